@@ -1,0 +1,33 @@
+// Rotations: axis-angle (rotation vector) ⇄ matrix and the derivatives flsh needs.
+//
+// Convention: R = exp([θ]×) (Rodrigues). The left Jacobian J_l(θ) relates a change of the
+// rotation vector to a spatial (world-frame) angular increment: dR = [J_l(θ) dθ]× R.
+// All functions are exact to round-off at θ = 0 (Taylor branches) and valid up to |θ| = π.
+#pragma once
+
+#include "flsh/core/types.h"
+
+namespace flsh {
+
+/// [v]×, the cross-product matrix: skew(v) w = v × w.
+Mat3 skew(const Vec3& v);
+
+/// Rodrigues' formula R = exp([θ]×).
+Mat3 rodrigues(const Vec3& theta);
+
+/// Left Jacobian of SO(3): d/dε exp([θ + ε]×) = [J_l(θ) ε]× exp([θ]×) to first order.
+Mat3 leftJacobianSO3(const Vec3& theta);
+
+/// Inverse of the left Jacobian (defined for |θ| < 2π).
+Mat3 leftJacobianInverseSO3(const Vec3& theta);
+
+/// dR/dθ_a for a = 0, 1, 2 (three 3 × 3 matrices), i.e. [J_l(θ) e_a]× R.
+void rodriguesDerivatives(const Vec3& theta, Mat3 dR[3]);
+
+/// Rotation vector of R with |θ| ≤ π; robust near 0 and near π.
+Vec3 logSO3(const Mat3& R);
+
+/// Spherical interpolation between two rotation vectors, t in [0, 1], along the shortest arc.
+Vec3 slerpRotationVector(const Vec3& a, const Vec3& b, double t);
+
+}  // namespace flsh

@@ -1,0 +1,78 @@
+// Reading and writing numpy `.npy` arrays inside `.npz` archives (stored or deflated).
+//
+// Supported dtypes: little-endian float64/float32, int64/int32/uint64/uint32/uint8, bool.
+// Every error names the file, the key, the expected and the actual shape/dtype.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "flsh/core/types.h"
+
+namespace flsh::io {
+
+/// One array as stored: numpy dtype descriptor (e.g. "<f8"), shape, raw bytes (C order after
+/// reading; Fortran-ordered arrays are transposed into C order on read).
+struct NpyArray {
+  std::string dtype;
+  std::vector<long> shape;
+  std::vector<uint8_t> bytes;
+
+  long size() const;  ///< product of shape (1 for a 0-d array)
+  bool isFloat() const;
+  bool isInteger() const;  ///< signed, unsigned or bool
+};
+
+/// An `.npz` file read fully into memory. Conversions check shape and values and throw
+/// InputError("FILE: key 'K': expected shape (…), got (…)") etc.
+class NpzFile {
+ public:
+  /// Reads the archive. Throws FileError (missing/unreadable) or InputError (not a zip,
+  /// truncated, corrupt member, malformed .npy header, unsupported dtype).
+  explicit NpzFile(const std::string& path);
+
+  const std::string& path() const { return path_; }
+  std::vector<std::string> keys() const;
+  bool has(const std::string& key) const;
+  /// The raw array; throws InputError naming the file and the missing key.
+  const NpyArray& raw(const std::string& key) const;
+
+  /// Array converted to float64, checked against `shape` (−1 = any extent; the number of
+  /// dimensions must match) and for NaN/Inf. Returned flattened in C order.
+  std::vector<double> doubles(const std::string& key, const std::vector<long>& shape) const;
+  /// 2-D array as a row-major matrix (checked as doubles()).
+  RowMatX matrix(const std::string& key, long rows = -1, long cols = -1) const;
+  /// 1-D array (checked as doubles()).
+  VecX vector(const std::string& key, long size = -1) const;
+  /// Scalar (0-d or one-element array).
+  double scalar(const std::string& key) const;
+  /// Integer array converted to int64 (float arrays holding integers are accepted), checked
+  /// against `shape`. uint32/uint64 values of 2³²−1 / 2⁶⁴−1 become −1.
+  std::vector<int64_t> integers(const std::string& key, const std::vector<long>& shape) const;
+  /// String array (numpy '<U…' or '|S…'), e.g. AMASS 'gender'; empty if absent.
+  std::string string(const std::string& key) const;
+
+ private:
+  std::string path_;
+  std::map<std::string, NpyArray> arrays_;
+};
+
+/// Collects arrays and writes an `.npz` archive atomically (never a half-written file).
+class NpzWriter {
+ public:
+  void add(const std::string& key, const double* data, const std::vector<long>& shape);
+  void add(const std::string& key, const int64_t* data, const std::vector<long>& shape);
+  void add(const std::string& key, const Eigen::Ref<const RowMatX>& matrix);  ///< 2-D float64
+  void add(const std::string& key, const Eigen::Ref<const VecX>& vector);    ///< 1-D float64
+  void addScalar(const std::string& key, double value);                     ///< 0-d float64
+  void addString(const std::string& key, const std::string& value);         ///< 0-d '<U'
+  /// Writes the archive (deflate-compressed if `compress`), atomically.
+  void save(const std::string& path, bool compress = false) const;
+
+ private:
+  std::map<std::string, NpyArray> arrays_;
+};
+
+}  // namespace flsh::io

@@ -1,0 +1,51 @@
+// A small headless software renderer: shaded triangle meshes into RGB images, and PNG output.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "flsh/core/types.h"
+
+namespace flsh::render {
+
+/// 8-bit RGB image, row-major, top row first.
+struct Image {
+  int width = 0, height = 0;
+  std::vector<uint8_t> rgb;  ///< width · height · 3
+  uint8_t* pixel(int x, int y) { return &rgb[3 * (size_t(y) * width + x)]; }
+  const uint8_t* pixel(int x, int y) const { return &rgb[3 * (size_t(y) * width + x)]; }
+};
+
+struct RenderOptions {
+  int width = 480;   ///< pixels
+  int height = 640;  ///< pixels
+  /// Direction the camera looks along (world), default: from the front (+z) towards −z,
+  /// slightly from above and from the body's right.
+  Vec3 view_direction = Vec3(-0.25, -0.2, -1.0);
+  Vec3 up = Vec3::UnitY();
+  /// Orthographic framing: the view fits this world box (min, max); empty box = fit the mesh.
+  Eigen::AlignedBox3d frame;
+  Vec3 base_color = Vec3(0.80, 0.62, 0.52);  ///< used when no per-vertex colours
+  Vec3 background = Vec3(1.0, 1.0, 1.0);
+  bool draw_ground = true;  ///< a shaded floor at the lowest point of the frame box
+};
+
+/// Renders one mesh (#V × 3, #F × 3) with Lambert + ambient shading and a z-buffer.
+/// `colors` (#V × 3 in [0, 1]) overrides base_color when given.
+Image renderMesh(const Eigen::Ref<const MatX3>& V, const Eigen::Ref<const MatX3i>& F,
+                 const RenderOptions& options = {}, const MatX3& colors = MatX3());
+
+/// Renders several frames of one animated mesh side by side with a common framing
+/// (`columns` per row; 0 = all in one row).
+Image renderSheet(const std::vector<MatX3>& frames, const Eigen::Ref<const MatX3i>& F,
+                  const RenderOptions& options = {}, int columns = 0,
+                  const std::vector<MatX3>& colors = {});
+
+/// Writes an 8-bit RGB PNG atomically. Throws FileError on failure.
+void writePng(const std::string& path, const Image& image);
+
+/// Reads an 8-bit RGB/RGBA PNG (for tests and tools).
+Image readPng(const std::string& path);
+
+}  // namespace flsh::render

@@ -1,0 +1,98 @@
+#include "flsh/body/body_model.h"
+
+#include <string>
+
+#include "body/body_model_derived.h"
+#include "flsh/core/error.h"
+
+namespace flsh {
+
+namespace {
+
+std::string prefix(const BodyModel& m) {
+  return (m.source.empty() ? std::string("body model") : m.source) + ": ";
+}
+
+void expectShape(const BodyModel& m, const char* key, long rows, long cols, long erows,
+                 long ecols, const char* meaning) {
+  if (rows != erows || cols != ecols)
+    throw InputError(prefix(m) + "array '" + key + "' has shape " + shapeString({rows, cols}) +
+                     ", expected " + shapeString({erows, ecols}) + " (" + meaning + ")");
+}
+
+template <class M>
+void expectFinite(const BodyModel& m, const char* key, const M& a) {
+  if (!a.allFinite()) throw InputError(prefix(m) + "array '" + key + "' contains NaN or Inf");
+}
+
+}  // namespace
+
+void BodyModel::validate() const {
+  const long V = v_template.rows();
+  if (V < 4) throw InputError(prefix(*this) + "array 'v_template' has " + std::to_string(V) +
+                              " vertices, expected at least 4");
+  const long J = long(parents.size());
+  if (J < 1) throw InputError(prefix(*this) + "kintree_table is empty");
+  expectShape(*this, "shapedirs", shapedirs.rows(), shapedirs.cols(), 3 * V, shapedirs.cols(),
+              "3V x K");
+  expectShape(*this, "posedirs", posedirs.rows(), posedirs.cols(), 3 * V, 9 * (J - 1),
+              "3V x 9(J-1)");
+  expectShape(*this, "J_regressor", J_regressor.rows(), J_regressor.cols(), J, V, "J x V");
+  expectShape(*this, "weights", weights.rows(), weights.cols(), V, J, "V x J");
+  if (faces.cols() != 3 || faces.rows() < 1)
+    throw InputError(prefix(*this) + "array 'f' has shape " +
+                     shapeString({long(faces.rows()), long(faces.cols())}) + ", expected (F, 3)");
+  expectFinite(*this, "v_template", v_template);
+  expectFinite(*this, "shapedirs", shapedirs);
+  expectFinite(*this, "posedirs", posedirs);
+  expectFinite(*this, "weights", weights);
+  for (int k = 0; k < J_regressor.outerSize(); ++k)
+    for (SpMatR::InnerIterator it(J_regressor, k); it; ++it)
+      if (!std::isfinite(it.value()))
+        throw InputError(prefix(*this) + "array 'J_regressor' contains NaN or Inf");
+  if (faces.minCoeff() < 0 || faces.maxCoeff() >= V)
+    throw InputError(prefix(*this) + "array 'f' has vertex indices outside [0, " +
+                     std::to_string(V - 1) + "] (found " + std::to_string(faces.minCoeff()) +
+                     ".." + std::to_string(faces.maxCoeff()) + ")");
+  if (parents[0] != -1)
+    throw InputError(prefix(*this) + "kintree_table: joint 0 must be the root (parent -1), got " +
+                     std::to_string(parents[0]));
+  for (long j = 1; j < J; ++j)
+    if (parents[j] < 0 || parents[j] >= j)
+      throw InputError(prefix(*this) + "kintree_table: parent of joint " + std::to_string(j) +
+                       " is " + std::to_string(parents[j]) + ", expected a joint in [0, " +
+                       std::to_string(j - 1) + "]");
+  const VecX rowsums = weights.rowwise().sum();
+  for (long i = 0; i < V; ++i)
+    if (std::abs(rowsums[i] - 1.0) > 1e-3)
+      throw InputError(prefix(*this) + "array 'weights': row " + std::to_string(i) +
+                       " sums to " + std::to_string(rowsums[i]) + ", expected 1");
+}
+
+void BodyModel::finalize() {
+  validate();
+  auto d = std::make_shared<Derived>();
+  const int V = numVertices(), J = numJoints();
+  d->weight_start.reserve(V + 1);
+  d->weight_start.push_back(0);
+  for (int i = 0; i < V; ++i) {
+    for (int j = 0; j < J; ++j) {
+      const double w = weights(i, j);
+      if (w != 0.0) {
+        d->weight_joint.push_back(j);
+        d->weight_value.push_back(w);
+      }
+    }
+    d->weight_start.push_back(int(d->weight_joint.size()));
+  }
+  const long nnz = (posedirs.array() != 0.0).count();
+  d->use_sparse_posedirs = nnz * 2 < posedirs.size();
+  if (d->use_sparse_posedirs) d->posedirs_sparse = posedirs.sparseView(1.0, 0.0);
+  d->chain.resize(J);
+  for (int j = 0; j < J; ++j) {
+    for (int k = j; k >= 0; k = parents[k]) d->chain[j].insert(d->chain[j].begin(), k);
+  }
+  derived = std::move(d);
+}
+
+}  // namespace flsh

@@ -1,0 +1,24 @@
+// Internal acceleration data of a BodyModel (built by BodyModel::finalize()).
+#pragma once
+
+#include <vector>
+
+#include "flsh/body/body_model.h"
+
+namespace flsh {
+
+struct BodyModel::Derived {
+  /// Per vertex, the joints with a nonzero weight and their weights (CSR layout):
+  /// joints weight_joint[weight_start[i] .. weight_start[i+1]).
+  std::vector<int> weight_start;
+  std::vector<int> weight_joint;
+  std::vector<double> weight_value;
+  /// Pose blend shapes as a column-major sparse matrix (3#V × 207) when less than half of
+  /// posedirs is nonzero; empty otherwise (the dense posedirs is used).
+  SpMat posedirs_sparse;
+  bool use_sparse_posedirs = false;
+  /// Per joint, its ancestors from the root down to and including itself.
+  std::vector<std::vector<int>> chain;
+};
+
+}  // namespace flsh

@@ -1,0 +1,104 @@
+#include "support/test_support.h"
+
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+
+#include "flsh/body/smpl_skeleton.h"
+
+namespace flsh::test {
+
+MatX finiteDifferenceJacobian(const std::function<VecX(const VecX&)>& f, const VecX& x,
+                              double eps) {
+  const VecX f0 = f(x);
+  MatX J(f0.size(), x.size());
+  VecX xp = x, xm = x;
+  for (int k = 0; k < x.size(); ++k) {
+    xp[k] = x[k] + eps;
+    xm[k] = x[k] - eps;
+    J.col(k) = (f(xp) - f(xm)) / (2.0 * eps);
+    xp[k] = xm[k] = x[k];
+  }
+  return J;
+}
+
+::testing::AssertionResult jacobianMatchesFiniteDifferences(
+    const std::function<VecX(const VecX&)>& f, const VecX& x, const MatX& analytic, double tol,
+    double eps) {
+  const double amax = analytic.size() ? analytic.cwiseAbs().maxCoeff() : 0.0;
+  if (!(amax > 1e-12))
+    return ::testing::AssertionFailure() << "analytic derivative is zero (max |A| = " << amax
+                                         << "): the check would be vacuous";
+  const MatX fd = finiteDifferenceJacobian(f, x, eps);
+  if (fd.rows() != analytic.rows() || fd.cols() != analytic.cols())
+    return ::testing::AssertionFailure() << "shape mismatch: analytic " << analytic.rows() << "x"
+                                         << analytic.cols() << ", finite differences "
+                                         << fd.rows() << "x" << fd.cols();
+  const double scale = std::max(1.0, fd.cwiseAbs().maxCoeff());
+  Eigen::Index r = 0, c = 0;
+  const double err = (analytic - fd).cwiseAbs().maxCoeff(&r, &c);
+  if (!(err <= tol * scale))
+    return ::testing::AssertionFailure()
+           << "max |analytic − FD| = " << err << " at (" << r << ", " << c << "): analytic "
+           << analytic(r, c) << ", FD " << fd(r, c) << " (tolerance " << tol * scale << ")";
+  return ::testing::AssertionSuccess() << "max error " << err;
+}
+
+std::string freshTempDir(const std::string& name) {
+  namespace fs = std::filesystem;
+  const char* base = std::getenv("FLSH_TEST_TMP");
+  fs::path root = base ? fs::path(base) : fs::temp_directory_path() / "flsh_tests";
+  fs::path dir = root / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir.string();
+}
+
+BodyModel makeRandomModel(int vertices, int betas, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> uni(-1.0, 1.0);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  BodyModel m;
+  m.source = "random-test-model";
+  m.parents.assign(kSmplParents.begin(), kSmplParents.end());
+  // Joint centres: a crude human layout, so that chains have real lever arms.
+  MatX3 J(kNumJoints, 3);
+  for (int j = 0; j < kNumJoints; ++j) {
+    const int p = m.parents[j];
+    const Vec3 base = p < 0 ? Vec3(0, 0.9, 0) : Vec3(J.row(p));
+    J.row(j) = base + 0.15 * Vec3(uni(rng), uni(rng), uni(rng));
+  }
+  m.v_template.resize(vertices, 3);
+  m.weights = MatX::Zero(vertices, kNumJoints);
+  std::vector<int> owner(vertices);
+  for (int i = 0; i < vertices; ++i) {
+    const int j = i % kNumJoints;
+    owner[i] = j;
+    m.v_template.row(i) = J.row(j) + 0.08 * Vec3(uni(rng), uni(rng), uni(rng)).transpose();
+    // Weight on the owner, its parent and one random joint: positive, rows sum to 1.
+    double w0 = 0.5 + 0.3 * std::abs(uni(rng));
+    const int p = std::max(0, m.parents[j]);
+    const int r = int(std::abs(uni(rng)) * (kNumJoints - 1));
+    m.weights(i, j) += w0;
+    m.weights(i, p) += (1.0 - w0) * 0.7;
+    m.weights(i, r) += (1.0 - w0) * 0.3;
+  }
+  m.shapedirs.resize(3 * vertices, betas);
+  for (int k = 0; k < m.shapedirs.size(); ++k) m.shapedirs.data()[k] = 0.01 * gauss(rng);
+  m.posedirs.resize(3 * vertices, kPoseFeatureSize);
+  for (int k = 0; k < m.posedirs.size(); ++k) m.posedirs.data()[k] = 0.005 * gauss(rng);
+  // Regressor: each joint averages the vertices it owns (positive, rows sum to 1).
+  std::vector<Triplet> trips;
+  std::vector<int> count(kNumJoints, 0);
+  for (int i = 0; i < vertices; ++i) ++count[owner[i]];
+  for (int i = 0; i < vertices; ++i) trips.emplace_back(owner[i], i, 1.0 / count[owner[i]]);
+  m.J_regressor.resize(kNumJoints, vertices);
+  m.J_regressor.setFromTriplets(trips.begin(), trips.end());
+  // Faces: consecutive vertex triples (topology is irrelevant to the forward pass).
+  m.faces.resize(vertices / 3, 3);
+  for (int f = 0; f < vertices / 3; ++f) m.faces.row(f) << 3 * f, 3 * f + 1, 3 * f + 2;
+  m.finalize();
+  return m;
+}
+
+}  // namespace flsh::test

@@ -1,0 +1,34 @@
+// Shared helpers of the C++ tests: one finite-difference checker for every derivative,
+// temporary directories, and a small random SMPL-format model.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <functional>
+#include <string>
+
+#include "flsh/body/body_model.h"
+#include "flsh/core/types.h"
+
+namespace flsh::test {
+
+/// Central-difference Jacobian of f at x (columns = dx directions).
+MatX finiteDifferenceJacobian(const std::function<VecX(const VecX&)>& f, const VecX& x,
+                              double eps = 1e-6);
+
+/// Asserts that `analytic` is not (near) zero, then that it matches the central-difference
+/// Jacobian of f at x: max |A − FD| ≤ tol · max(1, max |FD|). Returns the error found.
+::testing::AssertionResult jacobianMatchesFiniteDifferences(
+    const std::function<VecX(const VecX&)>& f, const VecX& x, const MatX& analytic,
+    double tol = 1e-6, double eps = 1e-6);
+
+/// A fresh empty directory under $FLSH_TEST_TMP (or the system temp dir) for one test.
+std::string freshTempDir(const std::string& name);
+
+/// A small random SMPL-format model (`vertices` vertices, `betas` shape components) with a
+/// valid skeleton (SMPL parents), smooth positive weights (rows sum to 1), a regressor whose
+/// rows sum to 1, and random dense shape and pose blend shapes. Finalized. Deterministic in
+/// `seed`. For unit tests of the forward pass that must not depend on the synthetic body.
+BodyModel makeRandomModel(int vertices = 300, int betas = 10, unsigned seed = 1);
+
+}  // namespace flsh::test

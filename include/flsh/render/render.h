@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "flsh/core/types.h"
 
 namespace flsh::render {

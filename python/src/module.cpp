@@ -1,8 +1,10 @@
 // Entry point of the flsh._flsh extension module: one binding file per C++ folder.
-#include <pybind11/pybind11.h>
-
-namespace py = pybind11;
+#include "bindings.h"
 
 PYBIND11_MODULE(_flsh, m) {
   m.doc() = "flsh: differentiable physics of SMPL human bodies (C++ core)";
+  flsh::python::bind_core(m);  // first: registers the exception translation
+  flsh::python::bind_body(m);
+  flsh::python::bind_io(m);
+  flsh::python::bind_render(m);
 }

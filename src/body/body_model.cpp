@@ -92,6 +92,18 @@ void BodyModel::finalize() {
   for (int j = 0; j < J; ++j) {
     for (int k = j; k >= 0; k = parents[k]) d->chain[j].insert(d->chain[j].begin(), k);
   }
+  // Joint centres are linear in β: regress the template and every shape direction once, so
+  // the forward pass and its shape Jacobian need no vertex-sized work for the joints.
+  const int K = numBetas();
+  d->joints_template = VecX::Zero(3 * J);
+  d->joint_shapedirs = MatX::Zero(3 * J, K);
+  for (int j = 0; j < J_regressor.outerSize(); ++j)
+    for (SpMatR::InnerIterator it(J_regressor, j); it; ++it) {
+      const long i = it.col();
+      const double w = it.value();
+      d->joints_template.segment<3>(3 * j) += w * v_template.row(i).transpose();
+      d->joint_shapedirs.middleRows<3>(3 * j) += w * shapedirs.middleRows<3>(3 * i);
+    }
   derived = std::move(d);
 }
 

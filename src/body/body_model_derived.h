@@ -19,6 +19,11 @@ struct BodyModel::Derived {
   bool use_sparse_posedirs = false;
   /// Per joint, its ancestors from the root down to and including itself.
   std::vector<std::vector<int>> chain;
+  /// 3J template joint centres J_regressor · v_template, flattened (entry 3j + c), m.
+  VecX joints_template;
+  /// 3J × K joint shape directions dJ/dβ = J_regressor · shapedirs (row 3j + c), so that
+  /// J(β) = joints_template + joint_shapedirs β without touching the vertices.
+  MatX joint_shapedirs;
 };
 
 }  // namespace flsh

@@ -48,7 +48,14 @@ std::string freshTempDir(const std::string& name) {
   namespace fs = std::filesystem;
   const char* base = std::getenv("FLSH_TEST_TMP");
   fs::path root = base ? fs::path(base) : fs::temp_directory_path() / "flsh_tests";
-  fs::path dir = root / name;
+  // ctest runs each test in its own process, several at once: qualify the directory by the
+  // running test's name so that two tests asking for the same name never share it.
+  std::string qualified = name;
+  if (const auto* info = ::testing::UnitTest::GetInstance()->current_test_info())
+    qualified = std::string(info->test_suite_name()) + "." + info->name() + "." + name;
+  for (char& c : qualified)
+    if (c == '/') c = '_';
+  fs::path dir = root / qualified;
   fs::remove_all(dir);
   fs::create_directories(dir);
   return dir.string();

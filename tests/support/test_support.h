@@ -22,7 +22,8 @@ MatX finiteDifferenceJacobian(const std::function<VecX(const VecX&)>& f, const V
     const std::function<VecX(const VecX&)>& f, const VecX& x, const MatX& analytic,
     double tol = 1e-6, double eps = 1e-6);
 
-/// A fresh empty directory under $FLSH_TEST_TMP (or the system temp dir) for one test.
+/// A fresh empty directory under $FLSH_TEST_TMP (or the system temp dir), unique to the running
+/// test and `name`.
 std::string freshTempDir(const std::string& name);
 
 /// A small random SMPL-format model (`vertices` vertices, `betas` shape components) with a

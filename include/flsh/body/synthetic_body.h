@@ -26,7 +26,8 @@ struct SyntheticBodyOptions {
 /// Meaning of the 10 shape directions of the synthetic body, in order (e.g. "height").
 extern const std::vector<std::string> kSyntheticShapeNames;
 
-/// Generates the synthetic body (finalized). Throws InputError for vertices < 200.
+/// Generates the synthetic body (finalized). Throws InputError for vertices < 200 or
+/// > 100 000, or a height that is not finite and positive.
 BodyModel makeSyntheticBody(const SyntheticBodyOptions& options = {});
 
 }  // namespace flsh

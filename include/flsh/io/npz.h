@@ -30,7 +30,8 @@ struct NpyArray {
 class NpzFile {
  public:
   /// Reads the archive. Throws FileError (missing/unreadable) or InputError (not a zip,
-  /// truncated, corrupt member, malformed .npy header, unsupported dtype).
+  /// truncated, corrupt member, malformed .npy header). A member of unsupported dtype (e.g.
+  /// an object array) does not spoil the others: raw() and the conversions throw for it.
   explicit NpzFile(const std::string& path);
 
   const std::string& path() const { return path_; }
@@ -66,6 +67,16 @@ class NpzWriter {
   void add(const std::string& key, const int64_t* data, const std::vector<long>& shape);
   void add(const std::string& key, const Eigen::Ref<const RowMatX>& matrix);  ///< 2-D float64
   void add(const std::string& key, const Eigen::Ref<const VecX>& vector);    ///< 1-D float64
+  /// Any Eigen matrix or vector (e.g. RowMatX, MatX3, VecX): a compile-time column vector is
+  /// written 1-D, anything else 2-D. Without it such calls are ambiguous between the two
+  /// Ref overloads above (each Ref<const …> accepts any double expression).
+  template <class Derived>
+  void add(const std::string& key, const Eigen::MatrixBase<Derived>& values) {
+    if constexpr (Derived::ColsAtCompileTime == 1)
+      add(key, Eigen::Ref<const VecX>(values));
+    else
+      add(key, Eigen::Ref<const RowMatX>(values));
+  }
   void addScalar(const std::string& key, double value);                     ///< 0-d float64
   void addString(const std::string& key, const std::string& value);         ///< 0-d '<U'
   /// Writes the archive (deflate-compressed if `compress`), atomically.

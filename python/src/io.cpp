@@ -1,0 +1,146 @@
+// Bindings of include/flsh/io: motions (AMASS-style .npz, built-in motions) and meshes
+// (PLY / OBJ).
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <cmath>
+
+#include "bindings.h"
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/io/mesh_io.h"
+#include "flsh/io/motion.h"
+
+namespace flsh::python {
+
+namespace {
+
+const Motion& motion_of(const py::object& self) { return self.cast<const Motion&>(); }
+
+Motion make_motion(const py::object& poses, const py::object& trans, const py::object& betas,
+                   double fps, const std::string& gender, const std::string& source) {
+  auto a = as_float64(poses, "poses");
+  if (a.ndim() != 2 || (a.shape(1) != kSmplPoseSize && a.shape(1) != kSmplhPoseSize))
+    check_shape(a, "poses", {-1, kSmplPoseSize}, "(T, 72) or (T, 156)");
+  if (!(std::isfinite(fps) && fps > 0))
+    throw py::value_error("fps: expected a positive frame rate, got " + std::to_string(fps));
+  Motion motion;
+  motion.poses = toSmplPoses(Eigen::Map<const RowMatX>(a.data(), a.shape(0), a.shape(1)));
+  const long frames = long(a.shape(0));
+  motion.trans = trans.is_none() ? RowMatX(RowMatX::Zero(frames, 3))
+                                 : to_matrix(trans, "trans", frames, 3);
+  if (!betas.is_none()) motion.betas = to_vector(betas, "betas", -1, "(K,)");
+  motion.fps = fps;
+  motion.gender = gender;
+  motion.source = source;
+  return motion;
+}
+
+}  // namespace
+
+void bind_io(py::module_& m) {
+  // --- Motion --------------------------------------------------------------------------------
+  const py::ssize_t d = sizeof(double);
+  py::class_<Motion>(m, "Motion",
+                     "A motion in SMPL's 72-value pose layout. Array properties are read-only.")
+      .def(py::init(&make_motion), py::arg("poses"), py::arg("trans") = py::none(),
+           py::arg("betas") = py::none(), py::arg("fps") = 30.0, py::arg("gender") = "",
+           py::arg("source") = "",
+           "poses (T, 72) or SMPL-H (T, 156) axis-angle, rad (stored as (T, 72)); trans (T, 3) "
+           "m or None (zeros); betas (K,) or None; fps > 0.")
+      .def_property_readonly("poses", [d](py::object self) {
+          const RowMatX& p = motion_of(self).poses;
+          return readonly_view(p.data(), {p.rows(), p.cols()}, {p.cols() * d, d}, self);
+        }, "(T, 72) axis-angle joint rotations, rad.")
+      .def_property_readonly("trans", [d](py::object self) {
+          const RowMatX& t = motion_of(self).trans;
+          return readonly_view(t.data(), {t.rows(), t.cols()}, {t.cols() * d, d}, self);
+        }, "(T, 3) root translation, m.")
+      .def_property_readonly("betas", [d](py::object self) {
+          const VecX& b = motion_of(self).betas;
+          return readonly_view(b.data(), {b.size()}, {d}, self);
+        }, "(K,) shape coefficients stored with the motion (may be empty).")
+      .def_property_readonly("fps", [](const Motion& mo) { return mo.fps; }, "Frames per second.")
+      .def_property_readonly("gender", [](const Motion& mo) { return mo.gender; })
+      .def_property_readonly("source", [](const Motion& mo) { return mo.source; },
+                             "File path or 'builtin:NAME'.")
+      .def_property_readonly("num_frames", &Motion::numFrames, "T")
+      .def_property_readonly("duration", &Motion::duration, "(T − 1) / fps, s.")
+      .def("__len__", &Motion::numFrames)
+      .def("__repr__", [](const Motion& mo) {
+        return "Motion(source='" + mo.source + "', frames=" + std::to_string(mo.numFrames()) +
+               ", fps=" + py::repr(py::float_(mo.fps)).cast<std::string>() + ")";
+      });
+
+  m.def("load_motion", [](const std::filesystem::path& path) {
+          const std::string p = path_string(path);
+          require_existing_file(p, "load_motion");
+          py::gil_scoped_release release;
+          return loadMotion(p);
+        },
+        py::arg("path"),
+        "Reads an AMASS-style .npz (poses (T, 72|156), trans (T, 3), optional betas, "
+        "mocap_framerate, gender) as a Motion with (T, 72) poses.");
+  m.def("save_motion", [](const Motion& motion, const std::filesystem::path& path) {
+          const std::string p = path_string(path);
+          py::gil_scoped_release release;
+          saveMotion(motion, p);
+        },
+        py::arg("motion"), py::arg("path"),
+        "Writes an AMASS-style .npz (poses (T, 72), trans, betas, mocap_framerate, gender), "
+        "atomically.");
+  m.def("builtin_motion_names", &builtinMotionNames, "Names of the built-in motions.");
+  m.def("make_builtin_motion", [](const std::string& name, double seconds, double fps) {
+          py::gil_scoped_release release;
+          return makeBuiltinMotion(name, seconds, fps);
+        },
+        py::arg("name"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0,
+        "A built-in procedural motion `seconds` long (s) at `fps`; ValueError for unknown names.");
+  m.def("load_or_make_motion",
+        [](const std::string& spec, double seconds, double fps) {
+          py::gil_scoped_release release;
+          return loadOrMakeMotion(spec, seconds, fps);
+        },
+        py::arg("spec"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0,
+        "A motion file path if it exists, else 'builtin:NAME' or NAME of a built-in motion.");
+
+  // --- Meshes --------------------------------------------------------------------------------
+  m.def("write_ply",
+        [](const std::filesystem::path& path, const py::object& vertices, const py::object& faces,
+           const py::object& colors, bool binary) {
+          const MatX3 V = to_points(vertices, "vertices");
+          const MatX3i F = to_triangles(faces, "faces");
+          const io::Colors C =
+              colors.is_none() ? io::Colors() : to_points(colors, "colors", V.rows());
+          const std::string p = path_string(path);
+          py::gil_scoped_release release;
+          io::writePly(p, V, F, C, binary);
+        },
+        py::arg("path"), py::arg("vertices"), py::arg("faces"), py::arg("colors") = py::none(),
+        py::arg("binary") = true,
+        "Writes a PLY (binary little-endian or ASCII) atomically: vertices (V, 3) m, faces (F, 3) "
+        "int, colors (V, 3) RGB in [0, 1] or None.");
+  m.def("write_obj",
+        [](const std::filesystem::path& path, const py::object& vertices, const py::object& faces) {
+          const MatX3 V = to_points(vertices, "vertices");
+          const MatX3i F = to_triangles(faces, "faces");
+          const std::string p = path_string(path);
+          py::gil_scoped_release release;
+          io::writeObj(p, V, F);
+        },
+        py::arg("path"), py::arg("vertices"), py::arg("faces"),
+        "Writes an OBJ atomically: vertices (V, 3) m, faces (F, 3) int.");
+  m.def("read_mesh", [](const std::filesystem::path& path) {
+          const std::string p = path_string(path);
+          require_existing_file(p, "read_mesh");
+          MatX3 V;
+          MatX3i F;
+          {
+            py::gil_scoped_release release;
+            io::readMesh(p, V, F);
+          }
+          return py::make_tuple(to_numpy(V), to_numpy(F));
+        },
+        py::arg("path"), "Reads a PLY or OBJ triangle mesh: (vertices (V, 3) float64, faces (F, 3) int32).");
+}
+
+}  // namespace flsh::python

@@ -1,0 +1,99 @@
+// AMASS-style motion files (`.npz`): reading (SMPL or SMPL-H poses) and writing (SMPL poses).
+#include <cmath>
+#include <iostream>
+#include <string>
+
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/core/error.h"
+#include "flsh/io/motion.h"
+#include "flsh/io/npz.h"
+
+namespace flsh {
+
+namespace {
+
+constexpr double kDefaultFps = 30.0;
+
+double readFrameRate(const io::NpzFile& file) {
+  for (const char* key : {"mocap_framerate", "mocap_frame_rate"}) {
+    if (!file.has(key)) continue;
+    const double fps = file.scalar(key);  // rejects NaN/Inf
+    if (!(fps > 0.0))
+      throw InputError(file.path() + ": key '" + key + "': frame rate must be > 0, got " +
+                       std::to_string(fps));
+    return fps;
+  }
+  std::cerr << "flsh: warning: " << file.path()
+            << ": no 'mocap_framerate' or 'mocap_frame_rate' key; assuming " << kDefaultFps
+            << " fps\n";
+  return kDefaultFps;
+}
+
+}  // namespace
+
+Motion loadMotion(const std::string& path) {
+  const io::NpzFile file(path);
+  Motion motion;
+  motion.source = path;
+
+  const RowMatX poses = file.matrix("poses");
+  if (poses.cols() != kSmplPoseSize && poses.cols() != kSmplhPoseSize)
+    throw InputError(path +
+                     ": key 'poses': expected shape (T, 72) (SMPL) or (T, 156) (SMPL-H), "
+                     "got " +
+                     shapeString({long(poses.rows()), long(poses.cols())}));
+  const long T = poses.rows();
+  if (T < 1)
+    throw InputError(path + ": key 'poses' has no frames, shape " +
+                     shapeString({T, long(poses.cols())}));
+  motion.poses = toSmplPoses(poses, path + ": key 'poses'");
+
+  const RowMatX trans = file.matrix("trans", -1, 3);
+  if (trans.rows() != T)
+    throw InputError(path + ": key 'trans' has " + std::to_string(trans.rows()) +
+                     " frames but key 'poses' has " + std::to_string(T) + " (shapes " +
+                     shapeString({long(trans.rows()), 3}) + " and " +
+                     shapeString({T, long(poses.cols())}) + ")");
+  motion.trans = trans;
+
+  if (file.has("betas")) {
+    // AMASS stores (B,); some tools store (1, B).
+    const std::vector<long>& shape = file.raw("betas").shape;
+    if (shape.size() == 1) {
+      motion.betas = file.vector("betas");
+    } else if (shape.size() == 2 && shape[0] == 1) {
+      motion.betas = file.matrix("betas", 1, -1).row(0).transpose();
+    } else {
+      throw InputError(path + ": key 'betas': expected shape (B,) or (1, B), got " +
+                       shapeString(shape));
+    }
+  }
+  motion.fps = readFrameRate(file);
+  motion.gender = file.string("gender");
+  return motion;
+}
+
+void saveMotion(const Motion& motion, const std::string& path) {
+  const long T = motion.poses.rows();
+  if (motion.poses.cols() != kSmplPoseSize)
+    throw InputError("saveMotion(" + path + "): poses: expected shape (T, 72), got " +
+                     shapeString({T, long(motion.poses.cols())}));
+  if (motion.trans.rows() != T || motion.trans.cols() != 3)
+    throw InputError("saveMotion(" + path + "): trans: expected shape " + shapeString({T, 3}) +
+                     " (T from poses), got " +
+                     shapeString({long(motion.trans.rows()), long(motion.trans.cols())}));
+  if (!motion.poses.allFinite() || !motion.trans.allFinite() || !motion.betas.allFinite())
+    throw InputError("saveMotion(" + path + "): poses, trans or betas contain NaN or Inf");
+  if (!(motion.fps > 0.0) || !std::isfinite(motion.fps))
+    throw InputError("saveMotion(" + path + "): fps must be finite and > 0, got " +
+                     std::to_string(motion.fps));
+  io::NpzWriter writer;
+  writer.add("poses", motion.poses);
+  writer.add("trans", motion.trans);
+  writer.add("betas", motion.betas);
+  writer.addScalar("mocap_framerate", motion.fps);
+  if (!motion.gender.empty()) writer.addString("gender", motion.gender);
+  writer.save(path);
+}
+
+}  // namespace flsh

@@ -1,0 +1,28 @@
+"""Shared fixtures of the pytest suite of flsh's Python API.
+
+`import flsh` is deliberately unguarded: if the extension module does not import, every test
+must fail (a collection error), never be skipped.
+"""
+import numpy as np
+import pytest
+
+import flsh
+from flsh import smpl_torch
+
+
+@pytest.fixture(scope="session")
+def body():
+    """A small synthetic body (800 vertices, 1596 triangles), generated once per session."""
+    return flsh.make_synthetic_body(vertices=800)
+
+
+@pytest.fixture(scope="session")
+def reference(body):
+    """The plain-PyTorch SMPL reference over the same arrays."""
+    return smpl_torch.SmplTorch.from_flsh(body)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20240611)
+

@@ -569,16 +569,25 @@ const NpyArray& NpzFile::raw(const std::string& key) const {
   return it->second;
 }
 
+namespace {
+/// Throws InputError unless `actual` has the dimensions of `expected` (−1 = any extent).
+void checkShape(const std::string& where, const std::vector<long>& actual,
+                const std::vector<long>& expected) {
+  bool match = actual.size() == expected.size();
+  for (size_t k = 0; match && k < expected.size(); ++k)
+    match = expected[k] < 0 || expected[k] == actual[k];
+  if (!match)
+    throw InputError(where + ": expected shape " + expectedShapeString(expected) + ", got " +
+                     shapeString(actual));
+}
+}  // namespace
+
 std::vector<double> NpzFile::doubles(const std::string& key, const std::vector<long>& shape) const {
   const NpyArray& a = raw(key);
   const std::string where = path_ + ": key '" + key + "'";
   if (!a.isFloat() && !a.isInteger())
     throw InputError(where + ": expected a numeric array, got dtype '" + a.dtype + "'");
-  bool match = a.shape.size() == shape.size();
-  for (size_t k = 0; match && k < shape.size(); ++k) match = shape[k] < 0 || shape[k] == a.shape[k];
-  if (!match)
-    throw InputError(where + ": expected shape " + expectedShapeString(shape) + ", got " +
-                     shapeString(a.shape));
+  checkShape(where, a.shape, shape);
   const DtypeInfo d = parseDtype(a.dtype);
   const long n = a.size();
   std::vector<double> out(static_cast<size_t>(n));
@@ -616,11 +625,7 @@ std::vector<int64_t> NpzFile::integers(const std::string& key,
   const std::string where = path_ + ": key '" + key + "'";
   if (!a.isFloat() && !a.isInteger())
     throw InputError(where + ": expected an integer array, got dtype '" + a.dtype + "'");
-  bool match = a.shape.size() == shape.size();
-  for (size_t k = 0; match && k < shape.size(); ++k) match = shape[k] < 0 || shape[k] == a.shape[k];
-  if (!match)
-    throw InputError(where + ": expected shape " + expectedShapeString(shape) + ", got " +
-                     shapeString(a.shape));
+  checkShape(where, a.shape, shape);
   const DtypeInfo d = parseDtype(a.dtype);
   const long n = a.size();
   std::vector<int64_t> out(static_cast<size_t>(n));

@@ -19,20 +19,7 @@ namespace {
 
 using ::testing::HasSubstr;
 namespace fs = std::filesystem;
-
-template <class E, class F>
-std::string messageOf(F&& call) {
-  try {
-    call();
-  } catch (const E& e) {
-    return e.what();
-  } catch (const std::exception& e) {
-    ADD_FAILURE() << "threw the wrong exception type: " << e.what();
-    return "";
-  }
-  ADD_FAILURE() << "did not throw";
-  return "";
-}
+using test::messageOf;
 
 std::string tupleText(const std::vector<long>& shape) {
   std::string out = "(";

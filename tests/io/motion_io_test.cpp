@@ -17,20 +17,7 @@ namespace {
 
 using ::testing::HasSubstr;
 namespace fs = std::filesystem;
-
-template <class E, class F>
-std::string messageOf(F&& call) {
-  try {
-    call();
-  } catch (const E& e) {
-    return e.what();
-  } catch (const std::exception& e) {
-    ADD_FAILURE() << "threw the wrong exception type: " << e.what();
-    return "";
-  }
-  ADD_FAILURE() << "did not throw";
-  return "";
-}
+using test::messageOf;
 
 RowMatX randomMatrix(long rows, long cols, unsigned seed) {
   std::mt19937 rng(seed);

@@ -21,22 +21,7 @@ using test::npyOf;
 using test::RawMember;
 using ::testing::HasSubstr;
 namespace fs = std::filesystem;
-
-/// Runs `call` and returns the message of the exception of type E it throws ("" and a test
-/// failure if it throws nothing or something else).
-template <class E, class F>
-std::string messageOf(F&& call) {
-  try {
-    call();
-  } catch (const E& e) {
-    return e.what();
-  } catch (const std::exception& e) {
-    ADD_FAILURE() << "threw the wrong exception type: " << e.what();
-    return "";
-  }
-  ADD_FAILURE() << "did not throw";
-  return "";
-}
+using test::messageOf;
 
 std::vector<std::string> filesIn(const std::string& dir) {
   std::vector<std::string> names;

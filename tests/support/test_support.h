@@ -26,6 +26,22 @@ MatX finiteDifferenceJacobian(const std::function<VecX(const VecX&)>& f, const V
 /// test and `name`.
 std::string freshTempDir(const std::string& name);
 
+/// Runs `call` and returns the message of the exception of type E it throws ("" and a test
+/// failure if it throws nothing or another type). For checking what error messages name.
+template <class E, class F>
+std::string messageOf(F&& call) {
+  try {
+    call();
+  } catch (const E& e) {
+    return e.what();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "threw the wrong exception type: " << e.what();
+    return "";
+  }
+  ADD_FAILURE() << "did not throw";
+  return "";
+}
+
 /// A small random SMPL-format model (`vertices` vertices, `betas` shape components) with a
 /// valid skeleton (SMPL parents), smooth positive weights (rows sum to 1), a regressor whose
 /// rows sum to 1, and random dense shape and pose blend shapes. Finalized. Deterministic in

@@ -4,26 +4,38 @@
 //   flsh motion --name walk --out MOTION.npz [--seconds S] [--fps F]
 //   flsh pose --model BODY.npz --motion MOTION.npz --out OUT.npz [--betas b0,b1,…]
 //   flsh demo [--out DIR] [--vertices N] [--motion NAME]
+//   flsh simulate [SCENE.json] [--out DIR] [--duration S] [--time-step H]
 //
 // Every command prints a one-line summary on success, and on bad input exits non-zero with a
 // message naming the input, leaving no partial output file (all writes are atomic).
 #include <CLI/CLI.hpp>
 
+#include <unistd.h>
+
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <map>
+#include <memory>
 #include <sstream>
 
 #include "flsh/body/body_forward.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
 #include "flsh/io/atomic_file.h"
+#include "flsh/io/gltf.h"
 #include "flsh/io/mesh_io.h"
 #include "flsh/io/motion.h"
 #include "flsh/io/npz.h"
+#include "flsh/io/scene_file.h"
 #include "flsh/render/render.h"
+#include "flsh/sim/simulable.h"
+#include "flsh/solve/scene.h"
+#include "flsh/volume/soft_avatar.h"
 
 namespace {
 
@@ -154,6 +166,445 @@ int cmdDemo(const std::string& out_dir, int vertices, const std::string& motion_
   return 0;
 }
 
+// ---------------------------------------------------------------------------------------------
+// flsh simulate
+
+/// A closed UV sphere of radius r about the origin, axis +z, with no vertex ring on the equator
+/// (so that stretching the halves apart along z turns it into a capsule). #V × 3, #F × 3.
+void makeUvSphere(double r, int rings, int segments, MatX3& V, MatX3i& F) {
+  const double pi = 3.14159265358979323846;
+  V.resize(2 + rings * segments, 3);
+  V.row(0) << 0, 0, r;
+  for (int k = 0; k < rings; ++k) {
+    const double polar = pi * (k + 0.5) / rings;
+    for (int s = 0; s < segments; ++s) {
+      const double azimuth = 2 * pi * s / segments;
+      V.row(1 + k * segments + s) << r * std::sin(polar) * std::cos(azimuth),
+          r * std::sin(polar) * std::sin(azimuth), r * std::cos(polar);
+    }
+  }
+  V.row(1 + rings * segments) << 0, 0, -r;
+  const int bottom = 1 + rings * segments;
+  auto ring = [&](int k, int s) { return 1 + k * segments + (s % segments); };
+  std::vector<Eigen::Vector3i> faces;
+  for (int s = 0; s < segments; ++s) {
+    faces.emplace_back(0, ring(0, s), ring(0, s + 1));
+    for (int k = 0; k + 1 < rings; ++k) {
+      faces.emplace_back(ring(k, s), ring(k + 1, s), ring(k + 1, s + 1));
+      faces.emplace_back(ring(k, s), ring(k + 1, s + 1), ring(k, s + 1));
+    }
+    faces.emplace_back(bottom, ring(rings - 1, s + 1), ring(rings - 1, s));
+  }
+  F.resize(long(faces.size()), 3);
+  for (size_t f = 0; f < faces.size(); ++f) F.row(long(f)) = faces[f].transpose();
+}
+
+/// Triangle mesh of a sphere or capsule collider at zero path offset (planes have none).
+bool colliderMesh(const Collider& collider, MatX3& V, MatX3i& F) {
+  if (collider.shape() == ColliderShape::Plane) return false;
+  makeUvSphere(collider.radius(), 12, 24, V, F);  // 12 rings: none on the equator
+  if (collider.shape() == ColliderShape::Sphere) {
+    V.rowwise() += collider.p0().transpose();
+    return true;
+  }
+  const Vec3 a = collider.p0(), b = collider.p1();
+  const double half = 0.5 * (b - a).norm();
+  for (Eigen::Index i = 0; i < V.rows(); ++i) V(i, 2) += V(i, 2) > 0 ? half : -half;
+  const Mat3 R = Eigen::Quaterniond::FromTwoVectors(Vec3::UnitZ(), half > 0 ? Vec3(b - a) : Vec3::UnitZ())
+                     .toRotationMatrix();
+  V = (V * R.transpose()).rowwise() + (0.5 * (a + b)).transpose();
+  return true;
+}
+
+/// A square of `half` m half-size on a plane collider, centred at the point of the plane
+/// nearest to `center` (a ground for glTF viewers).
+void planeQuad(const Collider& plane, const Vec3& center, double half, MatX3& V, MatX3i& F) {
+  const Vec3 n = plane.p1();
+  const Vec3 c = center - (center - plane.p0()).dot(n) * n;
+  const Vec3 u = n.unitOrthogonal(), w = n.cross(u);
+  V.resize(4, 3);
+  V.row(0) = (c - half * u - half * w).transpose();
+  V.row(1) = (c + half * u - half * w).transpose();
+  V.row(2) = (c + half * u + half * w).transpose();
+  V.row(3) = (c - half * u + half * w).transpose();
+  F.resize(2, 3);
+  F << 0, 1, 2, 0, 2, 3;  // counter-clockwise seen from the normal side
+}
+
+/// One line on stderr that updates in place on a terminal; a line per 10 % otherwise.
+class ProgressBar {
+ public:
+  explicit ProgressBar(int total) : total_(std::max(1, total)), tty_(isatty(fileno(stderr)) != 0) {}
+  void update(int done, double sim_time) {
+    const double elapsed = secondsSince(start_);
+    const int percent = int(100.0 * done / total_);
+    if (tty_) {
+      if (done < total_ && secondsSince(last_) < 0.1) return;
+      last_ = Clock::now();
+    } else {
+      if (percent / 10 == last_decile_ && done < total_) return;
+      last_decile_ = percent / 10;
+    }
+    const double rate = elapsed > 0 ? done / elapsed : 0.0;
+    const double eta = rate > 0 ? (total_ - done) / rate : 0.0;
+    const int width = 24, filled = width * done / total_;
+    std::fprintf(stderr, "%s[%s%s] %3d%%  step %d/%d  t = %.3f s  %.0f steps/s  ETA %.1f s%s",
+                 tty_ ? "\r" : "", std::string(filled, '#').c_str(),
+                 std::string(width - filled, '.').c_str(), percent, done, total_, sim_time, rate,
+                 eta, tty_ ? "\033[K" : "\n");
+    std::fflush(stderr);
+  }
+  void finish() {
+    if (tty_) std::fputc('\n', stderr);
+  }
+
+ private:
+  int total_;
+  bool tty_;
+  int last_decile_ = 0;  // the first line comes at 10 %
+  Clock::time_point start_ = Clock::now(), last_ = Clock::time_point();
+};
+
+/// One avatar of the scene while it is simulated, and what is recorded of it.
+struct AvatarRun {
+  const AvatarSpec* spec = nullptr;
+  std::string where;  ///< "SCENE: avatars[i]" for messages
+  std::shared_ptr<const BodyModel> body;
+  std::shared_ptr<SoftAvatar> avatar;
+  std::shared_ptr<const Motion> motion;
+  std::shared_ptr<Simulable> simulable;
+  // Per saved frame:
+  std::vector<VecX> states, poses;
+  std::vector<Vec3> trans;
+  std::vector<MatX3> vertices, joints;
+  std::vector<std::vector<Mat3>> rotations;
+};
+
+/// The avatar's motion with its yaw (about +y through the root's rest position) and offset:
+/// every frame is rigidly moved, trans' = R_y trans + offset and R_root' = R_y R_root.
+std::shared_ptr<Motion> placedMotion(Motion motion, const AvatarSpec& spec) {
+  const Mat3 Ry = Eigen::AngleAxisd(spec.yaw, Vec3::UnitY()).toRotationMatrix();
+  for (int k = 0; k < motion.numFrames(); ++k) {
+    const Vec3 trans = motion.trans.row(k).transpose();
+    motion.trans.row(k) = (Ry * trans + spec.offset).transpose();
+    const Vec3 root = motion.poses.row(k).head<3>().transpose();
+    motion.poses.row(k).head<3>() = logSO3(Ry * rodrigues(root)).transpose();
+  }
+  return std::make_shared<Motion>(std::move(motion));
+}
+
+/// Loads every body model, motion and avatar of the scene (nothing is written).
+std::vector<AvatarRun> buildAvatars(const SceneSpec& scene) {
+  std::map<std::string, std::shared_ptr<const BodyModel>> bodies;  // shared per model
+  std::vector<AvatarRun> runs(scene.avatars.size());
+  for (size_t i = 0; i < scene.avatars.size(); ++i) {
+    const AvatarSpec& spec = scene.avatars[i];
+    AvatarRun& run = runs[i];
+    run.spec = &spec;
+    run.where = scene.source + ": avatars[" + std::to_string(i) + "]";
+    const std::string key = spec.model == "synthetic"
+                                ? "synthetic:" + std::to_string(spec.synthetic_vertices)
+                                : spec.model;
+    auto& body = bodies[key];
+    if (!body) {
+      if (spec.model == "synthetic") {
+        std::fprintf(stderr, "simulate: generating the synthetic body (%d vertices)...\n",
+                     spec.synthetic_vertices);
+        SyntheticBodyOptions options;
+        options.vertices = spec.synthetic_vertices;
+        body = std::make_shared<const BodyModel>(makeSyntheticBody(options));
+      } else {
+        body = std::make_shared<const BodyModel>(loadBodyModel(spec.model));
+      }
+      if (body->numJoints() != kNumJoints)
+        throw InputError(run.where + ".model: " + spec.model + " has " +
+                         std::to_string(body->numJoints()) + " joints, expected 24 (SMPL)");
+    }
+    run.body = body;
+
+    std::shared_ptr<Motion> motion;
+    if (!spec.motion.empty()) {
+      const std::string prefix = "builtin:";
+      Motion raw = spec.motion.rfind(prefix, 0) == 0
+                       ? makeBuiltinMotion(spec.motion.substr(prefix.size()),
+                                           spec.motion_seconds > 0 ? spec.motion_seconds
+                                                                   : scene.duration)
+                       : loadMotion(spec.motion);
+      motion = placedMotion(std::move(raw), spec);
+    }
+    run.motion = motion;
+
+    VecX betas = spec.betas;
+    if (betas.size() > body->numBetas())
+      throw InputError(run.where + ".betas: " + std::to_string(betas.size()) +
+                       " values, but the model has " + std::to_string(body->numBetas()) +
+                       " shape components");
+    if (betas.size() == 0 && motion && motion->betas.size() > 0)
+      betas = fitBetas(motion->betas, *body, motion->source);
+    if (betas.size() == 0) betas = VecX::Zero(body->numBetas());
+    run.avatar = std::make_shared<SoftAvatar>(body, betas);
+    run.avatar->initVolumetricData();
+    SimulableOptions options = spec.options;
+    options.time_step = scene.time_step;
+    run.simulable = std::make_shared<Simulable>(run.avatar, run.motion, options);
+  }
+  return runs;
+}
+
+void recordFrame(AvatarRun& run) {
+  const Simulable& sim = *run.simulable;
+  run.states.push_back(sim.getState());
+  run.poses.push_back(sim.getPose());
+  run.trans.push_back(sim.getTrans());
+  run.vertices.push_back(sim.getVertices());
+  run.joints.push_back(sim.bonePositions());
+  run.rotations.push_back(sim.boneRotations());
+}
+
+/// (T, …) float64 array of per-frame matrices stacked in C order.
+template <class M>
+void addStacked(io::NpzWriter& npz, const std::string& key, const std::vector<M>& frames,
+                std::vector<long> frame_shape) {
+  size_t per_frame = 1;
+  for (long n : frame_shape) per_frame *= size_t(n);
+  std::vector<double> data(frames.size() * per_frame);
+  for (size_t k = 0; k < frames.size(); ++k) {
+    // Row-major copy (MatX3 is row-major; vectors are 1-D).
+    const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows = frames[k];
+    if (size_t(rows.size()) != per_frame)
+      throw Error("simulate: internal shape mismatch in " + key);
+    std::copy(rows.data(), rows.data() + per_frame, data.begin() + long(k * per_frame));
+  }
+  frame_shape.insert(frame_shape.begin(), long(frames.size()));
+  npz.add(key, data.data(), frame_shape);
+}
+
+const Vec3 kAvatarColors[] = {Vec3(0.80, 0.62, 0.52), Vec3(0.55, 0.66, 0.80),
+                              Vec3(0.62, 0.78, 0.55), Vec3(0.82, 0.72, 0.45)};
+const Vec3 kColliderColor(0.90, 0.25, 0.20);
+
+int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) {
+  namespace fs = std::filesystem;
+  const auto t_setup = Clock::now();
+  // Everything is read and checked before anything is written.
+  const SceneSpec scene = scene_path.empty() ? defaultScene(overrides)
+                                             : loadSceneFile(scene_path, overrides);
+  std::vector<AvatarRun> runs = buildAvatars(scene);
+
+  SceneOptions scene_options;
+  scene_options.newton = scene.newton;
+  scene_options.avatar_contact = scene.avatar_contact;
+  Scene sim_scene(scene_options);
+  for (auto& run : runs) sim_scene.addSimulable(run.simulable);
+  for (const auto& collider : scene.colliders) sim_scene.addCollider(collider);
+  sim_scene.initialize();
+  // An avatar starting deep inside the ground is usually a wrong plane height: say so.
+  for (const auto& run : runs) {
+    const MatX3 nodes = run.simulable->getNodes();
+    for (const auto& collider : scene.colliders) {
+      if (collider.shape() != ColliderShape::Plane) continue;
+      double deepest = 0.0;
+      for (Eigen::Index i = 0; i < nodes.rows(); ++i)
+        deepest = std::min(deepest, collider.signedDistance(nodes.row(i).transpose(), 0.0));
+      if (deepest < -0.02)
+        std::fprintf(stderr, "simulate: warning: avatar '%s' starts %.3f m deep in plane '%s'\n",
+                     run.spec->name.c_str(), -deepest, collider.name.c_str());
+    }
+  }
+  const double setup_seconds = secondsSince(t_setup);
+
+  // ---- simulation: record frames in memory, write nothing yet ----
+  const double h = scene.time_step;
+  const int steps = std::max(1, int(std::lround(scene.duration / h)));
+  const int every = scene.outputs.every;
+  std::vector<double> times;
+  std::vector<std::vector<Vec3>> collider_offsets(scene.colliders.size());
+  auto record = [&](double t) {
+    times.push_back(t);
+    for (auto& run : runs) recordFrame(run);
+    for (size_t c = 0; c < scene.colliders.size(); ++c)
+      collider_offsets[c].push_back(scene.colliders[c].path.offsetAt(t));
+  };
+  record(0.0);
+  const auto t_sim = Clock::now();
+  ProgressBar progress(steps);
+  long newton_iterations = 0;
+  int unconverged = 0, max_contacts = 0;
+  std::string first_unconverged;
+  for (int s = 1; s <= steps; ++s) {
+    const StepStats stats = sim_scene.step();
+    newton_iterations += stats.newton.iterations;
+    max_contacts = std::max(max_contacts, stats.active_contacts);
+    if (!stats.newton.converged && unconverged++ == 0)
+      first_unconverged = "step " + std::to_string(s) + ": " + stats.newton.message;
+    for (const auto& run : runs)
+      if (!run.simulable->getState().allFinite())
+        throw Error("simulation diverged: avatar '" + run.spec->name +
+                    "' has a non-finite state after step " + std::to_string(s) + " (t = " +
+                    std::to_string(s * h) + " s); nothing was written");
+    if (s % every == 0) record(s * h);
+    progress.update(s, s * h);
+  }
+  progress.finish();
+  const double sim_seconds = secondsSince(t_sim);
+
+  // ---- outputs, each file atomic ----
+  const auto t_out = Clock::now();
+  const fs::path dir(scene.outputs.dir);
+  const OutputSpec& wanted = scene.outputs;
+  if (wanted.ply || wanted.npz || wanted.gltf || wanted.png) io::ensureDirectory(dir.string());
+  const int T = int(times.size());
+  std::vector<std::string> written;
+
+  if (scene.outputs.ply) {
+    for (const auto& run : runs) {
+      const fs::path mesh_dir = dir / "meshes" / run.spec->name;
+      io::ensureDirectory(mesh_dir.string());
+      for (int k = 0; k < T; ++k) {
+        char name[64];
+        std::snprintf(name, sizeof(name), "frame_%04d.ply", k);
+        io::writePly((mesh_dir / name).string(), run.vertices[k], run.body->faces);
+      }
+      // Frames of an earlier, longer run in this folder would mix with this one.
+      for (int k = T;; ++k) {
+        char name[64];
+        std::snprintf(name, sizeof(name), "frame_%04d.ply", k);
+        std::error_code ec;
+        if (!fs::remove(mesh_dir / name, ec)) break;
+      }
+    }
+    written.push_back("meshes/<avatar>/frame_*.ply");
+  }
+
+  if (scene.outputs.npz) {
+    io::NpzWriter npz;
+    npz.add("times", Eigen::Map<const VecX>(times.data(), T));
+    npz.addScalar("time_step", h);
+    for (const auto& run : runs) {
+      const std::string& name = run.spec->name;
+      const long V = run.body->numVertices(), F = run.body->numFaces();
+      addStacked(npz, name + "_states", run.states, {long(run.states[0].size())});
+      addStacked(npz, name + "_poses", run.poses, {kSmplPoseSize});
+      addStacked(npz, name + "_trans", run.trans, {3});
+      addStacked(npz, name + "_vertices", run.vertices, {V, 3});
+      addStacked(npz, name + "_joints", run.joints, {kNumJoints, 3});
+      std::vector<int64_t> faces(size_t(F) * 3);
+      for (long f = 0; f < F; ++f)
+        for (int c = 0; c < 3; ++c) faces[3 * f + c] = run.body->faces(f, c);
+      npz.add(name + "_faces", faces.data(), {F, 3});
+      npz.add(name + "_betas", Eigen::Ref<const VecX>(run.avatar->betas()));
+    }
+    for (size_t c = 0; c < scene.colliders.size(); ++c)
+      addStacked(npz, scene.colliders[c].name + "_offset", collider_offsets[c], {3});
+    npz.save((dir / "states.npz").string());
+    written.push_back("states.npz");
+  }
+
+  if (scene.outputs.gltf) {
+    std::vector<io::GltfSkinnedAvatar> avatars;
+    Vec3 center = Vec3::Zero();
+    for (size_t i = 0; i < runs.size(); ++i) {
+      const AvatarRun& run = runs[i];
+      io::GltfSkinnedAvatar a;
+      a.name = run.spec->name;
+      a.rest_vertices = run.avatar->restVertices();
+      a.faces = run.body->faces;
+      a.weights = run.body->weights;
+      a.parents = run.body->parents;
+      a.rest_joints = run.avatar->restJoints();
+      a.bone_names.assign(kSmplJointNames.begin(), kSmplJointNames.end());
+      a.rotations = run.rotations;
+      a.positions = run.joints;
+      a.color = kAvatarColors[i % 4];
+      center += run.joints[0].row(0).transpose() / double(runs.size());
+      avatars.push_back(std::move(a));
+    }
+    std::vector<io::GltfRigidMesh> rigid;
+    for (size_t c = 0; c < scene.colliders.size(); ++c) {
+      const Collider& collider = scene.colliders[c];
+      io::GltfRigidMesh m;
+      m.name = collider.name;
+      if (colliderMesh(collider, m.vertices, m.faces)) {
+        m.translations = collider_offsets[c];
+        m.color = kColliderColor;
+      } else {
+        planeQuad(collider, center, 5.0, m.vertices, m.faces);
+        m.color = Vec3(0.7, 0.7, 0.7);
+      }
+      rigid.push_back(std::move(m));
+    }
+    io::writeGlb((dir / "animation.glb").string(), times, avatars, rigid);
+    written.push_back("animation.glb");
+  }
+
+  if (scene.outputs.png) {
+    // All avatars and the sphere/capsule colliders in one mesh per shown frame, framed on the
+    // avatars (a collider far away is cut off rather than shrinking the bodies).
+    const int shown = std::min(scene.outputs.png_frames, T);
+    MatX3i faces;
+    std::vector<MatX3> frames, colors;
+    Eigen::AlignedBox3d box;
+    for (int j = 0; j < shown; ++j) {
+      const int k = shown > 1 ? j * (T - 1) / (shown - 1) : 0;
+      std::vector<std::pair<MatX3, MatX3i>> parts;
+      std::vector<Vec3> part_colors;
+      for (size_t i = 0; i < runs.size(); ++i) {
+        parts.emplace_back(runs[i].vertices[k], runs[i].body->faces);
+        part_colors.push_back(kAvatarColors[i % 4]);
+        for (Eigen::Index v = 0; v < runs[i].vertices[k].rows(); ++v)
+          box.extend(runs[i].vertices[k].row(v).transpose());
+      }
+      for (size_t c = 0; c < scene.colliders.size(); ++c) {
+        MatX3 V;
+        MatX3i F;
+        if (!colliderMesh(scene.colliders[c], V, F)) continue;
+        V.rowwise() += collider_offsets[c][k].transpose();
+        parts.emplace_back(V, F);
+        part_colors.push_back(kColliderColor);
+      }
+      long nv = 0, nf = 0;
+      for (const auto& p : parts) nv += p.first.rows(), nf += p.second.rows();
+      MatX3 V(nv, 3), C(nv, 3);
+      MatX3i F(nf, 3);
+      long v0 = 0, f0 = 0;
+      for (size_t p = 0; p < parts.size(); ++p) {
+        V.middleRows(v0, parts[p].first.rows()) = parts[p].first;
+        C.middleRows(v0, parts[p].first.rows()).rowwise() = part_colors[p].transpose();
+        F.middleRows(f0, parts[p].second.rows()) = parts[p].second.array() + int(v0);
+        v0 += parts[p].first.rows();
+        f0 += parts[p].second.rows();
+      }
+      faces = F;
+      frames.push_back(std::move(V));
+      colors.push_back(std::move(C));
+    }
+    render::RenderOptions view;
+    view.width = 320;
+    view.height = 480;
+    // Padded except below: the renderer puts its floor at the bottom of the box (the soles).
+    view.frame = Eigen::AlignedBox3d(box.min() - Vec3(0.15, 0.0, 0.15), box.max() + Vec3::Constant(0.15));
+    render::writePng((dir / "sheet.png").string(),
+                     render::renderSheet(frames, faces, view, 0, colors));
+    written.push_back("sheet.png");
+  }
+  const double out_seconds = secondsSince(t_out);
+
+  std::string outputs;
+  for (const auto& w : written) outputs += (outputs.empty() ? "" : ", ") + w;
+  if (unconverged > 0)
+    std::fprintf(stderr, "simulate: warning: %d of %d steps did not converge (first: %s)\n",
+                 unconverged, steps, first_unconverged.c_str());
+  std::printf("simulate: %s: %zu avatar(s), %zu collider(s), %d steps of %.4g s (%.3g s), "
+              "%d frames; %.0f steps/s, %.2f Newton iterations/step, %d unconverged, "
+              "max %d contacts; wall time: set-up %.2f s, simulation %.2f s, output %.2f s; "
+              "wrote %s in %s\n",
+              scene.source.c_str(), runs.size(), scene.colliders.size(), steps, h, steps * h, T,
+              steps / std::max(sim_seconds, 1e-9), double(newton_iterations) / steps, unconverged,
+              max_contacts, setup_seconds, sim_seconds, out_seconds,
+              outputs.empty() ? "nothing" : outputs.c_str(), dir.string().c_str());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -191,6 +642,17 @@ int main(int argc, char** argv) {
   demo->add_option("--motion", name, "built-in motion")->capture_default_str();
   demo->add_option("--seconds", seconds, "duration, s")->capture_default_str();
 
+  std::string scene_path, sim_out;
+  double duration = 0.0, time_step = 0.0;
+  auto* simulate = app.add_subcommand(
+      "simulate", "Main job: simulate a scene (default: a synthetic walker hit by a ball); "
+                  "writes PLY meshes, states.npz, animation.glb and sheet.png");
+  simulate->add_option("scene", scene_path, "scene file (.json, see docs/scene_format.md); "
+                                            "none = the built-in default scene");
+  simulate->add_option("--out", sim_out, "output directory (overrides outputs.dir)");
+  simulate->add_option("--duration", duration, "simulated time, s (overrides duration)");
+  simulate->add_option("--time-step", time_step, "time step, s (overrides time_step)");
+
   CLI11_PARSE(app, argc, argv);
   const std::string command = app.get_subcommands().front()->get_name();
   try {
@@ -198,6 +660,19 @@ int main(int argc, char** argv) {
     if (command == "motion") return cmdMotion(name, out, seconds, fps);
     if (command == "pose") return cmdPose(model, motion_spec, out, betas);
     if (command == "demo") return cmdDemo(demo_out, vertices, name, seconds);
+    if (command == "simulate") {
+      SceneOverrides overrides;
+      overrides.duration = duration;
+      overrides.time_step = time_step;
+      overrides.output_dir = sim_out;
+      if (simulate->count("--duration") && duration == 0.0)
+        throw InputError("--duration: expected a time > 0 s, got 0");
+      if (simulate->count("--time-step") && time_step == 0.0)
+        throw InputError("--time-step: expected a time step > 0 s, got 0");
+      if (simulate->count("--out") && sim_out.empty())
+        throw InputError("--out: expected a directory, got an empty string");
+      return cmdSimulate(scene_path, overrides);
+    }
   } catch (const flsh::Error& e) {
     std::fprintf(stderr, "flsh %s: error: %s\n", command.c_str(), e.what());
     return 2;

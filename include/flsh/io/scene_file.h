@@ -1,0 +1,67 @@
+// Scene files (JSON) for `flsh simulate`: avatars, colliders, time step, duration, outputs.
+// See docs/scene_format.md for the keys; unknown keys, wrong types and missing files are
+// errors naming the key path (e.g. "scene.json: avatars[1].motion: …").
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "flsh/contact/collider.h"
+#include "flsh/sim/simulable.h"
+#include "flsh/solve/newton.h"
+
+namespace flsh {
+
+struct AvatarSpec {
+  std::string name;                     ///< for outputs; default "avatar<i>"
+  std::string model = "synthetic";      ///< SMPL .npz path, or "synthetic"
+  int synthetic_vertices = 6890;        ///< for model = "synthetic"
+  VecX betas;                           ///< shape; empty = zeros (or the motion's)
+  std::string simulation = "skeleton";  ///< "skeleton" (FEM/ROM come with their issues)
+  std::string motion;                   ///< AMASS .npz path or builtin:NAME; empty = none
+  double motion_seconds = 0.0;          ///< length of a built-in motion, s; 0 = the duration
+  Vec3 offset = Vec3::Zero();           ///< added to the motion's root translation, m
+  double yaw = 0.0;                     ///< rotation of the motion about +y, rad
+  SimulableOptions options;
+};
+
+struct OutputSpec {
+  std::string dir = "out/simulate";
+  bool ply = true;       ///< per-frame PLY meshes (one folder per avatar)
+  bool npz = true;       ///< states.npz: states, vertices, joints per frame per avatar
+  bool gltf = true;      ///< animation.glb: skinned mesh + per-frame bone transforms per avatar
+  bool png = true;       ///< sheet.png with a few frames
+  int png_frames = 5;
+  int every = 1;         ///< write every n-th frame
+};
+
+struct SceneSpec {
+  std::string source;    ///< file path or "builtin default scene"
+  std::vector<AvatarSpec> avatars;
+  std::vector<Collider> colliders;
+  double time_step = 1.0 / 60.0;  ///< s
+  double duration = 2.0;          ///< s
+  NewtonOptions newton;
+  bool avatar_contact = true;
+  OutputSpec outputs;
+};
+
+/// Command-line overrides, applied before validation (so that e.g. collider velocities span
+/// the overridden duration). Zero / empty = keep the scene's value.
+struct SceneOverrides {
+  double duration = 0.0;   ///< s (--duration)
+  double time_step = 0.0;  ///< s (--time-step)
+  std::string output_dir;  ///< --out
+};
+
+/// Parses and validates a scene file; relative paths are relative to the file's folder.
+/// Every referenced file must exist. Throws FileError / InputError before any output exists.
+SceneSpec loadSceneFile(const std::string& path, const SceneOverrides& overrides = {});
+/// Parses JSON text (`origin` names it in messages; `base_dir` resolves relative paths).
+SceneSpec parseSceneJson(const std::string& text, const std::string& origin,
+                         const std::string& base_dir = ".", const SceneOverrides& overrides = {});
+/// The built-in default: a synthetic avatar walking on the ground, a ball thrown at it
+/// (the same scene as examples/scenes/default.json).
+SceneSpec defaultScene(const SceneOverrides& overrides = {});
+
+}  // namespace flsh

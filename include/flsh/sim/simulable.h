@@ -1,0 +1,148 @@
+// Simulable: one avatar's simulation state and energies, with the runtime API of the FLSH paper.
+//
+// Backward Euler as an optimization (ARCHITECTURE.md §4):
+//   q_{n+1} = argmin_q  E(q) = E_dyn(q) + E_pot(q),
+//   E_dyn = 1/(2h²) Σ_mass points m ‖x(q) − x̂‖²,  x̂ = 2 x(q_n) − x(q_{n−1}),
+//   E_pot = gravity + joint springs + tracking springs + contact (+ user terms).
+//
+// Articulated skeleton model: 24 rigid bones in maximal coordinates. Bone b has a world
+// position t_b (where its joint centre is) and rotation R_b (relative to the rest T-pose), so a
+// rest point X of the bone moves to x = R_b (X − J_b) + t_b; at rest t_b = J_b, R_b = I.
+//
+// State layout (getState/setState): 6 values per bone b, at 6b: [t_b (m, 3), r_b (rad, 3)]
+// with r_b the rotation vector of R_b. Increments (updateState, gradients, Hessians) use the
+// same 6 slots per bone: [δt_b, δω_b] with t_b ← t_b + δt_b and R_b ← exp([δω_b]×) R_b (a
+// world-frame rotation increment). All derivatives are taken in this increment chart at the
+// current state.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "flsh/contact/collider.h"
+#include "flsh/contact/contact_energy.h"
+#include "flsh/core/types.h"
+#include "flsh/io/motion.h"
+#include "flsh/volume/soft_avatar.h"
+
+namespace flsh {
+
+/// Stiffnesses and physical settings of a simulable; every default has its unit.
+struct SimulableOptions {
+  double time_step = 1.0 / 60.0;          ///< h, s
+  Vec3 gravity = Vec3(0.0, -9.81, 0.0);   ///< m/s²
+  double joint_stiffness = 1.0e5;         ///< k_J, N/m: ½k_J‖R_p(J_b − J_p) + t_p − t_b‖²
+  /// Tracking springs ½k_b‖log(R_target,bᵀ R_rel,b)‖² with k_b = ω_T² · I_b, where I_b =
+  /// Σ m‖X − J_b‖² over the bone's subtree (kg·m²): every joint then tracks with about the
+  /// same natural frequency ω_T = sqrt(tracking_stiffness). Unit 1/s²; default (2π·3 Hz)².
+  double tracking_stiffness = 355.0;
+  /// Root springs to the mocap root position and orientation, same scaling with the whole
+  /// body's mass M and polar inertia about the root: k = root_stiffness · M (N/m) and
+  /// root_stiffness · I_0 (N·m/rad²). Unit 1/s²; default (2π·2 Hz)².
+  double root_stiffness = 158.0;
+  bool track_mocap = true;                ///< off: no tracking springs (a passive ragdoll)
+  /// Bones whose state is prescribed by the mocap (kinematic), e.g. {0} pins the root.
+  std::vector<int> kinematic_bones;
+  ContactOptions contact;                 ///< collider contact on surface vertices
+};
+
+/// Diagnostics of the last energy evaluation.
+struct SimulableStats {
+  int active_contacts = 0;
+};
+
+class Simulable {
+ public:
+  /// `avatar` must be initialized (initVolumetricData()); `mocap` may be null (no tracking,
+  /// the rest pose is the initial state). The paper's 3-argument form takes the body model
+  /// explicitly; it must be the avatar's.
+  Simulable(std::shared_ptr<const SoftAvatar> avatar, std::shared_ptr<const Motion> mocap = nullptr,
+            const SimulableOptions& options = {});
+  Simulable(std::shared_ptr<const SoftAvatar> avatar, std::shared_ptr<const BodyModel> body,
+            std::shared_ptr<const Motion> mocap, const SimulableOptions& options = {});
+  ~Simulable();
+  Simulable(const Simulable&) = delete;
+  Simulable& operator=(const Simulable&) = delete;
+
+  /// Sets the state from the mocap's first frame (or the rest pose) with the mocap's initial
+  /// velocity (zero without mocap); time = 0.
+  void initialize();
+
+  // ---- stepping --------------------------------------------------------------------------
+  /// Before a step: advance time by h, update mocap targets (interpolated, slerp for
+  /// rotations, when rates differ), set the inertial prediction x̂ from q_n and q_{n−1}, and
+  /// move kinematic bones to their targets.
+  void preUpdate();
+  /// After the step converged: q_{n−1} ← q_n, q_n ← q.
+  void postUpdate();
+
+  // ---- state -----------------------------------------------------------------------------
+  int numDofs() const;                       ///< 6 · 24 for the skeleton
+  VecX getState() const;                     ///< layout above
+  void setState(const VecX& q);              ///< throws InputError on size / non-finite
+  void updateState(const VecX& dq);          ///< increment chart
+  void pushState();                          ///< saves q on a stack
+  void popState();                           ///< restores the last pushed q (throws if empty)
+  /// Sets the previous state so that the velocity (per DoF, m/s and rad/s in the world frame)
+  /// is `v`: q_{n−1} = q_n − h v (in the increment chart).
+  void setVelocity(const VecX& v);
+  VecX getVelocity() const;                  ///< (q_n ⊖ q_{n−1}) / h
+  double time() const;
+
+  // ---- outputs and Jacobians ---------------------------------------------------------------
+  /// SMPL pose (72, axis-angle per joint relative to its parent) and root translation read
+  /// off the state: θ_b = log(R_pᵀ R_b), θ_0 = log(R_0), trans = t_0 − J_0.
+  VecX getPose() const;
+  Vec3 getTrans() const;
+  /// d(θ, trans)/dq: 75 × numDofs (rows 0..71 pose, 72..74 trans).
+  MatX getStateJacobian() const;
+  /// Mesh vertices (#V × 3): SMPL skinning (with pose blend shapes) of getPose()/getTrans().
+  MatX3 getVertices() const;
+  /// Simulation nodes: for the skeleton, the surface vertices by linear blend skinning of the
+  /// bone transforms, x_i = Σ_b w_ib (R_b (X_i − J_b) + t_b) (used by contact).
+  MatX3 getNodes() const;
+  /// d(nodes)/dq: 3#V × numDofs, sparse.
+  SpMat getNodesStateJacobian() const;
+
+  /// Current bone transforms: rotations R_b (24) and joint positions t_b (24 × 3).
+  const std::vector<Mat3>& boneRotations() const;
+  const MatX3& bonePositions() const;
+
+  // ---- energies (values at the current state) ------------------------------------------------
+  double getDynamicEnergyScalar() const;
+  double getPotentialEnergyScalar() const;
+  /// Gradients are ADDED into g at `offset` (g must be large enough).
+  void getDynamicGradientVector(VecX& g, int offset = 0) const;
+  void getPotentialGradientVector(VecX& g, int offset = 0) const;
+  /// Zeroes the entries of kinematic DoFs.
+  void fixVectorKinematic(VecX& g, int offset = 0) const;
+  /// Hessian triplets are APPENDED (both triangles) with indices shifted by `offset`. `psd`:
+  /// the positive-semidefinite form Newton uses (projected terms); false: the exact Hessian.
+  /// (Inertia: `psd` gives Gauss–Newton, Σ m JᵀJ; false adds the residual curvature.)
+  void getDynamicHessianTripletVector(std::vector<Triplet>& H, int offset = 0,
+                                      bool psd = true) const;
+  void getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset = 0,
+                                        bool psd = true) const;
+  /// Makes kinematic rows/columns of the assembled H identity (drops their triplets and adds
+  /// unit diagonals): call on the full triplet list before assembly.
+  void fixMatrixKinematic(std::vector<Triplet>& H, int offset = 0) const;
+
+  // ---- scene hooks -------------------------------------------------------------------------
+  void setColliders(std::vector<Collider> colliders);
+  const std::vector<Collider>& colliders() const;
+  /// Turns the dynamic term off (static equilibrium problems).
+  void setStatic(bool on);
+  bool isStatic() const;
+
+  const SoftAvatar& avatar() const;
+  const SimulableOptions& options() const;
+  SimulableStats stats() const;
+
+  struct Impl;
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace flsh

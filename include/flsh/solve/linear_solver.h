@@ -1,0 +1,44 @@
+// One interface over the linear solvers of Newton and of the adjoint: dense Cholesky for small
+// systems, CHOLMOD (supernodal Cholesky) for large sparse ones. The symbolic analysis is cached
+// and reused while the sparsity pattern does not change; the numeric factor stays available
+// for later solves (the adjoint reuses it).
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "flsh/core/types.h"
+
+namespace flsh {
+
+enum class LinearSolverType {
+  Auto,     ///< dense below `dense_threshold` unknowns, CHOLMOD above
+  Dense,    ///< Eigen's blocked LLT (Cholesky) on the dense matrix (positive definite only)
+  Cholmod,  ///< CHOLMOD supernodal Cholesky (positive definite only)
+};
+
+class LinearSolver {
+ public:
+  virtual ~LinearSolver() = default;
+  /// Factors the symmetric matrix A (full storage, both triangles). Returns false if A is not
+  /// positive definite (Newton then regularizes). Reuses the symbolic analysis when A has the
+  /// same pattern as the previous call.
+  virtual bool factorize(const SpMat& A) = 0;
+  /// Solves A x = b with the factor of the last factorize() call. Throws Error if that call
+  /// failed or there was none, or InputError if b has the wrong size.
+  virtual VecX solve(const VecX& b) const = 0;
+  virtual std::string name() const = 0;
+  /// Counters, for benchmarks: numeric factorizations and symbolic analyses done.
+  int numFactorizations() const { return factorizations_; }
+  int numAnalyses() const { return analyses_; }
+
+ protected:
+  int factorizations_ = 0;
+  int analyses_ = 0;
+};
+
+/// Creates a solver; Auto picks Dense when n ≤ dense_threshold.
+std::unique_ptr<LinearSolver> makeLinearSolver(LinearSolverType type, int n,
+                                               int dense_threshold = 600);
+
+}  // namespace flsh

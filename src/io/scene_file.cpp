@@ -1,0 +1,547 @@
+// Scene files for `flsh simulate` (docs/scene_format.md): a strict JSON reader whose every
+// error names the origin and the key path, e.g. "scene.json: avatars[0].options.gravity: …".
+#include "flsh/io/scene_file.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "flsh/core/error.h"
+#include "flsh/io/motion.h"
+
+namespace flsh {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr long kMaxSteps = 10'000'000;  // a bound that catches unit mistakes (ms for s)
+
+// The built-in default scene, kept byte-identical to examples/scenes/default.json (a test
+// checks that they parse to the same scene). The ground sits at the 1.70 m synthetic body's
+// sole height (rest min y = −0.952 m); the ball (r = 0.12 m) comes from the front at 4 m/s
+// along −z and meets the walker's belly (y = 0.05 m; the belly's front is at z ≈ 1.31 m after
+// 1 s of walking at 1.2 m/s) at t ≈ 1 s.
+constexpr const char* kDefaultSceneJson = R"({
+  "time_step": 0.016666666666666666,
+  "duration": 2.0,
+  "avatar_contact": true,
+  "newton": {"max_iterations": 30, "gradient_tolerance": 1e-6},
+  "avatars": [
+    {
+      "name": "walker",
+      "model": "synthetic",
+      "vertices": 6890,
+      "simulation": "skeleton",
+      "motion": "builtin:walk",
+      "motion_seconds": 2.0
+    }
+  ],
+  "colliders": [
+    {"name": "ground", "type": "plane", "point": [0.0, -0.952, 0.0], "normal": [0.0, 1.0, 0.0]},
+    {"name": "ball", "type": "sphere", "center": [0.0, 0.05, 5.41], "radius": 0.12,
+     "velocity": [0.0, 0.0, -4.0]}
+  ],
+  "outputs": {"dir": "out/simulate", "ply": true, "npz": true, "gltf": true, "png": true,
+              "png_frames": 5, "every": 1}
+}
+)";
+
+std::string joinNames(const std::vector<std::string>& names) {
+  std::string text;
+  for (const auto& n : names) text += (text.empty() ? "" : ", ") + n;
+  return text;
+}
+
+// A short rendering of a JSON value for messages ("string \"abc\"", "number -1").
+std::string describe(const json& value) {
+  std::string text = value.dump();
+  if (text.size() > 40) text = text.substr(0, 37) + "...";
+  return std::string(value.type_name()) + " " + text;
+}
+
+std::string number(double value) {
+  std::ostringstream out;
+  out << value;
+  return out.str();
+}
+
+/// Reads one scene document; every accessor takes the key path for messages.
+class SceneReader {
+ public:
+  SceneReader(std::string origin, std::string base_dir)
+      : origin_(std::move(origin)), base_dir_(std::move(base_dir)) {}
+
+  [[noreturn]] void fail(const std::string& path, const std::string& message) const {
+    throw InputError(origin_ + ": " + path + ": " + message);
+  }
+
+  static std::string child(const std::string& path, const std::string& key) {
+    return path.empty() ? key : path + "." + key;
+  }
+  static std::string item(const std::string& path, size_t index) {
+    return path + "[" + std::to_string(index) + "]";
+  }
+
+  void requireObject(const json& value, const std::string& path) const {
+    if (!value.is_object()) fail(path, "expected a JSON object, got " + describe(value));
+  }
+
+  /// Every key of `object` must be in `known`.
+  void checkKeys(const json& object, const std::string& path,
+                 const std::vector<std::string>& known) const {
+    for (const auto& [key, value] : object.items()) {
+      if (std::find(known.begin(), known.end(), key) == known.end())
+        fail(child(path, key), "unknown key (known: " + joinNames(known) + ")");
+    }
+  }
+
+  double toDouble(const json& value, const std::string& path) const {
+    if (!value.is_number()) fail(path, "expected a number, got " + describe(value));
+    const double x = value.get<double>();
+    if (!std::isfinite(x)) fail(path, "expected a finite number, got " + number(x));
+    return x;
+  }
+
+  int toInt(const json& value, const std::string& path) const {
+    const double x = toDouble(value, path);
+    if (x != std::floor(x) || std::abs(x) > 2e9)
+      fail(path, "expected an integer, got " + describe(value));
+    return int(x);
+  }
+
+  Vec3 toVec3(const json& value, const std::string& path) const {
+    if (!value.is_array() || value.size() != 3)
+      fail(path, "expected 3 numbers [x, y, z], got " + describe(value));
+    Vec3 v;
+    for (int c = 0; c < 3; ++c) v[c] = toDouble(value[c], item(path, c));
+    return v;
+  }
+
+  bool toBool(const json& value, const std::string& path) const {
+    if (!value.is_boolean()) fail(path, "expected true or false, got " + describe(value));
+    return value.get<bool>();
+  }
+
+  std::string toString(const json& value, const std::string& path) const {
+    if (!value.is_string()) fail(path, "expected a string, got " + describe(value));
+    return value.get<std::string>();
+  }
+
+  /// A number in [lo, hi] (open at lo when `open_lo`): "expected 0 < time_step ≤ 1".
+  double toRange(const json& value, const std::string& path, double lo, double hi, bool open_lo,
+                 const std::string& unit = "") const {
+    const double x = toDouble(value, path);
+    if ((open_lo ? x <= lo : x < lo) || x > hi) {
+      std::string expected = number(lo) + (open_lo ? " < value" : " <= value");
+      if (std::isfinite(hi)) expected += " <= " + number(hi);
+      fail(path,
+           "expected " + expected + (unit.empty() ? "" : " (" + unit + ")") + ", got " + number(x));
+    }
+    return x;
+  }
+
+  int toIntRange(const json& value, const std::string& path, int lo, int hi) const {
+    const int x = toInt(value, path);
+    if (x < lo || x > hi)
+      fail(path, "expected an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                     "], got " + std::to_string(x));
+    return x;
+  }
+
+  /// Names become folder names and npz key prefixes: letters, digits, '_' and '-'.
+  std::string toName(const json& value, const std::string& path) const {
+    const std::string name = toString(value, path);
+    const bool ok =
+        !name.empty() && name.size() <= 64 && std::all_of(name.begin(), name.end(), [](char c) {
+          return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+        });
+    if (!ok)
+      fail(path, "expected a name of 1-64 letters, digits, '_' or '-', got \"" + name + "\"");
+    return name;
+  }
+
+  /// Resolves a relative path against the scene file's folder and requires an existing file.
+  std::string existingFile(const std::string& text, const std::string& path,
+                           const std::string& what) const {
+    if (text.empty()) fail(path, "expected a file path, got an empty string");
+    fs::path p(text);
+    if (p.is_relative()) p = fs::path(base_dir_) / p;
+    std::error_code absolute_error;
+    const fs::path absolute = fs::absolute(p, absolute_error);  // messages name a full path
+    if (!absolute_error) p = absolute;
+    p = p.lexically_normal();
+    std::error_code ec;
+    if (!fs::is_regular_file(p, ec))
+      throw FileError(origin_ + ": " + path + ": " + what + " file not found: " + p.string());
+    return p.string();
+  }
+
+  SceneSpec read(const json& root, const SceneOverrides& overrides) const {
+    if (!root.is_object()) fail("(top level)", "expected a JSON object, got " + describe(root));
+    checkKeys(
+        root, "",
+        {"time_step", "duration", "avatar_contact", "newton", "avatars", "colliders", "outputs"});
+    SceneSpec scene;
+    if (root.contains("time_step"))
+      scene.time_step = toRange(root["time_step"], "time_step", 0.0, 1.0, true, "s");
+    if (root.contains("duration"))
+      scene.duration = toRange(root["duration"], "duration", 0.0, 1e6, true, "s");
+    applyOverrides(scene, overrides);
+    if (scene.duration / scene.time_step > double(kMaxSteps))
+      fail("duration", "duration / time_step = " + number(scene.duration / scene.time_step) +
+                           " steps, expected at most " + std::to_string(kMaxSteps));
+    if (root.contains("avatar_contact"))
+      scene.avatar_contact = toBool(root["avatar_contact"], "avatar_contact");
+    if (root.contains("newton")) scene.newton = readNewton(root["newton"], "newton");
+
+    if (!root.contains("avatars")) fail("avatars", "missing (a scene needs at least one avatar)");
+    const json& avatars = root["avatars"];
+    if (!avatars.is_array() || avatars.empty())
+      fail("avatars", "expected a list of at least one avatar, got " + describe(avatars));
+    std::set<std::string> avatar_names;
+    for (size_t i = 0; i < avatars.size(); ++i) {
+      AvatarSpec avatar = readAvatar(avatars[i], item("avatars", i), i, scene);
+      if (!avatar_names.insert(avatar.name).second)
+        fail(item("avatars", i) + ".name", "duplicate avatar name \"" + avatar.name + "\"");
+      scene.avatars.push_back(std::move(avatar));
+    }
+
+    if (root.contains("colliders")) {
+      const json& colliders = root["colliders"];
+      if (!colliders.is_array())
+        fail("colliders", "expected a list of colliders, got " + describe(colliders));
+      std::set<std::string> collider_names;
+      for (size_t i = 0; i < colliders.size(); ++i) {
+        Collider collider = readCollider(colliders[i], item("colliders", i), i, scene);
+        if (!collider_names.insert(collider.name).second)
+          fail(item("colliders", i) + ".name", "duplicate collider name \"" + collider.name + "\"");
+        scene.colliders.push_back(std::move(collider));
+      }
+    }
+    if (root.contains("outputs")) scene.outputs = readOutputs(root["outputs"], "outputs");
+    if (!overrides.output_dir.empty()) scene.outputs.dir = overrides.output_dir;
+    return scene;
+  }
+
+ private:
+  void applyOverrides(SceneSpec& scene, const SceneOverrides& overrides) const {
+    if (overrides.time_step != 0.0) {
+      if (!(overrides.time_step > 0.0 && overrides.time_step <= 1.0))
+        throw InputError("--time-step: expected 0 < value <= 1 (s), got " +
+                         number(overrides.time_step));
+      scene.time_step = overrides.time_step;
+    }
+    if (overrides.duration != 0.0) {
+      if (!(overrides.duration > 0.0 && overrides.duration <= 1e6))
+        throw InputError("--duration: expected 0 < value <= 1e6 (s), got " +
+                         number(overrides.duration));
+      scene.duration = overrides.duration;
+    }
+  }
+
+  NewtonOptions readNewton(const json& node, const std::string& path) const {
+    requireObject(node, path);
+    checkKeys(node, path,
+              {"max_iterations", "gradient_tolerance", "step_tolerance", "linear_solver"});
+    NewtonOptions newton;
+    if (node.contains("max_iterations"))
+      newton.max_iterations =
+          toIntRange(node["max_iterations"], child(path, "max_iterations"), 1, 10000);
+    if (node.contains("gradient_tolerance"))
+      newton.gradient_tolerance =
+          toRange(node["gradient_tolerance"], child(path, "gradient_tolerance"), 0.0, 1.0, true);
+    if (node.contains("step_tolerance"))
+      newton.step_tolerance =
+          toRange(node["step_tolerance"], child(path, "step_tolerance"), 0.0, 1.0, false);
+    if (node.contains("linear_solver")) {
+      const std::string p = child(path, "linear_solver");
+      const std::string name = toString(node["linear_solver"], p);
+      if (name == "auto")
+        newton.linear_solver = LinearSolverType::Auto;
+      else if (name == "dense")
+        newton.linear_solver = LinearSolverType::Dense;
+      else if (name == "cholmod")
+        newton.linear_solver = LinearSolverType::Cholmod;
+      else
+        fail(p, "expected \"auto\", \"dense\" or \"cholmod\", got \"" + name + "\"");
+    }
+    return newton;
+  }
+
+  AvatarSpec readAvatar(const json& node, const std::string& path, size_t index,
+                        const SceneSpec& scene) const {
+    requireObject(node, path);
+    checkKeys(node, path,
+              {"name", "model", "vertices", "betas", "simulation", "motion", "motion_seconds",
+               "offset", "yaw_degrees", "options"});
+    AvatarSpec avatar;
+    avatar.name = node.contains("name") ? toName(node["name"], child(path, "name"))
+                                        : "avatar" + std::to_string(index);
+    if (node.contains("model")) {
+      const std::string p = child(path, "model");
+      const std::string model = toString(node["model"], p);
+      avatar.model = model == "synthetic" ? model : existingFile(model, p, "body model");
+    }
+    if (node.contains("vertices")) {
+      const std::string p = child(path, "vertices");
+      if (avatar.model != "synthetic")
+        fail(p, "only for \"model\": \"synthetic\" (a model file fixes its vertex count)");
+      avatar.synthetic_vertices = toIntRange(node["vertices"], p, 200, 100000);
+    }
+    if (node.contains("betas")) {
+      const std::string p = child(path, "betas");
+      const json& betas = node["betas"];
+      if (!betas.is_array() || betas.size() > 300)
+        fail(p, "expected a list of at most 300 numbers, got " + describe(betas));
+      avatar.betas.resize(long(betas.size()));
+      for (size_t k = 0; k < betas.size(); ++k)
+        avatar.betas[long(k)] = toDouble(betas[k], item(p, k));
+    }
+    if (node.contains("simulation")) {
+      const std::string p = child(path, "simulation");
+      const std::string simulation = toString(node["simulation"], p);
+      if (simulation == "fem" || simulation == "rom")
+        fail(p, "\"" + simulation +
+                    "\" is not available yet: the FEM/ROM soft-tissue models are not "
+                    "implemented in this version (use \"skeleton\")");
+      if (simulation != "skeleton")
+        fail(p, "expected \"skeleton\" (later: \"fem\", \"rom\"), got \"" + simulation + "\"");
+      avatar.simulation = simulation;
+    }
+    bool builtin_motion = false;
+    if (node.contains("motion")) {
+      const std::string p = child(path, "motion");
+      const std::string motion = toString(node["motion"], p);
+      const std::string prefix = "builtin:";
+      if (motion.rfind(prefix, 0) == 0) {
+        const std::string name = motion.substr(prefix.size());
+        const auto names = builtinMotionNames();
+        if (std::find(names.begin(), names.end(), name) == names.end())
+          fail(p, "unknown built-in motion \"" + name + "\" (known: " + joinNames(names) + ")");
+        avatar.motion = motion;
+        builtin_motion = true;
+      } else {
+        const auto names = builtinMotionNames();
+        std::string resolved;
+        try {
+          resolved = existingFile(motion, p, "motion");
+        } catch (const FileError& e) {
+          if (std::find(names.begin(), names.end(), motion) != names.end())
+            throw FileError(std::string(e.what()) +
+                            " (for the built-in motion write \"builtin:" + motion + "\")");
+          throw;
+        }
+        avatar.motion = resolved;
+      }
+    }
+    if (node.contains("motion_seconds")) {
+      const std::string p = child(path, "motion_seconds");
+      if (!builtin_motion) fail(p, "only for a built-in motion (\"motion\": \"builtin:NAME\")");
+      avatar.motion_seconds = toRange(node["motion_seconds"], p, 0.0, 1e5, true, "s");
+    }
+    if (node.contains("offset")) avatar.offset = toVec3(node["offset"], child(path, "offset"));
+    if (node.contains("yaw_degrees"))
+      avatar.yaw = toRange(node["yaw_degrees"], child(path, "yaw_degrees"), -3600.0, 3600.0, false,
+                           "degrees") *
+                   kPi / 180.0;
+    avatar.options.time_step = scene.time_step;
+    if (node.contains("options"))
+      readSimulableOptions(node["options"], child(path, "options"), avatar.options);
+    return avatar;
+  }
+
+  void readSimulableOptions(const json& node, const std::string& path,
+                            SimulableOptions& options) const {
+    requireObject(node, path);
+    checkKeys(node, path,
+              {"tracking_stiffness", "root_stiffness", "joint_stiffness", "contact_stiffness",
+               "gravity", "kinematic_bones", "track_mocap"});
+    const double inf = std::numeric_limits<double>::infinity();
+    if (node.contains("tracking_stiffness"))
+      options.tracking_stiffness = toRange(
+          node["tracking_stiffness"], child(path, "tracking_stiffness"), 0.0, inf, false, "1/s²");
+    if (node.contains("root_stiffness"))
+      options.root_stiffness =
+          toRange(node["root_stiffness"], child(path, "root_stiffness"), 0.0, inf, false, "1/s²");
+    if (node.contains("joint_stiffness"))
+      options.joint_stiffness =
+          toRange(node["joint_stiffness"], child(path, "joint_stiffness"), 0.0, inf, true, "N/m");
+    if (node.contains("contact_stiffness"))
+      options.contact.stiffness = toRange(
+          node["contact_stiffness"], child(path, "contact_stiffness"), 0.0, inf, false, "N/m³");
+    if (node.contains("gravity")) options.gravity = toVec3(node["gravity"], child(path, "gravity"));
+    if (node.contains("track_mocap"))
+      options.track_mocap = toBool(node["track_mocap"], child(path, "track_mocap"));
+    if (node.contains("kinematic_bones")) {
+      const std::string p = child(path, "kinematic_bones");
+      const json& bones = node["kinematic_bones"];
+      if (!bones.is_array())
+        fail(p, "expected a list of bone indices 0..23, got " + describe(bones));
+      options.kinematic_bones.clear();
+      for (size_t k = 0; k < bones.size(); ++k) {
+        const int bone = toIntRange(bones[k], item(p, k), 0, 23);
+        if (std::find(options.kinematic_bones.begin(), options.kinematic_bones.end(), bone) !=
+            options.kinematic_bones.end())
+          fail(item(p, k), "bone " + std::to_string(bone) + " is listed twice");
+        options.kinematic_bones.push_back(bone);
+      }
+    }
+  }
+
+  Collider readCollider(const json& node, const std::string& path, size_t index,
+                        const SceneSpec& scene) const {
+    requireObject(node, path);
+    if (!node.contains("type"))
+      fail(child(path, "type"), "missing (expected \"plane\", \"sphere\" or \"capsule\")");
+    const std::string type = toString(node["type"], child(path, "type"));
+    const double inf = std::numeric_limits<double>::infinity();
+    Collider collider;
+    if (type == "plane") {
+      checkKeys(node, path, {"name", "type", "point", "normal", "velocity", "path"});
+      const Vec3 point =
+          node.contains("point") ? toVec3(node["point"], child(path, "point")) : Vec3::Zero();
+      const Vec3 normal =
+          node.contains("normal") ? toVec3(node["normal"], child(path, "normal")) : Vec3::UnitY();
+      if (!(normal.norm() > 1e-12))
+        fail(child(path, "normal"), "expected a nonzero vector, got [0, 0, 0]");
+      collider = Collider::plane(point, normal);
+    } else if (type == "sphere") {
+      checkKeys(node, path, {"name", "type", "center", "radius", "velocity", "path"});
+      if (!node.contains("center")) fail(child(path, "center"), "missing (expected [x, y, z], m)");
+      if (!node.contains("radius"))
+        fail(child(path, "radius"), "missing (expected a radius > 0, m)");
+      collider =
+          Collider::sphere(toVec3(node["center"], child(path, "center")),
+                           toRange(node["radius"], child(path, "radius"), 0.0, inf, true, "m"));
+    } else if (type == "capsule") {
+      checkKeys(node, path, {"name", "type", "a", "b", "radius", "velocity", "path"});
+      for (const char* key : {"a", "b"})
+        if (!node.contains(key)) fail(child(path, key), "missing (expected [x, y, z], m)");
+      if (!node.contains("radius"))
+        fail(child(path, "radius"), "missing (expected a radius > 0, m)");
+      collider = Collider::capsule(
+          toVec3(node["a"], child(path, "a")), toVec3(node["b"], child(path, "b")),
+          toRange(node["radius"], child(path, "radius"), 0.0, inf, true, "m"));
+    } else {
+      fail(child(path, "type"),
+           "expected \"plane\", \"sphere\" or \"capsule\", got \"" + type + "\"");
+    }
+    collider.name = node.contains("name") ? toName(node["name"], child(path, "name"))
+                                          : type + std::to_string(index);
+    if (node.contains("velocity") && node.contains("path"))
+      fail(child(path, "velocity"), "give either \"velocity\" or \"path\", not both");
+    if (node.contains("velocity")) {
+      // Constant velocity over the whole simulation (held after the last key otherwise).
+      const Vec3 velocity = toVec3(node["velocity"], child(path, "velocity"));
+      collider.path = ColliderPath::constantVelocity(velocity, scene.duration + scene.time_step);
+    }
+    if (node.contains("path")) collider.path = readPath(node["path"], child(path, "path"));
+    return collider;
+  }
+
+  ColliderPath readPath(const json& node, const std::string& path) const {
+    requireObject(node, path);
+    checkKeys(node, path, {"times", "offsets"});
+    for (const char* key : {"times", "offsets"})
+      if (!node.contains(key)) fail(child(path, key), "missing");
+    const json& times = node["times"];
+    const json& offsets = node["offsets"];
+    if (!times.is_array() || times.empty())
+      fail(child(path, "times"),
+           "expected a list of at least one time (s), got " + describe(times));
+    if (!offsets.is_array() || offsets.size() != times.size())
+      fail(child(path, "offsets"), "expected a list of " + std::to_string(times.size()) +
+                                       " offsets [x, y, z] (one per time), got " +
+                                       describe(offsets));
+    ColliderPath result;
+    for (size_t k = 0; k < times.size(); ++k) {
+      const double t = toDouble(times[k], item(child(path, "times"), k));
+      if (k > 0 && !(t > result.times.back()))
+        fail(item(child(path, "times"), k), "times must increase strictly, got " + number(t) +
+                                                " after " + number(result.times.back()));
+      result.times.push_back(t);
+      result.offsets.push_back(toVec3(offsets[k], item(child(path, "offsets"), k)));
+    }
+    result.validate(origin_ + ": " + path);
+    return result;
+  }
+
+  OutputSpec readOutputs(const json& node, const std::string& path) const {
+    requireObject(node, path);
+    checkKeys(node, path, {"dir", "ply", "npz", "gltf", "png", "png_frames", "every"});
+    OutputSpec outputs;
+    if (node.contains("dir")) {
+      outputs.dir = toString(node["dir"], child(path, "dir"));
+      if (outputs.dir.empty())
+        fail(child(path, "dir"), "expected a directory, got an empty string");
+    }
+    if (node.contains("ply")) outputs.ply = toBool(node["ply"], child(path, "ply"));
+    if (node.contains("npz")) outputs.npz = toBool(node["npz"], child(path, "npz"));
+    if (node.contains("gltf")) outputs.gltf = toBool(node["gltf"], child(path, "gltf"));
+    if (node.contains("png")) outputs.png = toBool(node["png"], child(path, "png"));
+    if (node.contains("png_frames"))
+      outputs.png_frames = toIntRange(node["png_frames"], child(path, "png_frames"), 1, 100);
+    if (node.contains("every"))
+      outputs.every = toIntRange(node["every"], child(path, "every"), 1, 1000000);
+    return outputs;
+  }
+
+  std::string origin_;
+  std::string base_dir_;
+};
+
+}  // namespace
+
+SceneSpec parseSceneJson(const std::string& text, const std::string& origin,
+                         const std::string& base_dir, const SceneOverrides& overrides) {
+  json root;
+  try {
+    root = json::parse(text);
+  } catch (const json::parse_error& e) {
+    // Line and column of the byte nlohmann stopped at, for editors.
+    const size_t byte = std::min<size_t>(e.byte, text.size());
+    size_t line = 1, column = 1;
+    for (size_t k = 0; k + 1 < byte; ++k) {
+      if (text[k] == '\n') {
+        ++line;
+        column = 1;
+      } else {
+        ++column;
+      }
+    }
+    throw InputError(origin + ": malformed JSON at byte " + std::to_string(e.byte) + " (line " +
+                     std::to_string(line) + ", column " + std::to_string(column) +
+                     "): " + e.what());
+  } catch (const json::exception& e) {
+    // E.g. a number too large for a double (out_of_range.406).
+    throw InputError(origin + ": invalid JSON: " + e.what());
+  }
+  SceneSpec scene = SceneReader(origin, base_dir).read(root, overrides);
+  scene.source = origin;
+  return scene;
+}
+
+SceneSpec loadSceneFile(const std::string& path, const SceneOverrides& overrides) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) throw FileError(path + ": scene file not found");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError(path + ": cannot open the scene file for reading");
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) throw FileError(path + ": read error");
+  const fs::path parent = fs::path(path).parent_path();
+  return parseSceneJson(text.str(), path, parent.empty() ? "." : parent.string(), overrides);
+}
+
+SceneSpec defaultScene(const SceneOverrides& overrides) {
+  return parseSceneJson(kDefaultSceneJson, "builtin default scene", ".", overrides);
+}
+
+}  // namespace flsh

@@ -1,0 +1,879 @@
+// Simulable for the articulated skeleton: 24 rigid bones in maximal coordinates, joint springs,
+// mocap tracking springs, gravity, backward-Euler inertia and collider contact on the skinned
+// surface (ARCHITECTURE.md §4–5). The energy kernels live in skeleton_energies.cpp; this file
+// holds the state, the mocap targets and the assembly.
+//
+// Not thread-safe per instance: const evaluations share a mutable contact cache.
+#include "flsh/sim/simulable.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "flsh/body/body_forward.h"
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
+#include "flsh/sim/skeleton_energies.h"
+
+namespace flsh {
+
+namespace {
+
+constexpr int kDofsPerBone = 6;
+
+// Rigid transforms of all bones: rotation R_b and joint centre t_b (row b of t).
+struct BoneStates {
+  std::vector<Mat3> R;
+  MatX3 t;
+};
+
+BoneStates restBones(const MatX3& joints) {
+  BoneStates s;
+  s.R.assign(joints.rows(), Mat3::Identity());
+  s.t = joints;
+  return s;
+}
+
+// Bones posed by an SMPL pose (72) and root translation, like poseBody's transforms:
+// R_b = R_p rodrigues(θ_b), t_b = R_p (J_b − J_p) + t_p, t_0 = J_0 + trans.
+BoneStates bonesFromPose(const Eigen::Ref<const VecX>& pose, const Vec3& trans,
+                         const MatX3& joints, const std::vector<int>& parents) {
+  BoneStates s;
+  const int n = int(parents.size());
+  s.R.resize(n);
+  s.t.resize(n, 3);
+  for (int b = 0; b < n; ++b) {
+    const Mat3 local = rodrigues(pose.segment<3>(3 * b));
+    const int p = parents[b];
+    if (p < 0) {
+      s.R[b] = local;
+      s.t.row(b) = joints.row(b) + trans.transpose();
+    } else {
+      s.R[b] = s.R[p] * local;
+      s.t.row(b) = (s.R[p] * (joints.row(b) - joints.row(p)).transpose() +
+                    s.t.row(p).transpose()).transpose();
+    }
+  }
+  return s;
+}
+
+// Appends a dense block (fixed-size expressions: no temporaries in the hot path).
+template <class Derived>
+void addBlock(std::vector<Triplet>& H, int row0, int col0, const Eigen::MatrixBase<Derived>& block) {
+  for (int c = 0; c < block.cols(); ++c)
+    for (int r = 0; r < block.rows(); ++r) H.emplace_back(row0 + r, col0 + c, block(r, c));
+}
+
+std::string motionName(const Motion& m) {
+  return m.source.empty() ? std::string("mocap") : "mocap '" + m.source + "'";
+}
+
+}  // namespace
+
+struct Simulable::Impl {
+  // ---- model data (immutable after construction) ----
+  std::shared_ptr<const SoftAvatar> avatar;
+  std::shared_ptr<const Motion> mocap;
+  SimulableOptions options;
+  int num_bones = 0;
+  std::vector<int> parents;
+  MatX3 J;  // 24 × 3 rest joint centres
+  std::vector<BoneInertia> inertia;
+  std::vector<double> tracking_k;  // N·m/rad² per bone (root unused)
+  double root_k_pos = 0.0, root_k_rot = 0.0;
+  std::vector<char> kinematic;  // per bone
+
+  // Skinning weights as (bone, weight) lists per vertex (the nonzero entries only).
+  struct Influence {
+    int bone;
+    double weight;
+  };
+  std::vector<int> influence_start;  // #V + 1
+  std::vector<Influence> influences;
+
+  // Broad phase: per bone, the vertices it dominates (largest weight), a sphere bounding their
+  // rest offsets X − J_b (centre s_b in the bone frame, radius ρ_b about s_b, extent e_b = max
+  // |X − J_b|), and W_bc = max over those vertices of w_ic for each other bone c that
+  // influences them.
+  std::vector<std::vector<int>> dominated;
+  std::vector<Vec3> sphere_center;
+  std::vector<double> sphere_radius, sphere_extent;
+  std::vector<std::vector<Influence>> co_influence;
+
+  // ---- mutable data ----
+  BoneStates q, q_n, q_nm1;
+  std::vector<BoneStates> stack;
+  std::vector<Collider> colliders;
+  double time = 0.0;
+  bool is_static = false;
+  std::vector<Mat3> target_R;  // per bone: R_target,rel (root: the global target rotation)
+  Vec3 target_t0 = Vec3::Zero();
+  long state_version = 0;
+
+  // Contact cache, valid while cache_version == state_version.
+  struct ContactCache {
+    long version = -1;
+    std::vector<int> candidates;  // vertex indices evaluated (dominated by bones near colliders)
+    MatX3 nodes;                  // positions of the candidates
+    VecX areas;
+    VecX gradient;                // ∂E/∂x of the candidates (3 per candidate)
+    double energy = 0.0;
+    int active = 0;
+    std::vector<ContactPoint> points;
+    std::vector<Triplet> node_hessian;  // scratch for colliderContactEnergy
+  };
+  mutable ContactCache contact;
+  // Scratch for assembling contact Hessians bone pair by bone pair.
+  mutable std::vector<Mat6> pair_blocks;
+  mutable std::vector<char> pair_touched;
+  mutable std::vector<int> pair_list;
+
+  void touch() { ++state_version; }
+  int dofs() const { return kDofsPerBone * num_bones; }
+
+  void validateOptions() const;
+  void buildSkinning();
+  void buildStiffnesses();
+  void updateTargets(double t);
+  void placeKinematicBones();
+  void ensureContact() const;
+  Vec3 node(int i) const;
+  double contactEnergy() const {
+    ensureContact();
+    return contact.energy;
+  }
+  void addContactGradient(VecX& g, int offset) const;
+  void addContactHessian(std::vector<Triplet>& H, int offset, bool psd) const;
+};
+
+// ---- construction ------------------------------------------------------------------------
+
+void Simulable::Impl::validateOptions() const {
+  const std::string fn = "Simulable: ";
+  if (!(options.time_step > 0.0) || !std::isfinite(options.time_step))
+    throw InputError(fn + "options.time_step = " + std::to_string(options.time_step) +
+                     ", expected finite and > 0 s");
+  if (!options.gravity.allFinite()) throw InputError(fn + "options.gravity contains NaN or Inf");
+  const std::pair<const char*, double> stiffnesses[] = {
+      {"joint_stiffness", options.joint_stiffness},
+      {"tracking_stiffness", options.tracking_stiffness},
+      {"root_stiffness", options.root_stiffness},
+      {"contact.stiffness", options.contact.stiffness}};
+  for (const auto& [name, value] : stiffnesses)
+    if (!(value >= 0.0) || !std::isfinite(value))
+      throw InputError(fn + "options." + name + " = " + std::to_string(value) +
+                       ", expected finite and >= 0");
+  for (int b : options.kinematic_bones)
+    if (b < 0 || b >= num_bones)
+      throw InputError(fn + "options.kinematic_bones contains " + std::to_string(b) +
+                       ", expected bone indices in [0, " + std::to_string(num_bones) + ")");
+}
+
+void Simulable::Impl::buildSkinning() {
+  const MatX& W = avatar->body().weights;  // #V × 24
+  const MatX3& X = avatar->restVertices();
+  const int nv = int(X.rows());
+  influence_start.assign(nv + 1, 0);
+  influences.clear();
+  dominated.assign(num_bones, {});
+  std::vector<int> dominant(nv, 0);
+  for (int i = 0; i < nv; ++i) {
+    int best = 0;
+    for (int b = 0; b < num_bones; ++b) {
+      if (W(i, b) != 0.0) influences.push_back({b, W(i, b)});
+      if (W(i, b) > W(i, best)) best = b;
+    }
+    influence_start[i + 1] = int(influences.size());
+    dominant[i] = best;
+    dominated[best].push_back(i);
+  }
+  sphere_center.assign(num_bones, Vec3::Zero());
+  sphere_radius.assign(num_bones, 0.0);
+  sphere_extent.assign(num_bones, 0.0);
+  co_influence.assign(num_bones, {});
+  for (int b = 0; b < num_bones; ++b) {
+    if (dominated[b].empty()) continue;
+    Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+    for (int i : dominated[b]) {
+      const Vec3 p = X.row(i).transpose() - J.row(b).transpose();
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    sphere_center[b] = 0.5 * (lo + hi);
+    std::vector<double> max_weight(num_bones, 0.0);
+    for (int i : dominated[b]) {
+      const Vec3 p = X.row(i).transpose() - J.row(b).transpose();
+      sphere_radius[b] = std::max(sphere_radius[b], (p - sphere_center[b]).norm());
+      sphere_extent[b] = std::max(sphere_extent[b], p.norm());
+      for (int k = influence_start[i]; k < influence_start[i + 1]; ++k)
+        if (influences[k].bone != b)
+          max_weight[influences[k].bone] = std::max(max_weight[influences[k].bone],
+                                                    influences[k].weight);
+    }
+    for (int c = 0; c < num_bones; ++c)
+      if (max_weight[c] > 0.0) co_influence[b].push_back({c, max_weight[c]});
+  }
+}
+
+// Tracking stiffness k_b = ω_T² I_b with I_b = Σ m‖X − J_b‖² over bone b's subtree, from each
+// bone c's moments about its own joint by the parallel-axis shift d = J_c − J_b:
+// Σ_c m‖(X − J_c) + d‖² = tr(S_c) + 2 m̄_c·d + M_c‖d‖². The root spring uses the whole body.
+void Simulable::Impl::buildStiffnesses() {
+  std::vector<std::vector<int>> children(num_bones);
+  for (int b = 1; b < num_bones; ++b) children[parents[b]].push_back(b);
+  auto polarMoment = [&](int b) {
+    double I = 0.0;
+    std::vector<int> todo = {b};
+    while (!todo.empty()) {
+      const int c = todo.back();
+      todo.pop_back();
+      const Vec3 d = (J.row(c) - J.row(b)).transpose();
+      I += inertia[c].second_moment.trace() + 2.0 * inertia[c].first_moment.dot(d) +
+           inertia[c].mass * d.squaredNorm();
+      for (int child : children[c]) todo.push_back(child);
+    }
+    return I;
+  };
+  tracking_k.assign(num_bones, 0.0);
+  for (int b = 1; b < num_bones; ++b) tracking_k[b] = options.tracking_stiffness * polarMoment(b);
+  double mass = 0.0;
+  for (const BoneInertia& bone : inertia) mass += bone.mass;
+  root_k_pos = options.root_stiffness * mass;
+  root_k_rot = options.root_stiffness * polarMoment(0);
+}
+
+Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar,
+                     std::shared_ptr<const Motion> mocap, const SimulableOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  const std::string fn = "Simulable: ";
+  if (!avatar) throw InputError(fn + "avatar is null, expected a SoftAvatar");
+  if (!avatar->initialized())
+    throw InputError(fn + "the avatar is not initialized (call SoftAvatar::initVolumetricData())");
+  const BodyModel& body = avatar->body();
+  if (body.numJoints() != kNumJoints)
+    throw InputError(fn + "the avatar's body model has " + std::to_string(body.numJoints()) +
+                     " joints, expected SMPL's " + std::to_string(kNumJoints));
+  if (int(avatar->boneInertia().size()) != kNumJoints ||
+      avatar->restJoints().rows() != kNumJoints ||
+      avatar->restVertices().rows() != body.numVertices() ||
+      avatar->vertexAreas().size() != body.numVertices())
+    throw InputError(fn + "the avatar's data does not match its body model (" +
+                     std::to_string(avatar->boneInertia().size()) + " bone inertias, " +
+                     std::to_string(avatar->restJoints().rows()) + " joints, " +
+                     std::to_string(avatar->restVertices().rows()) + " vertices; expected 24, " +
+                     "24 and " + std::to_string(body.numVertices()) + ")");
+  if (mocap) {
+    const Motion& mo = *mocap;
+    if (mo.numFrames() < 1)
+      throw InputError(fn + motionName(mo) + " has no frames, expected at least 1");
+    if (mo.poses.cols() != kSmplPoseSize || mo.trans.rows() != mo.poses.rows() ||
+        mo.trans.cols() != 3)
+      throw InputError(fn + motionName(mo) + ": poses " +
+                       shapeString({long(mo.poses.rows()), long(mo.poses.cols())}) + " and trans " +
+                       shapeString({long(mo.trans.rows()), long(mo.trans.cols())}) +
+                       ", expected (T, 72) and (T, 3)");
+    if (!mo.poses.allFinite() || !mo.trans.allFinite())
+      throw InputError(fn + motionName(mo) + " contains NaN or Inf in poses or trans");
+    if (!(mo.fps > 0.0) || !std::isfinite(mo.fps))
+      throw InputError(fn + motionName(mo) + " has fps = " + std::to_string(mo.fps) +
+                       ", expected finite and > 0");
+  }
+  m.avatar = std::move(avatar);
+  m.mocap = std::move(mocap);
+  m.options = options;
+  m.num_bones = kNumJoints;
+  m.validateOptions();
+  m.parents = body.parents;
+  m.J = m.avatar->restJoints();
+  m.inertia = m.avatar->boneInertia();
+  m.kinematic.assign(m.num_bones, 0);
+  for (int b : m.options.kinematic_bones) m.kinematic[b] = 1;
+  m.buildSkinning();
+  m.buildStiffnesses();
+  m.pair_blocks.assign(m.num_bones * m.num_bones, Mat6::Zero());
+  m.pair_touched.assign(m.num_bones * m.num_bones, 0);
+  m.q = m.q_n = m.q_nm1 = restBones(m.J);
+  m.updateTargets(0.0);
+}
+
+Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar,
+                     std::shared_ptr<const BodyModel> body, std::shared_ptr<const Motion> mocap,
+                     const SimulableOptions& options)
+    : Simulable(avatar, std::move(mocap), options) {
+  if (!body || body.get() != &avatar->body())
+    throw InputError(
+        "Simulable: the body model passed is not the avatar's (a SoftAvatar is built for one "
+        "body model; pass avatar->bodyPtr())");
+}
+
+Simulable::~Simulable() = default;
+
+// ---- targets and stepping ----------------------------------------------------------------
+
+// Mocap targets at time t: frame t·fps, slerp between neighbouring frames for rotations,
+// linear for the root translation, held at the first/last frame outside the clip.
+void Simulable::Impl::updateTargets(double t) {
+  target_R.resize(num_bones);
+  if (!mocap) {
+    // No mocap: the rest pose is the target (used by kinematic bones only).
+    std::fill(target_R.begin(), target_R.end(), Mat3::Identity());
+    target_t0 = J.row(0).transpose();
+    return;
+  }
+  const Motion& mo = *mocap;
+  const int last = mo.numFrames() - 1;
+  const double frame = std::clamp(t * mo.fps, 0.0, double(last));
+  const int f0 = std::min(int(std::floor(frame)), last);
+  const int f1 = std::min(f0 + 1, last);
+  const double alpha = frame - f0;
+  for (int b = 0; b < num_bones; ++b) {
+    const Vec3 a = mo.poses.row(f0).segment<3>(3 * b).transpose();
+    const Vec3 c = mo.poses.row(f1).segment<3>(3 * b).transpose();
+    target_R[b] = rodrigues(alpha == 0.0 ? a : slerpRotationVector(a, c, alpha));
+  }
+  const Vec3 trans = ((1.0 - alpha) * mo.trans.row(f0) + alpha * mo.trans.row(f1)).transpose();
+  target_t0 = J.row(0).transpose() + trans;
+}
+
+// Kinematic bones follow their targets, carried by their (possibly simulated) parents.
+void Simulable::Impl::placeKinematicBones() {
+  for (int b = 0; b < num_bones; ++b) {
+    if (!kinematic[b]) continue;
+    const int p = parents[b];
+    if (p < 0) {
+      q.R[b] = target_R[b];
+      q.t.row(b) = target_t0.transpose();
+    } else {
+      q.R[b] = q.R[p] * target_R[b];
+      q.t.row(b) = (q.R[p] * (J.row(b) - J.row(p)).transpose() + q.t.row(p).transpose())
+                       .transpose();
+    }
+  }
+}
+
+void Simulable::initialize() {
+  Impl& m = *impl_;
+  m.time = 0.0;
+  m.updateTargets(0.0);
+  m.stack.clear();
+  if (!m.mocap) {
+    m.q = m.q_n = m.q_nm1 = restBones(m.J);
+    m.touch();
+    return;
+  }
+  const Motion& mo = *m.mocap;
+  m.q = bonesFromPose(mo.poses.row(0).transpose(), mo.trans.row(0).transpose(), m.J, m.parents);
+  m.q_n = m.q;
+  m.q_nm1 = m.q;
+  m.touch();
+  if (mo.numFrames() > 1) {
+    // Initial velocity from the first two frames; q_{n−1} = q_n ⊖ h v.
+    const BoneStates next =
+        bonesFromPose(mo.poses.row(1).transpose(), mo.trans.row(1).transpose(), m.J, m.parents);
+    VecX v(m.dofs());
+    for (int b = 0; b < m.num_bones; ++b) {
+      v.segment<3>(6 * b) = (next.t.row(b) - m.q.t.row(b)).transpose() * mo.fps;
+      v.segment<3>(6 * b + 3) = logSO3(next.R[b] * m.q.R[b].transpose()) * mo.fps;
+    }
+    setVelocity(v);
+  }
+}
+
+void Simulable::preUpdate() {
+  Impl& m = *impl_;
+  m.time += m.options.time_step;
+  m.updateTargets(m.time);
+  // Start Newton from the inertial prediction: q_n extrapolated with the current velocity.
+  for (int b = 0; b < m.num_bones; ++b) {
+    m.q.t.row(b) = 2.0 * m.q_n.t.row(b) - m.q_nm1.t.row(b);
+    m.q.R[b] = rodrigues(logSO3(m.q_n.R[b] * m.q_nm1.R[b].transpose())) * m.q_n.R[b];
+  }
+  m.placeKinematicBones();
+  m.touch();
+}
+
+void Simulable::postUpdate() {
+  Impl& m = *impl_;
+  m.q_nm1 = m.q_n;
+  m.q_n = m.q;
+}
+
+// ---- state -------------------------------------------------------------------------------
+
+int Simulable::numDofs() const { return impl_->dofs(); }
+
+VecX Simulable::getState() const {
+  const Impl& m = *impl_;
+  VecX q(m.dofs());
+  for (int b = 0; b < m.num_bones; ++b) {
+    q.segment<3>(6 * b) = m.q.t.row(b).transpose();
+    q.segment<3>(6 * b + 3) = logSO3(m.q.R[b]);
+  }
+  return q;
+}
+
+void Simulable::setState(const VecX& q) {
+  Impl& m = *impl_;
+  if (q.size() != m.dofs())
+    throw InputError("Simulable::setState: q has " + std::to_string(q.size()) +
+                     " values, expected numDofs() = " + std::to_string(m.dofs()) +
+                     " (6 per bone: t, rotation vector)");
+  if (!q.allFinite()) throw InputError("Simulable::setState: q contains NaN or Inf");
+  for (int b = 0; b < m.num_bones; ++b) {
+    m.q.t.row(b) = q.segment<3>(6 * b).transpose();
+    m.q.R[b] = rodrigues(q.segment<3>(6 * b + 3));
+  }
+  m.touch();
+}
+
+void Simulable::updateState(const VecX& dq) {
+  Impl& m = *impl_;
+  if (dq.size() != m.dofs())
+    throw InputError("Simulable::updateState: dq has " + std::to_string(dq.size()) +
+                     " values, expected numDofs() = " + std::to_string(m.dofs()));
+  if (!dq.allFinite()) throw InputError("Simulable::updateState: dq contains NaN or Inf");
+  for (int b = 0; b < m.num_bones; ++b) {
+    m.q.t.row(b) += dq.segment<3>(6 * b).transpose();
+    m.q.R[b] = rodrigues(dq.segment<3>(6 * b + 3)) * m.q.R[b];
+  }
+  m.touch();
+}
+
+void Simulable::pushState() { impl_->stack.push_back(impl_->q); }
+
+void Simulable::popState() {
+  Impl& m = *impl_;
+  if (m.stack.empty())
+    throw Error("Simulable::popState: the state stack is empty (popState without pushState)");
+  m.q = std::move(m.stack.back());
+  m.stack.pop_back();
+  m.touch();
+}
+
+void Simulable::setVelocity(const VecX& v) {
+  Impl& m = *impl_;
+  if (v.size() != m.dofs())
+    throw InputError("Simulable::setVelocity: v has " + std::to_string(v.size()) +
+                     " values, expected numDofs() = " + std::to_string(m.dofs()));
+  if (!v.allFinite()) throw InputError("Simulable::setVelocity: v contains NaN or Inf");
+  const double h = m.options.time_step;
+  for (int b = 0; b < m.num_bones; ++b) {
+    m.q_nm1.t.row(b) = m.q_n.t.row(b) - h * v.segment<3>(6 * b).transpose();
+    m.q_nm1.R[b] = rodrigues(-h * v.segment<3>(6 * b + 3)) * m.q_n.R[b];
+  }
+}
+
+VecX Simulable::getVelocity() const {
+  const Impl& m = *impl_;
+  const double h = m.options.time_step;
+  VecX v(m.dofs());
+  for (int b = 0; b < m.num_bones; ++b) {
+    v.segment<3>(6 * b) = (m.q_n.t.row(b) - m.q_nm1.t.row(b)).transpose() / h;
+    v.segment<3>(6 * b + 3) = logSO3(m.q_n.R[b] * m.q_nm1.R[b].transpose()) / h;
+  }
+  return v;
+}
+
+double Simulable::time() const { return impl_->time; }
+
+// ---- outputs -----------------------------------------------------------------------------
+
+VecX Simulable::getPose() const {
+  const Impl& m = *impl_;
+  VecX pose(3 * m.num_bones);
+  for (int b = 0; b < m.num_bones; ++b) {
+    const int p = m.parents[b];
+    pose.segment<3>(3 * b) = logSO3(p < 0 ? m.q.R[b] : Mat3(m.q.R[p].transpose() * m.q.R[b]));
+  }
+  return pose;
+}
+
+Vec3 Simulable::getTrans() const {
+  return (impl_->q.t.row(0) - impl_->J.row(0)).transpose();
+}
+
+// θ_b = log(R_pᵀR_b): a world increment δω_b left-multiplies R_pᵀR_b by exp([R_pᵀδω_b]×), so
+// dθ_b = J_l(θ_b)⁻¹ R_pᵀ (δω_b − δω_p).
+MatX Simulable::getStateJacobian() const {
+  const Impl& m = *impl_;
+  MatX D = MatX::Zero(3 * m.num_bones + 3, m.dofs());
+  const VecX pose = getPose();
+  for (int b = 0; b < m.num_bones; ++b) {
+    const int p = m.parents[b];
+    const Mat3 Jinv = leftJacobianInverseSO3(pose.segment<3>(3 * b));
+    if (p < 0) {
+      D.block<3, 3>(3 * b, 6 * b + 3) = Jinv;
+    } else {
+      const Mat3 block = Jinv * m.q.R[p].transpose();
+      D.block<3, 3>(3 * b, 6 * b + 3) = block;
+      D.block<3, 3>(3 * b, 6 * p + 3) = -block;
+    }
+  }
+  D.block<3, 3>(3 * m.num_bones, 0) = Mat3::Identity();
+  return D;
+}
+
+MatX3 Simulable::getVertices() const {
+  const SoftAvatar& avatar = *impl_->avatar;
+  return poseBody(avatar.body(), avatar.betas(), getPose(), getTrans()).vertices;
+}
+
+Vec3 Simulable::Impl::node(int i) const {
+  const Vec3 X = avatar->restVertices().row(i).transpose();
+  Vec3 x = Vec3::Zero();
+  for (int k = influence_start[i]; k < influence_start[i + 1]; ++k) {
+    const int b = influences[k].bone;
+    x += influences[k].weight * (q.R[b] * (X - J.row(b).transpose()) + q.t.row(b).transpose());
+  }
+  return x;
+}
+
+MatX3 Simulable::getNodes() const {
+  const Impl& m = *impl_;
+  MatX3 nodes(m.avatar->restVertices().rows(), 3);
+  for (int i = 0; i < nodes.rows(); ++i) nodes.row(i) = m.node(i).transpose();
+  return nodes;
+}
+
+// ∂x_i/∂t_b = w_ib I, ∂x_i/∂δω_b = −w_ib [R_b(X_i − J_b)]×.
+SpMat Simulable::getNodesStateJacobian() const {
+  const Impl& m = *impl_;
+  const MatX3& X = m.avatar->restVertices();
+  std::vector<Triplet> triplets;
+  triplets.reserve(m.influences.size() * 9);
+  for (int i = 0; i < X.rows(); ++i) {
+    for (int k = m.influence_start[i]; k < m.influence_start[i + 1]; ++k) {
+      const int b = m.influences[k].bone;
+      const double w = m.influences[k].weight;
+      const Mat3 dx_dw = -w * skew(m.q.R[b] * (X.row(i) - m.J.row(b)).transpose());
+      for (int r = 0; r < 3; ++r) {
+        triplets.emplace_back(3 * i + r, 6 * b + r, w);
+        for (int c = 0; c < 3; ++c) triplets.emplace_back(3 * i + r, 6 * b + 3 + c, dx_dw(r, c));
+      }
+    }
+  }
+  SpMat D(3 * X.rows(), m.dofs());
+  D.setFromTriplets(triplets.begin(), triplets.end());
+  return D;
+}
+
+const std::vector<Mat3>& Simulable::boneRotations() const { return impl_->q.R; }
+const MatX3& Simulable::bonePositions() const { return impl_->q.t; }
+
+// ---- contact -----------------------------------------------------------------------------
+
+// Broad phase, then the contact energy and its node gradient at the current state. A vertex i
+// dominated by bone b is x_i = x_ib + Σ_{c≠b} w_ic (x_ic − x_ib) with x_ib its rigid position
+// on b, and x_ic − x_ib = (R_c − R_b)(X_i − J_b) + (R_c(J_b − J_c) + t_c − t_b), so
+// |x_i − x_ib| ≤ Σ_c W_bc (‖R_c − R_b‖₂ e_b + |R_c(J_b − J_c) + t_c − t_b|). Signed distances
+// are 1-Lipschitz, so bone b's vertices can only touch a collider if d(centre) < radius of this
+// bound: the skipped vertices have exactly zero contact energy.
+void Simulable::Impl::ensureContact() const {
+  ContactCache& cc = contact;
+  if (cc.version == state_version) return;
+  cc.candidates.clear();
+  cc.points.clear();
+  cc.energy = 0.0;
+  cc.active = 0;
+  if (!colliders.empty()) {
+    for (int b = 0; b < num_bones; ++b) {
+      if (dominated[b].empty()) continue;
+      double margin = 0.0;
+      for (const Influence& co : co_influence[b]) {
+        const int c = co.bone;
+        const double rotation_gap =
+            std::sqrt(std::max(0.0, 3.0 - (q.R[b].transpose() * q.R[c]).trace()));
+        const Vec3 joint_gap = q.R[c] * (J.row(b) - J.row(c)).transpose() +
+                               q.t.row(c).transpose() - q.t.row(b).transpose();
+        margin += co.weight * (rotation_gap * sphere_extent[b] + joint_gap.norm());
+      }
+      const Vec3 centre = q.R[b] * sphere_center[b] + q.t.row(b).transpose();
+      const double radius = sphere_radius[b] + margin;
+      bool near = false;
+      for (const Collider& collider : colliders)
+        near = near || collider.signedDistance(centre, time) < radius;
+      if (near) cc.candidates.insert(cc.candidates.end(), dominated[b].begin(), dominated[b].end());
+    }
+  }
+  const int n = int(cc.candidates.size());
+  cc.nodes.resize(n, 3);
+  cc.areas.resize(n);
+  const VecX& areas = avatar->vertexAreas();
+  for (int j = 0; j < n; ++j) {
+    cc.nodes.row(j) = node(cc.candidates[j]).transpose();
+    cc.areas[j] = areas[cc.candidates[j]];
+  }
+  cc.gradient.setZero(3 * n);
+  if (n > 0)
+    cc.energy = colliderContactEnergy(cc.nodes, cc.areas, colliders, time, options.contact,
+                                      &cc.gradient, nullptr, 0, &cc.points);
+  cc.active = int(cc.points.size());
+  cc.version = state_version;
+}
+
+void Simulable::Impl::addContactGradient(VecX& g, int offset) const {
+  ensureContact();
+  const MatX3& X = avatar->restVertices();
+  for (size_t j = 0; j < contact.candidates.size(); ++j) {
+    const Vec3 gx = contact.gradient.segment<3>(3 * j);
+    if (gx.isZero(0.0)) continue;
+    const int i = contact.candidates[j];
+    for (int k = influence_start[i]; k < influence_start[i + 1]; ++k) {
+      const int b = influences[k].bone;
+      const double w = influences[k].weight;
+      const Vec3 y = q.R[b] * (X.row(i) - J.row(b)).transpose();
+      g.segment<3>(offset + 6 * b) += w * gx;
+      g.segment<3>(offset + 6 * b + 3) += w * y.cross(gx);
+    }
+  }
+}
+
+// Jᵀ H_x J per active vertex, accumulated per bone pair; the exact form adds the curvature
+// of the rotating points, Σ_b w_ib (g_i · ∂²y_ib), in each bone's rotation block.
+void Simulable::Impl::addContactHessian(std::vector<Triplet>& H, int offset, bool psd) const {
+  ensureContact();
+  if (contact.active == 0) return;
+  ContactOptions contact_options = options.contact;
+  contact_options.exact_hessian = !psd;
+  std::vector<Triplet>& node_hessian = contact.node_hessian;
+  node_hessian.clear();
+  colliderContactEnergy(contact.nodes, contact.areas, colliders, time, contact_options, nullptr,
+                        &node_hessian, 0, nullptr);
+  const MatX3& X = avatar->restVertices();
+  pair_list.clear();
+  auto block = [&](int b, int c) -> Mat6& {
+    const int key = b * num_bones + c;
+    if (!pair_touched[key]) {
+      pair_touched[key] = 1;
+      pair_blocks[key].setZero();
+      pair_list.push_back(key);
+    }
+    return pair_blocks[key];
+  };
+  // colliderContactEnergy emits 9 consecutive triplets (one 3 × 3 block) per active pair.
+  Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
+  int bones[kNumJoints];
+  for (size_t start = 0; start + 9 <= node_hessian.size(); start += 9) {
+    const int j = node_hessian[start].row() / 3;
+    Mat3 Hx;
+    for (int e = 0; e < 9; ++e) {
+      const Triplet& t = node_hessian[start + e];
+      Hx(t.row() - 3 * j, t.col() - 3 * j) = t.value();
+    }
+    const int i = contact.candidates[j];
+    const int count = influence_start[i + 1] - influence_start[i];
+    for (int a = 0; a < count; ++a) {
+      const Influence& inf = influences[influence_start[i] + a];
+      const Vec3 y = q.R[inf.bone] * (X.row(i) - J.row(inf.bone)).transpose();
+      bones[a] = inf.bone;
+      Jb[a].leftCols<3>() = inf.weight * Mat3::Identity();
+      Jb[a].rightCols<3>() = -inf.weight * skew(y);
+    }
+    for (int a = 0; a < count; ++a) {
+      const Eigen::Matrix<double, 6, 3> JaT_H = Jb[a].transpose() * Hx;
+      for (int c = 0; c < count; ++c) block(bones[a], bones[c]) += JaT_H * Jb[c];
+    }
+  }
+  // Curvature of the rotating contact points, summed per bone (Σ_i w_ib g_i·∂²y_ib); the PSD
+  // form keeps its projection on the PSD cone (the stabilizing part) instead of dropping it.
+  Mat3 curvature[kNumJoints];
+  bool has_curvature[kNumJoints] = {};
+  for (size_t j = 0; j < contact.candidates.size(); ++j) {
+    const Vec3 gx = contact.gradient.segment<3>(3 * j);
+    if (gx.isZero(0.0)) continue;
+    const int i = contact.candidates[j];
+    for (int k = influence_start[i]; k < influence_start[i + 1]; ++k) {
+      const int b = influences[k].bone;
+      const Vec3 y = q.R[b] * (X.row(i) - J.row(b)).transpose();
+      if (!has_curvature[b]) curvature[b].setZero();
+      has_curvature[b] = true;
+      curvature[b] += influences[k].weight * rotationCurvature(gx, y);
+    }
+  }
+  for (int b = 0; b < num_bones; ++b)
+    if (has_curvature[b])
+      block(b, b).bottomRightCorner<3, 3>() += psd ? projectToPSD<3>(curvature[b]) : curvature[b];
+  for (int key : pair_list) {
+    const int b = key / num_bones, c = key % num_bones;
+    addBlock(H, offset + 6 * b, offset + 6 * c, pair_blocks[key]);
+    pair_touched[key] = 0;
+  }
+}
+
+// ---- energies ----------------------------------------------------------------------------
+
+double Simulable::getDynamicEnergyScalar() const {
+  const Impl& m = *impl_;
+  if (m.is_static) return 0.0;
+  double E = 0.0;
+  for (int b = 0; b < m.num_bones; ++b)
+    E += rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(),
+                            m.q_n.R[b], m.q_nm1.t.row(b).transpose(), m.q_nm1.R[b],
+                            m.inertia[b], m.options.time_step);
+  return E;
+}
+
+void Simulable::getDynamicGradientVector(VecX& g, int offset) const {
+  const Impl& m = *impl_;
+  if (m.is_static) return;
+  Vec6 gb;
+  for (int b = 0; b < m.num_bones; ++b) {
+    rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(), m.q_n.R[b],
+                       m.q_nm1.t.row(b).transpose(), m.q_nm1.R[b], m.inertia[b],
+                       m.options.time_step, &gb);
+    g.segment<6>(offset + 6 * b) += gb;
+  }
+}
+
+void Simulable::getDynamicHessianTripletVector(std::vector<Triplet>& H, int offset,
+                                               bool psd) const {
+  const Impl& m = *impl_;
+  if (m.is_static) return;
+  Mat6 Hb;
+  for (int b = 0; b < m.num_bones; ++b) {
+    rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(), m.q_n.R[b],
+                       m.q_nm1.t.row(b).transpose(), m.q_nm1.R[b], m.inertia[b],
+                       m.options.time_step, nullptr, &Hb, psd);
+    addBlock(H, offset + 6 * b, offset + 6 * b, Hb);
+  }
+}
+
+double Simulable::getPotentialEnergyScalar() const {
+  const Impl& m = *impl_;
+  double E = 0.0;
+  const bool tracking = m.mocap && m.options.track_mocap;
+  for (int b = 0; b < m.num_bones; ++b) {
+    const Vec3 t_b = m.q.t.row(b).transpose();
+    E += gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity);
+    const int p = m.parents[b];
+    if (p < 0) {
+      if (tracking)
+        E += rootSpringEnergy(t_b, m.q.R[b], m.target_t0, m.target_R[b], m.root_k_pos,
+                              m.root_k_rot);
+      continue;
+    }
+    E += jointSpringEnergy(m.q.t.row(p).transpose(), m.q.R[p], t_b, m.q.R[b],
+                           m.J.row(p).transpose(), m.J.row(b).transpose(),
+                           m.options.joint_stiffness);
+    if (tracking) E += trackingSpringEnergy(m.q.R[p], m.q.R[b], m.target_R[b], m.tracking_k[b]);
+  }
+  return E + m.contactEnergy();
+}
+
+void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
+  const Impl& m = *impl_;
+  const bool tracking = m.mocap && m.options.track_mocap;
+  Vec6 g6;
+  Vec12 g12;
+  for (int b = 0; b < m.num_bones; ++b) {
+    const Vec3 t_b = m.q.t.row(b).transpose();
+    const int ib = offset + 6 * b;
+    gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, &g6);
+    g.segment<6>(ib) += g6;
+    const int p = m.parents[b];
+    if (p < 0) {
+      if (tracking) {
+        rootSpringEnergy(t_b, m.q.R[b], m.target_t0, m.target_R[b], m.root_k_pos, m.root_k_rot,
+                         &g6);
+        g.segment<6>(ib) += g6;
+      }
+      continue;
+    }
+    const int ip = offset + 6 * p;
+    jointSpringEnergy(m.q.t.row(p).transpose(), m.q.R[p], t_b, m.q.R[b], m.J.row(p).transpose(),
+                      m.J.row(b).transpose(), m.options.joint_stiffness, &g12);
+    g.segment<6>(ip) += g12.head<6>();
+    g.segment<6>(ib) += g12.tail<6>();
+    if (tracking) {
+      trackingSpringEnergy(m.q.R[p], m.q.R[b], m.target_R[b], m.tracking_k[b], &g6);
+      g.segment<3>(ip + 3) += g6.head<3>();
+      g.segment<3>(ib + 3) += g6.tail<3>();
+    }
+  }
+  m.addContactGradient(g, offset);
+}
+
+void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset,
+                                                 bool psd) const {
+  const Impl& m = *impl_;
+  const bool tracking = m.mocap && m.options.track_mocap;
+  Mat6 H6;
+  Mat12 H12;
+  for (int b = 0; b < m.num_bones; ++b) {
+    const Vec3 t_b = m.q.t.row(b).transpose();
+    const int ib = offset + 6 * b;
+    gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, nullptr, &H6, psd);
+    addBlock(H, ib + 3, ib + 3, H6.bottomRightCorner<3, 3>());  // only the rotation block
+    const int p = m.parents[b];
+    if (p < 0) {
+      if (tracking) {
+        rootSpringEnergy(t_b, m.q.R[b], m.target_t0, m.target_R[b], m.root_k_pos, m.root_k_rot,
+                         nullptr, &H6, psd);
+        addBlock(H, ib, ib, H6);
+      }
+      continue;
+    }
+    const int ip = offset + 6 * p;
+    jointSpringEnergy(m.q.t.row(p).transpose(), m.q.R[p], t_b, m.q.R[b], m.J.row(p).transpose(),
+                      m.J.row(b).transpose(), m.options.joint_stiffness, nullptr, &H12, psd);
+    // Rows/columns of δω_b are structurally zero (the spring does not rotate with bone b).
+    addBlock(H, ip, ip, H12.topLeftCorner<6, 6>());
+    addBlock(H, ip, ib, H12.block<6, 3>(0, 6));
+    addBlock(H, ib, ip, H12.block<3, 6>(6, 0));
+    addBlock(H, ib, ib, H12.block<3, 3>(6, 6));
+    if (tracking) {
+      trackingSpringEnergy(m.q.R[p], m.q.R[b], m.target_R[b], m.tracking_k[b], nullptr, &H6,
+                           psd);
+      addBlock(H, ip + 3, ip + 3, H6.topLeftCorner<3, 3>());
+      addBlock(H, ip + 3, ib + 3, H6.topRightCorner<3, 3>());
+      addBlock(H, ib + 3, ip + 3, H6.bottomLeftCorner<3, 3>());
+      addBlock(H, ib + 3, ib + 3, H6.bottomRightCorner<3, 3>());
+    }
+  }
+  m.addContactHessian(H, offset, psd);
+}
+
+void Simulable::fixVectorKinematic(VecX& g, int offset) const {
+  const Impl& m = *impl_;
+  for (int b = 0; b < m.num_bones; ++b)
+    if (m.kinematic[b]) g.segment<6>(offset + 6 * b).setZero();
+}
+
+void Simulable::fixMatrixKinematic(std::vector<Triplet>& H, int offset) const {
+  const Impl& m = *impl_;
+  if (m.options.kinematic_bones.empty()) return;
+  auto isKinematic = [&](int index) {
+    const int local = index - offset;
+    return local >= 0 && local < m.dofs() && m.kinematic[local / kDofsPerBone];
+  };
+  H.erase(std::remove_if(H.begin(), H.end(),
+                         [&](const Triplet& t) { return isKinematic(t.row()) || isKinematic(t.col()); }),
+          H.end());
+  for (int b = 0; b < m.num_bones; ++b)
+    if (m.kinematic[b])
+      for (int k = 0; k < kDofsPerBone; ++k)
+        H.emplace_back(offset + 6 * b + k, offset + 6 * b + k, 1.0);
+}
+
+// ---- scene hooks -------------------------------------------------------------------------
+
+void Simulable::setColliders(std::vector<Collider> colliders) {
+  impl_->colliders = std::move(colliders);
+  impl_->touch();
+}
+
+const std::vector<Collider>& Simulable::colliders() const { return impl_->colliders; }
+void Simulable::setStatic(bool on) { impl_->is_static = on; }
+bool Simulable::isStatic() const { return impl_->is_static; }
+const SoftAvatar& Simulable::avatar() const { return *impl_->avatar; }
+const SimulableOptions& Simulable::options() const { return impl_->options; }
+
+SimulableStats Simulable::stats() const {
+  SimulableStats s;
+  s.active_contacts = impl_->contact.active;
+  return s;
+}
+
+}  // namespace flsh

@@ -1,0 +1,141 @@
+// CHOLMOD supernodal Cholesky behind the LinearSolver interface. The input matrix is wrapped,
+// not copied: CHOLMOD reads Eigen's compressed column storage directly (stype = −1: only the
+// lower triangle is used). The symbolic analysis (fill-reducing ordering, supernodes) is kept
+// while the pattern stays the same, which is the common case across Newton iterations.
+#include <cholmod.h>
+
+#include <algorithm>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "flsh/core/error.h"
+#include "solve/linear_solver_detail.h"
+
+namespace flsh {
+
+namespace {
+
+class CholmodSolver final : public LinearSolver {
+ public:
+  CholmodSolver() {
+    cholmod_start(&common_);
+    common_.supernodal = CHOLMOD_SUPERNODAL;
+    common_.print = 0;  // non-PD is an expected answer, not something to print
+    common_.error_handler = nullptr;
+  }
+
+  ~CholmodSolver() override {
+    if (factor_) cholmod_free_factor(&factor_, &common_);
+    if (x_) cholmod_free_dense(&x_, &common_);
+    if (y_) cholmod_free_dense(&y_, &common_);
+    if (e_) cholmod_free_dense(&e_, &common_);
+    cholmod_finish(&common_);
+  }
+
+  CholmodSolver(const CholmodSolver&) = delete;
+  CholmodSolver& operator=(const CholmodSolver&) = delete;
+
+  bool factorize(const SpMat& A_in) override {
+    detail::checkSquare(A_in, "CholmodSolver::factorize");
+    has_factor_ = false;
+    const SpMat* A = &A_in;
+    if (!A_in.isCompressed()) {  // CHOLMOD needs packed columns
+      compressed_ = A_in;
+      compressed_.makeCompressed();
+      A = &compressed_;
+    }
+    ++factorizations_;
+    if (!detail::allFinite(*A)) return false;
+
+    cholmod_sparse view = wrap(*A);
+    if (!factor_ || !samePattern(*A)) {
+      if (factor_) cholmod_free_factor(&factor_, &common_);
+      factor_ = cholmod_analyze(&view, &common_);
+      if (!factor_ || common_.status < CHOLMOD_OK)
+        throw Error("CholmodSolver::factorize: cholmod_analyze failed (status " +
+                    std::to_string(common_.status) + ") on a " + std::to_string(A->rows()) + " × " +
+                    std::to_string(A->cols()) + " matrix");
+      ++analyses_;
+      rememberPattern(*A);
+    }
+    const int ok = cholmod_factorize(&view, factor_, &common_);
+    if (!ok || common_.status == CHOLMOD_NOT_POSDEF || factor_->minor < factor_->n) return false;
+    if (common_.status < CHOLMOD_OK)
+      throw Error("CholmodSolver::factorize: cholmod_factorize failed (status " +
+                  std::to_string(common_.status) + ")");
+    has_factor_ = true;
+    return true;
+  }
+
+  VecX solve(const VecX& b) const override {
+    if (!has_factor_)
+      throw Error(
+          "CholmodSolver::solve: no factor (the last factorize() failed or was never "
+          "called)");
+    if (b.size() != Eigen::Index(factor_->n))
+      throw InputError("CholmodSolver::solve: b must have " + std::to_string(factor_->n) +
+                       " entries, got " + std::to_string(b.size()));
+    cholmod_dense rhs;
+    std::memset(&rhs, 0, sizeof(rhs));
+    rhs.nrow = rhs.d = rhs.nzmax = size_t(b.size());
+    rhs.ncol = 1;
+    rhs.x = const_cast<double*>(b.data());
+    rhs.xtype = CHOLMOD_REAL;
+    rhs.dtype = CHOLMOD_DOUBLE;
+    // cholmod_solve2 keeps its result and workspaces (x_, y_, e_) between calls.
+    if (!cholmod_solve2(CHOLMOD_A, factor_, &rhs, nullptr, &x_, nullptr, &y_, &e_, &common_))
+      throw Error("CholmodSolver::solve: cholmod_solve2 failed (status " +
+                  std::to_string(common_.status) + ")");
+    return Eigen::Map<const VecX>(static_cast<const double*>(x_->x), b.size());
+  }
+
+  std::string name() const override { return "cholmod-supernodal"; }
+
+ private:
+  static cholmod_sparse wrap(const SpMat& A) {
+    cholmod_sparse s;
+    std::memset(&s, 0, sizeof(s));
+    s.nrow = size_t(A.rows());
+    s.ncol = size_t(A.cols());
+    s.nzmax = size_t(A.nonZeros());
+    s.p = const_cast<int*>(A.outerIndexPtr());
+    s.i = const_cast<int*>(A.innerIndexPtr());
+    s.x = const_cast<double*>(A.valuePtr());
+    s.stype = -1;  // symmetric, lower triangle used, upper ignored
+    s.itype = CHOLMOD_INT;
+    s.xtype = CHOLMOD_REAL;
+    s.dtype = CHOLMOD_DOUBLE;
+    s.sorted = 1;  // Eigen keeps inner indices sorted in compressed mode
+    s.packed = 1;
+    return s;
+  }
+
+  bool samePattern(const SpMat& A) const {
+    if (A.rows() != rows_ || A.nonZeros() != Eigen::Index(inner_.size())) return false;
+    return std::equal(outer_.begin(), outer_.end(), A.outerIndexPtr()) &&
+           std::equal(inner_.begin(), inner_.end(), A.innerIndexPtr());
+  }
+
+  void rememberPattern(const SpMat& A) {
+    rows_ = A.rows();
+    outer_.assign(A.outerIndexPtr(), A.outerIndexPtr() + A.outerSize() + 1);
+    inner_.assign(A.innerIndexPtr(), A.innerIndexPtr() + A.nonZeros());
+  }
+
+  mutable cholmod_common common_;
+  cholmod_factor* factor_ = nullptr;
+  mutable cholmod_dense *x_ = nullptr, *y_ = nullptr, *e_ = nullptr;
+  SpMat compressed_;
+  Eigen::Index rows_ = -1;
+  std::vector<int> outer_, inner_;
+  bool has_factor_ = false;
+};
+
+}  // namespace
+
+namespace detail {
+std::unique_ptr<LinearSolver> makeCholmodSolver() { return std::make_unique<CholmodSolver>(); }
+}  // namespace detail
+
+}  // namespace flsh

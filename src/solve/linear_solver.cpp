@@ -1,0 +1,97 @@
+#include "flsh/solve/linear_solver.h"
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <string>
+
+#include "flsh/core/error.h"
+#include "solve/linear_solver_detail.h"
+
+namespace flsh {
+
+namespace detail {
+
+void checkSquare(const SpMat& A, const char* who) {
+  if (A.rows() != A.cols() || A.rows() == 0)
+    throw InputError(std::string(who) + ": matrix A must be square and non-empty, got " +
+                     shapeString({long(A.rows()), long(A.cols())}));
+}
+
+bool allFinite(const SpMat& A) {
+  const double* v = A.valuePtr();
+  const Eigen::Index nnz = A.isCompressed() ? A.nonZeros() : A.data().size();
+  for (Eigen::Index k = 0; k < nnz; ++k)
+    if (!std::isfinite(v[k])) return false;
+  return true;
+}
+
+}  // namespace detail
+
+namespace {
+
+// Pivots below this fraction of the largest one count as "not positive definite": the matrix is
+// then singular to working precision and its Newton direction would be meaningless.
+constexpr double kRelativePivotFloor = 1e-14;
+
+/// Dense Cholesky of the lower triangle. The dense copy and the factor keep their storage
+/// between calls of the same size (Newton calls it with one n every iteration).
+class DenseCholeskySolver final : public LinearSolver {
+ public:
+  bool factorize(const SpMat& A) override {
+    detail::checkSquare(A, "DenseCholeskySolver::factorize");
+    has_factor_ = false;
+    ++factorizations_;
+    const Eigen::Index n = A.rows();
+    if (dense_.rows() != n) {
+      dense_.resize(n, n);
+      ++analyses_;  // the "analysis" of a dense solver is sizing its storage
+    }
+    dense_.setZero();
+    for (int k = 0; k < A.outerSize(); ++k)
+      for (SpMat::InnerIterator it(A, k); it; ++it)
+        if (it.row() >= it.col()) dense_(it.row(), it.col()) = it.value();
+    if (!dense_.allFinite()) return false;
+    llt_.compute(dense_);  // reads the lower triangle only
+    if (llt_.info() != Eigen::Success) return false;
+    const auto pivots = llt_.matrixLLT().diagonal();
+    if (!(pivots.minCoeff() > std::sqrt(kRelativePivotFloor) * pivots.maxCoeff())) return false;
+    has_factor_ = true;
+    return true;
+  }
+
+  VecX solve(const VecX& b) const override {
+    if (!has_factor_)
+      throw Error(
+          "DenseCholeskySolver::solve: no factor (the last factorize() failed or was "
+          "never called)");
+    if (b.size() != dense_.rows())
+      throw InputError("DenseCholeskySolver::solve: b must have " + std::to_string(dense_.rows()) +
+                       " entries, got " + std::to_string(b.size()));
+    return llt_.solve(b);
+  }
+
+  std::string name() const override { return "dense-llt"; }
+
+ private:
+  MatX dense_;
+  Eigen::LLT<MatX> llt_;
+  bool has_factor_ = false;
+};
+
+}  // namespace
+
+std::unique_ptr<LinearSolver> makeLinearSolver(LinearSolverType type, int n, int dense_threshold) {
+  switch (type) {
+    case LinearSolverType::Dense:
+      return std::make_unique<DenseCholeskySolver>();
+    case LinearSolverType::Cholmod:
+      return detail::makeCholmodSolver();
+    case LinearSolverType::Auto:
+      if (n < 0) throw InputError("makeLinearSolver: n must be ≥ 0, got " + std::to_string(n));
+      if (n <= dense_threshold) return std::make_unique<DenseCholeskySolver>();
+      return detail::makeCholmodSolver();
+  }
+  throw InputError("makeLinearSolver: unknown LinearSolverType " + std::to_string(int(type)));
+}
+
+}  // namespace flsh

@@ -1,0 +1,584 @@
+#include "flsh/solve/scene.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <string>
+
+#include "flsh/contact/contact_energy.h"
+#include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
+
+namespace flsh {
+
+namespace {
+// Vertices per broad-phase cluster: small enough to prune, large enough to amortize the test.
+constexpr int kClusterSize = 24;
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+using Mat36 = Eigen::Matrix<double, 3, 6>;
+using Vec9 = Eigen::Matrix<double, 9, 1>;
+using Mat9 = Eigen::Matrix<double, 9, 9>;
+using Box3 = Eigen::AlignedBox3d;
+
+/// ½(g pᵀ + p gᵀ) − (g·p) I: the Hessian of gᵀ exp([δ]×) p at δ = 0 (second-order rotation
+/// term of a point p = R(X − J) rotated by a world-frame increment δ, contracted with g).
+Mat3 rotationCurvature(const Vec3& g, const Vec3& p) {
+  Mat3 M = 0.5 * (g * p.transpose() + p * g.transpose());
+  M.diagonal().array() -= g.dot(p);
+  return M;
+}
+}  // namespace
+
+/// Skinning data of one simulable and its posed capsules and (lazily) nodes at the last state
+/// seen. Nodes are x_i = Σ_b w_ib (R_b (X_i − J_b) + t_b), the formula of
+/// Simulable::getNodes, computed only for the vertex groups the broad phase keeps.
+struct Scene::AvatarContactData {
+  int bones = 0;
+  // Per vertex i, its nonzero skinning weights: bones weight_bone[k], values weight_value[k]
+  // for k in [weight_start[i], weight_start[i + 1]).
+  std::vector<int> weight_start, weight_bone;
+  std::vector<double> weight_value;
+  // Vertices grouped by their dominant bone b (group b), each group split into spatial
+  // clusters of at most kClusterSize vertices: cluster k (of bone cluster_bone[k]) holds
+  // cluster_vertices[cluster_start[k] .. cluster_start[k + 1]); the groups of bone b are
+  // clusters bone_clusters[b] .. bone_clusters[b + 1]. In the bone's rest frame (offsets
+  // X − J_b) a cluster lies in the sphere (offset, radius) and within `extent` of J_b.
+  struct Bound {
+    Vec3 offset = Vec3::Zero();
+    double radius = 0.0, extent = 0.0;
+    std::vector<std::pair<int, double>> coweights;  // other bones c, max w_ic over the set
+  };
+  std::vector<int> bone_clusters, cluster_start, cluster_vertices, cluster_bone;
+  std::vector<Bound> group_rest, cluster_rest;
+
+  // Cache key: the bone transforms the posed data below belong to; `version` counts changes.
+  bool valid = false;
+  long version = 0;
+  std::vector<Mat3> key_rotations;
+  MatX3 key_positions;
+
+  // Posed bounds: a vertex x_i = x_ib + Σ_{c≠b} w_ic (x_ic − x_ib) (x_ib: its rigid position on
+  // its dominant bone b) lies within `bound` of `center`, since
+  // |x_ic − x_ib| ≤ ‖R_c − R_b‖₂ |X − J_b| + |R_c (J_b − J_c) + t_c − t_b|.
+  std::vector<Vec3> group_center, cluster_center;
+  std::vector<double> group_bound, cluster_bound;
+  std::vector<double> rotation_gap, joint_gap;  // per bone pair b·bones + c
+  std::vector<char> cluster_posed;              // nodes of the cluster computed for this state
+  MatX3 nodes;                                  // #V × 3, valid for posed clusters only
+  struct PosedCapsule {
+    int bone = 0;
+    Vec3 a_rotated, b_rotated;  // R_b (a − J_b), R_b (b − J_b): a' = a_rotated + t_b
+    Vec3 a, b;                  // posed end points, m
+    double radius = 0.0;
+    Vec3 center;  // bounding sphere of the capsule
+    double bound = 0.0;
+  };
+  std::vector<PosedCapsule> capsules;
+};
+
+namespace {
+/// Squared distance from x to the segment [a, b].
+double segmentDistanceSquared(const Vec3& x, const Vec3& a, const Vec3& b) {
+  const Vec3 ab = b - a;
+  const double length2 = ab.squaredNorm();
+  double t = length2 > 0.0 ? (x - a).dot(ab) / length2 : 0.0;
+  t = std::min(1.0, std::max(0.0, t));
+  return (x - a - t * ab).squaredNorm();
+}
+}  // namespace
+
+/// 6 × 6 Hessian blocks between the bones of two simulables, accumulated per vertex–capsule
+/// contact and flushed as triplets once per ordered pair (so each bone pair emits 36 entries,
+/// not 36 per contact).
+struct Scene::BlockAccumulator {
+  int size = 0;  // bones of A followed by bones of B
+  std::vector<Mat6> blocks;
+  std::vector<char> touched;
+  std::vector<int> touched_list;
+
+  void reset(int bones) {
+    if (bones != size) {
+      size = bones;
+      blocks.assign(size_t(size) * size, Mat6::Zero());
+      touched.assign(size_t(size) * size, 0);
+    }
+    touched_list.clear();
+  }
+  Mat6& at(int i, int j) {
+    const int index = i * size + j;
+    if (!touched[index]) {
+      touched[index] = 1;
+      blocks[index].setZero();
+      touched_list.push_back(index);
+    }
+    return blocks[index];
+  }
+  /// Appends the touched blocks; local bone l maps to merged DoF dof(l) + 0..5.
+  template <class DofOf>
+  void flush(const DofOf& dof, std::vector<Triplet>& H) {
+    for (int index : touched_list) {
+      const int row = dof(index / size), col = dof(index % size);
+      const Mat6& B = blocks[index];
+      for (int c = 0; c < 6; ++c)
+        for (int r = 0; r < 6; ++r) H.emplace_back(row + r, col + c, B(r, c));
+      touched[index] = 0;
+    }
+    touched_list.clear();
+  }
+};
+
+Scene::Scene(const SceneOptions& options)
+    : options_(options), blocks_(std::make_unique<BlockAccumulator>()) {
+  const double k = options.avatar_contact_options.stiffness;
+  if (!(k >= 0.0) || !std::isfinite(k))
+    throw InputError(
+        "Scene: SceneOptions::avatar_contact_options.stiffness must be finite and "
+        "≥ 0 (N/m³), got " +
+        std::to_string(k));
+}
+
+Scene::~Scene() = default;
+
+void Scene::addSimulable(std::shared_ptr<Simulable> simulable) {
+  if (!simulable) throw InputError("Scene::addSimulable: simulable is null");
+  if (!simulables_.empty()) {
+    const double h0 = simulables_.front()->options().time_step;
+    const double h = simulable->options().time_step;
+    if (std::abs(h - h0) > 1e-12 * std::abs(h0))
+      throw InputError("Scene::addSimulable: all simulables must share one time step; simulable " +
+                       std::to_string(simulables_.size()) +
+                       " has time_step = " + std::to_string(h) + " s, expected " +
+                       std::to_string(h0) + " s (simulable 0)");
+  }
+  simulable->setColliders(colliders_);
+  offsets_.push_back(num_dofs_);
+  num_dofs_ += simulable->numDofs();
+  simulables_.push_back(std::move(simulable));
+  contact_data_.emplace_back();
+}
+
+void Scene::addCollider(const Collider& collider) {
+  colliders_.push_back(collider);
+  for (auto& s : simulables_) s->setColliders(colliders_);
+}
+
+void Scene::initialize() {
+  for (auto& s : simulables_) s->initialize();
+  for (auto& data : contact_data_)
+    if (data) data->valid = false;
+}
+
+void Scene::ensureSolver() {
+  // A new solver when the size changes: Auto picks the backend from n.
+  if (!solver_ ||
+      (options_.newton.linear_solver == LinearSolverType::Auto && last_solver_dofs_ != num_dofs_)) {
+    solver_ = makeLinearSolver(options_.newton.linear_solver, num_dofs_);
+    last_solver_dofs_ = num_dofs_;
+  }
+}
+
+StepStats Scene::step() {
+  if (simulables_.empty())
+    throw Error("Scene::step: the scene has no simulables (call addSimulable first)");
+  const auto start = std::chrono::steady_clock::now();
+  for (auto& s : simulables_) s->preUpdate();
+  ensureSolver();
+  StepStats stats;
+  stats.newton = newtonSolve(*this, options_.newton, solver_.get());
+  // Newton's last evaluation is the gradient at the final state, so these counts belong to it.
+  for (auto& s : simulables_) stats.active_contacts += s->stats().active_contacts;
+  stats.active_contacts += avatar_contacts_;
+  for (auto& s : simulables_) s->postUpdate();
+  stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return stats;
+}
+
+double Scene::time() const { return simulables_.empty() ? 0.0 : simulables_.front()->time(); }
+
+void Scene::setStatic(bool on) {
+  for (auto& s : simulables_) s->setStatic(on);
+}
+
+int Scene::numDofs() const { return num_dofs_; }
+
+bool Scene::avatarContactActive() const {
+  return options_.avatar_contact && simulables_.size() >= 2 &&
+         options_.avatar_contact_options.stiffness > 0.0;
+}
+
+double Scene::energy() {
+  double e = 0.0;
+  for (auto& s : simulables_) e += s->getDynamicEnergyScalar() + s->getPotentialEnergyScalar();
+  if (avatarContactActive()) e += avatarContactEnergy(nullptr, nullptr, true);
+  return e;
+}
+
+void Scene::gradient(VecX& g) {
+  g.setZero(num_dofs_);
+  for (size_t i = 0; i < simulables_.size(); ++i) {
+    simulables_[i]->getDynamicGradientVector(g, offsets_[i]);
+    simulables_[i]->getPotentialGradientVector(g, offsets_[i]);
+  }
+  if (avatarContactActive()) avatarContactEnergy(&g, nullptr, true);
+}
+
+void Scene::hessian(SpMat& H, bool psd) {
+  triplets_.clear();
+  for (size_t i = 0; i < simulables_.size(); ++i) {
+    simulables_[i]->getDynamicHessianTripletVector(triplets_, offsets_[i], psd);
+    simulables_[i]->getPotentialHessianTripletVector(triplets_, offsets_[i], psd);
+  }
+  if (avatarContactActive()) avatarContactEnergy(nullptr, &triplets_, psd);
+  // A stored diagonal keeps the pattern stable under Newton's diagonal shifts.
+  for (int k = 0; k < num_dofs_; ++k) triplets_.emplace_back(k, k, 0.0);
+  H.resize(num_dofs_, num_dofs_);
+  H.setFromTriplets(triplets_.begin(), triplets_.end());
+}
+
+void Scene::step(const VecX& dq) {
+  if (dq.size() != num_dofs_)
+    throw InputError("Scene::step: dq must have numDofs() = " + std::to_string(num_dofs_) +
+                     " entries, got " + std::to_string(dq.size()));
+  for (size_t i = 0; i < simulables_.size(); ++i)
+    simulables_[i]->updateState(dq.segment(offsets_[i], simulables_[i]->numDofs()));
+}
+
+void Scene::push() {
+  for (auto& s : simulables_) s->pushState();
+  ++stack_depth_;
+}
+
+void Scene::pop() {
+  if (stack_depth_ == 0) throw Error("Scene::pop: no state was pushed");
+  for (auto& s : simulables_) s->popState();
+  --stack_depth_;
+}
+
+// Simulables can only restore what they pushed, and setState(getState()) is not bit-exact
+// (rotation vector round trip), so an accepted step is kept by pop() + step() in Newton.
+bool Scene::discardPushed() { return false; }
+
+void Scene::fixKinematic(VecX& g, SpMat* H) {
+  bool any_kinematic = false;
+  for (size_t i = 0; i < simulables_.size(); ++i) {
+    simulables_[i]->fixVectorKinematic(g, offsets_[i]);
+    any_kinematic = any_kinematic || !simulables_[i]->options().kinematic_bones.empty();
+  }
+  if (!H || !any_kinematic) return;
+  triplets_.clear();
+  for (int k = 0; k < H->outerSize(); ++k)
+    for (SpMat::InnerIterator it(*H, k); it; ++it)
+      triplets_.emplace_back(int(it.row()), int(it.col()), it.value());
+  for (size_t i = 0; i < simulables_.size(); ++i)
+    simulables_[i]->fixMatrixKinematic(triplets_, offsets_[i]);
+  H->setFromTriplets(triplets_.begin(), triplets_.end());
+}
+
+// ---- avatar–avatar contact -------------------------------------------------------------------
+
+Scene::AvatarContactData& Scene::contactData(int i) const {
+  auto& slot = contact_data_[i];
+  const Simulable& sim = *simulables_[i];
+  const SoftAvatar& avatar = sim.avatar();
+  const MatX3& X = avatar.restVertices();
+  const MatX3& J = avatar.restJoints();
+  if (!slot) {
+    const MatX& W = avatar.body().weights;
+    const int V = int(W.rows()), bones = int(W.cols());
+    if (sim.numDofs() != 6 * bones)
+      throw Error("Scene::avatarContactEnergy: simulable " + std::to_string(i) + " has " +
+                  std::to_string(sim.numDofs()) +
+                  " DoFs; avatar–avatar contact needs the "
+                  "articulated skeleton model (6 per bone = " +
+                  std::to_string(6 * bones) + ")");
+    if (X.rows() != V || avatar.vertexAreas().size() != V || J.rows() != bones)
+      throw Error("Scene::avatarContactEnergy: simulable " + std::to_string(i) +
+                  ": avatar rest vertices / areas / joints do not match the skinning weights " +
+                  shapeString({long(V), long(bones)}) + " (is the avatar initialized?)");
+    auto data = std::make_unique<AvatarContactData>();
+    data->bones = bones;
+    data->weight_start.reserve(V + 1);
+    std::vector<int> dominant(V, 0);
+    for (int v = 0; v < V; ++v) {
+      data->weight_start.push_back(int(data->weight_bone.size()));
+      double best = -1.0;
+      for (int b = 0; b < bones; ++b) {
+        const double w = W(v, b);
+        if (w == 0.0) continue;
+        data->weight_bone.push_back(b);
+        data->weight_value.push_back(w);
+        if (w > best) best = w, dominant[v] = b;
+      }
+    }
+    data->weight_start.push_back(int(data->weight_bone.size()));
+    // Rest bound of a vertex set on bone b.
+    const auto restBound = [&](int b, const int* begin, const int* end) {
+      AvatarContactData::Bound bound;
+      Box3 box;
+      box.setEmpty();
+      for (const int* v = begin; v != end; ++v) box.extend((X.row(*v) - J.row(b)).transpose());
+      bound.offset = box.center();
+      std::vector<double> coweight(bones, 0.0);
+      for (const int* v = begin; v != end; ++v) {
+        const Vec3 offset = (X.row(*v) - J.row(b)).transpose();
+        bound.radius = std::max(bound.radius, (offset - bound.offset).norm());
+        bound.extent = std::max(bound.extent, offset.norm());
+        for (int w = data->weight_start[*v]; w < data->weight_start[*v + 1]; ++w)
+          if (data->weight_bone[w] != b)
+            coweight[data->weight_bone[w]] =
+                std::max(coweight[data->weight_bone[w]], data->weight_value[w]);
+      }
+      for (int c = 0; c < bones; ++c)
+        if (coweight[c] > 0.0) bound.coweights.emplace_back(c, coweight[c]);
+      return bound;
+    };
+    std::vector<std::vector<int>> group(bones);
+    for (int v = 0; v < V; ++v) group[dominant[v]].push_back(v);
+    data->bone_clusters.assign(1, 0);
+    data->cluster_start.assign(1, 0);
+    for (int b = 0; b < bones; ++b) {
+      data->group_rest.push_back(restBound(b, group[b].data(), group[b].data() + group[b].size()));
+      // Median splits along the longest axis until the pieces are small.
+      std::vector<std::pair<int, int>> todo;
+      if (!group[b].empty()) todo.emplace_back(0, int(group[b].size()));
+      while (!todo.empty()) {
+        const auto [begin, end] = todo.back();
+        todo.pop_back();
+        int* first = group[b].data() + begin;
+        int* last = group[b].data() + end;
+        if (end - begin <= kClusterSize) {
+          data->cluster_vertices.insert(data->cluster_vertices.end(), first, last);
+          data->cluster_start.push_back(int(data->cluster_vertices.size()));
+          data->cluster_bone.push_back(b);
+          data->cluster_rest.push_back(restBound(b, first, last));
+          continue;
+        }
+        Box3 box;
+        box.setEmpty();
+        for (const int* v = first; v != last; ++v) box.extend(X.row(*v).transpose());
+        int axis = 0;
+        box.sizes().maxCoeff(&axis);
+        int* middle = first + (end - begin) / 2;
+        std::nth_element(first, middle, last,
+                         [&](int u, int v) { return X(u, axis) < X(v, axis); });
+        todo.emplace_back(begin, begin + (end - begin) / 2);
+        todo.emplace_back(begin + (end - begin) / 2, end);
+      }
+      data->bone_clusters.push_back(int(data->cluster_bone.size()));
+    }
+    const int clusters = int(data->cluster_bone.size());
+    data->group_center.assign(bones, Vec3::Zero());
+    data->group_bound.assign(bones, 0.0);
+    data->cluster_center.assign(clusters, Vec3::Zero());
+    data->cluster_bound.assign(clusters, 0.0);
+    data->cluster_posed.assign(clusters, 0);
+    data->rotation_gap.assign(bones * bones, 0.0);
+    data->joint_gap.assign(bones * bones, 0.0);
+    data->nodes.resize(V, 3);
+    slot = std::move(data);
+  }
+
+  // Refresh the posed data when the bone transforms changed since the last call.
+  AvatarContactData& data = *slot;
+  const std::vector<Mat3>& R = sim.boneRotations();
+  const MatX3& T = sim.bonePositions();
+  bool same = data.valid && data.key_positions.rows() == T.rows() && data.key_positions == T;
+  for (int b = 0; same && b < data.bones; ++b) same = data.key_rotations[b] == R[b];
+  if (same) return data;
+
+  data.key_rotations = R;
+  data.key_positions = T;
+  ++data.version;
+  const int bones = data.bones;
+  for (int b = 0; b < bones; ++b) {
+    for (const auto& [c, weight] : data.group_rest[b].coweights) {
+      data.rotation_gap[b * bones + c] =
+          std::sqrt(std::max(0.0, 3.0 - (R[b].transpose() * R[c]).trace()));  // ‖R_c − R_b‖₂
+      data.joint_gap[b * bones + c] =
+          (R[c] * (J.row(b) - J.row(c)).transpose() + (T.row(c) - T.row(b)).transpose()).norm();
+    }
+  }
+  const auto posedBound = [&](int b, const AvatarContactData::Bound& rest, Vec3& center,
+                              double& bound) {
+    double margin = 0.0;
+    for (const auto& [c, weight] : rest.coweights)
+      margin +=
+          weight * (data.rotation_gap[b * bones + c] * rest.extent + data.joint_gap[b * bones + c]);
+    center = R[b] * rest.offset + T.row(b).transpose();
+    bound = rest.radius + margin;
+  };
+  for (int b = 0; b < bones; ++b)
+    posedBound(b, data.group_rest[b], data.group_center[b], data.group_bound[b]);
+  for (size_t k = 0; k < data.cluster_bone.size(); ++k) {
+    posedBound(data.cluster_bone[k], data.cluster_rest[k], data.cluster_center[k],
+               data.cluster_bound[k]);
+    data.cluster_posed[k] = 0;
+  }
+  data.capsules.clear();
+  for (const BoneCapsule& c : avatar.boneCapsules()) {
+    if (!(c.radius > 0.0)) continue;  // bones that dominate no vertex have no capsule
+    AvatarContactData::PosedCapsule p;
+    p.bone = c.bone;
+    const Vec3 joint = J.row(c.bone).transpose();
+    const Vec3 t = T.row(c.bone).transpose();
+    p.a_rotated = R[c.bone] * (c.a - joint);
+    p.b_rotated = R[c.bone] * (c.b - joint);
+    p.a = p.a_rotated + t;
+    p.b = p.b_rotated + t;
+    p.radius = c.radius;
+    p.center = 0.5 * (p.a + p.b);
+    p.bound = 0.5 * (p.a - p.b).norm() + c.radius;
+    data.capsules.push_back(p);
+  }
+  data.valid = true;
+  return data;
+}
+
+void Scene::poseCluster(int i, int cluster) const {
+  AvatarContactData& data = *contact_data_[i];
+  if (data.cluster_posed[cluster]) return;
+  const Simulable& sim = *simulables_[i];
+  const MatX3& X = sim.avatar().restVertices();
+  const MatX3& J = sim.avatar().restJoints();
+  const std::vector<Mat3>& R = sim.boneRotations();
+  const MatX3& T = sim.bonePositions();
+  for (int k = data.cluster_start[cluster]; k < data.cluster_start[cluster + 1]; ++k) {
+    const int v = data.cluster_vertices[k];
+    const Vec3 Xv = X.row(v).transpose();
+    Vec3 x = Vec3::Zero();
+    for (int w = data.weight_start[v]; w < data.weight_start[v + 1]; ++w) {
+      const int b = data.weight_bone[w];
+      x += data.weight_value[w] * (R[b] * (Xv - J.row(b).transpose()) + T.row(b).transpose());
+    }
+    data.nodes.row(v) = x.transpose();
+  }
+  data.cluster_posed[cluster] = 1;
+}
+
+double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, int* active) const {
+  int contacts = 0;
+  double energy = 0.0;
+  if (g && g->size() != num_dofs_)
+    throw InputError("Scene::avatarContactEnergy: g must have numDofs() = " +
+                     std::to_string(num_dofs_) + " entries, got " + std::to_string(g->size()));
+  ContactOptions contact_options = options_.avatar_contact_options;
+  contact_options.exact_hessian = !psd;
+  const double stiffness = contact_options.stiffness;
+  const int n_sim = int(simulables_.size());
+  for (int i = 0; i < n_sim; ++i) contactData(i);  // refresh every posed cache once
+
+  Vec9 grad9;
+  Mat9 hess9;
+  std::vector<Mat36> P;  // ∂x/∂(t_k, δω_k) per weight of the vertex
+  std::vector<Mat36> HxxP;
+  std::vector<Vec3> p_rotated;  // R_k (X − J_k) per weight of the vertex
+  for (int ia = 0; ia < n_sim; ++ia) {
+    AvatarContactData& A = *contact_data_[ia];
+    const Simulable& simA = *simulables_[ia];
+    const SoftAvatar& avatarA = simA.avatar();
+    const MatX3& XA = avatarA.restVertices();
+    const MatX3& JA = avatarA.restJoints();
+    const VecX& areas = avatarA.vertexAreas();
+    const std::vector<Mat3>& RA = simA.boneRotations();
+    for (int ib = 0; ib < n_sim; ++ib) {
+      if (ib == ia) continue;
+      const AvatarContactData& B = *contact_data_[ib];
+      if (H) blocks_->reset(A.bones + B.bones);
+      for (const auto& cap : B.capsules) {
+        const double bound2 = cap.bound * cap.bound, radius2 = cap.radius * cap.radius;
+        for (int bone = 0; bone < A.bones; ++bone) {
+          if (A.bone_clusters[bone] == A.bone_clusters[bone + 1] ||
+              (A.group_center[bone] - cap.center).norm() > A.group_bound[bone] + cap.bound)
+            continue;
+          for (int cluster = A.bone_clusters[bone]; cluster < A.bone_clusters[bone + 1];
+               ++cluster) {
+            const double reach = A.cluster_bound[cluster] + cap.radius;
+            if (segmentDistanceSquared(A.cluster_center[cluster], cap.a, cap.b) > reach * reach)
+              continue;
+            poseCluster(ia, cluster);
+            for (int k = A.cluster_start[cluster]; k < A.cluster_start[cluster + 1]; ++k) {
+              const int v = A.cluster_vertices[k];
+              const Vec3 x = A.nodes.row(v).transpose();
+              if ((x - cap.center).squaredNorm() > bound2) continue;
+              if (segmentDistanceSquared(x, cap.a, cap.b) >= radius2) continue;
+              ++contacts;
+              const bool derivatives = g || H;
+              energy += vertexCapsulePenalty(x, cap.a, cap.b, cap.radius, stiffness * areas[v],
+                                             contact_options, derivatives ? &grad9 : nullptr,
+                                             H ? &hess9 : nullptr);
+              if (!derivatives) continue;
+
+              // Chain rule through x = Σ_k w_k (R_k (X − J_k) + t_k) and a' = R_b (a − J_b) + t_b.
+              const int w_begin = A.weight_start[v], w_end = A.weight_start[v + 1];
+              const int nw = w_end - w_begin;
+              p_rotated.resize(nw);
+              for (int w = 0; w < nw; ++w) {
+                const int bone = A.weight_bone[w_begin + w];
+                p_rotated[w] = RA[bone] * (XA.row(v) - JA.row(bone)).transpose();
+              }
+              const Vec3 gx = grad9.segment<3>(0), ga = grad9.segment<3>(3),
+                         gb = grad9.segment<3>(6);
+              if (g) {
+                for (int w = 0; w < nw; ++w) {
+                  const int dof = offsets_[ia] + 6 * A.weight_bone[w_begin + w];
+                  const double weight = A.weight_value[w_begin + w];
+                  g->segment<3>(dof) += weight * gx;
+                  g->segment<3>(dof + 3) += weight * p_rotated[w].cross(gx);
+                }
+                const int dof = offsets_[ib] + 6 * cap.bone;
+                g->segment<3>(dof) += ga + gb;
+                g->segment<3>(dof + 3) += cap.a_rotated.cross(ga) + cap.b_rotated.cross(gb);
+              }
+              if (!H) continue;
+              P.resize(nw);
+              HxxP.resize(nw);
+              const Mat3 Hxx = hess9.block<3, 3>(0, 0);
+              for (int w = 0; w < nw; ++w) {
+                const double weight = A.weight_value[w_begin + w];
+                P[w].leftCols<3>() = weight * Mat3::Identity();
+                P[w].rightCols<3>() = -weight * skew(p_rotated[w]);
+                HxxP[w] = Hxx * P[w];
+              }
+              Mat6 Q;  // ∂(a', b')/∂(t_b, δω_b)
+              Q << Mat3::Identity(), -skew(cap.a_rotated), Mat3::Identity(), -skew(cap.b_rotated);
+              const Mat36 HxyQ = hess9.block<3, 6>(0, 3) * Q;
+              const int bone_b = A.bones + cap.bone;  // local index in the accumulator
+              Mat6& Bbb = blocks_->at(bone_b, bone_b);
+              Bbb.noalias() += Q.transpose() * hess9.block<6, 6>(3, 3) * Q;
+              if (!psd) {
+                Bbb.bottomRightCorner<3, 3>() +=
+                    rotationCurvature(ga, cap.a_rotated) + rotationCurvature(gb, cap.b_rotated);
+              }
+              for (int w = 0; w < nw; ++w) {
+                const int bone_k = A.weight_bone[w_begin + w];
+                for (int u = 0; u < nw; ++u)
+                  blocks_->at(bone_k, A.weight_bone[w_begin + u]).noalias() +=
+                      P[w].transpose() * HxxP[u];
+                const Mat6 cross = P[w].transpose() * HxyQ;
+                blocks_->at(bone_k, bone_b) += cross;
+                blocks_->at(bone_b, bone_k) += cross.transpose();
+                if (!psd)
+                  blocks_->at(bone_k, bone_k).bottomRightCorner<3, 3>() +=
+                      A.weight_value[w_begin + w] * rotationCurvature(gx, p_rotated[w]);
+              }
+            }
+          }
+        }
+      }
+      if (H) {
+        const int off_a = offsets_[ia], off_b = offsets_[ib], bones_a = A.bones;
+        blocks_->flush(
+            [&](int local) {
+              return local < bones_a ? off_a + 6 * local : off_b + 6 * (local - bones_a);
+            },
+            *H);
+      }
+    }
+  }
+  avatar_contacts_ = contacts;
+  if (active) *active = contacts;
+  return energy;
+}
+
+}  // namespace flsh

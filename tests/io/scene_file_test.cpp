@@ -1,0 +1,355 @@
+#include "flsh/io/scene_file.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "flsh/body/body_forward.h"
+#include "flsh/body/synthetic_body.h"
+#include "flsh/core/error.h"
+#include "flsh/io/motion.h"
+#include "support/test_support.h"
+
+namespace flsh {
+namespace {
+
+using ::testing::HasSubstr;
+namespace fs = std::filesystem;
+using test::messageOf;
+
+SceneSpec parse(const std::string& text, const std::string& base_dir = ".") {
+  return parseSceneJson(text, "scene.json", base_dir);
+}
+
+std::string inputError(const std::string& text) {
+  return messageOf<InputError>([&] { parse(text); });
+}
+
+void writeText(const std::string& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+}
+
+const BodyModel& smallBody() {
+  static const BodyModel body = [] {
+    SyntheticBodyOptions options;
+    options.vertices = 1000;
+    return makeSyntheticBody(options);
+  }();
+  return body;
+}
+
+TEST(SceneFile, MinimalSceneGetsDocumentedDefaults) {
+  const SceneSpec scene = parse(R"({"avatars": [{}]})");
+  EXPECT_EQ(scene.source, "scene.json");
+  ASSERT_EQ(scene.avatars.size(), 1u);
+  const AvatarSpec& a = scene.avatars[0];
+  EXPECT_EQ(a.name, "avatar0");
+  EXPECT_EQ(a.model, "synthetic");
+  EXPECT_EQ(a.synthetic_vertices, 6890);
+  EXPECT_EQ(a.simulation, "skeleton");
+  EXPECT_TRUE(a.motion.empty());
+  EXPECT_EQ(a.betas.size(), 0);
+  EXPECT_DOUBLE_EQ(scene.time_step, 1.0 / 60.0);
+  EXPECT_DOUBLE_EQ(a.options.time_step, 1.0 / 60.0);
+  EXPECT_DOUBLE_EQ(scene.duration, 2.0);
+  EXPECT_TRUE(scene.avatar_contact);
+  EXPECT_TRUE(scene.colliders.empty());
+  EXPECT_EQ(scene.outputs.dir, "out/simulate");
+  EXPECT_TRUE(scene.outputs.ply && scene.outputs.npz && scene.outputs.gltf && scene.outputs.png);
+  EXPECT_EQ(scene.outputs.png_frames, 5);
+  EXPECT_EQ(scene.outputs.every, 1);
+  EXPECT_EQ(scene.newton.max_iterations, NewtonOptions().max_iterations);
+}
+
+TEST(SceneFile, ReadsEveryKey) {
+  const SceneSpec scene = parse(R"({
+    "time_step": 0.01, "duration": 0.5, "avatar_contact": false,
+    "newton": {"max_iterations": 12, "gradient_tolerance": 1e-5, "step_tolerance": 1e-8,
+               "linear_solver": "dense"},
+    "avatars": [{"name": "a-1", "vertices": 800, "betas": [0.5, -1],
+                 "motion": "builtin:jumping_jacks", "motion_seconds": 1.5,
+                 "offset": [1, 0, -2], "yaw_degrees": 90,
+                 "options": {"tracking_stiffness": 100, "root_stiffness": 50,
+                             "joint_stiffness": 2e4, "contact_stiffness": 1e5,
+                             "gravity": [0, -1.62, 0], "kinematic_bones": [0, 15],
+                             "track_mocap": false}},
+                {"name": "b"}],
+    "colliders": [{"type": "plane", "point": [0, -1, 0], "normal": [0, 2, 0]},
+                  {"name": "ball", "type": "sphere", "center": [1, 2, 3], "radius": 0.2,
+                   "velocity": [-4, 0, 0]},
+                  {"type": "capsule", "a": [0, 0, 0], "b": [0, 1, 0], "radius": 0.1,
+                   "path": {"times": [0, 1], "offsets": [[0, 0, 0], [1, 0, 0]]}}],
+    "outputs": {"dir": "elsewhere", "ply": false, "npz": true, "gltf": false, "png": false,
+                "png_frames": 3, "every": 2}})");
+  EXPECT_DOUBLE_EQ(scene.time_step, 0.01);
+  EXPECT_DOUBLE_EQ(scene.duration, 0.5);
+  EXPECT_FALSE(scene.avatar_contact);
+  EXPECT_EQ(scene.newton.max_iterations, 12);
+  EXPECT_DOUBLE_EQ(scene.newton.gradient_tolerance, 1e-5);
+  EXPECT_DOUBLE_EQ(scene.newton.step_tolerance, 1e-8);
+  EXPECT_EQ(scene.newton.linear_solver, LinearSolverType::Dense);
+  ASSERT_EQ(scene.avatars.size(), 2u);
+  const AvatarSpec& a = scene.avatars[0];
+  EXPECT_EQ(a.name, "a-1");
+  EXPECT_EQ(a.synthetic_vertices, 800);
+  ASSERT_EQ(a.betas.size(), 2);
+  EXPECT_DOUBLE_EQ(a.betas[1], -1.0);
+  EXPECT_EQ(a.motion, "builtin:jumping_jacks");
+  EXPECT_DOUBLE_EQ(a.motion_seconds, 1.5);
+  EXPECT_TRUE(a.offset.isApprox(Vec3(1, 0, -2)));
+  EXPECT_NEAR(a.yaw, M_PI / 2, 1e-12);
+  EXPECT_DOUBLE_EQ(a.options.time_step, 0.01);
+  EXPECT_DOUBLE_EQ(a.options.tracking_stiffness, 100);
+  EXPECT_DOUBLE_EQ(a.options.root_stiffness, 50);
+  EXPECT_DOUBLE_EQ(a.options.joint_stiffness, 2e4);
+  EXPECT_DOUBLE_EQ(a.options.contact.stiffness, 1e5);
+  EXPECT_TRUE(a.options.gravity.isApprox(Vec3(0, -1.62, 0)));
+  EXPECT_EQ(a.options.kinematic_bones, (std::vector<int>{0, 15}));
+  EXPECT_FALSE(a.options.track_mocap);
+  EXPECT_EQ(scene.avatars[1].name, "b");
+
+  ASSERT_EQ(scene.colliders.size(), 3u);
+  const Collider& plane = scene.colliders[0];
+  EXPECT_EQ(plane.shape(), ColliderShape::Plane);
+  EXPECT_EQ(plane.name, "plane0");
+  EXPECT_NEAR(plane.signedDistance(Vec3(5, 0.5, 7), 0.0), 1.5, 1e-12);  // normal normalized
+  const Collider& ball = scene.colliders[1];
+  EXPECT_EQ(ball.shape(), ColliderShape::Sphere);
+  EXPECT_EQ(ball.name, "ball");
+  EXPECT_DOUBLE_EQ(ball.radius(), 0.2);
+  // The velocity holds over the whole simulation.
+  EXPECT_TRUE(ball.path.offsetAt(0.5).isApprox(Vec3(-2, 0, 0), 1e-12));
+  const Collider& capsule = scene.colliders[2];
+  EXPECT_EQ(capsule.name, "capsule2");
+  EXPECT_TRUE(capsule.path.offsetAt(0.5).isApprox(Vec3(0.5, 0, 0), 1e-12));
+
+  EXPECT_EQ(scene.outputs.dir, "elsewhere");
+  EXPECT_FALSE(scene.outputs.ply);
+  EXPECT_FALSE(scene.outputs.gltf);
+  EXPECT_FALSE(scene.outputs.png);
+  EXPECT_EQ(scene.outputs.png_frames, 3);
+  EXPECT_EQ(scene.outputs.every, 2);
+}
+
+TEST(SceneFile, UnknownKeysAreNamedWithTheirPath) {
+  std::string m = inputError(R"({"avatars": [{"optoins": {}}]})");
+  EXPECT_THAT(m, HasSubstr("scene.json: avatars[0].optoins: unknown key (known: name, model"));
+  EXPECT_THAT(m, HasSubstr("options"));
+  m = inputError(R"({"avatars": [{}], "tim_step": 0.1})");
+  EXPECT_THAT(m, HasSubstr("scene.json: tim_step: unknown key (known: time_step"));
+  m = inputError(R"({"avatars": [{"options": {"gravty": [0, 0, 0]}}]})");
+  EXPECT_THAT(m, HasSubstr("avatars[0].options.gravty: unknown key"));
+  m = inputError(R"({"avatars": [{}], "newton": {"iterations": 3}})");
+  EXPECT_THAT(m, HasSubstr("newton.iterations: unknown key (known: max_iterations"));
+  m = inputError(R"({"avatars": [{}], "colliders": [{"type": "plane", "radius": 1}]})");
+  EXPECT_THAT(m, HasSubstr("colliders[0].radius: unknown key (known: name, type, point, normal"));
+  m = inputError(R"({"avatars": [{}], "outputs": {"obj": true}})");
+  EXPECT_THAT(m, HasSubstr("outputs.obj: unknown key"));
+  m = inputError(R"({"avatars": [{}], "colliders": [{"type": "capsule", "a": [0,0,0],
+                    "b": [0,1,0], "radius": 1, "path": {"times": [0], "offset": [[0,0,0]]}}]})");
+  EXPECT_THAT(m, HasSubstr("colliders[0].path.offset: unknown key (known: times, offsets)"));
+}
+
+TEST(SceneFile, WrongTypesAndValuesAreNamedWithTheirPath) {
+  struct Case {
+    const char* json;
+    const char* expected;
+  };
+  const Case cases[] = {
+      {R"({"avatars": [{}], "time_step": -0.1})",
+       "scene.json: time_step: expected 0 < value <= 1 (s), got -0.1"},
+      {R"({"avatars": [{}], "time_step": "fast"})",
+       "time_step: expected a number, got string \"fast\""},
+      {R"({"avatars": [{}], "duration": 0})", "duration: expected 0 < value"},
+      {R"({"avatars": [{}], "duration": 1e6, "time_step": 1e-4})",
+       "duration: duration / time_step"},
+      {R"({"avatars": [{}], "avatar_contact": 1})", "avatar_contact: expected true or false"},
+      {R"({"avatars": [{}], "newton": {"max_iterations": 2.5}})",
+       "newton.max_iterations: expected an integer"},
+      {R"({"avatars": [{}], "newton": {"linear_solver": "lu"}})",
+       "newton.linear_solver: expected \"auto\""},
+      {R"({"avatars": []})", "avatars: expected a list of at least one avatar"},
+      {R"({"time_step": 0.01})", "avatars: missing"},
+      {R"([1, 2])", "expected a JSON object, got array"},
+      {R"({"avatars": [{"offset": [1, 2]}]})",
+       "avatars[0].offset: expected 3 numbers [x, y, z], got array [1,2]"},
+      {R"({"avatars": [{"options": {"gravity": [0, "down", 0]}}]})",
+       "avatars[0].options.gravity[1]: expected a number"},
+      {R"({"avatars": [{"simulation": "fem"}]})",
+       "avatars[0].simulation: \"fem\" is not available yet: the FEM/ROM soft-tissue models are "
+       "not implemented in this version"},
+      {R"({"avatars": [{"simulation": "rom"}]})", "not available yet"},
+      {R"({"avatars": [{"simulation": "cloth"}]})", "avatars[0].simulation: expected \"skeleton\""},
+      {R"({"avatars": [{"vertices": 50}]})",
+       "avatars[0].vertices: expected an integer in [200, 100000], got 50"},
+      {R"({"avatars": [{"name": "a/b"}]})", "avatars[0].name: expected a name"},
+      {R"({"avatars": [{"name": "x"}, {"name": "x"}]})", "avatars[1].name: duplicate avatar name"},
+      {R"({"avatars": [{"motion": "builtin:moonwalk"}]})",
+       "avatars[0].motion: unknown built-in motion \"moonwalk\" (known: "},
+      {R"({"avatars": [{"motion_seconds": 2}]})",
+       "avatars[0].motion_seconds: only for a built-in motion"},
+      {R"({"avatars": [{"options": {"kinematic_bones": [0, 24]}}]})",
+       "avatars[0].options.kinematic_bones[1]: expected an integer in [0, 23], got 24"},
+      {R"({"avatars": [{"options": {"kinematic_bones": [3, 3]}}]})",
+       "kinematic_bones[1]: bone 3 is listed twice"},
+      {R"({"avatars": [{"options": {"joint_stiffness": 0}}]})",
+       "avatars[0].options.joint_stiffness: expected 0 < value"},
+      {R"({"avatars": [{"options": {"tracking_stiffness": -1}}]})",
+       "options.tracking_stiffness: expected 0 <= value"},
+      {R"({"avatars": [{}], "colliders": [{"type": "sphere", "center": [0,0,0], "radius": 0}]})",
+       "colliders[0].radius: expected 0 < value (m), got 0"},
+      {R"({"avatars": [{}], "colliders": [{"type": "sphere", "radius": 1}]})",
+       "colliders[0].center: missing"},
+      {R"({"avatars": [{}], "colliders": [{"type": "box"}]})",
+       "colliders[0].type: expected \"plane\", \"sphere\" or \"capsule\", got \"box\""},
+      {R"({"avatars": [{}], "colliders": [{"point": [0,0,0]}]})", "colliders[0].type: missing"},
+      {R"({"avatars": [{}], "colliders": [{"type": "plane", "normal": [0,0,0]}]})",
+       "colliders[0].normal: expected a nonzero vector"},
+      {R"({"avatars": [{}], "colliders": [{"type": "plane", "velocity": [1,0,0], "path": {"times": [0], "offsets": [[0,0,0]]}}]})",
+       "colliders[0].velocity: give either"},
+      {R"({"avatars": [{}], "colliders": [{"type": "plane", "path": {"times": [0, 0], "offsets": [[0,0,0], [1,0,0]]}}]})",
+       "colliders[0].path.times[1]: times must increase strictly"},
+      {R"({"avatars": [{}], "colliders": [{"type": "plane", "path": {"times": [0, 1], "offsets": [[0,0,0]]}}]})",
+       "colliders[0].path.offsets: expected a list of 2 offsets"},
+      {R"({"avatars": [{}], "colliders": [{"type": "plane", "name": "g"}, {"type": "plane", "name": "g"}]})",
+       "colliders[1].name: duplicate collider name"},
+      {R"({"avatars": [{}], "outputs": {"every": 0}})",
+       "outputs.every: expected an integer in [1, 1000000], got 0"},
+      {R"({"avatars": [{}], "outputs": {"dir": ""}})", "outputs.dir: expected a directory"},
+      {R"({"avatars": [{}], "duration": 1e400})",
+       "scene.json: invalid JSON: [json.exception.out_of_range.406] number overflow"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.json);
+    EXPECT_THAT(inputError(c.json), HasSubstr(c.expected));
+  }
+}
+
+TEST(SceneFile, MalformedJsonNamesTheBytePosition) {
+  const std::string m = inputError("{\"avatars\": [{}],\n \"duration\": }");
+  EXPECT_THAT(m, HasSubstr("scene.json: malformed JSON at byte 32 (line 2, column 14)"));
+  EXPECT_THAT(inputError(""), HasSubstr("scene.json: malformed JSON at byte"));
+}
+
+TEST(SceneFile, RelativePathsResolveAgainstTheSceneFolder) {
+  const std::string dir = test::freshTempDir("scene_paths");
+  fs::create_directories(fs::path(dir) / "data");
+  saveMotion(makeBuiltinMotion("walk", 0.2), (fs::path(dir) / "data" / "walk.npz").string());
+  writeText((fs::path(dir) / "data" / "body.npz").string(),
+            "any content: only existence is checked here");
+  const std::string scene_path = (fs::path(dir) / "scene.json").string();
+  writeText(scene_path, R"({"avatars": [{"model": "data/body.npz", "motion": "data/walk.npz"}]})");
+  const SceneSpec scene = loadSceneFile(scene_path);
+  EXPECT_EQ(scene.source, scene_path);
+  EXPECT_EQ(fs::path(scene.avatars[0].model),
+            (fs::path(dir) / "data" / "body.npz").lexically_normal());
+  EXPECT_EQ(fs::path(scene.avatars[0].motion),
+            (fs::path(dir) / "data" / "walk.npz").lexically_normal());
+  // "vertices" only makes sense for the synthetic body.
+  writeText(scene_path, R"({"avatars": [{"model": "data/body.npz", "vertices": 900}]})");
+  EXPECT_THAT(messageOf<InputError>([&] { loadSceneFile(scene_path); }),
+              HasSubstr("avatars[0].vertices: only for \"model\": \"synthetic\""));
+}
+
+TEST(SceneFile, MissingFilesAreFileErrorsNamingKeyAndResolvedPath) {
+  const std::string dir = test::freshTempDir("scene_missing");
+  const std::string scene_path = (fs::path(dir) / "scene.json").string();
+  writeText(scene_path, R"({"avatars": [{"motion": "nowhere/run.npz"}]})");
+  std::string m = messageOf<FileError>([&] { loadSceneFile(scene_path); });
+  EXPECT_THAT(m, HasSubstr(scene_path + ": avatars[0].motion: motion file not found: " +
+                           (fs::path(dir) / "nowhere" / "run.npz").string()));
+  writeText(scene_path, R"({"avatars": [{}, {"model": "smpl.npz"}]})");
+  m = messageOf<FileError>([&] { loadSceneFile(scene_path); });
+  EXPECT_THAT(m, HasSubstr("avatars[1].model: body model file not found: " +
+                           (fs::path(dir) / "smpl.npz").string()));
+  // A built-in name without its prefix is a missing file, with a hint.
+  writeText(scene_path, R"({"avatars": [{"motion": "walk"}]})");
+  m = messageOf<FileError>([&] { loadSceneFile(scene_path); });
+  EXPECT_THAT(m, HasSubstr("builtin:walk"));
+  m = messageOf<FileError>([&] { loadSceneFile((fs::path(dir) / "absent.json").string()); });
+  EXPECT_THAT(m, HasSubstr("absent.json: scene file not found"));
+}
+
+TEST(SceneFile, OverridesApplyBeforeCollidersAreBuilt) {
+  const std::string text = R"({"avatars": [{}], "duration": 1.0,
+      "colliders": [{"type": "sphere", "center": [0, 0, 0], "radius": 0.1, "velocity": [2, 0, 0]}]})";
+  SceneOverrides overrides;
+  overrides.duration = 3.0;
+  overrides.time_step = 0.005;
+  overrides.output_dir = "here";
+  const SceneSpec scene = parseSceneJson(text, "scene.json", ".", overrides);
+  EXPECT_DOUBLE_EQ(scene.duration, 3.0);
+  EXPECT_DOUBLE_EQ(scene.time_step, 0.005);
+  EXPECT_DOUBLE_EQ(scene.avatars[0].options.time_step, 0.005);
+  EXPECT_EQ(scene.outputs.dir, "here");
+  // The ball keeps flying for the overridden duration, not only the file's.
+  EXPECT_TRUE(scene.colliders[0].path.offsetAt(2.5).isApprox(Vec3(5, 0, 0), 1e-12));
+  overrides.duration = -1;
+  EXPECT_THAT(messageOf<InputError>([&] { parseSceneJson(text, "scene.json", ".", overrides); }),
+              HasSubstr("--duration: expected 0 < value"));
+}
+
+TEST(SceneFile, ExampleFilesParseAndTheDefaultMatchesTheBuiltIn) {
+  const fs::path examples = fs::path(FLSH_SOURCE_DIR) / "examples" / "scenes";
+  const SceneSpec file = loadSceneFile((examples / "default.json").string());
+  const SceneSpec builtin = defaultScene();
+  EXPECT_EQ(builtin.source, "builtin default scene");
+  ASSERT_EQ(file.avatars.size(), builtin.avatars.size());
+  EXPECT_EQ(file.avatars[0].name, builtin.avatars[0].name);
+  EXPECT_EQ(file.avatars[0].motion, builtin.avatars[0].motion);
+  EXPECT_EQ(file.avatars[0].synthetic_vertices, builtin.avatars[0].synthetic_vertices);
+  EXPECT_DOUBLE_EQ(file.time_step, builtin.time_step);
+  EXPECT_DOUBLE_EQ(file.duration, builtin.duration);
+  ASSERT_EQ(file.colliders.size(), builtin.colliders.size());
+  for (size_t c = 0; c < file.colliders.size(); ++c) {
+    EXPECT_EQ(file.colliders[c].name, builtin.colliders[c].name);
+    EXPECT_EQ(file.colliders[c].p0(), builtin.colliders[c].p0());
+    EXPECT_EQ(file.colliders[c].radius(), builtin.colliders[c].radius());
+    EXPECT_EQ(file.colliders[c].path.offsetAt(1.0), builtin.colliders[c].path.offsetAt(1.0));
+  }
+  EXPECT_EQ(file.outputs.dir, builtin.outputs.dir);
+
+  // The brief's default: one walking synthetic avatar, h = 1/60 s, ground and a thrown ball.
+  EXPECT_NEAR(builtin.time_step, 1.0 / 60.0, 1e-15);
+  EXPECT_EQ(builtin.avatars[0].synthetic_vertices, 6890);
+  EXPECT_EQ(builtin.avatars[0].motion, "builtin:walk");
+  EXPECT_EQ(builtin.colliders[0].shape(), ColliderShape::Plane);
+  EXPECT_EQ(builtin.colliders[1].shape(), ColliderShape::Sphere);
+  EXPECT_DOUBLE_EQ(builtin.colliders[1].radius(), 0.12);
+
+  const SceneSpec two = loadSceneFile((examples / "two_avatars.json").string());
+  EXPECT_EQ(two.avatars.size(), 2u);
+  EXPECT_NEAR(two.avatars[1].yaw, M_PI, 1e-12);
+}
+
+TEST(SceneFile, DefaultGroundSitsAtTheSolesAndTheBallMeetsTheWalkerNearOneSecond) {
+  const SceneSpec scene = defaultScene();
+  const BodyModel& body = smallBody();
+  // Ground: the plane's height is the rest body's lowest point (1000-vertex body: within 5 mm
+  // of the 6890-vertex one).
+  const double sole = body.v_template.col(1).minCoeff();
+  EXPECT_NEAR(scene.colliders[0].p0().y(), sole, 5e-3);
+
+  const Collider& ball = scene.colliders[1];
+  const Motion walk = makeBuiltinMotion("walk", 2.0, 30.0);
+  auto clearance = [&](int frame) {  // smallest signed distance of the body to the ball
+    const double t = frame / walk.fps;
+    const PosedBody posed =
+        poseBody(body, VecX::Zero(body.numBetas()), walk.poses.row(frame).transpose(),
+                 walk.trans.row(frame).transpose());
+    double d = 1e9;
+    for (Eigen::Index i = 0; i < posed.vertices.rows(); ++i)
+      d = std::min(d, ball.signedDistance(posed.vertices.row(i).transpose(), t));
+    return d;
+  };
+  EXPECT_GT(clearance(24), 0.3);   // t = 0.8 s: still well away
+  EXPECT_LT(clearance(30), 0.02);  // t = 1.0 s: touching or inside
+  EXPECT_GT(clearance(30), -0.1);
+}
+
+}  // namespace
+}  // namespace flsh

@@ -3,7 +3,8 @@
 //   TwoAvatarsOverlapping: two walking avatars, the second 2 cm into the first (continuous
 //                    avatar–avatar contact), both on the ground;
 //   GetVertices:     SMPL skinning of the simulated pose (the mesh output of one frame).
-// Argument: the linear solver (0 = Auto, 1 = dense, 2 = CHOLMOD).
+// Argument: the linear solver (0 = Auto, which is the simplicial sparse LLT in a Scene,
+// 1 = dense, 2 = CHOLMOD, 3 = simplicial sparse LLT).
 // Counter `steps_per_s` (or `frames_per_s`) is the figure to compare with the goals (≥ 3000
 // steps/s for one avatar, ≥ 800 for two); `newton_iterations` and `contacts` are per step.
 #include <benchmark/benchmark.h>
@@ -78,11 +79,12 @@ void runSteps(benchmark::State& state, Scene& scene) {
   state.counters["analyses"] = double(scene.linearSolver()->numAnalyses());
 }
 
-/// Benchmark argument: 0 = the default (Auto) linear solver, 1 = dense, 2 = CHOLMOD.
+/// Benchmark argument: 0 = the default (Auto) linear solver, 1 = dense, 2 = CHOLMOD, 3 = sparse
+/// simplicial LLT.
 SceneOptions sceneOptions(const benchmark::State& state) {
   SceneOptions options;
   const LinearSolverType types[] = {LinearSolverType::Auto, LinearSolverType::Dense,
-                                    LinearSolverType::Cholmod};
+                                    LinearSolverType::Cholmod, LinearSolverType::SparseLLT};
   options.newton.linear_solver = types[state.range(0)];
   return options;
 }
@@ -96,7 +98,7 @@ void BM_OneAvatarWalk(benchmark::State& state) {
   scene.addCollider(Collider::plane(Vec3(0, lowestNodeHeight(*sim) - 0.005, 0), Vec3::UnitY()));
   runSteps(state, scene);
 }
-BENCHMARK(BM_OneAvatarWalk)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMicrosecond)->UseRealTime();
+BENCHMARK(BM_OneAvatarWalk)->Arg(0)->Arg(1)->Arg(2)->Arg(3)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
 void BM_TwoAvatarsOverlapping(benchmark::State& state) {
   const Shared& s = shared();
@@ -127,6 +129,7 @@ BENCHMARK(BM_TwoAvatarsOverlapping)
     ->Arg(0)
     ->Arg(1)
     ->Arg(2)
+    ->Arg(3)
     ->Unit(benchmark::kMicrosecond)
     ->UseRealTime();
 

@@ -24,6 +24,10 @@ void bind_core(py::module_& m);
 void bind_body(py::module_& m);
 void bind_io(py::module_& m);
 void bind_render(py::module_& m);
+void bind_volume(py::module_& m);
+void bind_contact(py::module_& m);
+void bind_sim(py::module_& m);
+void bind_solve(py::module_& m);
 
 /// "(72,)", "(800, 3)": numpy's way of writing a shape, for messages.
 std::string shape_text(const std::vector<long>& shape);
@@ -65,6 +69,15 @@ py::array_t<double> to_numpy(const MatX3& m);
 py::array_t<double> to_numpy(const RowMatX& m);
 py::array_t<double> to_numpy(const VecX& v);
 py::array_t<int> to_numpy(const MatX3i& m);
+
+/// A sparse matrix as a scipy.sparse.csc_matrix (copies; duplicates already summed).
+py::object to_scipy_csc(const SpMat& A);
+/// A sparse matrix from Python: a scipy.sparse matrix (any format) or a dense 2-D array,
+/// checked to be rows × cols (−1 = any) with finite values; ValueError naming `name`.
+std::vector<Triplet> to_triplets(const py::handle& obj, const std::string& name, long rows,
+                                 long cols);
+/// Triplets (duplicates summed) as a rows × cols csc_matrix.
+py::object triplets_to_scipy_csc(const std::vector<Triplet>& triplets, int rows, int cols);
 
 /// A numpy array that takes over an Eigen matrix's storage (no copy), viewed in C order
 /// with `shape`; the matrix must be row-major (or a vector) with shape's element count.

@@ -1,14 +1,16 @@
-// Bindings of include/flsh/io: motions (AMASS-style .npz, built-in motions) and meshes
-// (PLY / OBJ).
+// Bindings of include/flsh/io: motions (AMASS-style .npz, built-in motions), meshes (PLY / OBJ)
+// and scene files (a read-only view of the parsed SceneSpec).
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
 #include <cmath>
+#include <memory>
 
 #include "bindings.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/io/mesh_io.h"
 #include "flsh/io/motion.h"
+#include "flsh/io/scene_file.h"
 
 namespace flsh::python {
 
@@ -40,7 +42,7 @@ Motion make_motion(const py::object& poses, const py::object& trans, const py::o
 void bind_io(py::module_& m) {
   // --- Motion --------------------------------------------------------------------------------
   const py::ssize_t d = sizeof(double);
-  py::class_<Motion>(m, "Motion",
+  py::class_<Motion, std::shared_ptr<Motion>>(m, "Motion",
                      "A motion in SMPL's 72-value pose layout. Array properties are read-only.")
       .def(py::init(&make_motion), py::arg("poses"), py::arg("trans") = py::none(),
            py::arg("betas") = py::none(), py::arg("fps") = 30.0, py::arg("gender") = "",
@@ -102,6 +104,73 @@ void bind_io(py::module_& m) {
         },
         py::arg("spec"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0,
         "A motion file path if it exists, else 'builtin:NAME' or NAME of a built-in motion.");
+
+  // --- Scene files (read-only views) ---------------------------------------------------------
+  py::class_<AvatarSpec>(m, "AvatarSpec", "One avatar of a scene file (read-only).")
+      .def_readonly("name", &AvatarSpec::name)
+      .def_readonly("model", &AvatarSpec::model, "SMPL .npz path or 'synthetic'")
+      .def_readonly("synthetic_vertices", &AvatarSpec::synthetic_vertices)
+      .def_property_readonly("betas", [](const AvatarSpec& a) { return to_numpy(a.betas); },
+                             "(K,) shape; empty = zeros")
+      .def_readonly("simulation", &AvatarSpec::simulation, "'skeleton'")
+      .def_readonly("motion", &AvatarSpec::motion, "AMASS .npz path or builtin:NAME; '' = none")
+      .def_readonly("motion_seconds", &AvatarSpec::motion_seconds, "s; 0 = the duration")
+      .def_property_readonly("offset", [](const AvatarSpec& a) { return to_numpy(VecX(a.offset)); },
+                             "(3,) added to the motion's root translation, m")
+      .def_readonly("yaw", &AvatarSpec::yaw, "rotation of the motion about +y, rad")
+      .def_readonly("options", &AvatarSpec::options, "SimulableOptions")
+      .def("__repr__", [](const AvatarSpec& a) {
+        return "AvatarSpec(name='" + a.name + "', model='" + a.model + "', motion='" + a.motion +
+               "')";
+      });
+  py::class_<OutputSpec>(m, "OutputSpec", "Outputs of a scene file (read-only).")
+      .def_readonly("dir", &OutputSpec::dir)
+      .def_readonly("ply", &OutputSpec::ply)
+      .def_readonly("npz", &OutputSpec::npz)
+      .def_readonly("gltf", &OutputSpec::gltf)
+      .def_readonly("png", &OutputSpec::png)
+      .def_readonly("png_frames", &OutputSpec::png_frames)
+      .def_readonly("every", &OutputSpec::every, "write every n-th frame");
+  py::class_<SceneSpec>(m, "SceneSpec", "A parsed, validated scene file (read-only).")
+      .def_readonly("source", &SceneSpec::source, "file path or 'builtin default scene'")
+      .def_readonly("avatars", &SceneSpec::avatars, "list of AvatarSpec")
+      .def_readonly("colliders", &SceneSpec::colliders, "list of Collider")
+      .def_readonly("time_step", &SceneSpec::time_step, "s")
+      .def_readonly("duration", &SceneSpec::duration, "s")
+      .def_readonly("newton", &SceneSpec::newton, "NewtonOptions")
+      .def_readonly("avatar_contact", &SceneSpec::avatar_contact)
+      .def_readonly("outputs", &SceneSpec::outputs, "OutputSpec")
+      .def("__repr__", [](const SceneSpec& s) {
+        return "SceneSpec(source='" + s.source + "', avatars=" + std::to_string(s.avatars.size()) +
+               ", colliders=" + std::to_string(s.colliders.size()) + ")";
+      });
+  const auto overrides_of = [](double duration, double time_step, const std::string& out) {
+    SceneOverrides o;
+    o.duration = duration;
+    o.time_step = time_step;
+    o.output_dir = out;
+    return o;
+  };
+  m.def("load_scene_file",
+        [overrides_of](const std::filesystem::path& path, double duration, double time_step,
+                       const std::string& output_dir) {
+          const std::string p = path_string(path);
+          require_existing_file(p, "load_scene_file");
+          const SceneOverrides o = overrides_of(duration, time_step, output_dir);
+          py::gil_scoped_release release;
+          return loadSceneFile(p, o);
+        },
+        py::arg("path"), py::kw_only(), py::arg("duration") = 0.0, py::arg("time_step") = 0.0,
+        py::arg("output_dir") = "",
+        "Parses and validates a scene file (JSON) as a SceneSpec. Overrides (0 / '' = keep): "
+        "duration s, time_step s, output_dir. FileNotFoundError / OSError / ValueError.");
+  m.def("default_scene",
+        [overrides_of](double duration, double time_step, const std::string& output_dir) {
+          return defaultScene(overrides_of(duration, time_step, output_dir));
+        },
+        py::kw_only(), py::arg("duration") = 0.0, py::arg("time_step") = 0.0,
+        py::arg("output_dir") = "",
+        "The built-in default SceneSpec (a synthetic avatar walking, a ball thrown at it).");
 
   // --- Meshes --------------------------------------------------------------------------------
   m.def("write_ply",

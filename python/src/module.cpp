@@ -7,4 +7,8 @@ PYBIND11_MODULE(_flsh, m) {
   flsh::python::bind_body(m);
   flsh::python::bind_io(m);
   flsh::python::bind_render(m);
+  flsh::python::bind_volume(m);   // before sim: Simulable takes a SoftAvatar
+  flsh::python::bind_contact(m);  // before sim and solve: options and colliders
+  flsh::python::bind_sim(m);
+  flsh::python::bind_solve(m);
 }

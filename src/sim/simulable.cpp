@@ -103,7 +103,10 @@ struct Simulable::Impl {
 
   // ---- mutable data ----
   BoneStates q, q_n, q_nm1;
+  // Saved states: entries [0, stack_depth) are live; the rest keep their storage for reuse
+  // (push/pop/discard then allocate nothing).
   std::vector<BoneStates> stack;
+  size_t stack_depth = 0;
   std::vector<Collider> colliders;
   double time = 0.0;
   bool is_static = false;
@@ -357,7 +360,7 @@ void Simulable::initialize() {
   Impl& m = *impl_;
   m.time = 0.0;
   m.updateTargets(0.0);
-  m.stack.clear();
+  m.stack_depth = 0;
   if (!m.mocap) {
     m.q = m.q_n = m.q_nm1 = restBones(m.J);
     m.touch();
@@ -441,15 +444,27 @@ void Simulable::updateState(const VecX& dq) {
   m.touch();
 }
 
-void Simulable::pushState() { impl_->stack.push_back(impl_->q); }
+void Simulable::pushState() {
+  Impl& m = *impl_;
+  if (m.stack.size() <= m.stack_depth) m.stack.push_back(m.q);
+  else m.stack[m.stack_depth] = m.q;
+  ++m.stack_depth;
+}
 
 void Simulable::popState() {
   Impl& m = *impl_;
-  if (m.stack.empty())
+  if (m.stack_depth == 0)
     throw Error("Simulable::popState: the state stack is empty (popState without pushState)");
-  m.q = std::move(m.stack.back());
-  m.stack.pop_back();
+  m.q = m.stack[--m.stack_depth];
   m.touch();
+}
+
+void Simulable::discardState() {
+  Impl& m = *impl_;
+  if (m.stack_depth == 0)
+    throw Error(
+        "Simulable::discardState: the state stack is empty (discardState without pushState)");
+  --m.stack_depth;
 }
 
 void Simulable::setVelocity(const VecX& v) {

@@ -130,20 +130,26 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
       break;
     }
 
-    // ---- Newton direction: H dq = −g, shifting the diagonal until H is positive definite.
-    objective.hessian(H, true);
-    objective.fixKinematic(g, &H);
-    if (H.rows() != n || H.cols() != n)
-      throw Error("newtonSolve: Objective::hessian returned " +
-                  shapeString({long(H.rows()), long(H.cols())}) + ", expected (" +
-                  std::to_string(n) + ", " + std::to_string(n) + ")");
-    diagonalPointers(H, diagonal);
-    double diagonal_scale = 0.0;
-    for (int k = 0; k < n; ++k) diagonal_scale += std::abs(*diagonal[k]);
-    diagonal_scale /= n;
-    if (!(diagonal_scale > 0.0) || !std::isfinite(diagonal_scale)) diagonal_scale = 1.0;
-
-    bool have_direction = solver->factorize(H);
+    // ---- Newton direction: H dq = −g. The exact Hessian first (quadratic convergence); if it
+    // is not positive definite, the objective's PSD form; then diagonal shifts until it is.
+    bool have_direction = false;
+    double diagonal_scale = 1.0;
+    for (int form = options.exact_hessian ? 0 : 1; form < 2 && !have_direction; ++form) {
+      const bool psd = form == 1;
+      if (psd && options.exact_hessian) ++result.psd_fallbacks;
+      objective.hessian(H, psd);
+      objective.fixKinematic(g, &H);
+      if (H.rows() != n || H.cols() != n)
+        throw Error("newtonSolve: Objective::hessian returned " +
+                    shapeString({long(H.rows()), long(H.cols())}) + ", expected (" +
+                    std::to_string(n) + ", " + std::to_string(n) + ")");
+      diagonalPointers(H, diagonal);
+      diagonal_scale = 0.0;
+      for (int k = 0; k < n; ++k) diagonal_scale += std::abs(*diagonal[k]);
+      diagonal_scale /= n;
+      if (!(diagonal_scale > 0.0) || !std::isfinite(diagonal_scale)) diagonal_scale = 1.0;
+      have_direction = solver->factorize(H);
+    }
     if (!have_direction) {
       diagonal_values.resize(n);
       for (int k = 0; k < n; ++k) diagonal_values[k] = *diagonal[k];

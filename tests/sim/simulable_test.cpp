@@ -302,6 +302,30 @@ TEST(Simulable, PushPopRoundTripsExactlyAndInvalidatesCaches) {
   EXPECT_NE(message.find("empty"), std::string::npos) << message;
 }
 
+TEST(Simulable, DiscardStateKeepsTheCurrentStateAndDropsTheSavedOne) {
+  auto sim = walkingAvatarOnGround(10);
+  const VecX q0 = sim->getState();
+  sim->pushState();  // saved: q0
+  sim->updateState(randomVector(sim->numDofs(), 0.1, 12));
+  const VecX q1 = sim->getState();
+  sim->pushState();  // saved: q1
+  sim->updateState(randomVector(sim->numDofs(), 0.1, 13));
+  const VecX q2 = sim->getState();
+  sim->discardState();  // drops q1, keeps q2 bit for bit
+  EXPECT_TRUE(sim->getState() == q2);
+  sim->popState();  // back to q0: the discarded level is gone
+  EXPECT_TRUE(sim->getState() == q0);
+  // Re-pushing reuses the storage of the dropped levels and still round-trips exactly.
+  sim->setState(q1);
+  sim->pushState();
+  sim->setState(q2);
+  sim->popState();
+  for (int b = 0; b < 24; ++b)
+    EXPECT_TRUE(sim->boneRotations()[b] == rodrigues(q1.segment<3>(6 * b + 3))) << "bone " << b;
+  const std::string message = messageOf<Error>([&] { sim->discardState(); });
+  EXPECT_NE(message.find("empty"), std::string::npos) << message;
+}
+
 TEST(Simulable, SetStateRejectsWrongSizesAndNonFiniteValues) {
   Simulable sim(shared().avatar);
   sim.initialize();

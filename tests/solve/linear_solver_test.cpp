@@ -111,14 +111,19 @@ TEST_P(LinearSolverTest, RejectsBadShapesWithMessages) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Backends, LinearSolverTest,
-                         ::testing::Values(LinearSolverType::Dense, LinearSolverType::Cholmod),
+                         ::testing::Values(LinearSolverType::Dense, LinearSolverType::Cholmod,
+                                           LinearSolverType::SparseLLT),
                          [](const auto& info) {
-                           return info.param == LinearSolverType::Dense ? "Dense" : "Cholmod";
+                           return info.param == LinearSolverType::Dense     ? "Dense"
+                                  : info.param == LinearSolverType::Cholmod ? "Cholmod"
+                                                                            : "SparseLLT";
                          });
 
-TEST(CholmodSolver, ReusesTheAnalysisWhileThePatternIsUnchanged) {
+class SparseSolverTest : public ::testing::TestWithParam<LinearSolverType> {};
+
+TEST_P(SparseSolverTest, ReusesTheAnalysisWhileThePatternIsUnchanged) {
   const int n = 200;
-  auto solver = makeLinearSolver(LinearSolverType::Cholmod, n);
+  auto solver = makeLinearSolver(GetParam(), n);
   SpMat A = randomSpd(n, 3, 7);
   const VecX b = randomVector(n, 8);
   for (int round = 0; round < 4; ++round) {
@@ -144,12 +149,20 @@ TEST(CholmodSolver, ReusesTheAnalysisWhileThePatternIsUnchanged) {
   EXPECT_EQ(solver->numFactorizations(), 7);
 }
 
+INSTANTIATE_TEST_SUITE_P(Backends, SparseSolverTest,
+                         ::testing::Values(LinearSolverType::Cholmod, LinearSolverType::SparseLLT),
+                         [](const auto& info) {
+                           return info.param == LinearSolverType::Cholmod ? "Cholmod"
+                                                                          : "SparseLLT";
+                         });
+
 TEST(LinearSolverFactory, AutoPicksDenseForSmallAndCholmodForLargeSystems) {
   EXPECT_EQ(makeLinearSolver(LinearSolverType::Auto, 144)->name(), "dense-llt");
   EXPECT_EQ(makeLinearSolver(LinearSolverType::Auto, 600)->name(), "dense-llt");
   EXPECT_EQ(makeLinearSolver(LinearSolverType::Auto, 601)->name(), "cholmod-supernodal");
   EXPECT_EQ(makeLinearSolver(LinearSolverType::Auto, 50, 10)->name(), "cholmod-supernodal");
   EXPECT_EQ(makeLinearSolver(LinearSolverType::Dense, 5000)->name(), "dense-llt");
+  EXPECT_EQ(makeLinearSolver(LinearSolverType::SparseLLT, 5)->name(), "eigen-simplicial-llt");
 }
 
 }  // namespace

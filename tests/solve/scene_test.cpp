@@ -354,7 +354,7 @@ TEST(Scene, AvatarStandingOnTheGroundConverges) {
   EXPECT_GT(max_contacts, 0);
   EXPECT_TRUE(sim->getState().allFinite());
   EXPECT_GT(lowestNodeHeight(*sim), ground - 0.02);  // stands on the plane, does not sink
-  // One symbolic analysis (the dense solver sizes its storage once) for all steps.
+  // One symbolic analysis for all steps: the scene's Hessian pattern is fixed.
   ASSERT_NE(scene.linearSolver(), nullptr);
   EXPECT_EQ(scene.linearSolver()->numAnalyses(), 1);
   EXPECT_GT(scene.linearSolver()->numFactorizations(), 15);

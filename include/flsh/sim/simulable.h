@@ -39,8 +39,9 @@ struct SimulableOptions {
   double tracking_stiffness = 355.0;
   /// Root springs to the mocap root position and orientation, same scaling with the whole
   /// body's mass M and polar inertia about the root: k = root_stiffness · M (N/m) and
-  /// root_stiffness · I_0 (N·m/rad²). Unit 1/s²; default (2π·2 Hz)².
-  double root_stiffness = 158.0;
+  /// root_stiffness · I_0 (N·m/rad²). Unit 1/s²; default (2π·4 Hz)²: the static sag of a body
+  /// hanging on its root spring is g/root_stiffness ≈ 1.5 cm (2 Hz sagged 6 cm).
+  double root_stiffness = 630.0;
   bool track_mocap = true;                ///< off: no tracking springs (a passive ragdoll)
   /// Bones whose state is prescribed by the mocap (kinematic), e.g. {0} pins the root.
   std::vector<int> kinematic_bones;
@@ -84,6 +85,9 @@ class Simulable {
   void updateState(const VecX& dq);          ///< increment chart
   void pushState();                          ///< saves q on a stack
   void popState();                           ///< restores the last pushed q (throws if empty)
+  /// Drops the last pushed q without restoring it (throws if empty): keeps an accepted trial
+  /// state exactly, without a pop-and-reapply.
+  void discardState();
   /// Sets the previous state so that the velocity (per DoF, m/s and rad/s in the world frame)
   /// is `v`: q_{n−1} = q_n − h v (in the increment chart).
   void setVelocity(const VecX& v);

@@ -15,6 +15,9 @@ enum class LinearSolverType {
   Auto,     ///< dense below `dense_threshold` unknowns, CHOLMOD above
   Dense,    ///< Eigen's blocked LLT (Cholesky) on the dense matrix (positive definite only)
   Cholmod,  ///< CHOLMOD supernodal Cholesky (positive definite only)
+  /// Eigen's simplicial (up-looking) Cholesky with AMD ordering: for small sparse systems such
+  /// as the skeleton's block-tree Hessians, where dense or supernodal factors waste work.
+  SparseLLT,
 };
 
 class LinearSolver {

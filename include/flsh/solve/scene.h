@@ -13,6 +13,8 @@
 namespace flsh {
 
 struct SceneOptions {
+  /// newton.linear_solver = Auto gives the scene the simplicial sparse Cholesky (SparseLLT):
+  /// its Hessian has a fixed block tree-sparse pattern (see Scene::hessian).
   NewtonOptions newton;
   /// Vertices of each avatar against the other avatars' bone capsules.
   bool avatar_contact = true;
@@ -83,11 +85,23 @@ class Scene : public Objective {
   int last_solver_dofs_ = -1;
   int stack_depth_ = 0;            // push() levels not yet popped
   std::vector<Triplet> triplets_;  // Hessian assembly buffer, reused
+  // Fixed Hessian pattern of whole 6 × 6 bone blocks, a superset of every evaluation's
+  // (all bone pairs that share a vertex, so collider contacts never change it): assembly
+  // writes values in place and the solver keeps its analysis. block_rank_ (bones² entries):
+  // position of block row a within block column b's stored blocks, −1 outside the pattern.
+  SpMat hessian_pattern_;
+  std::vector<int> block_rank_;
+  void rebuildHessianPattern();
+  bool fillHessian(SpMat& H) const;
   // Per-simulable skinning data and the posed nodes/capsules of the last state seen.
   mutable std::vector<std::unique_ptr<AvatarContactData>> contact_data_;
   struct BlockAccumulator;
   mutable std::unique_ptr<BlockAccumulator> blocks_;
   mutable int avatar_contacts_ = 0;  // active vertex–capsule pairs at the last evaluation
+  // Avatar–avatar pairs in contact, (capsule of B, vertex of A) per ordered pair A·n + B, found
+  // at the posed-data versions contact_pairs_versions_ (one per simulable).
+  mutable std::vector<std::vector<std::pair<int, int>>> contact_pairs_;
+  mutable std::vector<long> contact_pairs_versions_;
 };
 
 }  // namespace flsh

@@ -1,0 +1,366 @@
+// Bindings of include/flsh/sim: SimulableOptions and Simulable with the runtime API of the
+// FLSH paper under the paper's camelCase names, each also under a snake_case alias. Also the
+// scipy.sparse helpers declared in bindings.h.
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <memory>
+
+#include "bindings.h"
+#include "flsh/sim/simulable.h"
+
+namespace flsh::python {
+
+// ---------------------------------------------------------------------------------------------
+// scipy.sparse helpers
+
+py::object to_scipy_csc(const SpMat& A) {
+  SpMat c = A;
+  c.makeCompressed();
+  const py::ssize_t nnz = c.nonZeros();
+  py::array_t<double> data(nnz);
+  py::array_t<int> indices(nnz), indptr(py::ssize_t(c.cols() + 1));
+  std::copy(c.valuePtr(), c.valuePtr() + nnz, data.mutable_data());
+  std::copy(c.innerIndexPtr(), c.innerIndexPtr() + nnz, indices.mutable_data());
+  std::copy(c.outerIndexPtr(), c.outerIndexPtr() + c.cols() + 1, indptr.mutable_data());
+  py::object csc = py::module_::import("scipy.sparse").attr("csc_matrix");
+  return csc(py::make_tuple(data, indices, indptr),
+             py::arg("shape") = py::make_tuple(c.rows(), c.cols()));
+}
+
+py::object triplets_to_scipy_csc(const std::vector<Triplet>& triplets, int rows, int cols) {
+  SpMat A(rows, cols);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  return to_scipy_csc(A);
+}
+
+std::vector<Triplet> to_triplets(const py::handle& obj, const std::string& name, long rows,
+                                 long cols) {
+  py::module_ sparse = py::module_::import("scipy.sparse");
+  std::vector<Triplet> triplets;
+  const auto check = [&](long r, long c) {
+    if ((rows >= 0 && r != rows) || (cols >= 0 && c != cols))
+      throw py::value_error(name + ": expected shape " + shape_text({rows, cols}) + ", got " +
+                            shape_text({r, c}));
+  };
+  if (sparse.attr("issparse")(obj).cast<bool>()) {
+    py::object coo = obj.attr("tocoo")();
+    const py::tuple shape = coo.attr("shape");
+    check(shape[0].cast<long>(), shape[1].cast<long>());
+    auto row = as_int32(coo.attr("row"), name + ".row");
+    auto col = as_int32(coo.attr("col"), name + ".col");
+    auto data = as_float64(coo.attr("data"), name + ".data");
+    triplets.reserve(size_t(data.size()));
+    for (py::ssize_t k = 0; k < data.size(); ++k)
+      triplets.emplace_back(row.data()[k], col.data()[k], data.data()[k]);
+    return triplets;
+  }
+  auto a = as_float64(obj, name);
+  if (a.ndim() != 2)
+    throw py::value_error(name + ": expected a scipy.sparse matrix or a 2-D array of shape " +
+                          shape_text({rows, cols}) + ", got " + std::to_string(a.ndim()) +
+                          "-D array");
+  check(long(a.shape(0)), long(a.shape(1)));
+  for (py::ssize_t r = 0; r < a.shape(0); ++r)
+    for (py::ssize_t c = 0; c < a.shape(1); ++c)
+      if (const double v = a.data()[r * a.shape(1) + c]; v != 0.0) triplets.emplace_back(r, c, v);
+  return triplets;
+}
+
+namespace {
+
+// An increment, state or gradient of the simulable: (numDofs,) finite.
+VecX dof_vector(const Simulable& s, const py::object& v, const char* name) {
+  return to_vector(v, name, s.numDofs());
+}
+
+py::array_t<double> rotations_numpy(const std::vector<Mat3>& R) {
+  py::array_t<double> a({py::ssize_t(R.size()), py::ssize_t(3), py::ssize_t(3)});
+  auto v = a.mutable_unchecked<3>();
+  for (size_t b = 0; b < R.size(); ++b)
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) v(b, r, c) = R[b](r, c);
+  return a;
+}
+
+void check_finite_nonnegative(double value, const char* name) {
+  if (!(std::isfinite(value) && value >= 0.0))
+    throw py::value_error(std::string(name) + ": expected a finite value ≥ 0, got " +
+                          std::to_string(value));
+}
+
+std::vector<int> kinematic_list(const py::object& bones) {
+  if (bones.is_none()) return {};
+  auto a = as_int32(bones, "kinematic_bones");
+  check_shape(a, "kinematic_bones", {-1}, "(B,)");
+  return std::vector<int>(a.data(), a.data() + a.size());
+}
+
+}  // namespace
+
+void bind_sim(py::module_& m) {
+  const SimulableOptions defaults;
+  py::class_<SimulableOptions>(m, "SimulableOptions",
+                               "Stiffnesses and physical settings of a Simulable (SI units).")
+      .def(py::init([](double time_step, const py::object& gravity, double joint_stiffness,
+                       double tracking_stiffness, double root_stiffness, bool track_mocap,
+                       const py::object& kinematic_bones, const py::object& contact) {
+             if (!(std::isfinite(time_step) && time_step > 0.0))
+               throw py::value_error("time_step: expected a finite value > 0 (s), got " +
+                                     std::to_string(time_step));
+             check_finite_nonnegative(joint_stiffness, "joint_stiffness");
+             check_finite_nonnegative(tracking_stiffness, "tracking_stiffness");
+             check_finite_nonnegative(root_stiffness, "root_stiffness");
+             SimulableOptions o;
+             o.time_step = time_step;
+             if (!gravity.is_none()) o.gravity = to_vec3(gravity, "gravity");
+             o.joint_stiffness = joint_stiffness;
+             o.tracking_stiffness = tracking_stiffness;
+             o.root_stiffness = root_stiffness;
+             o.track_mocap = track_mocap;
+             o.kinematic_bones = kinematic_list(kinematic_bones);
+             if (!contact.is_none()) o.contact = contact.cast<ContactOptions>();
+             return o;
+           }),
+           py::kw_only(), py::arg("time_step") = defaults.time_step,
+           py::arg("gravity") = py::none(), py::arg("joint_stiffness") = defaults.joint_stiffness,
+           py::arg("tracking_stiffness") = defaults.tracking_stiffness,
+           py::arg("root_stiffness") = defaults.root_stiffness,
+           py::arg("track_mocap") = defaults.track_mocap, py::arg("kinematic_bones") = py::none(),
+           py::arg("contact") = py::none(),
+           "Keyword arguments; None keeps the default (gravity (0, −9.81, 0) m/s², no kinematic "
+           "bones, default ContactOptions).")
+      .def_readwrite("time_step", &SimulableOptions::time_step, "h, s")
+      .def_property("gravity", [](const SimulableOptions& o) { return to_numpy(VecX(o.gravity)); },
+                    [](SimulableOptions& o, const py::object& g) { o.gravity = to_vec3(g, "gravity"); },
+                    "(3,) m/s²")
+      .def_readwrite("joint_stiffness", &SimulableOptions::joint_stiffness, "k_J, N/m")
+      .def_readwrite("tracking_stiffness", &SimulableOptions::tracking_stiffness,
+                     "ω_T², 1/s² (joint springs k_b = ω_T² I_b)")
+      .def_readwrite("root_stiffness", &SimulableOptions::root_stiffness,
+                     "1/s² (root springs scaled by mass and polar inertia)")
+      .def_readwrite("track_mocap", &SimulableOptions::track_mocap,
+                     "False: no tracking springs (a passive ragdoll)")
+      .def_property("kinematic_bones",
+                    [](const SimulableOptions& o) { return o.kinematic_bones; },
+                    [](SimulableOptions& o, const py::object& b) {
+                      o.kinematic_bones = kinematic_list(b);
+                    },
+                    "bones prescribed by the mocap, e.g. [0] pins the root")
+      .def_readwrite("contact", &SimulableOptions::contact, "ContactOptions (a copy on read)")
+      .def("__repr__", [](const SimulableOptions& o) {
+        return "SimulableOptions(time_step=" + py::repr(py::float_(o.time_step)).cast<std::string>() +
+               ", track_mocap=" + (o.track_mocap ? "True" : "False") + ")";
+      });
+
+  using S = Simulable;
+  py::class_<S, std::shared_ptr<S>> sim(
+      m, "Simulable",
+      "One avatar's simulation state and energies (articulated skeleton: 24 bones × 6 DoFs "
+      "[t_b m, r_b rad]). Methods carry the FLSH paper's names; each has a snake_case alias. "
+      "Derivatives are in the increment chart [δt_b, δω_b] at the current state. Keeps its "
+      "avatar and mocap alive. Not thread-safe.");
+  sim.def(py::init([](std::shared_ptr<SoftAvatar> avatar, std::shared_ptr<Motion> mocap,
+                      const py::object& options) {
+            const SimulableOptions o =
+                options.is_none() ? SimulableOptions() : options.cast<SimulableOptions>();
+            return std::make_shared<S>(std::move(avatar), std::move(mocap), o);
+          }),
+          py::arg("avatar"), py::arg("mocap") = py::none(), py::arg("options") = py::none(),
+          "avatar: initialized SoftAvatar; mocap: Motion to track or None (rest pose); "
+          "options: SimulableOptions or None.");
+  sim.def(py::init([](std::shared_ptr<SoftAvatar> avatar, std::shared_ptr<BodyModel> body,
+                      std::shared_ptr<Motion> mocap, const py::object& options) {
+            const SimulableOptions o =
+                options.is_none() ? SimulableOptions() : options.cast<SimulableOptions>();
+            return std::make_shared<S>(std::move(avatar), std::move(body), std::move(mocap), o);
+          }),
+          py::arg("avatar"), py::arg("body"), py::arg("mocap"), py::arg("options") = py::none(),
+          "The paper's form: body must be the avatar's BodyModel.");
+
+  // Registers `camel` and its snake_case alias as the same function object.
+  const auto alias = [&sim](const char* camel, const char* snake) {
+    sim.attr(snake) = sim.attr(camel);
+  };
+
+  sim.def("initialize", &S::initialize,
+          "State from the mocap's first frame (or the rest pose) with the mocap's velocity; "
+          "time = 0.");
+  sim.def("preUpdate", &S::preUpdate,
+          "Before a step: time += h, mocap targets, inertial prediction, kinematic bones.");
+  alias("preUpdate", "pre_update");
+  sim.def("postUpdate", &S::postUpdate, "After a converged step: q_{n−1} ← q_n, q_n ← q.");
+  alias("postUpdate", "post_update");
+
+  // ---- state
+  sim.def("numDofs", &S::numDofs, "Number of DoFs (144 for the skeleton).");
+  sim.def_property_readonly("num_dofs", &S::numDofs, "Number of DoFs (144 for the skeleton).");
+  sim.def("getState", [](const S& s) { return to_numpy(s.getState()); },
+          "(numDofs,) state: per bone [t_b (m, 3), r_b rotation vector (rad, 3)].");
+  alias("getState", "get_state");
+  sim.def("setState",
+          [](S& s, const py::object& q) { s.setState(dof_vector(s, q, "q")); }, py::arg("q"),
+          "Sets the state q (numDofs,) in getState's layout.");
+  alias("setState", "set_state");
+  sim.def("updateState",
+          [](S& s, const py::object& dq) { s.updateState(dof_vector(s, dq, "dq")); },
+          py::arg("dq"),
+          "Applies an increment dq (numDofs,): t_b += δt_b (m), R_b ← exp([δω_b]×) R_b (rad).");
+  alias("updateState", "update_state");
+  sim.def("pushState", &S::pushState, "Saves the state on a stack.");
+  alias("pushState", "push_state");
+  sim.def("popState", &S::popState,
+          "Restores the last pushed state exactly (RuntimeError if the stack is empty).");
+  alias("popState", "pop_state");
+  sim.def("discardState", &S::discardState,
+          "Drops the last pushed state without restoring it (RuntimeError if the stack is empty).");
+  alias("discardState", "discard_state");
+  sim.def("setVelocity",
+          [](S& s, const py::object& v) { s.setVelocity(dof_vector(s, v, "v")); }, py::arg("v"),
+          "Sets the velocity v (numDofs,), m/s and rad/s (world frame): q_{n−1} = q_n − h v.");
+  alias("setVelocity", "set_velocity");
+  sim.def("getVelocity", [](const S& s) { return to_numpy(s.getVelocity()); },
+          "(numDofs,) velocity (q_n ⊖ q_{n−1}) / h, m/s and rad/s.");
+  alias("getVelocity", "get_velocity");
+  sim.def_property_readonly("time", &S::time, "Simulated time, s.");
+
+  // ---- outputs
+  sim.def("getPose", [](const S& s) { return to_numpy(s.getPose()); },
+          "(72,) SMPL pose read off the state, rad.");
+  alias("getPose", "get_pose");
+  sim.def("getTrans", [](const S& s) { return to_numpy(VecX(s.getTrans())); },
+          "(3,) SMPL root translation t_0 − J_0, m.");
+  alias("getTrans", "get_trans");
+  sim.def("getStateJacobian",
+          [](const S& s) {
+            RowMatX J;
+            {
+              py::gil_scoped_release release;
+              J = s.getStateJacobian();
+            }
+            return to_numpy(J);
+          },
+          "(75, numDofs) d(pose (72), trans (3)) / dq.");
+  alias("getStateJacobian", "get_state_jacobian");
+  sim.def("getVertices",
+          [](const S& s) {
+            MatX3 V;
+            {
+              py::gil_scoped_release release;
+              V = s.getVertices();
+            }
+            return to_numpy(V);
+          },
+          "(V, 3) mesh vertices: SMPL skinning of getPose()/getTrans(), m.");
+  alias("getVertices", "get_vertices");
+  sim.def("getNodes", [](const S& s) { return to_numpy(s.getNodes()); },
+          "(V, 3) simulation nodes (linear blend skinning of the bone transforms), m.");
+  alias("getNodes", "get_nodes");
+  sim.def("getNodesStateJacobian",
+          [](const S& s) {
+            SpMat J;
+            {
+              py::gil_scoped_release release;
+              J = s.getNodesStateJacobian();
+            }
+            return to_scipy_csc(J);
+          },
+          "d nodes / dq as a scipy.sparse.csc_matrix (3V, numDofs), row 3i + c.");
+  alias("getNodesStateJacobian", "get_nodes_state_jacobian");
+  sim.def_property_readonly("bone_rotations",
+                            [](const S& s) { return rotations_numpy(s.boneRotations()); },
+                            "(24, 3, 3) bone rotations R_b relative to the rest pose.");
+  sim.def_property_readonly("bone_positions",
+                            [](const S& s) { return to_numpy(s.bonePositions()); },
+                            "(24, 3) joint centres t_b, m.");
+
+  // ---- energies
+  sim.def("getDynamicEnergyScalar", &S::getDynamicEnergyScalar,
+          "Inertia 1/(2h²) Σ m ‖x(q) − x̂‖², J (0 when static).");
+  alias("getDynamicEnergyScalar", "get_dynamic_energy_scalar");
+  sim.def("getPotentialEnergyScalar", &S::getPotentialEnergyScalar,
+          "Gravity + joint + tracking springs + contact, J.");
+  alias("getPotentialEnergyScalar", "get_potential_energy_scalar");
+  sim.def("getDynamicGradientVector",
+          [](const S& s) {
+            VecX g = VecX::Zero(s.numDofs());
+            s.getDynamicGradientVector(g);
+            return to_numpy(g);
+          },
+          "(numDofs,) gradient of the dynamic energy (a new vector), J per m or rad.");
+  alias("getDynamicGradientVector", "get_dynamic_gradient_vector");
+  sim.def("getPotentialGradientVector",
+          [](const S& s) {
+            VecX g = VecX::Zero(s.numDofs());
+            s.getPotentialGradientVector(g);
+            return to_numpy(g);
+          },
+          "(numDofs,) gradient of the potential energy (a new vector), J per m or rad.");
+  alias("getPotentialGradientVector", "get_potential_gradient_vector");
+  sim.def("fixVectorKinematic",
+          [](const S& s, const py::object& g) {
+            VecX v = dof_vector(s, g, "g");
+            s.fixVectorKinematic(v);
+            return to_numpy(v);
+          },
+          py::arg("g"), "Copy of g (numDofs,) with the kinematic DoFs zeroed.");
+  alias("fixVectorKinematic", "fix_vector_kinematic");
+  sim.def("getDynamicHessianTripletVector",
+          [](const S& s, bool psd) {
+            std::vector<Triplet> H;
+            {
+              py::gil_scoped_release release;
+              s.getDynamicHessianTripletVector(H, 0, psd);
+            }
+            return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
+          },
+          py::arg("psd") = true,
+          "Hessian of the dynamic energy, scipy.sparse.csc_matrix (numDofs, numDofs). psd=True: "
+          "Gauss–Newton (what Newton uses); False: exact.");
+  alias("getDynamicHessianTripletVector", "get_dynamic_hessian_triplet_vector");
+  sim.def("getPotentialHessianTripletVector",
+          [](const S& s, bool psd) {
+            std::vector<Triplet> H;
+            {
+              py::gil_scoped_release release;
+              s.getPotentialHessianTripletVector(H, 0, psd);
+            }
+            return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
+          },
+          py::arg("psd") = true,
+          "Hessian of the potential energy, scipy.sparse.csc_matrix (numDofs, numDofs). "
+          "psd=True: projected positive semidefinite; False: exact.");
+  alias("getPotentialHessianTripletVector", "get_potential_hessian_triplet_vector");
+  sim.def("fixMatrixKinematic",
+          [](const S& s, const py::object& H) {
+            const int n = s.numDofs();
+            std::vector<Triplet> t = to_triplets(H, "H", n, n);
+            s.fixMatrixKinematic(t);
+            return triplets_to_scipy_csc(t, n, n);
+          },
+          py::arg("H"),
+          "H (numDofs, numDofs), scipy.sparse or dense, with kinematic rows/columns made "
+          "identity; returns a csc_matrix.");
+  alias("fixMatrixKinematic", "fix_matrix_kinematic");
+
+  // ---- scene hooks
+  sim.def("setColliders", &S::setColliders, py::arg("colliders"),
+          "Replaces the colliders (list of Collider) seen by this avatar.");
+  alias("setColliders", "set_colliders");
+  sim.def_property_readonly("colliders", &S::colliders, "list of Collider (copies).");
+  sim.def("setStatic", &S::setStatic, py::arg("on") = true,
+          "True: drops the dynamic term (static equilibrium).");
+  alias("setStatic", "set_static");
+  sim.def_property_readonly("is_static", &S::isStatic);
+  sim.def_property_readonly("avatar", [](const S& s) { return &s.avatar(); },
+                            py::return_value_policy::reference_internal, "The SoftAvatar.");
+  sim.def_property_readonly("options", &S::options, "SimulableOptions (a copy).");
+  sim.def_property_readonly("active_contacts", [](const S& s) { return s.stats().active_contacts; },
+                            "Vertex–collider contacts at the last energy evaluation.");
+  sim.def("__repr__", [](const S& s) {
+    return "Simulable(dofs=" + std::to_string(s.numDofs()) +
+           ", time=" + py::repr(py::float_(s.time())).cast<std::string>() + ")";
+  });
+}
+
+}  // namespace flsh::python

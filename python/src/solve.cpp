@@ -1,0 +1,222 @@
+// Bindings of include/flsh/solve: Newton's options and result, linear-solver choice, and Scene
+// (several simulables and colliders stepped together; also the Objective Newton minimizes).
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <memory>
+
+#include "bindings.h"
+#include "flsh/solve/newton.h"
+#include "flsh/solve/scene.h"
+
+namespace flsh::python {
+
+namespace {
+
+const char* solver_name(LinearSolverType t) {
+  switch (t) {
+    case LinearSolverType::Auto: return "Auto";
+    case LinearSolverType::Dense: return "Dense";
+    case LinearSolverType::Cholmod: return "Cholmod";
+    case LinearSolverType::SparseLLT: return "SparseLLT";
+  }
+  return "unknown";
+}
+
+}  // namespace
+
+void bind_solve(py::module_& m) {
+  py::enum_<LinearSolverType>(m, "LinearSolverType", "Linear solver of Newton's steps.")
+      .value("Auto", LinearSolverType::Auto,
+             "scenes: simplicial sparse Cholesky; elsewhere dense up to 600 unknowns, CHOLMOD above")
+      .value("Dense", LinearSolverType::Dense, "Eigen's dense Cholesky")
+      .value("Cholmod", LinearSolverType::Cholmod, "CHOLMOD supernodal Cholesky")
+      .value("SparseLLT", LinearSolverType::SparseLLT,
+             "Eigen's simplicial Cholesky (AMD ordering), analysis reused while the pattern holds");
+
+  const NewtonOptions nd;
+  py::class_<NewtonOptions>(m, "NewtonOptions", "Newton's method with backtracking line search.")
+      .def(py::init([](int max_iterations, double gradient_tolerance, double step_tolerance,
+                       int max_line_search_steps, double armijo, double initial_regularization,
+                       LinearSolverType linear_solver, bool exact_hessian) {
+             NewtonOptions o;
+             o.max_iterations = max_iterations;
+             o.gradient_tolerance = gradient_tolerance;
+             o.step_tolerance = step_tolerance;
+             o.max_line_search_steps = max_line_search_steps;
+             o.armijo = armijo;
+             o.initial_regularization = initial_regularization;
+             o.linear_solver = linear_solver;
+             o.exact_hessian = exact_hessian;
+             return o;
+           }),
+           py::kw_only(), py::arg("max_iterations") = nd.max_iterations,
+           py::arg("gradient_tolerance") = nd.gradient_tolerance,
+           py::arg("step_tolerance") = nd.step_tolerance,
+           py::arg("max_line_search_steps") = nd.max_line_search_steps,
+           py::arg("armijo") = nd.armijo,
+           py::arg("initial_regularization") = nd.initial_regularization,
+           py::arg("linear_solver") = nd.linear_solver,
+           py::arg("exact_hessian") = nd.exact_hessian,
+           "Keyword arguments; values are checked when a solve starts (ValueError).")
+      .def_readwrite("max_iterations", &NewtonOptions::max_iterations)
+      .def_readwrite("gradient_tolerance", &NewtonOptions::gradient_tolerance,
+                     "converged when ‖g‖∞ ≤ tol · max(1, ‖g₀‖∞)")
+      .def_readwrite("step_tolerance", &NewtonOptions::step_tolerance,
+                     "… or when the accepted step ‖dq‖∞ ≤ tol (m or rad)")
+      .def_readwrite("max_line_search_steps", &NewtonOptions::max_line_search_steps)
+      .def_readwrite("armijo", &NewtonOptions::armijo, "sufficient-decrease constant in (0, 1)")
+      .def_readwrite("initial_regularization", &NewtonOptions::initial_regularization,
+                     "first diagonal shift (relative to the mean diagonal) when H is not PD")
+      .def_readwrite("linear_solver", &NewtonOptions::linear_solver)
+      .def_readwrite("exact_hessian", &NewtonOptions::exact_hessian,
+                     "try the exact Hessian first (falls back to the PSD form if not PD)")
+      .def("__repr__", [](const NewtonOptions& o) {
+        return "NewtonOptions(max_iterations=" + std::to_string(o.max_iterations) +
+               ", gradient_tolerance=" +
+               py::repr(py::float_(o.gradient_tolerance)).cast<std::string>() +
+               ", linear_solver=" + solver_name(o.linear_solver) + ")";
+      });
+
+  py::class_<NewtonResult>(m, "NewtonResult", "Outcome of one Newton solve.")
+      .def_readonly("converged", &NewtonResult::converged)
+      .def_readonly("iterations", &NewtonResult::iterations)
+      .def_readonly("energy", &NewtonResult::energy, "final energy, J")
+      .def_readonly("gradient_norm", &NewtonResult::gradient_norm, "‖g‖∞ at the end")
+      .def_readonly("line_search_steps", &NewtonResult::line_search_steps,
+                    "backtracking halvings in total")
+      .def_readonly("regularizations", &NewtonResult::regularizations, "Hessian shifts needed")
+      .def_readonly("psd_fallbacks", &NewtonResult::psd_fallbacks,
+                    "iterations whose exact Hessian was not positive definite")
+      .def_readonly("message", &NewtonResult::message)
+      .def("__repr__", [](const NewtonResult& r) {
+        return "NewtonResult(converged=" + std::string(r.converged ? "True" : "False") +
+               ", iterations=" + std::to_string(r.iterations) + ", message='" + r.message + "')";
+      });
+
+  const SceneOptions sd;
+  py::class_<SceneOptions>(m, "SceneOptions", "Options of a Scene.")
+      .def(py::init([](const py::object& newton, bool avatar_contact,
+                       const py::object& avatar_contact_options) {
+             SceneOptions o;
+             if (!newton.is_none()) o.newton = newton.cast<NewtonOptions>();
+             o.avatar_contact = avatar_contact;
+             if (!avatar_contact_options.is_none())
+               o.avatar_contact_options = avatar_contact_options.cast<ContactOptions>();
+             return o;
+           }),
+           py::kw_only(), py::arg("newton") = py::none(),
+           py::arg("avatar_contact") = sd.avatar_contact,
+           py::arg("avatar_contact_options") = py::none(),
+           "newton: NewtonOptions or None; avatar_contact: vertices against the other avatars' "
+           "bone capsules; avatar_contact_options: ContactOptions or None.")
+      .def_readwrite("newton", &SceneOptions::newton, "NewtonOptions (a copy on read)")
+      .def_readwrite("avatar_contact", &SceneOptions::avatar_contact)
+      .def_readwrite("avatar_contact_options", &SceneOptions::avatar_contact_options,
+                     "ContactOptions (a copy on read)");
+
+  py::class_<StepStats>(m, "StepStats", "Diagnostics of one Scene.step().")
+      .def_readonly("newton", &StepStats::newton, "NewtonResult")
+      .def_readonly("active_contacts", &StepStats::active_contacts,
+                    "vertex–collider and vertex–capsule pairs in contact")
+      .def_readonly("seconds", &StepStats::seconds, "wall time of the step, s")
+      .def("__repr__", [](const StepStats& s) {
+        return "StepStats(converged=" + std::string(s.newton.converged ? "True" : "False") +
+               ", iterations=" + std::to_string(s.newton.iterations) +
+               ", active_contacts=" + std::to_string(s.active_contacts) + ")";
+      });
+
+  py::class_<Scene, std::shared_ptr<Scene>>(
+      m, "Scene",
+      "Several simulables and colliders stepped together; states merged into one vector "
+      "(simulable i at offset(i)). Keeps its simulables alive. Not thread-safe.")
+      .def(py::init([](const py::object& options) {
+             return std::make_shared<Scene>(options.is_none() ? SceneOptions()
+                                                              : options.cast<SceneOptions>());
+           }),
+           py::arg("options") = py::none(), "options: SceneOptions or None.")
+      .def("add_simulable", &Scene::addSimulable, py::arg("simulable"),
+           "Adds a Simulable (all must share one time step).")
+      .def("add_collider", &Scene::addCollider, py::arg("collider"),
+           "Adds a Collider seen by every avatar (a copy).")
+      .def("initialize", &Scene::initialize, "Calls initialize() on every simulable.")
+      .def("step", py::overload_cast<>(&Scene::step), py::call_guard<py::gil_scoped_release>(),
+           "One backward-Euler step of every simulable (preUpdate, Newton, postUpdate); "
+           "returns StepStats. Releases the GIL.")
+      .def_property_readonly("time", &Scene::time, "s")
+      .def("set_static", &Scene::setStatic, py::arg("on") = true,
+           "True: drops the dynamic terms (static equilibrium).")
+      .def_property_readonly("simulables", &Scene::simulables, "list of Simulable")
+      .def_property_readonly("colliders", &Scene::colliders, "list of Collider (copies)")
+      .def("offset",
+           [](const Scene& s, int i) {
+             if (i < 0 || i >= int(s.simulables().size()))
+               throw py::index_error("offset: simulable index " + std::to_string(i) +
+                                     " out of range [0, " + std::to_string(s.simulables().size()) +
+                                     ")");
+             return s.offset(i);
+           },
+           py::arg("i"), "Index of simulable i's first DoF in the merged vector.")
+      .def_property_readonly("num_dofs", &Scene::numDofs, "Merged number of DoFs.")
+      .def_property_readonly("options", &Scene::options, "SceneOptions (a copy).")
+      .def("energy", &Scene::energy, "Merged backward-Euler energy at the current states, J.")
+      .def("gradient",
+           [](Scene& s) {
+             VecX g;
+             s.gradient(g);
+             return to_numpy(g);
+           },
+           "(num_dofs,) merged gradient (kinematic DoFs not zeroed).")
+      .def("hessian",
+           [](Scene& s, bool psd) {
+             SpMat H;
+             {
+               py::gil_scoped_release release;
+               s.hessian(H, psd);
+             }
+             return to_scipy_csc(H);
+           },
+           py::arg("psd") = true,
+           "Merged Hessian as scipy.sparse.csc_matrix (num_dofs, num_dofs); psd=False: exact.")
+      .def("apply_increment",
+           [](Scene& s, const py::object& dq) {
+             s.step(to_vector(dq, "dq", s.numDofs()));
+           },
+           py::arg("dq"), "Applies a merged increment dq (num_dofs,) to every simulable.")
+      .def("push", &Scene::push, "Saves every simulable's state.")
+      .def("pop", &Scene::pop, "Restores the last pushed states (RuntimeError if none).")
+      .def("fix_kinematic",
+           [](Scene& s, const py::object& g, const py::object& H) -> py::object {
+             VecX v = to_vector(g, "g", s.numDofs());
+             if (H.is_none()) {
+               s.fixKinematic(v, nullptr);
+               return to_numpy(v);
+             }
+             const std::vector<Triplet> t = to_triplets(H, "H", s.numDofs(), s.numDofs());
+             SpMat A(s.numDofs(), s.numDofs());
+             A.setFromTriplets(t.begin(), t.end());
+             s.fixKinematic(v, &A);
+             return py::make_tuple(to_numpy(v), to_scipy_csc(A));
+           },
+           py::arg("g"), py::arg("H") = py::none(),
+           "g (num_dofs,) with kinematic DoFs zeroed; with H also H with their rows/columns "
+           "made identity: returns g or (g, H as csc_matrix).")
+      .def("__repr__", [](const Scene& s) {
+        return "Scene(simulables=" + std::to_string(s.simulables().size()) +
+               ", colliders=" + std::to_string(s.colliders().size()) +
+               ", dofs=" + std::to_string(s.numDofs()) + ")";
+      });
+
+  m.def("newton_solve",
+        [](Scene& scene, const py::object& options) {
+          const NewtonOptions o =
+              options.is_none() ? scene.options().newton : options.cast<NewtonOptions>();
+          py::gil_scoped_release release;
+          return newtonSolve(scene, o);  // own solver: the scene's may be sized for other DoFs
+        },
+        py::arg("scene"), py::arg("options") = py::none(),
+        "Minimizes the scene's merged energy from its current states (no preUpdate / "
+        "postUpdate); options: NewtonOptions or None (the scene's). Releases the GIL.");
+}
+
+}  // namespace flsh::python

@@ -1,0 +1,137 @@
+// Scene stepping (the real newtonSolve) at the extremes of the issue: time steps 1e-4 and 0.1 s,
+// very soft and very stiff tracking, a joint held near π, a fast motion, and an avatar starting
+// deep inside the ground. Each run must stay finite and bounded (root within a few metres of
+// where it started, no NaN) and Newton must keep returning a usable state.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/body/synthetic_body.h"
+#include "flsh/io/motion.h"
+#include "flsh/solve/scene.h"
+
+namespace flsh {
+namespace {
+
+struct Shared {
+  std::shared_ptr<const SoftAvatar> avatar;
+  std::shared_ptr<const Motion> walk;
+};
+
+// One small synthetic body and avatar for the whole binary (600 vertices keeps it fast).
+const Shared& shared() {
+  static const Shared s = [] {
+    Shared out;
+    SyntheticBodyOptions body_options;
+    body_options.vertices = 600;
+    auto body = std::make_shared<BodyModel>(makeSyntheticBody(body_options));
+    SoftAvatarSettings settings;
+    settings.voxel_size = 0.02;
+    auto avatar = std::make_shared<SoftAvatar>(body, VecX(), settings);
+    avatar->initVolumetricData();
+    out.avatar = avatar;
+    out.walk = std::make_shared<Motion>(makeBuiltinMotion("walk", 4.0, 30.0));
+    return out;
+  }();
+  return s;
+}
+
+struct Outcome {
+  double max_root_travel = 0.0;  // m, largest distance of the root from its start
+  double lowest_final = 0.0;     // m, lowest node height relative to the ground at the end
+  bool finite = true;
+  int steps_run = 0;
+  VecX final_pose;  // 72, SMPL pose at the end
+};
+
+/// Runs `steps` scene steps of one avatar tracking `motion` over a ground plane placed `depth`
+/// metres above the avatar's lowest vertex (depth > 0: the avatar starts inside the ground).
+Outcome run(const SimulableOptions& options, std::shared_ptr<const Motion> motion, int steps,
+            double depth = -0.005) {
+  auto sim = std::make_shared<Simulable>(shared().avatar, std::move(motion), options);
+  Scene scene;
+  scene.addSimulable(sim);
+  scene.initialize();
+  const double ground = sim->getNodes().col(1).minCoeff() + depth;
+  scene.addCollider(Collider::plane(Vec3(0, ground, 0), Vec3::UnitY()));
+  const Vec3 root0 = sim->bonePositions().row(0).transpose();
+  Outcome out;
+  for (int k = 0; k < steps; ++k) {
+    scene.step();
+    ++out.steps_run;
+    const VecX q = sim->getState();
+    if (!q.allFinite()) {
+      out.finite = false;
+      return out;
+    }
+    out.max_root_travel = std::max(
+        out.max_root_travel, (sim->bonePositions().row(0).transpose() - root0).norm());
+  }
+  const MatX3 nodes = sim->getNodes();
+  out.finite = out.finite && nodes.allFinite();
+  out.lowest_final = nodes.col(1).minCoeff() - ground;
+  out.final_pose = sim->getPose();
+  return out;
+}
+
+SimulableOptions withTimeStep(double h) {
+  SimulableOptions options;
+  options.time_step = h;
+  return options;
+}
+
+void expectBounded(const Outcome& out, double max_travel, const char* what) {
+  EXPECT_TRUE(out.finite) << what << ": NaN/Inf after " << out.steps_run << " steps";
+  EXPECT_LT(out.max_root_travel, max_travel) << what;
+  EXPECT_GT(out.lowest_final, -0.3) << what << ": sank through the ground";
+}
+
+TEST(SceneExtremes, TinyTimeStep) {
+  const Outcome out = run(withTimeStep(1e-4), shared().walk, 5);
+  expectBounded(out, 0.05, "h = 1e-4 s");  // 0.5 ms of walking moves the root millimetres
+}
+
+TEST(SceneExtremes, LargeTimeStep) {
+  const Outcome out = run(withTimeStep(0.1), shared().walk, 30);  // 3 s of the walk
+  expectBounded(out, 6.0, "h = 0.1 s");
+}
+
+TEST(SceneExtremes, VerySoftAndVeryStiffTracking) {
+  for (double stiffness : {1e-3, 1e5}) {
+    SimulableOptions options;
+    options.tracking_stiffness = stiffness;
+    options.root_stiffness = stiffness;
+    const Outcome out = run(options, shared().walk, 30);
+    expectBounded(out, 3.0, stiffness < 1.0 ? "soft tracking" : "stiff tracking");
+  }
+}
+
+TEST(SceneExtremes, ElbowTargetNearPi) {
+  auto motion = std::make_shared<Motion>(*shared().walk);
+  const int elbow = smplJointIndex("left_elbow");
+  for (int f = 0; f < motion->numFrames(); ++f)
+    motion->poses.row(f).segment<3>(3 * elbow) << 0.0, 3.1, 0.0;
+  const Outcome out = run(SimulableOptions(), motion, 30);
+  expectBounded(out, 3.0, "elbow at 3.1 rad");
+  ASSERT_EQ(out.final_pose.size(), 72);
+  EXPECT_GT(out.final_pose.segment<3>(3 * elbow).norm(), 2.8) << "the elbow must reach near π";
+}
+
+TEST(SceneExtremes, FastArmSwing) {
+  // The walk played 5× faster: same poses, frame rate × 5.
+  auto motion = std::make_shared<Motion>(*shared().walk);
+  motion->fps *= 5.0;
+  const Outcome out = run(SimulableOptions(), motion, 30);
+  expectBounded(out, 4.0, "walk at 5x speed");
+}
+
+TEST(SceneExtremes, StartingDeepInsideTheGround) {
+  const Outcome out = run(SimulableOptions(), shared().walk, 30, 0.3);
+  expectBounded(out, 3.0, "0.3 m inside the ground");
+  EXPECT_GT(out.lowest_final, -0.3 + 0.05) << "the ground must push the avatar out";
+}
+
+}  // namespace
+}  // namespace flsh

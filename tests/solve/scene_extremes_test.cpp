@@ -133,5 +133,40 @@ TEST(SceneExtremes, StartingDeepInsideTheGround) {
   EXPECT_GT(out.lowest_final, -0.3 + 0.05) << "the ground must push the avatar out";
 }
 
+TEST(SceneStatic, EquilibriumUnderGravityIsOneConvergedSolve) {
+  // Static mode drops inertia: one step solves the equilibrium of gravity, joint and tracking
+  // springs. Standing still with the ground under the feet, the body sags a little below the
+  // mocap pose and the converged gradient is (relatively) zero.
+  auto stand = std::make_shared<Motion>(makeBuiltinMotion("stand", 1.0, 30.0));
+  auto sim = std::make_shared<Simulable>(shared().avatar, stand);
+  Scene scene;
+  scene.addSimulable(sim);
+  scene.initialize();
+  const double ground = sim->getNodes().col(1).minCoeff() - 0.005;
+  scene.addCollider(Collider::plane(Vec3(0, ground, 0), Vec3::UnitY()));
+  const double root_start = sim->bonePositions()(0, 1);
+  scene.setStatic(true);
+  const StepStats stats = scene.step();
+  ASSERT_TRUE(stats.newton.converged) << stats.newton.message;
+  EXPECT_DOUBLE_EQ(sim->getDynamicEnergyScalar(), 0.0);
+  VecX g = VecX::Zero(sim->numDofs());
+  sim->getPotentialGradientVector(g);
+  sim->fixVectorKinematic(g);
+  VecX weight = VecX::Zero(sim->numDofs());
+  for (int b = 0; b < kNumJoints; ++b)
+    weight[6 * b + 1] = shared().avatar->boneInertia()[b].mass * 9.81;
+  ASSERT_GT(weight.lpNorm<Eigen::Infinity>(), 1.0);
+  EXPECT_LT(g.lpNorm<Eigen::Infinity>(), 1e-4 * weight.lpNorm<Eigen::Infinity>());
+  // Gravity pulls the root down, but by less than 3 cm (springs and ground carry the body).
+  const double sag = root_start - sim->bonePositions()(0, 1);
+  EXPECT_GT(sag, 0.0);
+  EXPECT_LT(sag, 0.03);
+  // A second static solve from the equilibrium changes nothing.
+  const VecX q = sim->getState();
+  const StepStats again = scene.step();
+  EXPECT_TRUE(again.newton.converged);
+  EXPECT_LT((sim->getState() - q).lpNorm<Eigen::Infinity>(), 1e-6);
+}
+
 }  // namespace
 }  // namespace flsh

@@ -23,29 +23,8 @@ namespace {
 using test::jacobianMatchesFiniteDifferences;
 using test::messageOf;
 
-struct Shared {
-  std::shared_ptr<const BodyModel> body;
-  std::shared_ptr<const SoftAvatar> avatar;
-  std::shared_ptr<const Motion> walk;
-};
-
-// One small synthetic body and avatar for the whole binary (generation takes about a second).
-const Shared& shared() {
-  static const Shared s = [] {
-    Shared out;
-    SyntheticBodyOptions body_options;
-    body_options.vertices = 800;
-    out.body = std::make_shared<BodyModel>(makeSyntheticBody(body_options));
-    SoftAvatarSettings settings;
-    settings.voxel_size = 0.02;
-    auto avatar = std::make_shared<SoftAvatar>(out.body, VecX(), settings);
-    avatar->initVolumetricData();
-    out.avatar = avatar;
-    out.walk = std::make_shared<Motion>(makeBuiltinMotion("walk", 1.0, 30.0));
-    return out;
-  }();
-  return s;
-}
+// One small synthetic body, avatar and walk for the whole binary (800 vertices).
+const test::SmallScene& shared() { return test::smallScene(800, 1.0); }
 
 VecX randomVector(int n, double scale, unsigned seed) {
   std::mt19937 engine(seed);
@@ -69,16 +48,6 @@ auto atMoved(Simulable& sim, const VecX& d, F&& f) {
   auto result = f();
   sim.popState();
   return result;
-}
-
-// Gradient of δ ↦ E(updateState(δ)) from the gradient at the moved state (rotation entries
-// pulled back by J_l(δω)ᵀ); its finite-difference Jacobian at 0 is the symmetric Hessian.
-VecX pulledBack(const VecX& g, const VecX& d) {
-  VecX out = g;
-  for (int b = 0; b < d.size() / 6; ++b)
-    out.segment<3>(6 * b + 3) =
-        leftJacobianSO3(d.segment<3>(6 * b + 3)).transpose() * g.segment<3>(6 * b + 3);
-  return out;
 }
 
 double lowestNodeHeight(const Simulable& sim) { return sim.getNodes().col(1).minCoeff(); }
@@ -111,7 +80,7 @@ TEST(Simulable, DynamicEnergyDerivativesMatchFiniteDifferences) {
     return atMoved(*sim, d, [&] {
       VecX gd = VecX::Zero(n);
       sim->getDynamicGradientVector(gd);
-      return pulledBack(gd, d);
+      return test::pullBackRotationGradient(gd, d);
     });
   };
   const auto r1 = jacobianMatchesFiniteDifferences(energy, VecX::Zero(n), g.transpose(), 1e-6);
@@ -137,7 +106,7 @@ TEST(Simulable, PotentialEnergyDerivativesWithGroundContactMatchFiniteDifference
     return atMoved(*sim, d, [&] {
       VecX gd = VecX::Zero(n);
       sim->getPotentialGradientVector(gd);
-      return pulledBack(gd, d);
+      return test::pullBackRotationGradient(gd, d);
     });
   };
   const auto r1 = jacobianMatchesFiniteDifferences(energy, VecX::Zero(n), g.transpose(), 1e-6);
@@ -179,7 +148,7 @@ TEST(Simulable, ContactOnlyDerivativesMatchFiniteDifferences) {
       return atMoved(sim, d, [&] {
         VecX gd = VecX::Zero(n);
         sim.getPotentialGradientVector(gd);
-        return pulledBack(gd, d);
+        return test::pullBackRotationGradient(gd, d);
       });
     };
     const auto r = jacobianMatchesFiniteDifferences(gradient, VecX::Zero(n), Hd, 1e-6);
@@ -385,7 +354,7 @@ TEST(Simulable, ConstructorRejectsBadInputs) {
 // ---- mocap ---------------------------------------------------------------------------------
 
 TEST(Simulable, InitializeReproducesTheMocapFirstFrame) {
-  const Shared& s = shared();
+  const test::SmallScene& s = shared();
   Simulable sim(s.avatar, s.body, s.walk);
   sim.initialize();
   const VecX pose0 = s.walk->poses.row(0).transpose();
@@ -494,7 +463,7 @@ StepResult solveStep(Simulable& sim, int max_iterations = 50) {
 }
 
 TEST(Simulable, RestAvatarWithPinnedRootHangsUnderGravity) {
-  const Shared& s = shared();
+  const test::SmallScene& s = shared();
   SimulableOptions options;
   options.kinematic_bones = {0};
   Simulable sim(s.avatar, nullptr, options);
@@ -529,7 +498,7 @@ TEST(Simulable, RestAvatarWithPinnedRootHangsUnderGravity) {
 TEST(Simulable, FreeFallMovesTheCentreOfMassExactly) {
   // Joint springs are internal forces: backward Euler moves the centre of mass by
   // COM_k = COM_0 + h² g k(k+1)/2 from rest, whatever the bones do.
-  const Shared& s = shared();
+  const test::SmallScene& s = shared();
   Simulable sim(s.avatar);
   sim.initialize();
   auto centreOfMass = [&] {
@@ -559,7 +528,7 @@ TEST(Simulable, FreeFallMovesTheCentreOfMassExactly) {
 TEST(Simulable, TracksTheMocapOnTheGround) {
   // Stiff tracking (6 Hz): the sag under gravity, g/ω², is below a centimetre. (With the
   // defaults, 2 Hz at the root, a body whose feet do not carry it sags about 6 cm.)
-  const Shared& s = shared();
+  const test::SmallScene& s = shared();
   SimulableOptions options;
   options.tracking_stiffness = options.root_stiffness = std::pow(2.0 * M_PI * 6.0, 2);
   Simulable sim(s.avatar, s.body, s.walk, options);
@@ -595,7 +564,7 @@ TEST(Simulable, StaysFiniteAtExtremeSettingsAndDeepPenetration) {
   // Time steps 1e-4…0.1 s, tracking very soft…very stiff, the avatar starting 30 cm deep in
   // the ground with a fast initial spin: every step converges, the state stays finite and the
   // body is pushed up, not through.
-  const Shared& s = shared();
+  const test::SmallScene& s = shared();
   for (double h : {1e-4, 1.0 / 60.0, 0.1}) {
     for (double tracking : {1e-2, 355.0, 1e5}) {
       SimulableOptions options;

@@ -51,16 +51,6 @@ std::vector<Pose> moved(const std::vector<Pose>& bones, const VecX& d) {
   return out;
 }
 
-// Gradient of δ ↦ E(moved(bones, δ)) at δ from the gradient g at the moved state: the rotation
-// entries pull back by J_l(δω)ᵀ. Its finite-difference Jacobian at 0 is the (symmetric) Hessian.
-VecX pulledBack(const VecX& g, const VecX& d) {
-  VecX out = g;
-  for (int b = 0; b < d.size() / 6; ++b)
-    out.segment<3>(6 * b + 3) =
-        leftJacobianSO3(d.segment<3>(6 * b + 3)).transpose() * g.segment<3>(6 * b + 3);
-  return out;
-}
-
 double minEigenvalue(const MatX& H) {
   return Eigen::SelfAdjointEigenSolver<MatX>(H).eigenvalues().minCoeff();
 }
@@ -146,7 +136,7 @@ TEST(RigidInertiaEnergy, DerivativesMatchFiniteDifferences) {
       const auto gradient = [&](const VecX& d) {
         Vec6 gd;
         inertiaAt(c, moved({c.q}, d)[0], &gd);
-        return pulledBack(gd, d);
+        return test::pullBackRotationGradient(gd, d);
       };
       EXPECT_TRUE(jacobianMatchesFiniteDifferences(gradient, VecX::Zero(6), H, 1e-6))
           << "angle " << max_angle << " h " << h;
@@ -219,7 +209,7 @@ TEST(GravityEnergy, ValueAndDerivatives) {
       const Pose m = moved({q}, d)[0];
       Vec6 gd;
       gravityEnergy(m.t, m.R, pts.inertia(), gravity, &gd);
-      return pulledBack(gd, d);
+      return test::pullBackRotationGradient(gd, d);
     };
     EXPECT_TRUE(jacobianMatchesFiniteDifferences(energy, VecX::Zero(6), g.transpose(), 1e-6));
     EXPECT_TRUE(jacobianMatchesFiniteDifferences(gradient, VecX::Zero(6), H, 1e-6));
@@ -254,7 +244,7 @@ TEST(JointSpringEnergy, ValueAndDerivatives) {
       const auto gradient = [&](const VecX& d) {
         Vec12 gd;
         eval(moved(bones, d), &gd, nullptr, false);
-        return pulledBack(gd, d);
+        return test::pullBackRotationGradient(gd, d);
       };
       EXPECT_TRUE(jacobianMatchesFiniteDifferences(energy, VecX::Zero(12), g.transpose(), 1e-6));
       EXPECT_TRUE(jacobianMatchesFiniteDifferences(gradient, VecX::Zero(12), H, 1e-6));
@@ -373,7 +363,7 @@ TEST(RootSpringEnergy, ValueAndDerivatives) {
       const Pose m = moved({q}, d)[0];
       Vec6 gd;
       rootSpringEnergy(m.t, m.R, target.t, target.R, k_pos, k_rot, &gd);
-      return pulledBack(gd, d);
+      return test::pullBackRotationGradient(gd, d);
     };
     const double eps = error_angle > 3.1 ? 1e-8 : 1e-6;
     const double tol = error_angle > 3.1 ? 1e-4 : 1e-6;

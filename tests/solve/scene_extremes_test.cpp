@@ -11,32 +11,13 @@
 #include "flsh/body/synthetic_body.h"
 #include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
+#include "support/test_support.h"
 
 namespace flsh {
 namespace {
 
-struct Shared {
-  std::shared_ptr<const SoftAvatar> avatar;
-  std::shared_ptr<const Motion> walk;
-};
-
-// One small synthetic body and avatar for the whole binary (600 vertices keeps it fast).
-const Shared& shared() {
-  static const Shared s = [] {
-    Shared out;
-    SyntheticBodyOptions body_options;
-    body_options.vertices = 600;
-    auto body = std::make_shared<BodyModel>(makeSyntheticBody(body_options));
-    SoftAvatarSettings settings;
-    settings.voxel_size = 0.02;
-    auto avatar = std::make_shared<SoftAvatar>(body, VecX(), settings);
-    avatar->initVolumetricData();
-    out.avatar = avatar;
-    out.walk = std::make_shared<Motion>(makeBuiltinMotion("walk", 4.0, 30.0));
-    return out;
-  }();
-  return s;
-}
+// One small synthetic body, avatar and walk for the whole binary (600 vertices).
+const test::SmallScene& shared() { return test::smallScene(600, 4.0); }
 
 struct Outcome {
   double max_root_travel = 0.0;  // m, largest distance of the root from its start

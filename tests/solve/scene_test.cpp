@@ -23,29 +23,8 @@ namespace {
 
 using test::jacobianMatchesFiniteDifferences;
 
-struct Shared {
-  std::shared_ptr<const BodyModel> body;
-  std::shared_ptr<const SoftAvatar> avatar;
-  std::shared_ptr<const Motion> walk;
-};
-
-// One small synthetic body and avatar for the whole binary.
-const Shared& shared() {
-  static const Shared s = [] {
-    Shared out;
-    SyntheticBodyOptions body_options;
-    body_options.vertices = 600;
-    out.body = std::make_shared<BodyModel>(makeSyntheticBody(body_options));
-    SoftAvatarSettings settings;
-    settings.voxel_size = 0.02;
-    auto avatar = std::make_shared<SoftAvatar>(out.body, VecX(), settings);
-    avatar->initVolumetricData();
-    out.avatar = avatar;
-    out.walk = std::make_shared<Motion>(makeBuiltinMotion("walk", 1.0, 30.0));
-    return out;
-  }();
-  return s;
-}
+// One small synthetic body, avatar and walk for the whole binary (600 vertices).
+const test::SmallScene& shared() { return test::smallScene(600, 1.0); }
 
 VecX randomVector(int n, double scale, unsigned seed) {
   std::mt19937 engine(seed);
@@ -83,16 +62,6 @@ auto atMoved(Scene& scene, const VecX& d, F&& f) {
   return result;
 }
 
-/// Gradient of δ ↦ E(q ⊕ δ) from the chart gradient at q ⊕ δ: rotation slots pulled back by
-/// J_l(δω)ᵀ. Its finite-difference Jacobian at δ = 0 is the (symmetric) exact Hessian.
-VecX pulledBack(const VecX& g, const VecX& d) {
-  VecX out = g;
-  for (int b = 0; b < d.size() / 6; ++b)
-    out.segment<3>(6 * b + 3) =
-        leftJacobianSO3(d.segment<3>(6 * b + 3)).transpose() * g.segment<3>(6 * b + 3);
-  return out;
-}
-
 /// Two avatars: A walking (mocap), B a ragdoll at rest placed `overlap` metres deeper into A
 /// (along z) than where their capsules first touch; both in one scene.
 struct TwoAvatars {
@@ -103,7 +72,7 @@ struct TwoAvatars {
 TwoAvatars twoAvatarsInContact(double overlap, const SimulableOptions& options = {},
                                bool with_mocap = true, const SceneOptions& scene_options = {}) {
   TwoAvatars out;
-  const Shared& s = shared();
+  const test::SmallScene& s = shared();
   out.a = std::make_shared<Simulable>(s.avatar, with_mocap ? s.walk : nullptr, options);
   out.b = std::make_shared<Simulable>(s.avatar, nullptr, options);
   out.scene = std::make_unique<Scene>(scene_options);
@@ -126,7 +95,7 @@ TwoAvatars twoAvatarsInContact(double overlap, const SimulableOptions& options =
 }
 
 TEST(Scene, OffsetsFollowTheSimulablesAndTimeStepsMustAgree) {
-  const Shared& s = shared();
+  const test::SmallScene& s = shared();
   Scene scene;
   EXPECT_EQ(scene.numDofs(), 0);
   scene.addSimulable(std::make_shared<Simulable>(s.avatar));
@@ -147,7 +116,7 @@ TEST(Scene, OffsetsFollowTheSimulablesAndTimeStepsMustAgree) {
 }
 
 TEST(Scene, CollidersReachEverySimulable) {
-  const Shared& s = shared();
+  const test::SmallScene& s = shared();
   Scene scene;
   auto a = std::make_shared<Simulable>(s.avatar);
   scene.addSimulable(a);
@@ -211,7 +180,7 @@ TEST(Scene, AvatarContactDerivativesMatchFiniteDifferences) {
     return atMoved(scene, d, [&] {
       VecX gd = VecX::Zero(n);
       scene.avatarContactEnergy(&gd, nullptr, true);
-      return pulledBack(gd, d);
+      return test::pullBackRotationGradient(gd, d);
     });
   };
   EXPECT_TRUE(jacobianMatchesFiniteDifferences(energy, VecX::Zero(n), g.transpose(), 1e-6));
@@ -289,7 +258,7 @@ TEST(Scene, MergedGradientAndExactHessianMatchFiniteDifferences) {
     return atMoved(scene, d, [&] {
       VecX gd;
       scene.gradient(gd);
-      return pulledBack(gd, d);
+      return test::pullBackRotationGradient(gd, d);
     });
   };
   EXPECT_TRUE(jacobianMatchesFiniteDifferences(energy, VecX::Zero(n), g.transpose(), 1e-6));
@@ -336,7 +305,7 @@ TEST(Scene, PushPopRoundTripsExactlyAndKinematicDofsAreFixed) {
 }
 
 TEST(Scene, AvatarStandingOnTheGroundConverges) {
-  const Shared& s = shared();
+  const test::SmallScene& s = shared();
   auto sim = std::make_shared<Simulable>(s.avatar, s.walk);
   Scene scene;
   scene.addSimulable(sim);

@@ -2,9 +2,13 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <map>
+#include <mutex>
 #include <random>
 
 #include "flsh/body/smpl_skeleton.h"
+#include "flsh/body/synthetic_body.h"
+#include "flsh/core/rotation.h"
 
 namespace flsh::test {
 
@@ -106,6 +110,33 @@ BodyModel makeRandomModel(int vertices, int betas, unsigned seed) {
   for (int f = 0; f < vertices / 3; ++f) m.faces.row(f) << 3 * f, 3 * f + 1, 3 * f + 2;
   m.finalize();
   return m;
+}
+
+const SmallScene& smallScene(int vertices, double walk_seconds) {
+  static std::mutex mutex;
+  static std::map<std::pair<int, double>, SmallScene> cache;
+  std::lock_guard<std::mutex> lock(mutex);
+  auto it = cache.find({vertices, walk_seconds});
+  if (it != cache.end()) return it->second;
+  SmallScene scene;
+  SyntheticBodyOptions body_options;
+  body_options.vertices = vertices;
+  scene.body = std::make_shared<BodyModel>(makeSyntheticBody(body_options));
+  SoftAvatarSettings settings;
+  settings.voxel_size = 0.02;
+  auto avatar = std::make_shared<SoftAvatar>(scene.body, VecX(), settings);
+  avatar->initVolumetricData();
+  scene.avatar = avatar;
+  scene.walk = std::make_shared<Motion>(makeBuiltinMotion("walk", walk_seconds, 30.0));
+  return cache.emplace(std::make_pair(vertices, walk_seconds), scene).first->second;
+}
+
+VecX pullBackRotationGradient(const VecX& g, const VecX& d) {
+  VecX out = g;
+  for (int b = 0; b < d.size() / 6; ++b)
+    out.segment<3>(6 * b + 3) =
+        leftJacobianSO3(d.segment<3>(6 * b + 3)).transpose() * g.segment<3>(6 * b + 3);
+  return out;
 }
 
 }  // namespace flsh::test

@@ -8,6 +8,8 @@
 #include <string>
 
 #include "flsh/body/body_model.h"
+#include "flsh/io/motion.h"
+#include "flsh/volume/soft_avatar.h"
 #include "flsh/core/types.h"
 
 namespace flsh::test {
@@ -41,6 +43,21 @@ std::string messageOf(F&& call) {
   ADD_FAILURE() << "did not throw";
   return "";
 }
+
+/// A small synthetic body, its skeleton avatar (2 cm voxels) and the built-in walk, built once
+/// per (vertices, walk_seconds) per test binary: the fixture of the simulation tests.
+struct SmallScene {
+  std::shared_ptr<const BodyModel> body;
+  std::shared_ptr<const SoftAvatar> avatar;
+  std::shared_ptr<const Motion> walk;  ///< built-in "walk" at 30 fps
+};
+const SmallScene& smallScene(int vertices, double walk_seconds = 1.0);
+
+/// Increment-chart helper for finite differences of gradients: the gradient g at the state
+/// moved by increments d (6 per bone, [δt, δω]) pulled back to the chart at d = 0, i.e. the
+/// rotation entries multiplied by J_l(δω)ᵀ. Its finite-difference Jacobian at d = 0 is the
+/// symmetric Hessian the simulables return.
+VecX pullBackRotationGradient(const VecX& g, const VecX& d);
 
 /// A small random SMPL-format model (`vertices` vertices, `betas` shape components) with a
 /// valid skeleton (SMPL parents), smooth positive weights (rows sum to 1), a regressor whose

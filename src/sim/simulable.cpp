@@ -61,8 +61,12 @@ BoneStates bonesFromPose(const Eigen::Ref<const VecX>& pose, const Vec3& trans,
 // Appends a dense block (fixed-size expressions: no temporaries in the hot path).
 template <class Derived>
 void addBlock(std::vector<Triplet>& H, int row0, int col0, const Eigen::MatrixBase<Derived>& block) {
+  // One resize, then plain stores: emplace_back per entry was not inlined (a call each).
+  const size_t start = H.size();
+  H.resize(start + size_t(block.rows() * block.cols()));
+  Triplet* out = H.data() + start;
   for (int c = 0; c < block.cols(); ++c)
-    for (int r = 0; r < block.rows(); ++r) H.emplace_back(row0 + r, col0 + c, block(r, c));
+    for (int r = 0; r < block.rows(); ++r) *out++ = Triplet(row0 + r, col0 + c, block(r, c));
 }
 
 std::string motionName(const Motion& m) {
@@ -99,6 +103,14 @@ struct Simulable::Impl {
   std::vector<std::vector<int>> dominated;
   std::vector<Vec3> sphere_center;
   std::vector<double> sphere_radius, sphere_extent;
+  // Spatial clusters of each bone's dominated vertices (contiguous ranges of dominated[b]), for
+  // a finer broad phase than the bone sphere; centres are relative to J_b in the rest frame.
+  struct VertexCluster {
+    Vec3 center;
+    double radius;
+    int begin, end;
+  };
+  std::vector<std::vector<VertexCluster>> clusters;
   std::vector<std::vector<Influence>> co_influence;
 
   // ---- mutable data ----
@@ -141,6 +153,7 @@ struct Simulable::Impl {
   void updateTargets(double t);
   void placeKinematicBones();
   void ensureContact() const;
+  void buildClusters();
   Vec3 node(int i) const;
   double contactEnergy() const {
     ensureContact();
@@ -216,6 +229,43 @@ void Simulable::Impl::buildSkinning() {
     }
     for (int c = 0; c < num_bones; ++c)
       if (max_weight[c] > 0.0) co_influence[b].push_back({c, max_weight[c]});
+  }
+  buildClusters();
+}
+
+// Median splits along the longest box side until at most kClusterVertices vertices remain.
+void Simulable::Impl::buildClusters() {
+  constexpr int kClusterVertices = 48;
+  const MatX3& X = avatar->restVertices();
+  clusters.assign(num_bones, {});
+  for (int b = 0; b < num_bones; ++b) {
+    std::vector<int>& verts = dominated[b];
+    auto local = [&](int i) -> Vec3 { return (X.row(i) - J.row(b)).transpose(); };
+    std::vector<std::pair<int, int>> todo;
+    if (!verts.empty()) todo.emplace_back(0, int(verts.size()));
+    while (!todo.empty()) {
+      const auto [begin, end] = todo.back();
+      todo.pop_back();
+      Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+      for (int k = begin; k < end; ++k) {
+        lo = lo.cwiseMin(local(verts[k]));
+        hi = hi.cwiseMax(local(verts[k]));
+      }
+      if (end - begin > kClusterVertices) {
+        int axis = 0;
+        (hi - lo).maxCoeff(&axis);
+        const int mid = (begin + end) / 2;
+        std::nth_element(verts.begin() + begin, verts.begin() + mid, verts.begin() + end,
+                         [&](int i, int j) { return X(i, axis) < X(j, axis); });
+        todo.emplace_back(begin, mid);
+        todo.emplace_back(mid, end);
+        continue;
+      }
+      VertexCluster cluster{0.5 * (lo + hi), 0.0, begin, end};
+      for (int k = begin; k < end; ++k)
+        cluster.radius = std::max(cluster.radius, (local(verts[k]) - cluster.center).norm());
+      clusters[b].push_back(cluster);
+    }
   }
 }
 
@@ -609,16 +659,41 @@ void Simulable::Impl::ensureContact() const {
       bool near = false;
       for (const Collider& collider : colliders)
         near = near || collider.signedDistance(centre, time) < radius;
-      if (near) cc.candidates.insert(cc.candidates.end(), dominated[b].begin(), dominated[b].end());
+      if (!near) continue;
+      // The same bound per vertex cluster: |x_i − cluster centre| ≤ cluster radius + margin.
+      for (const VertexCluster& cluster : clusters[b]) {
+        const Vec3 cluster_centre = q.R[b] * cluster.center + q.t.row(b).transpose();
+        bool cluster_near = false;
+        for (const Collider& collider : colliders)
+          cluster_near = cluster_near ||
+                         collider.signedDistance(cluster_centre, time) < cluster.radius + margin;
+        if (cluster_near)
+          cc.candidates.insert(cc.candidates.end(), dominated[b].begin() + cluster.begin,
+                               dominated[b].begin() + cluster.end);
+      }
     }
   }
   const int n = int(cc.candidates.size());
   cc.nodes.resize(n, 3);
   cc.areas.resize(n);
   const VecX& areas = avatar->vertexAreas();
-  for (int j = 0; j < n; ++j) {
-    cc.nodes.row(j) = node(cc.candidates[j]).transpose();
-    cc.areas[j] = areas[cc.candidates[j]];
+  if (n > 0) {
+    // node(i) with each bone's translation t_b − R_b J_b formed once per state, not per vertex.
+    Vec3 bone_shift[kNumJoints];
+    for (int b = 0; b < num_bones; ++b)
+      bone_shift[b] = q.t.row(b).transpose() - q.R[b] * J.row(b).transpose();
+    const MatX3& X = avatar->restVertices();
+    for (int j = 0; j < n; ++j) {
+      const int i = cc.candidates[j];
+      const Vec3 Xi = X.row(i).transpose();
+      Vec3 x = Vec3::Zero();
+      for (int k = influence_start[i]; k < influence_start[i + 1]; ++k) {
+        const int b = influences[k].bone;
+        x += influences[k].weight * (q.R[b] * Xi + bone_shift[b]);
+      }
+      cc.nodes.row(j) = x.transpose();
+      cc.areas[j] = areas[i];
+    }
   }
   cc.gradient.setZero(3 * n);
   if (n > 0)
@@ -889,6 +964,132 @@ SimulableStats Simulable::stats() const {
   SimulableStats s;
   s.active_contacts = impl_->contact.active;
   return s;
+}
+
+}  // namespace flsh
+
+// ---- parameter derivatives (formulas in parameter_derivatives.cpp) ---------------------------
+
+#include "sim/parameter_derivatives.h"
+
+namespace flsh {
+
+namespace {
+
+detail::SimulableParameterView parameterView(const Simulable::Impl& m) {
+  m.ensureContact();
+  return {m.num_bones, m.parents, m.J, m.inertia, m.options, m.mocap && m.options.track_mocap,
+          m.is_static, m.q.R, m.q.t, m.q_n.R, m.q_n.t, m.q_nm1.R, m.q_nm1.t, m.target_R,
+          m.target_t0, m.avatar->body().weights, m.avatar->restVertices(), m.contact.candidates,
+          m.contact.nodes, m.contact.areas, m.contact.gradient, m.colliders, m.time};
+}
+
+}  // namespace
+
+int Simulable::parameterSize(SimParameter p) const {
+  return detail::simParameterSize(p, int(impl_->colliders.size()));
+}
+
+MatX Simulable::getGradientParameterJacobian(SimParameter p) const {
+  return detail::gradientParameterJacobian(parameterView(*impl_), p);
+}
+
+MatX Simulable::getGradientPreviousStateJacobian(int which) const {
+  return detail::gradientPreviousStateJacobian(parameterView(*impl_), which);
+}
+
+VecX Simulable::getParameter(SimParameter p) const {
+  const Impl& m = *impl_;
+  VecX value(parameterSize(p));
+  switch (p) {
+    case SimParameter::RestJoints:
+      for (int b = 0; b < m.num_bones; ++b) value.segment<3>(3 * b) = m.J.row(b).transpose();
+      break;
+    case SimParameter::BoneInertia:
+      for (int b = 0; b < m.num_bones; ++b) {
+        const BoneInertia& in = m.inertia[b];
+        const Mat3& S = in.second_moment;
+        value.segment<10>(10 * b) << in.mass, in.first_moment, S(0, 0), S(1, 1), S(2, 2),
+            S(0, 1), S(0, 2), S(1, 2);
+      }
+      break;
+    case SimParameter::PoseTargets:
+      for (int b = 0; b < m.num_bones; ++b) value.segment<3>(3 * b) = logSO3(m.target_R[b]);
+      break;
+    case SimParameter::RootTranslationTarget: value = m.target_t0; break;
+    case SimParameter::Stiffnesses:
+      value << m.options.joint_stiffness, m.options.tracking_stiffness, m.options.root_stiffness,
+          m.options.contact.stiffness;
+      break;
+    case SimParameter::ColliderOffsets:
+      for (size_t k = 0; k < m.colliders.size(); ++k)
+        value.segment<3>(3 * k) = m.colliders[k].path.offsetAt(m.time);
+      break;
+  }
+  return value;
+}
+
+void Simulable::setParameter(SimParameter p, const VecX& value) {
+  Impl& m = *impl_;
+  if (value.size() != parameterSize(p))
+    throw InputError("Simulable::setParameter: value has " + std::to_string(value.size()) +
+                     " entries, expected parameterSize() = " + std::to_string(parameterSize(p)));
+  if (!value.allFinite()) throw InputError("Simulable::setParameter: value contains NaN or Inf");
+  switch (p) {
+    case SimParameter::RestJoints: {
+      const Vec3 root_shift = value.head<3>() - m.J.row(0).transpose();
+      for (int b = 0; b < m.num_bones; ++b) m.J.row(b) = value.segment<3>(3 * b).transpose();
+      m.target_t0 += root_shift;  // the root target is J_0 + trans
+      m.buildSkinning();
+      m.buildStiffnesses();
+      break;
+    }
+    case SimParameter::BoneInertia:
+      for (int b = 0; b < m.num_bones; ++b)
+        if (!(value[10 * b] > 0.0))
+          throw InputError("Simulable::setParameter: BoneInertia of bone " + std::to_string(b) +
+                           " has mass " + std::to_string(value[10 * b]) + ", expected > 0 kg");
+      for (int b = 0; b < m.num_bones; ++b) {
+        const auto v = value.segment<10>(10 * b);
+        BoneInertia& in = m.inertia[b];
+        in.mass = v[0];
+        in.first_moment = v.segment<3>(1);
+        in.second_moment << v[4], v[7], v[8], v[7], v[5], v[9], v[8], v[9], v[6];
+      }
+      m.buildStiffnesses();
+      break;
+    case SimParameter::PoseTargets:
+      for (int b = 0; b < m.num_bones; ++b) m.target_R[b] = rodrigues(value.segment<3>(3 * b));
+      break;
+    case SimParameter::RootTranslationTarget: m.target_t0 = value; break;
+    case SimParameter::Stiffnesses: {
+      SimulableOptions previous = m.options;
+      m.options.joint_stiffness = value[0];
+      m.options.tracking_stiffness = value[1];
+      m.options.root_stiffness = value[2];
+      m.options.contact.stiffness = value[3];
+      try {
+        m.validateOptions();
+      } catch (...) {
+        m.options = previous;
+        throw;
+      }
+      m.buildStiffnesses();
+      break;
+    }
+    case SimParameter::ColliderOffsets:
+      for (size_t k = 0; k < m.colliders.size(); ++k) {
+        ColliderPath& path = m.colliders[k].path;
+        const Vec3 shift = value.segment<3>(3 * k) - path.offsetAt(m.time);
+        if (path.times.empty()) {
+          path.times = {0.0};
+          path.offsets = {Vec3::Zero()};
+        }
+        for (Vec3& o : path.offsets) o += shift;
+      }
+      break;
+  }
+  m.touch();
 }
 
 }  // namespace flsh

@@ -272,11 +272,22 @@ bool Scene::fillHessian(SpMat& H) const {
   double* values = H.valuePtr();
   std::fill(values, values + nnz, 0.0);
   const int* outer = H.outerIndexPtr();
-  for (const Triplet& t : triplets_) {
+  const size_t count = triplets_.size();
+  if (fill_key_.size() < count) {
+    fill_key_.resize(count, -1);
+    fill_index_.resize(count, 0);
+  }
+  for (size_t k = 0; k < count; ++k) {
+    const Triplet& t = triplets_[k];
     const int r = t.row(), c = t.col();
-    const int rank = block_rank_[size_t(r / 6) * bones + c / 6];
-    if (rank < 0) return false;
-    values[outer[c] + 6 * rank + r % 6] += t.value();
+    const long long key = (long long)r * n + c;
+    if (key != fill_key_[k]) {
+      const int rank = block_rank_[size_t(r / 6) * bones + c / 6];
+      if (rank < 0) return false;
+      fill_key_[k] = key;
+      fill_index_[k] = outer[c] + 6 * rank + r % 6;
+    }
+    values[fill_index_[k]] += t.value();
   }
   return true;
 }
@@ -318,6 +329,7 @@ void Scene::rebuildHessianPattern() {
   hessian_pattern_.resize(n, n);
   hessian_pattern_.setFromTriplets(structure.begin(), structure.end());
   hessian_pattern_.makeCompressed();
+  fill_key_.clear();  // value indices refer to the old pattern
 }
 
 void Scene::step(const VecX& dq) {

@@ -48,6 +48,22 @@ struct SimulableOptions {
   ContactOptions contact;                 ///< collider contact on surface vertices
 };
 
+/// Parameter groups the total gradient depends on (for the adjoint, ARCHITECTURE.md §6).
+enum class SimParameter {
+  RestJoints,             ///< 72: rest joint centres J_b (m), 3 per bone: joint springs, skinning
+                          ///< (x_i = Σ w (R(X − J) + t)), tracking/root stiffness moments and the
+                          ///< root target J_0 + trans. Bone inertias are separate parameters
+                          ///< (their moments are about J_b as stored).
+  BoneInertia,            ///< 24 × 10: per bone mass (kg), first moment (3, kg·m), second
+                          ///< moment (6, kg·m²: xx, yy, zz, xy, xz, yz)
+  PoseTargets,            ///< 72: current tracking target rotation vectors θ_b (rad): b ≥ 1
+                          ///< relative to the parent, θ_0 the root orientation target
+  RootTranslationTarget,  ///< 3: target position of the root joint centre t_0 (m)
+  Stiffnesses,            ///< 4: joint_stiffness (N/m), tracking_stiffness (1/s²),
+                          ///< root_stiffness (1/s²), contact stiffness (N/m³)
+  ColliderOffsets,        ///< 3 per collider: current translation offset of its path (m)
+};
+
 /// Diagnostics of the last energy evaluation.
 struct SimulableStats {
   int active_contacts = 0;
@@ -142,6 +158,24 @@ class Simulable {
   const SoftAvatar& avatar() const;
   const SimulableOptions& options() const;
   SimulableStats stats() const;
+
+  // ---- parameter derivatives (for the adjoint) ---------------------------------------------
+  /// Number of values of a parameter group (ColliderOffsets: 3 per current collider).
+  int parameterSize(SimParameter p) const;
+  /// Current values of a parameter group (layout of SimParameter).
+  VecX getParameter(SimParameter p) const;
+  /// Overrides a parameter group (e.g. for optimization or finite differences); the state is
+  /// kept. PoseTargets and RootTranslationTarget hold until the next preUpdate()/initialize()
+  /// recomputes them from the mocap; ColliderOffsets shifts each collider's whole path.
+  /// Throws InputError on size / non-finite / invalid values.
+  void setParameter(SimParameter p, const VecX& value);
+  /// ∂g/∂p of the total gradient g = ∇(E_dyn + E_pot) at the current state (exact, increment
+  /// chart, kinematic rows not zeroed): numDofs × parameterSize(p). Does not change the state.
+  MatX getGradientParameterJacobian(SimParameter p) const;
+  /// ∂g/∂q_n (which = 1) or ∂g/∂q_{n−1} (which = 2): numDofs × numDofs, with respect to
+  /// increments of that previous state in the same chart (only the inertia term depends on
+  /// them; zero when static). Does not change the state.
+  MatX getGradientPreviousStateJacobian(int which) const;
 
   struct Impl;
 

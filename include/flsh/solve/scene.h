@@ -91,6 +91,10 @@ class Scene : public Objective {
   // position of block row a within block column b's stored blocks, −1 outside the pattern.
   SpMat hessian_pattern_;
   std::vector<int> block_rank_;
+  // Value index in the pattern of each triplet position of the last assembly, with its
+  // row · n + col key: the triplet order repeats between calls, so most lookups are skipped.
+  mutable std::vector<long long> fill_key_;
+  mutable std::vector<int> fill_index_;
   void rebuildHessianPattern();
   bool fillHessian(SpMat& H) const;
   // Per-simulable skinning data and the posed nodes/capsules of the last state seen.

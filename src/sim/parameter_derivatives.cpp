@@ -1,0 +1,322 @@
+// ∂g/∂p and ∂g/∂q_{n}, ∂g/∂q_{n−1} of the Simulable's total gradient, analytic, term by term
+// (the same kernels as simulable.cpp's assembly): inertia, gravity, joint springs, tracking and
+// root springs, collider contact on the skinned surface.
+#include "sim/parameter_derivatives.h"
+
+#include <string>
+
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
+#include "flsh/sim/skeleton_energies.h"
+
+namespace flsh::detail {
+
+namespace {
+
+constexpr int kInertiaValues = 10;  // mass, first moment (3), second moment (6)
+
+Vec3 vee(const Mat3& M) { return Vec3(M(2, 1), M(0, 2), M(1, 0)); }
+
+// Symmetric basis of the second moment in the order xx, yy, zz, xy, xz, yz.
+Mat3 secondMomentBasis(int k) {
+  static const int rows[6] = {0, 1, 2, 0, 0, 1}, cols[6] = {0, 1, 2, 1, 2, 2};
+  Mat3 E = Mat3::Zero();
+  E(rows[k], cols[k]) = 1.0;
+  E(cols[k], rows[k]) = 1.0;
+  return E;
+}
+
+// Subtree of every bone (itself included), from the parent list.
+std::vector<std::vector<int>> subtrees(const SimulableParameterView& v) {
+  std::vector<std::vector<int>> sub(v.num_bones);
+  for (int c = 0; c < v.num_bones; ++c)
+    for (int b = c; b >= 0; b = v.parents[b]) sub[b].push_back(c);
+  return sub;
+}
+
+// I_b = Σ_{c ∈ subtree(b)} tr(S_c) + 2 m̄_c·d + M_c‖d‖², d = J_c − J_b (kg·m²), as the
+// stiffness construction computes it.
+double polarMoment(const SimulableParameterView& v, const std::vector<int>& subtree, int b) {
+  double I = 0.0;
+  for (int c : subtree) {
+    const Vec3 d = (v.J.row(c) - v.J.row(b)).transpose();
+    const BoneInertia& in = v.inertia[c];
+    I += in.second_moment.trace() + 2.0 * in.first_moment.dot(d) + in.mass * d.squaredNorm();
+  }
+  return I;
+}
+
+// Gradient of a tracking spring with unit stiffness, over [δω_p, δω_b] (root: [−, δω_0]).
+Vec6 unitTracking(const SimulableParameterView& v, int b) {
+  Vec6 g;
+  const int p = v.parents[b];
+  trackingSpringEnergy(p < 0 ? Mat3::Identity() : v.R[p], v.R[b], v.target_R[b], 1.0, &g);
+  return g;
+}
+
+// Adds the unit tracking gradient of bone b times a row vector (∂k_b/∂p) into D.
+void addTrackingColumns(const SimulableParameterView& v, int b, const Eigen::RowVectorXd& dk,
+                        int col0, MatX& D) {
+  const Vec6 g = unitTracking(v, b);
+  const int p = v.parents[b];
+  if (p >= 0) D.middleRows<3>(6 * p + 3).middleCols(col0, dk.size()) += g.head<3>() * dk;
+  D.middleRows<3>(6 * b + 3).middleCols(col0, dk.size()) += g.tail<3>() * dk;
+}
+
+// Exact contact node Hessians (3 × 3 per candidate) against the given colliders.
+std::vector<Mat3> contactNodeHessians(const SimulableParameterView& v,
+                                      const std::vector<Collider>& colliders) {
+  const int n = int(v.candidates.size());
+  std::vector<Mat3> H(n, Mat3::Zero());
+  if (n == 0) return H;
+  ContactOptions options = v.options.contact;
+  options.exact_hessian = true;
+  std::vector<Triplet> triplets;
+  colliderContactEnergy(v.contact_nodes, v.contact_areas, colliders, v.time, options, nullptr,
+                        &triplets, 0, nullptr);
+  for (const Triplet& e : triplets) {
+    const int j = e.row() / 3;
+    H[j](e.row() - 3 * j, e.col() - 3 * j) += e.value();
+  }
+  return H;
+}
+
+// Pulls a node-gradient derivative dgx (3 × P per candidate) back to the DoFs of the bones
+// skinning each candidate: g_t,b += w gx, g_ω,b += w y × gx, y = R_b(X − J_b).
+void addContactRows(const SimulableParameterView& v, int j, const MatX& dgx, int col0, MatX& D) {
+  const int i = v.candidates[j];
+  for (int b = 0; b < v.num_bones; ++b) {
+    const double w = v.weights(i, b);
+    if (w == 0.0) continue;
+    const Vec3 y = v.R[b] * (v.X.row(i) - v.J.row(b)).transpose();
+    D.middleRows<3>(6 * b).middleCols(col0, dgx.cols()) += w * dgx;
+    D.middleRows<3>(6 * b + 3).middleCols(col0, dgx.cols()) += w * skew(y) * dgx;
+  }
+}
+
+MatX restJointsJacobian(const SimulableParameterView& v) {
+  MatX D = MatX::Zero(6 * v.num_bones, 3 * v.num_bones);
+  const double kj = v.options.joint_stiffness;
+  // Joint springs: d = y + t_p − t_b with y = R_p(J_b − J_p); dy = dd = R_p (dJ_b − dJ_p), and
+  // d(y × d) = [y − d]× R_p (dJ_b − dJ_p).
+  for (int b = 0; b < v.num_bones; ++b) {
+    const int p = v.parents[b];
+    if (p < 0) continue;
+    const Vec3 y = v.R[p] * (v.J.row(b) - v.J.row(p)).transpose();
+    const Vec3 d = y + v.t.row(p).transpose() - v.t.row(b).transpose();
+    const Mat3 dd = kj * v.R[p];
+    const Mat3 dcross = kj * skew(y - d) * v.R[p];
+    for (int s = 0; s < 2; ++s) {
+      const int c = s == 0 ? b : p;
+      const double sign = s == 0 ? 1.0 : -1.0;
+      D.block<3, 3>(6 * p, 3 * c) += sign * dd;
+      D.block<3, 3>(6 * p + 3, 3 * c) += sign * dcross;
+      D.block<3, 3>(6 * b, 3 * c) -= sign * dd;
+    }
+  }
+  if (v.tracking) {
+    // k_b = stiffness · I_b: ∂I_b/∂J_c = 2(m̄_c + M_c d) for c in the subtree, minus their sum
+    // for J_b itself. The root target t_0 = J_0 + trans moves with J_0.
+    const auto sub = subtrees(v);
+    for (int b = 0; b < v.num_bones; ++b) {
+      const double scale = b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness;
+      Eigen::RowVectorXd dk = Eigen::RowVectorXd::Zero(3 * v.num_bones);
+      for (int c : sub[b]) {
+        const Vec3 d = (v.J.row(c) - v.J.row(b)).transpose();
+        const Vec3 dI = 2.0 * (v.inertia[c].first_moment + v.inertia[c].mass * d);
+        dk.segment<3>(3 * c) += scale * dI.transpose();
+        dk.segment<3>(3 * b) -= scale * dI.transpose();
+      }
+      addTrackingColumns(v, b, dk, 0, D);
+    }
+    double mass = 0.0;
+    for (const BoneInertia& in : v.inertia) mass += in.mass;
+    D.block<3, 3>(0, 0) -= v.options.root_stiffness * mass * Mat3::Identity();
+  }
+  // Contact: dx_i/dJ_c = −w_ic R_c moves the node gradient by H_x dx; y_ib × g_x also turns
+  // with dy_ib = −R_b dJ_b.
+  const std::vector<Mat3> H = contactNodeHessians(v, v.colliders);
+  for (size_t j = 0; j < v.candidates.size(); ++j) {
+    const Vec3 gx = v.contact_gradient.segment<3>(3 * j);
+    if (gx.isZero(0.0) && H[j].isZero(0.0)) continue;
+    const int i = v.candidates[j];
+    MatX dgx = MatX::Zero(3, 3 * v.num_bones);
+    for (int c = 0; c < v.num_bones; ++c) {
+      const double w = v.weights(i, c);
+      if (w == 0.0) continue;
+      dgx.middleCols<3>(3 * c) = -w * H[j] * v.R[c];
+      D.block<3, 3>(6 * c + 3, 3 * c) += w * skew(gx) * v.R[c];
+    }
+    addContactRows(v, int(j), dgx, 0, D);
+  }
+  return D;
+}
+
+MatX boneInertiaJacobian(const SimulableParameterView& v) {
+  MatX D = MatX::Zero(6 * v.num_bones, kInertiaValues * v.num_bones);
+  const double inv_h2 = 1.0 / (v.options.time_step * v.options.time_step);
+  const Vec3& gravity = v.options.gravity;
+  for (int b = 0; b < v.num_bones; ++b) {
+    const int col = kInertiaValues * b;
+    const Vec3 t = v.t.row(b).transpose();
+    if (!v.is_static) {
+      // Inertia gradient inv_h2 [D m̄ + M u; (R m̄) × u + vee(R S Aᵀ − A S Rᵀ)], linear in M, m̄, S.
+      const Mat3 A = 2.0 * v.R_n[b] - v.R_nm1[b];
+      const Vec3 u = t - (2.0 * v.t_n.row(b) - v.t_nm1.row(b)).transpose();
+      D.block<3, 1>(6 * b, col) += inv_h2 * u;
+      D.block<3, 3>(6 * b, col + 1) += inv_h2 * (v.R[b] - A);
+      D.block<3, 3>(6 * b + 3, col + 1) -= inv_h2 * skew(u) * v.R[b];
+      for (int k = 0; k < 6; ++k) {
+        const Mat3 RSAt = v.R[b] * secondMomentBasis(k) * A.transpose();
+        D.block<3, 1>(6 * b + 3, col + 4 + k) += inv_h2 * vee(RSAt - RSAt.transpose());
+      }
+    }
+    // Gravity: [−M g; g × R m̄].
+    D.block<3, 1>(6 * b, col) -= gravity;
+    D.block<3, 3>(6 * b + 3, col + 1) += skew(gravity) * v.R[b];
+  }
+  if (v.tracking) {
+    const auto sub = subtrees(v);
+    for (int b = 0; b < v.num_bones; ++b) {
+      const double scale = b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness;
+      Eigen::RowVectorXd dk = Eigen::RowVectorXd::Zero(kInertiaValues * v.num_bones);
+      for (int c : sub[b]) {
+        const Vec3 d = (v.J.row(c) - v.J.row(b)).transpose();
+        const int col = kInertiaValues * c;
+        dk[col] = scale * d.squaredNorm();
+        dk.segment<3>(col + 1) = 2.0 * scale * d.transpose();
+        dk.segment<3>(col + 4).setConstant(scale);  // tr(S) = S_xx + S_yy + S_zz
+      }
+      addTrackingColumns(v, b, dk, 0, D);
+    }
+    // Root position spring k_pos = root_stiffness · Σ M.
+    const Vec3 d0 = v.t.row(0).transpose() - v.target_t0;
+    for (int c = 0; c < v.num_bones; ++c)
+      D.block<3, 1>(0, kInertiaValues * c) += v.options.root_stiffness * d0;
+  }
+  return D;
+}
+
+// w = R_p log(M R_targetᵀ), M = R_pᵀR_b; a target change exp(θ + δ) = exp([J_l(θ)δ]×) exp(θ)
+// gives dw = −R_p J_l(e)⁻ᵀ J_l(θ) δ with e = log(M R_targetᵀ).
+MatX poseTargetsJacobian(const SimulableParameterView& v) {
+  MatX D = MatX::Zero(6 * v.num_bones, 3 * v.num_bones);
+  if (!v.tracking) return D;
+  const auto sub = subtrees(v);
+  for (int b = 0; b < v.num_bones; ++b) {
+    const int p = v.parents[b];
+    const Mat3 R_p = p < 0 ? Mat3::Identity() : v.R[p];
+    const double stiffness =
+        (b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness) *
+        polarMoment(v, sub[b], b);
+    const Vec3 theta = logSO3(v.target_R[b]);
+    const Vec3 e = logSO3(R_p.transpose() * v.R[b] * v.target_R[b].transpose());
+    const Mat3 dw = -stiffness * R_p * leftJacobianInverseSO3(e).transpose() *
+                    leftJacobianSO3(theta);
+    D.block<3, 3>(6 * b + 3, 3 * b) += dw;
+    if (p >= 0) D.block<3, 3>(6 * p + 3, 3 * b) -= dw;
+  }
+  return D;
+}
+
+MatX stiffnessesJacobian(const SimulableParameterView& v) {
+  MatX D = MatX::Zero(6 * v.num_bones, 4);
+  Vec12 g12;
+  for (int b = 0; b < v.num_bones; ++b) {
+    const int p = v.parents[b];
+    if (p < 0) continue;
+    jointSpringEnergy(v.t.row(p).transpose(), v.R[p], v.t.row(b).transpose(), v.R[b],
+                      v.J.row(p).transpose(), v.J.row(b).transpose(), 1.0, &g12);
+    D.block<6, 1>(6 * p, 0) += g12.head<6>();
+    D.block<6, 1>(6 * b, 0) += g12.tail<6>();
+  }
+  if (v.tracking) {
+    const auto sub = subtrees(v);
+    for (int b = 0; b < v.num_bones; ++b) {
+      Eigen::RowVectorXd dk = Eigen::RowVectorXd::Zero(1);
+      dk[0] = polarMoment(v, sub[b], b);
+      addTrackingColumns(v, b, dk, b == 0 ? 2 : 1, D);
+    }
+    double mass = 0.0;
+    for (const BoneInertia& in : v.inertia) mass += in.mass;
+    D.block<3, 1>(0, 2) += mass * (v.t.row(0).transpose() - v.target_t0);
+  }
+  // Contact is linear in its stiffness: the node gradient at unit stiffness.
+  const int n = int(v.candidates.size());
+  if (n > 0) {
+    ContactOptions unit = v.options.contact;
+    unit.stiffness = 1.0;
+    VecX gx = VecX::Zero(3 * n);
+    colliderContactEnergy(v.contact_nodes, v.contact_areas, v.colliders, v.time, unit, &gx);
+    for (int j = 0; j < n; ++j)
+      if (!gx.segment<3>(3 * j).isZero(0.0)) addContactRows(v, j, gx.segment<3>(3 * j), 3, D);
+  }
+  return D;
+}
+
+// The contact energy depends on x − o_k for collider k: ∂g_x/∂o_k = −H_x,k.
+MatX colliderOffsetsJacobian(const SimulableParameterView& v) {
+  const int nc = int(v.colliders.size());
+  MatX D = MatX::Zero(6 * v.num_bones, 3 * nc);
+  for (int k = 0; k < nc; ++k) {
+    const std::vector<Mat3> H = contactNodeHessians(v, {v.colliders[k]});
+    for (size_t j = 0; j < H.size(); ++j)
+      if (!H[j].isZero(0.0)) addContactRows(v, int(j), -H[j], 3 * k, D);
+  }
+  return D;
+}
+
+}  // namespace
+
+int simParameterSize(SimParameter p, int num_colliders) {
+  switch (p) {
+    case SimParameter::RestJoints: return 3 * kNumJoints;
+    case SimParameter::BoneInertia: return kInertiaValues * kNumJoints;
+    case SimParameter::PoseTargets: return 3 * kNumJoints;
+    case SimParameter::RootTranslationTarget: return 3;
+    case SimParameter::Stiffnesses: return 4;
+    case SimParameter::ColliderOffsets: return 3 * num_colliders;
+  }
+  throw InputError("SimParameter: unknown parameter group " + std::to_string(int(p)));
+}
+
+MatX gradientParameterJacobian(const SimulableParameterView& v, SimParameter p) {
+  switch (p) {
+    case SimParameter::RestJoints: return restJointsJacobian(v);
+    case SimParameter::BoneInertia: return boneInertiaJacobian(v);
+    case SimParameter::PoseTargets: return poseTargetsJacobian(v);
+    case SimParameter::RootTranslationTarget: {
+      MatX D = MatX::Zero(6 * v.num_bones, 3);
+      if (v.tracking) {
+        double mass = 0.0;
+        for (const BoneInertia& in : v.inertia) mass += in.mass;
+        D.topRows<3>() = -v.options.root_stiffness * mass * Mat3::Identity();
+      }
+      return D;
+    }
+    case SimParameter::Stiffnesses: return stiffnessesJacobian(v);
+    case SimParameter::ColliderOffsets: return colliderOffsetsJacobian(v);
+  }
+  throw InputError("SimParameter: unknown parameter group " + std::to_string(int(p)));
+}
+
+MatX gradientPreviousStateJacobian(const SimulableParameterView& v, int which) {
+  if (which != 1 && which != 2)
+    throw InputError("Simulable::getGradientPreviousStateJacobian: which = " +
+                     std::to_string(which) + ", expected 1 (q_n) or 2 (q_{n-1})");
+  MatX D = MatX::Zero(6 * v.num_bones, 6 * v.num_bones);
+  if (v.is_static) return D;
+  Mat6 block;
+  for (int b = 0; b < v.num_bones; ++b) {
+    rigidInertiaGradientPreviousStates(v.t.row(b).transpose(), v.R[b], v.t_n.row(b).transpose(),
+                                       v.R_n[b], v.t_nm1.row(b).transpose(), v.R_nm1[b],
+                                       v.inertia[b], v.options.time_step,
+                                       which == 1 ? &block : nullptr,
+                                       which == 2 ? &block : nullptr);
+    D.block<6, 6>(6 * b, 6 * b) = block;
+  }
+  return D;
+}
+
+}  // namespace flsh::detail

@@ -1,0 +1,44 @@
+// Internal: derivatives of the Simulable's total gradient with respect to its parameters and its
+// previous states (for the adjoint, ARCHITECTURE.md §6). Simulable fills a read-only view of its
+// data; the formulas live in parameter_derivatives.cpp.
+#pragma once
+
+#include <vector>
+
+#include "flsh/sim/simulable.h"
+
+namespace flsh::detail {
+
+/// Read-only view of one Simulable's data at its current state (references stay owned by it).
+struct SimulableParameterView {
+  int num_bones;
+  const std::vector<int>& parents;         // 24, root −1
+  const MatX3& J;                          // 24 × 3 rest joint centres, m
+  const std::vector<BoneInertia>& inertia;  // 24
+  const SimulableOptions& options;
+  bool tracking;   // tracking and root springs active
+  bool is_static;  // no inertia term
+  const std::vector<Mat3>& R;
+  const MatX3& t;  // current state
+  const std::vector<Mat3>& R_n;
+  const MatX3& t_n;  // q_n
+  const std::vector<Mat3>& R_nm1;
+  const MatX3& t_nm1;  // q_{n−1}
+  const std::vector<Mat3>& target_R;  // per bone (root: global)
+  const Vec3& target_t0;
+  const MatX& weights;  // #V × 24 skinning weights
+  const MatX3& X;       // #V × 3 rest vertices
+  // Contact cache (up to date): candidate vertices, their positions, areas and node gradient.
+  const std::vector<int>& candidates;
+  const MatX3& contact_nodes;
+  const VecX& contact_areas;
+  const VecX& contact_gradient;  // 3 per candidate
+  const std::vector<Collider>& colliders;
+  double time;
+};
+
+int simParameterSize(SimParameter p, int num_colliders);
+MatX gradientParameterJacobian(const SimulableParameterView& v, SimParameter p);
+MatX gradientPreviousStateJacobian(const SimulableParameterView& v, int which);
+
+}  // namespace flsh::detail

@@ -14,17 +14,10 @@ namespace flsh {
 namespace {
 
 using test::jacobianMatchesFiniteDifferences;
+using test::randomVector;
 using test::messageOf;
 
 const test::SmallScene& shared() { return test::smallScene(600, 1.0); }
-
-VecX randomVector(int n, double scale, unsigned seed) {
-  std::mt19937 engine(seed);
-  std::uniform_real_distribution<double> u(-scale, scale);
-  VecX v(n);
-  for (int i = 0; i < n; ++i) v[i] = u(engine);
-  return v;
-}
 
 VecX totalGradient(const Simulable& sim) {
   VecX g = VecX::Zero(sim.numDofs());

@@ -21,18 +21,11 @@ namespace flsh {
 namespace {
 
 using test::jacobianMatchesFiniteDifferences;
+using test::randomVector;
 using test::messageOf;
 
 // One small synthetic body, avatar and walk for the whole binary (800 vertices).
 const test::SmallScene& shared() { return test::smallScene(800, 1.0); }
-
-VecX randomVector(int n, double scale, unsigned seed) {
-  std::mt19937 engine(seed);
-  std::uniform_real_distribution<double> u(-scale, scale);
-  VecX v(n);
-  for (int i = 0; i < n; ++i) v[i] = u(engine);
-  return v;
-}
 
 MatX dense(const std::vector<Triplet>& H, int n) {
   MatX D = MatX::Zero(n, n);

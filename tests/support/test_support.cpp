@@ -48,6 +48,14 @@ MatX finiteDifferenceJacobian(const std::function<VecX(const VecX&)>& f, const V
   return ::testing::AssertionSuccess() << "max error " << err;
 }
 
+VecX randomVector(int n, double scale, unsigned seed) {
+  std::mt19937 engine(seed);
+  std::uniform_real_distribution<double> u(-scale, scale);
+  VecX v(n);
+  for (int i = 0; i < n; ++i) v[i] = u(engine);
+  return v;
+}
+
 std::string freshTempDir(const std::string& name) {
   namespace fs = std::filesystem;
   const char* base = std::getenv("FLSH_TEST_TMP");

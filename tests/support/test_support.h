@@ -24,6 +24,9 @@ MatX finiteDifferenceJacobian(const std::function<VecX(const VecX&)>& f, const V
     const std::function<VecX(const VecX&)>& f, const VecX& x, const MatX& analytic,
     double tol = 1e-6, double eps = 1e-6);
 
+/// Uniform random vector in [−scale, scale]^n, deterministic in `seed`.
+VecX randomVector(int n, double scale, unsigned seed);
+
 /// A fresh empty directory under $FLSH_TEST_TMP (or the system temp dir), unique to the running
 /// test and `name`.
 std::string freshTempDir(const std::string& name);

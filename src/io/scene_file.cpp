@@ -26,8 +26,9 @@ constexpr long kMaxSteps = 10'000'000;  // a bound that catches unit mistakes (m
 // The built-in default scene, kept byte-identical to examples/scenes/default.json (a test
 // checks that they parse to the same scene). The ground sits at the 1.70 m synthetic body's
 // sole height (rest min y = −0.952 m); the ball (r = 0.12 m) comes from the front at 4 m/s
-// along −z and meets the walker's belly (y = 0.05 m; the belly's front is at z ≈ 1.31 m after
-// 1 s of walking at 1.2 m/s) at t ≈ 1 s.
+// along −z, meets the walker's belly (y = 0.05 m; the belly's front is at z ≈ 1.31 m after
+// 1 s of walking at 1.2 m/s) at t ≈ 1 s and bounces back 10 ms later: a scripted collider
+// cannot be stopped by the body, so its path is the bounce.
 constexpr const char* kDefaultSceneJson = R"({
   "time_step": 0.016666666666666666,
   "duration": 2.0,
@@ -46,7 +47,7 @@ constexpr const char* kDefaultSceneJson = R"({
   "colliders": [
     {"name": "ground", "type": "plane", "point": [0.0, -0.952, 0.0], "normal": [0.0, 1.0, 0.0]},
     {"name": "ball", "type": "sphere", "center": [0.0, 0.05, 5.41], "radius": 0.12,
-     "velocity": [0.0, 0.0, -4.0]}
+     "path": {"times": [0.0, 1.01, 2.0], "offsets": [[0, 0, 0], [0, 0, -4.04], [0, 0, -0.08]]}}
   ],
   "outputs": {"dir": "out/simulate", "ply": true, "npz": true, "gltf": true, "png": true,
               "png_frames": 5, "every": 1}

@@ -46,6 +46,24 @@ double secondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+/// Writes frames[k] as DIR/frame_%04d.ply and removes higher-numbered frames left by an
+/// earlier, longer run in the same folder (they would mix with this one).
+void writeFrameMeshes(const std::filesystem::path& dir, const std::vector<MatX3>& frames,
+                      const MatX3i& faces) {
+  namespace fs = std::filesystem;
+  io::ensureDirectory(dir.string());
+  auto name = [](size_t k) {
+    char buffer[64];
+    std::snprintf(buffer, sizeof(buffer), "frame_%04zu.ply", k);
+    return std::string(buffer);
+  };
+  for (size_t k = 0; k < frames.size(); ++k) io::writePly((dir / name(k)).string(), frames[k], faces);
+  for (size_t k = frames.size();; ++k) {
+    std::error_code ec;
+    if (!fs::remove(dir / name(k), ec)) break;
+  }
+}
+
 /// Parses "b0,b1,…" into a vector; throws InputError naming the option.
 VecX parseBetas(const std::string& text) {
   std::vector<double> values;
@@ -141,15 +159,10 @@ int cmdDemo(const std::string& out_dir, int vertices, const std::string& motion_
   writePosedNpz((fs::path(out_dir) / "posed.npz").string(), batch, body.numVertices(), betas,
                 motion.fps);
   const fs::path mesh_dir = fs::path(out_dir) / "meshes";
-  io::ensureDirectory(mesh_dir.string());
   const int T = motion.numFrames(), V = body.numVertices();
   std::vector<MatX3> frames(T);
-  for (int t = 0; t < T; ++t) {
-    frames[t] = Eigen::Map<const MatX3>(batch.vertices.row(t).data(), V, 3);
-    char name[64];
-    std::snprintf(name, sizeof(name), "frame_%04d.ply", t);
-    io::writePly((mesh_dir / name).string(), frames[t], body.faces);
-  }
+  for (int t = 0; t < T; ++t) frames[t] = Eigen::Map<const MatX3>(batch.vertices.row(t).data(), V, 3);
+  writeFrameMeshes(mesh_dir, frames, body.faces);
   // A sheet of five evenly spaced frames.
   const int shown = std::min(5, T);
   std::vector<MatX3> picked;
@@ -458,20 +471,7 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
 
   if (scene.outputs.ply) {
     for (const auto& run : runs) {
-      const fs::path mesh_dir = dir / "meshes" / run.spec->name;
-      io::ensureDirectory(mesh_dir.string());
-      for (int k = 0; k < T; ++k) {
-        char name[64];
-        std::snprintf(name, sizeof(name), "frame_%04d.ply", k);
-        io::writePly((mesh_dir / name).string(), run.vertices[k], run.body->faces);
-      }
-      // Frames of an earlier, longer run in this folder would mix with this one.
-      for (int k = T;; ++k) {
-        char name[64];
-        std::snprintf(name, sizeof(name), "frame_%04d.ply", k);
-        std::error_code ec;
-        if (!fs::remove(mesh_dir / name, ec)) break;
-      }
+      writeFrameMeshes(dir / "meshes" / run.spec->name, run.vertices, run.body->faces);
     }
     written.push_back("meshes/<avatar>/frame_*.ply");
   }

@@ -35,10 +35,11 @@ class ConversionError(Exception):
     """A bad input file; the message names the file and the key."""
 
 
-class ChumpyStandIn:
-    """Replaces any chumpy class while unpickling: keeps the state, exposes the value 'x'."""
+class _StateStandIn:
+    """Base of the stand-ins: created without running the real class's code, keeps the pickled
+    state in __dict__. Subclasses name the class they replace in `replaced_class`."""
 
-    chumpy_class = "chumpy.ch.Ch"
+    replaced_class = "?"
 
     def __new__(cls, *args, **kwargs):
         return object.__new__(cls)
@@ -53,30 +54,21 @@ class ChumpyStandIn:
             merged.update(state[1] or {})
             state = merged
         if not isinstance(state, dict):
-            raise ConversionError("unexpected pickled state of %s: %r" % (self.chumpy_class, type(state)))
+            raise ConversionError("unexpected pickled state of %s: %r" % (self.replaced_class, type(state)))
         self.__dict__.update(state)
 
 
-class SparseStandIn:
+class ChumpyStandIn(_StateStandIn):
+    """Replaces any chumpy class while unpickling: keeps the state, exposes the value 'x'."""
+
+    replaced_class = "chumpy.ch.Ch"
+
+
+class SparseStandIn(_StateStandIn):
     """Replaces a scipy.sparse matrix class: keeps its pickled arrays and densifies them
     itself, so old pickles (scipy 0.x attribute sets) load with any scipy, or none."""
 
-    sparse_class = "scipy.sparse.csc_matrix"
-
-    def __new__(cls, *args, **kwargs):
-        return object.__new__(cls)
-
-    def __init__(self, *args, **kwargs):
-        pass
-
-    def __setstate__(self, state):
-        if isinstance(state, tuple) and len(state) == 2:
-            merged = dict(state[0] or {})
-            merged.update(state[1] or {})
-            state = merged
-        if not isinstance(state, dict):
-            raise ConversionError("unexpected pickled state of %s" % self.sparse_class)
-        self.__dict__.update(state)
+    replaced_class = "scipy.sparse.csc_matrix"
 
     def toarray(self, what):
         state = self.__dict__
@@ -85,7 +77,7 @@ class SparseStandIn:
             rows, cols = (int(n) for n in shape)
             data = np.asarray(state["data"], dtype=np.float64)
             dense = np.zeros((rows, cols))
-            fmt = self.sparse_class.rsplit(".", 1)[-1][:3]
+            fmt = self.replaced_class.rsplit(".", 1)[-1][:3]
             if fmt in ("csc", "csr"):
                 indices = np.asarray(state["indices"], dtype=np.int64)
                 indptr = np.asarray(state["indptr"], dtype=np.int64)
@@ -99,12 +91,12 @@ class SparseStandIn:
                 col = np.asarray(state["col"], dtype=np.int64)
                 np.add.at(dense, (row, col), data)
             else:
-                raise ConversionError("unsupported sparse format %s" % self.sparse_class)
+                raise ConversionError("unsupported sparse format %s" % self.replaced_class)
         except ConversionError as error:
             raise ConversionError("%s: %s" % (what, error))
         except (KeyError, TypeError, ValueError, IndexError) as error:
             raise ConversionError("%s: malformed %s (%s: %s)"
-                                  % (what, self.sparse_class, type(error).__name__, error))
+                                  % (what, self.replaced_class, type(error).__name__, error))
         return dense
 
 
@@ -118,7 +110,7 @@ def stand_in_for(module, name):
     """One stand-in subclass per chumpy class, so messages can name the original class."""
     key = module + "." + name
     if key not in _stand_in_classes:
-        _stand_in_classes[key] = type(name, (ChumpyStandIn,), {"chumpy_class": key})
+        _stand_in_classes[key] = type(name, (ChumpyStandIn,), {"replaced_class": key})
     return _stand_in_classes[key]
 
 
@@ -146,7 +138,7 @@ class SmplUnpickler(pickle.Unpickler):
         if module.startswith("scipy.sparse") and name in _SPARSE_CLASSES:
             key = module + "." + name
             if key not in _stand_in_classes:
-                _stand_in_classes[key] = type(name, (SparseStandIn,), {"sparse_class": key})
+                _stand_in_classes[key] = type(name, (SparseStandIn,), {"replaced_class": key})
             return _stand_in_classes[key]
         if (module == "numpy" or module.startswith("numpy.")) and name in _NUMPY_NAMES:
             return super().find_class(module, name)
@@ -161,7 +153,7 @@ def to_array(value, what):
     while isinstance(value, ChumpyStandIn):
         if "x" not in value.__dict__:
             raise ConversionError("%s is a chumpy expression (%s) without a stored value 'x'"
-                                  % (what, value.chumpy_class))
+                                  % (what, value.replaced_class))
         value = value.__dict__["x"]
         seen += 1
         if seen > 100:

@@ -36,6 +36,8 @@ class NpzFile {
 
   const std::string& path() const { return path_; }
   std::vector<std::string> keys() const;
+  /// All arrays, by key.
+  const std::map<std::string, NpyArray>& arrays() const { return arrays_; }
   bool has(const std::string& key) const;
   /// The raw array; throws InputError naming the file and the missing key.
   const NpyArray& raw(const std::string& key) const;
@@ -79,6 +81,8 @@ class NpzWriter {
   }
   void addScalar(const std::string& key, double value);                     ///< 0-d float64
   void addString(const std::string& key, const std::string& value);         ///< 0-d '<U'
+  /// The arrays collected so far, by key (e.g. to checksum them before saving).
+  const std::map<std::string, NpyArray>& arrays() const { return arrays_; }
   /// Writes the archive (deflate-compressed if `compress`), atomically.
   void save(const std::string& path, bool compress = false) const;
 

@@ -1,0 +1,105 @@
+#include "flsh/volume/avatar_cache.h"
+
+#include <cstdlib>
+#include <filesystem>
+
+#include "flsh/core/error.h"
+#include "flsh/core/sha256.h"
+#include "flsh/io/atomic_file.h"
+
+namespace flsh {
+
+namespace {
+
+constexpr const char* kFormatName = "flsh-avatar-cache";
+
+bool isHeaderKey(const std::string& key) {
+  return key.size() >= 4 && key.compare(0, 2, "__") == 0 &&
+         key.compare(key.size() - 2, 2, "__") == 0;
+}
+
+bool isHexKey(const std::string& key) {
+  if (key.empty() || key.size() > 128) return false;
+  for (char c : key)
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
+  return true;
+}
+
+void checkKey(const std::string& key) {
+  // Keys become file names: only hex digests, so no path can escape the cache directory.
+  if (!isHexKey(key))
+    throw InputError("avatar cache: key '" + key +
+                     "' is not a lower-case hex digest (use Sha256::hexDigest())");
+}
+
+}  // namespace
+
+std::string npzContentChecksum(const std::map<std::string, io::NpyArray>& arrays) {
+  Sha256 h;
+  for (const auto& [key, array] : arrays) {
+    if (isHeaderKey(key)) continue;
+    h.updateField("key", key.data(), key.size());
+    h.updateField("dtype", array.dtype.data(), array.dtype.size());
+    h.updateField("shape", array.shape.data(), array.shape.size() * sizeof(long));
+    h.updateField("bytes", array.bytes.data(), array.bytes.size());
+  }
+  return h.hexDigest();
+}
+
+AvatarCache::AvatarCache(std::string dir) : dir_(dir.empty() ? defaultDirectory() : std::move(dir)) {}
+
+std::string AvatarCache::defaultDirectory() {
+  if (const char* d = std::getenv("FLSH_CACHE_DIR"); d && *d) return d;
+  if (const char* d = std::getenv("XDG_CACHE_HOME"); d && *d) return std::string(d) + "/flsh";
+  if (const char* d = std::getenv("HOME"); d && *d) return std::string(d) + "/.cache/flsh";
+  return ".flsh_cache";
+}
+
+std::string AvatarCache::pathFor(const std::string& key) const {
+  checkKey(key);
+  return (std::filesystem::path(dir_) / (key + ".npz")).string();
+}
+
+std::optional<io::NpzFile> AvatarCache::load(const std::string& key, std::string* problem) const {
+  const std::string path = pathFor(key);
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) return std::nullopt;
+  auto fail = [&](const std::string& why) -> std::optional<io::NpzFile> {
+    if (problem) *problem = "avatar cache file " + path + " " + why + "; rebuilding it";
+    return std::nullopt;
+  };
+  try {
+    io::NpzFile file(path);
+    for (const char* header : {"__format__", "__version__", "__key__", "__checksum__"})
+      if (!file.has(header)) return fail(std::string("has no '") + header + "' entry");
+    if (file.string("__format__") != kFormatName)
+      return fail("is not an flsh avatar cache file (format '" + file.string("__format__") + "')");
+    const double version = file.scalar("__version__");
+    if (version != kFormatVersion)
+      return fail("is stale: format version " + std::to_string(int(version)) + ", expected " +
+                  std::to_string(kFormatVersion));
+    if (file.string("__key__") != key)
+      return fail("was stored under another key (" + file.string("__key__") + ")");
+    if (file.string("__checksum__") != npzContentChecksum(file.arrays()))
+      return fail("is corrupted (content checksum mismatch)");
+    return file;
+  } catch (const Error& e) {
+    return fail(std::string("is unreadable (") + e.what() + ")");
+  }
+}
+
+void AvatarCache::store(const std::string& key, const io::NpzWriter& arrays) const {
+  const std::string path = pathFor(key);
+  for (const auto& [name, array] : arrays.arrays())
+    if (isHeaderKey(name))
+      throw InputError("avatar cache: array name '" + name + "' is reserved for the header");
+  io::NpzWriter out = arrays;
+  out.addString("__format__", kFormatName);
+  out.addScalar("__version__", kFormatVersion);
+  out.addString("__key__", key);
+  out.addString("__checksum__", npzContentChecksum(arrays.arrays()));
+  io::ensureDirectory(dir_);
+  out.save(path);
+}
+
+}  // namespace flsh

@@ -1,0 +1,53 @@
+#include "flsh/core/sha256.h"
+
+#include <gtest/gtest.h>
+
+#include "flsh/core/error.h"
+#include "flsh/core/types.h"
+
+namespace flsh {
+namespace {
+
+// FIPS 180-2 appendix B test vectors.
+TEST(Sha256, KnownVectors) {
+  EXPECT_EQ(sha256Hex(""), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+  EXPECT_EQ(sha256Hex("abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  EXPECT_EQ(sha256Hex("abcdbcdecdefdefgefghfghighijhijkijkljklmklmnlmnomnopnopq"),
+            "248d6a61d20638b8e5c026930c3e6039a33ce45964ff2167f6ecedd419db06c1");
+  EXPECT_EQ(sha256Hex(std::string(1000000, 'a')),
+            "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
+}
+
+TEST(Sha256, IncrementalEqualsOneShot) {
+  std::string text;
+  for (int i = 0; i < 1000; ++i) text += char('a' + i * 7 % 26);
+  for (size_t split : {size_t(0), size_t(1), size_t(55), size_t(56), size_t(63), size_t(64),
+                       size_t(65), size_t(999)}) {
+    Sha256 h;
+    h.update(text.substr(0, split));
+    h.update(text.substr(split));
+    EXPECT_EQ(h.hexDigest(), sha256Hex(text)) << "split at " << split;
+  }
+}
+
+TEST(Sha256, FieldsAreDelimitedAndMatricesHashTheirValues) {
+  Sha256 a, b;
+  a.updateField("ab", "c", 1);
+  b.updateField("a", "bc", 2);
+  EXPECT_NE(a.hexDigest(), b.hexDigest());
+
+  MatX3 row_major(2, 3);
+  row_major << 1, 2, 3, 4, 5, 6;
+  MatX col_major = row_major;
+  Sha256 r, c, t;
+  r.updateMatrix("m", row_major);
+  c.updateMatrix("m", col_major);
+  t.updateMatrix("m", col_major.transpose());
+  const std::string digest = r.hexDigest();
+  EXPECT_EQ(digest, c.hexDigest());
+  EXPECT_NE(digest, t.hexDigest());  // shape is part of the digest
+  EXPECT_THROW(r.update("more"), Error);
+}
+
+}  // namespace
+}  // namespace flsh

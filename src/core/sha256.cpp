@@ -88,6 +88,13 @@ void Sha256::updateField(const std::string& label, const void* data, size_t byte
   update(data, bytes);
 }
 
+void Sha256::updateLarge(const std::string& label, const void* data, size_t bytes) {
+  const uint64_t checksum = xxhash64(data, bytes);
+  updateField(label, &checksum, sizeof(checksum));
+  const uint64_t size = bytes;
+  update(&size, sizeof(size));
+}
+
 std::array<uint8_t, 32> Sha256::digest() {
   if (finished_) throw Error("Sha256::digest called twice");
   const uint64_t bits = total_bytes_ * 8;
@@ -112,6 +119,67 @@ std::string Sha256::hexDigest() {
     s += kHex[byte & 15];
   }
   return s;
+}
+
+namespace {
+
+constexpr uint64_t kP1 = 0x9E3779B185EBCA87ULL, kP2 = 0xC2B2AE3D27D4EB4FULL,
+                   kP3 = 0x165667B19E3779F9ULL, kP4 = 0x85EBCA77C2B2AE63ULL,
+                   kP5 = 0x27D4EB2F165667C5ULL;
+
+inline uint64_t rotl64(uint64_t x, int n) { return (x << n) | (x >> (64 - n)); }
+inline uint64_t load64(const uint8_t* p) {
+  uint64_t v;
+  std::memcpy(&v, p, 8);  // little-endian hosts only (x86-64, aarch64), as the npz format
+  return v;
+}
+inline uint32_t load32(const uint8_t* p) {
+  uint32_t v;
+  std::memcpy(&v, p, 4);
+  return v;
+}
+inline uint64_t xxRound(uint64_t acc, uint64_t lane) {
+  return rotl64(acc + lane * kP2, 31) * kP1;
+}
+inline uint64_t xxMerge(uint64_t acc, uint64_t lane) {
+  return (acc ^ xxRound(0, lane)) * kP1 + kP4;
+}
+
+}  // namespace
+
+uint64_t xxhash64(const void* data, size_t bytes, uint64_t seed) {
+  const auto* p = static_cast<const uint8_t*>(data);
+  const uint8_t* const end = p + bytes;
+  uint64_t h;
+  if (bytes >= 32) {
+    uint64_t v1 = seed + kP1 + kP2, v2 = seed + kP2, v3 = seed, v4 = seed - kP1;
+    for (; p + 32 <= end; p += 32) {
+      v1 = xxRound(v1, load64(p));
+      v2 = xxRound(v2, load64(p + 8));
+      v3 = xxRound(v3, load64(p + 16));
+      v4 = xxRound(v4, load64(p + 24));
+    }
+    h = rotl64(v1, 1) + rotl64(v2, 7) + rotl64(v3, 12) + rotl64(v4, 18);
+    h = xxMerge(h, v1);
+    h = xxMerge(h, v2);
+    h = xxMerge(h, v3);
+    h = xxMerge(h, v4);
+  } else {
+    h = seed + kP5;
+  }
+  h += uint64_t(bytes);
+  for (; p + 8 <= end; p += 8) h = rotl64(h ^ xxRound(0, load64(p)), 27) * kP1 + kP4;
+  if (p + 4 <= end) {
+    h = rotl64(h ^ (uint64_t(load32(p)) * kP1), 23) * kP2 + kP3;
+    p += 4;
+  }
+  for (; p < end; ++p) h = rotl64(h ^ (uint64_t(*p) * kP5), 11) * kP1;
+  h ^= h >> 33;
+  h *= kP2;
+  h ^= h >> 29;
+  h *= kP3;
+  h ^= h >> 32;
+  return h;
 }
 
 std::string sha256Hex(const std::string& bytes) {

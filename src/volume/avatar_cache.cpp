@@ -41,7 +41,7 @@ std::string npzContentChecksum(const std::map<std::string, io::NpyArray>& arrays
     h.updateField("key", key.data(), key.size());
     h.updateField("dtype", array.dtype.data(), array.dtype.size());
     h.updateField("shape", array.shape.data(), array.shape.size() * sizeof(long));
-    h.updateField("bytes", array.bytes.data(), array.bytes.size());
+    h.updateLarge("bytes", array.bytes.data(), array.bytes.size());
   }
   return h.hexDigest();
 }

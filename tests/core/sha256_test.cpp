@@ -18,6 +18,22 @@ TEST(Sha256, KnownVectors) {
             "cdc76e5c9914fb9281a1c7e284d73e67f1809a48a497200e046d39ccc7112cd0");
 }
 
+// Published XXH64 values (seed 0).
+TEST(XxHash64, KnownVectors) {
+  EXPECT_EQ(xxhash64("", 0), 0xEF46DB3751D8E999ULL);
+  EXPECT_EQ(xxhash64("a", 1), 0xD24EC4F1A98C6E5BULL);
+  const std::string text = "Nobody inspects the spammish repetition";
+  EXPECT_EQ(xxhash64(text.data(), text.size()), 0xFBCEA83C8A378BF1ULL);
+  // Every tail length (stripes of 32, then 8, 4 and single bytes) reacts to one changed byte.
+  std::string bytes(100, 'q');
+  for (size_t n = 0; n < bytes.size(); ++n) {
+    const uint64_t before = xxhash64(bytes.data(), n + 1);
+    bytes[n] ^= 1;
+    EXPECT_NE(xxhash64(bytes.data(), n + 1), before) << n;
+    bytes[n] ^= 1;
+  }
+}
+
 TEST(Sha256, IncrementalEqualsOneShot) {
   std::string text;
   for (int i = 0; i < 1000; ++i) text += char('a' + i * 7 % 26);

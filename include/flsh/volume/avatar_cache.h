@@ -5,7 +5,8 @@
 // built by the caller with Sha256. Besides the caller's arrays each file stores
 //   __format__   "flsh-avatar-cache"      __version__  AvatarCache::kFormatVersion
 //   __key__      the key it was stored under
-//   __checksum__ SHA-256 of every other array (name, dtype, shape and bytes, in key order).
+//   __checksum__ SHA-256 of every other array's name, dtype, shape and XXH64 of its bytes, in
+//                key order (XXH64: a 50 MB entry is checked in ~10 ms instead of ~0.3 s).
 // load() trusts a file only if it reads as a complete archive and all four agree; anything
 // else (truncated, corrupted, written by another format version, renamed) is reported through
 // `problem`, so the caller warns and rebuilds, and store() then replaces it. Files are written
@@ -44,7 +45,7 @@ class AvatarCache {
 };
 
 /// SHA-256 over the arrays of an archive except the header ones ("__…__"): names, dtypes,
-/// shapes and bytes in key order.
+/// shapes and the XXH64 of the bytes, in key order.
 std::string npzContentChecksum(const std::map<std::string, io::NpyArray>& arrays);
 
 }  // namespace flsh

@@ -5,10 +5,13 @@
 //   flsh pose --model BODY.npz --motion MOTION.npz --out OUT.npz [--betas b0,b1,…]
 //   flsh demo [--out DIR] [--vertices N] [--motion NAME]
 //   flsh simulate [SCENE.json] [--out DIR] [--duration S] [--time-step H]
+//   flsh avatar --model BODY.npz [--betas b0,b1,…] [--soft fem|rom] [--cache DIR]
+//               [--resolution R] [--materials FILE] [--no-cache]
 //
 // Every command prints a one-line summary on success, and on bad input exits non-zero with a
 // message naming the input, leaving no partial output file (all writes are atomic).
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include <unistd.h>
 
@@ -138,6 +141,101 @@ int cmdPose(const std::string& model_path, const std::string& motion_spec, const
   writePosedNpz(out, batch, model.numVertices(), betas, motion.fps);
   std::printf("pose: wrote %s (%d frames × %d vertices, %.1f fps motion) in %.2f s\n", out.c_str(),
               motion.numFrames(), model.numVertices(), motion.fps, secondsSince(t0));
+  return 0;
+}
+
+struct AvatarArgs {
+  std::string model, betas, soft = "none", cache, materials;
+  double resolution = 1.0;
+  bool no_cache = false;
+};
+
+// Builds (or loads) an avatar and prints its statistics as JSON on stdout.
+int cmdAvatar(const AvatarArgs& args) {
+  const auto t0 = Clock::now();
+  std::shared_ptr<const BodyModel> body;
+  if (args.model.rfind("synthetic", 0) == 0) {
+    // "synthetic" or "synthetic:N": the built-in synthetic body (N vertices, default 6890).
+    SyntheticBodyOptions options;
+    if (args.model.size() > 9) {
+      if (args.model[9] != ':')
+        throw InputError("--model: expected a .npz path, 'synthetic' or 'synthetic:N', got '" +
+                         args.model + "'");
+      try {
+        options.vertices = std::stoi(args.model.substr(10));
+      } catch (const std::exception&) {
+        throw InputError("--model: '" + args.model.substr(10) +
+                         "' is not a vertex count (synthetic:N)");
+      }
+    }
+    body = std::make_shared<const BodyModel>(makeSyntheticBody(options));
+  } else {
+    body = std::make_shared<const BodyModel>(loadBodyModel(args.model));
+  }
+  const double load_seconds = secondsSince(t0);
+  const VecX betas = args.betas.empty() ? VecX::Zero(body->numBetas())
+                                        : fitBetas(parseBetas(args.betas), *body, "--betas");
+  if (args.soft != "none" && args.soft != "fem" && args.soft != "rom")
+    throw InputError("--soft: expected fem or rom (or none: the skeleton), got '" + args.soft + "'");
+  if (!(args.resolution > 0) || !std::isfinite(args.resolution))
+    throw InputError("--resolution: expected a number > 0, got " + std::to_string(args.resolution));
+
+  SoftAvatarSettings settings;
+  settings.volumetric.tet_mesh.resolution = args.resolution;
+  settings.volumetric.material_file = args.materials;
+  settings.volumetric.cache_dir = args.cache;
+  settings.volumetric.use_cache = !args.no_cache;
+  SoftAvatar avatar(body, betas, settings);
+  avatar.enableSoftTissue(args.soft != "none");
+  avatar.enableReducedModel(args.soft == "rom");
+  const auto build_start = Clock::now();
+  avatar.initVolumetricData();
+  const double build_seconds = secondsSince(build_start);
+
+  const VolumetricBuildReport& r = avatar.volumetricBuildReport();
+  if (!r.warnings.empty()) std::cerr << "flsh avatar: warning: " << r.warnings;
+  nlohmann::ordered_json out;
+  out["model"] = body->source.empty() ? args.model : body->source;
+  out["soft"] = args.soft;
+  out["vertices"] = body->numVertices();
+  out["betas"] = std::vector<double>(avatar.betas().data(),
+                                     avatar.betas().data() + avatar.betas().size());
+  out["total_mass_kg"] = avatar.totalMass();
+  out["volume_m3"] = avatar.volume();
+  nlohmann::ordered_json seconds;
+  seconds["model_load"] = load_seconds;
+  seconds["skeleton"] = avatar.skeletonSeconds();
+  if (avatar.hasVolumetricData()) {
+    const VolumetricData& d = avatar.volumetricData();
+    const TetMeshQuality& q = d.templ->quality;
+    out["nodes"] = d.numNodes();
+    out["surface_nodes"] = d.templ->mesh.num_surface_nodes;
+    out["tets"] = d.numTets();
+    out["bone_nodes"] = d.numBoneNodes();
+    out["soft_tissue_nodes"] = d.numNodes() - d.numBoneNodes();
+    out["soft_body_mass_kg"] = d.totalMass();
+    out["quality"] = {{"min_dihedral_deg", q.min_dihedral_deg},
+                      {"max_dihedral_deg", q.max_dihedral_deg},
+                      {"max_radius_edge_ratio", q.max_radius_edge_ratio},
+                      {"mean_radius_edge_ratio", q.mean_radius_edge_ratio},
+                      {"min_volume_m3", q.min_volume}};
+    seconds["meshing"] = r.seconds_meshing;
+    seconds["harmonic_fields"] = r.seconds_harmonic;
+    seconds["mesh_quality"] = r.seconds_quality;
+    seconds["bone_nodes"] = r.seconds_bone_nodes;
+    seconds["materials"] = r.seconds_materials;
+    seconds["cache_load"] = r.seconds_cache_load;
+    seconds["cache_store"] = r.seconds_cache_store;
+    const bool used = settings.volumetric.use_cache;
+    out["cache"] = {
+        {"directory", used ? AvatarCache(args.cache).directory() : std::string()},
+        {"template", !used ? "off" : r.template_from_cache ? "hit" : "miss"},
+        {"shape", !used ? "off" : r.data_from_cache ? "hit" : "miss"},
+        {"warnings", r.warnings}};
+  }
+  seconds["avatar_total"] = build_seconds;
+  out["seconds"] = seconds;
+  std::printf("%s\n", out.dump(2).c_str());
   return 0;
 }
 
@@ -653,6 +751,25 @@ int main(int argc, char** argv) {
   simulate->add_option("--duration", duration, "simulated time, s (overrides duration)");
   simulate->add_option("--time-step", time_step, "time step, s (overrides time_step)");
 
+  AvatarArgs avatar_args;
+  auto* avatar = app.add_subcommand(
+      "avatar", "Build (or load from the cache) an avatar and print its statistics as JSON");
+  avatar->add_option("--model", avatar_args.model,
+                     "SMPL-format body (.npz), or synthetic[:VERTICES] for the built-in body")
+      ->required();
+  avatar->add_option("--betas", avatar_args.betas, "shape coefficients b0,b1,… (default: zeros)");
+  avatar->add_option("--soft", avatar_args.soft,
+                     "soft-tissue model: fem, rom, or none (the articulated skeleton)")
+      ->capture_default_str();
+  avatar->add_option("--cache", avatar_args.cache,
+                     "cache directory (default: $FLSH_CACHE_DIR, else ~/.cache/flsh)");
+  avatar->add_flag("--no-cache", avatar_args.no_cache, "neither read nor write the cache");
+  avatar->add_option("--resolution", avatar_args.resolution,
+                     "interior node density of the tet mesh relative to the default")
+      ->capture_default_str();
+  avatar->add_option("--materials", avatar_args.materials,
+                     "material file (JSON, docs/materials.md; default: built-in coefficients)");
+
   CLI11_PARSE(app, argc, argv);
   const std::string command = app.get_subcommands().front()->get_name();
   try {
@@ -660,6 +777,7 @@ int main(int argc, char** argv) {
     if (command == "motion") return cmdMotion(name, out, seconds, fps);
     if (command == "pose") return cmdPose(model, motion_spec, out, betas);
     if (command == "demo") return cmdDemo(demo_out, vertices, name, seconds);
+    if (command == "avatar") return cmdAvatar(avatar_args);
     if (command == "simulate") {
       SceneOverrides overrides;
       overrides.duration = duration;

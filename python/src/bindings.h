@@ -28,6 +28,7 @@ void bind_volume(py::module_& m);
 void bind_contact(py::module_& m);
 void bind_sim(py::module_& m);
 void bind_solve(py::module_& m);
+void bind_diff(py::module_& m);
 
 /// "(72,)", "(800, 3)": numpy's way of writing a shape, for messages.
 std::string shape_text(const std::vector<long>& shape);

@@ -11,4 +11,5 @@ PYBIND11_MODULE(_flsh, m) {
   flsh::python::bind_contact(m);  // before sim and solve: options and colliders
   flsh::python::bind_sim(m);
   flsh::python::bind_solve(m);
+  flsh::python::bind_diff(m);  // after sim and solve: Rollout takes a Simulable, NewtonOptions
 }

@@ -153,6 +153,30 @@ void bind_sim(py::module_& m) {
                ", track_mocap=" + (o.track_mocap ? "True" : "False") + ")";
       });
 
+  py::enum_<SimParameter>(
+      m, "SimParameter",
+      "Parameter groups the total gradient g = ∇(E_dyn + E_pot) depends on (for the adjoint). "
+      "Sizes and layouts: Simulable.parameterSize / getParameter.")
+      .value("RestJoints", SimParameter::RestJoints,
+             "(72,) rest joint centres J_b, m, 3 per bone (joint springs, skinning, tracking "
+             "moments, root target)")
+      .value("BoneInertia", SimParameter::BoneInertia,
+             "(240,) per bone: mass (kg), first moment (3, kg·m), second moment (6, kg·m²: xx, "
+             "yy, zz, xy, xz, yz)")
+      .value("PoseTargets", SimParameter::PoseTargets,
+             "(72,) tracking target rotation vectors θ_b, rad (b ≥ 1 relative to the parent, "
+             "θ_0 the root orientation); recomputed from the mocap by preUpdate/initialize")
+      .value("RootTranslationTarget", SimParameter::RootTranslationTarget,
+             "(3,) target position of the root joint centre, m; recomputed by preUpdate")
+      .value("Stiffnesses", SimParameter::Stiffnesses,
+             "(4,) joint_stiffness (N/m), tracking_stiffness (1/s²), root_stiffness (1/s²), "
+             "contact stiffness (N/m³)")
+      .value("ColliderOffsets", SimParameter::ColliderOffsets,
+             "(3·#colliders,) translation offset of each collider's path, m")
+      .value("Shape", SimParameter::Shape,
+             "(K,) the avatar's shape β (read only: setParameter raises ValueError; build a new "
+             "SoftAvatar instead)");
+
   using S = Simulable;
   py::class_<S, std::shared_ptr<S>> sim(
       m, "Simulable",
@@ -357,6 +381,52 @@ void bind_sim(py::module_& m) {
   sim.def_property_readonly("options", &S::options, "SimulableOptions (a copy).");
   sim.def_property_readonly("active_contacts", [](const S& s) { return s.stats().active_contacts; },
                             "Vertex–collider contacts at the last energy evaluation.");
+  // ---- parameter derivatives (for the adjoint)
+  sim.def("parameterSize", &S::parameterSize, py::arg("p"),
+          "Number of values of the SimParameter group p (ColliderOffsets: 3 per collider).");
+  alias("parameterSize", "parameter_size");
+  sim.def("getParameter", [](const S& s, SimParameter p) { return to_numpy(s.getParameter(p)); },
+          py::arg("p"),
+          "(parameterSize(p),) current values of group p in SimParameter's layout and units.");
+  alias("getParameter", "get_parameter");
+  sim.def("setParameter",
+          [](S& s, SimParameter p, const py::object& value) {
+            s.setParameter(p, to_vector(value, "value", s.parameterSize(p)));
+          },
+          py::arg("p"), py::arg("value"),
+          "Overrides group p with value (parameterSize(p),); the state is kept. PoseTargets and "
+          "RootTranslationTarget hold until the next preUpdate/initialize. ValueError on size, "
+          "non-finite or invalid values (nothing is changed then); Shape is read only.");
+  alias("setParameter", "set_parameter");
+  sim.def("getGradientParameterJacobian",
+          [](const S& s, SimParameter p) {
+            MatX J;
+            {
+              py::gil_scoped_release release;
+              J = s.getGradientParameterJacobian(p);
+            }
+            return to_numpy(RowMatX(J));
+          },
+          py::arg("p"),
+          "(numDofs, parameterSize(p)) ∂g/∂p of the total gradient at the current state (exact, "
+          "increment chart, kinematic rows not zeroed); units: gradient units (J per m or rad) "
+          "per unit of p. Does not change the state.");
+  alias("getGradientParameterJacobian", "get_gradient_parameter_jacobian");
+  sim.def("getGradientPreviousStateJacobian",
+          [](const S& s, int which) {
+            MatX J;
+            {
+              py::gil_scoped_release release;
+              J = s.getGradientPreviousStateJacobian(which);
+            }
+            return to_numpy(RowMatX(J));
+          },
+          py::arg("which"),
+          "(numDofs, numDofs) ∂g/∂q_n (which=1) or ∂g/∂q_{n−1} (which=2), with respect to "
+          "increments [δt_b m, δω_b rad] of that state; zero when static. ValueError for other "
+          "`which`. Does not change the state.");
+  alias("getGradientPreviousStateJacobian", "get_gradient_previous_state_jacobian");
+
   sim.def("__repr__", [](const S& s) {
     return "Simulable(dofs=" + std::to_string(s.numDofs()) +
            ", time=" + py::repr(py::float_(s.time())).cast<std::string>() + ")";

@@ -6,6 +6,7 @@
 
 #include "bindings.h"
 #include "flsh/volume/soft_avatar.h"
+#include "flsh/volume/tet_mesh.h"
 
 namespace flsh::python {
 
@@ -24,9 +25,103 @@ const SoftAvatar& initialized(const SoftAvatar& a, const char* what) {
   return a;
 }
 
+py::array_t<double> to_numpy_col(const MatX& M) { return to_numpy(RowMatX(M)); }
+
+py::array_t<int> ints_numpy(const MatX4i& tets) {
+  return take_numpy(MatX4i(tets), {py::ssize_t(tets.rows()), 4});
+}
+
+py::dict quality_dict(const TetMeshQuality& q) {
+  py::dict d;
+  d["min_dihedral_deg"] = q.min_dihedral_deg;
+  d["max_dihedral_deg"] = q.max_dihedral_deg;
+  d["max_radius_edge_ratio"] = q.max_radius_edge_ratio;
+  d["mean_radius_edge_ratio"] = q.mean_radius_edge_ratio;
+  d["min_volume"] = q.min_volume;
+  return d;
+}
+
 }  // namespace
 
 void bind_volume(py::module_& m) {
+  m.def(
+      "tetrahedralize_surface",
+      [](const py::object& V, const py::object& F, double resolution) {
+        const MatX3 vertices = to_points(V, "vertices");
+        const MatX3i faces = to_triangles(F, "faces");
+        TetMeshOptions options;
+        options.resolution = resolution;
+        TetMesh mesh;
+        {
+          py::gil_scoped_release release;
+          mesh = tetrahedralizeSurface(vertices, faces, options);
+        }
+        return py::make_tuple(to_numpy(mesh.nodes), ints_numpy(mesh.tets),
+                              quality_dict(tetMeshQuality(mesh)));
+      },
+      py::arg("vertices"), py::arg("faces"), py::kw_only(), py::arg("resolution") = 1.0,
+      "Tet mesh of a closed, outward-oriented surface (vertices (V, 3) m, faces (F, 3)) keeping "
+      "the surface: returns (nodes (N, 3) m with nodes[:V] == vertices, tets (T, 4) int32 "
+      "positively oriented, quality dict). resolution scales the interior node count.");
+
+  py::class_<VolumetricData>(
+      m, "VolumetricData",
+      "The volumetric body of a soft avatar (read-only; arrays are copies): the template tet "
+      "mesh, fields extended to all nodes, rest nodes at β, bone nodes and per-tet materials.")
+      .def_property_readonly("num_nodes", &VolumetricData::numNodes)
+      .def_property_readonly("num_tets", &VolumetricData::numTets)
+      .def_property_readonly("num_surface_nodes",
+                             [](const VolumetricData& d) { return d.templ->mesh.num_surface_nodes; },
+                             "V: nodes 0..V−1 are the SMPL surface vertices in order")
+      .def_property_readonly("num_bone_nodes", &VolumetricData::numBoneNodes)
+      .def_property_readonly("template_nodes",
+                             [](const VolumetricData& d) { return to_numpy(d.templ->mesh.nodes); },
+                             "(N, 3) rest nodes of the template (β = 0), m")
+      .def_property_readonly("rest_nodes", [](const VolumetricData& d) { return to_numpy(d.rest_nodes); },
+                             "(N, 3) rest nodes X̄(β) = X̄₀ + S β, m")
+      .def_property_readonly("rest_joints", [](const VolumetricData& d) { return to_numpy(d.rest_joints); },
+                             "(24, 3) J(β), m")
+      .def_property_readonly("tets", [](const VolumetricData& d) { return ints_numpy(d.templ->mesh.tets); },
+                             "(T, 4) node indices, positively oriented")
+      .def_property_readonly("weights", [](const VolumetricData& d) { return to_numpy_col(d.templ->fields.weights); },
+                             "(N, 24) skinning weights on all nodes (rows sum to 1)")
+      .def_property_readonly("shapedirs", [](const VolumetricData& d) { return to_numpy_col(d.templ->fields.shapedirs); },
+                             "(3N, K) shape directions, row 3i + c, m per unit β")
+      .def_property_readonly("posedirs", [](const VolumetricData& d) { return to_numpy_col(d.templ->fields.posedirs); },
+                             "(3N, 207) pose blend shapes, row 3i + c, m")
+      .def_property_readonly("bone_of_node",
+                             [](const VolumetricData& d) {
+                               return take_numpy(VecXi(d.bone_of_node), {py::ssize_t(d.bone_of_node.size())});
+                             },
+                             "(N,) int32: bone a node is attached to, −1 for soft tissue")
+      .def_property_readonly("tissue_thickness", [](const VolumetricData& d) { return to_numpy(d.tissue_thickness); },
+                             "(V,) local soft-tissue thickness at the surface vertices, m")
+      .def_property_readonly("density", [](const VolumetricData& d) { return to_numpy(d.materials.density); },
+                             "(T,) kg/m³")
+      .def_property_readonly("young", [](const VolumetricData& d) { return to_numpy(RowMatX(d.materials.young)); },
+                             "(T, 3) Young's moduli E1, E2, E3 along the frame axes a1, a2, a3, Pa")
+      .def_property_readonly("poisson", [](const VolumetricData& d) { return to_numpy(RowMatX(d.materials.poisson)); },
+                             "(T, 3) Poisson ratios ν12, ν13, ν23")
+      .def_property_readonly("shear", [](const VolumetricData& d) { return to_numpy(RowMatX(d.materials.shear)); },
+                             "(T, 3) shear moduli G12, G13, G23, Pa")
+      .def_property_readonly("fung", [](const VolumetricData& d) { return to_numpy(d.materials.fung); },
+                             "(T,) Fung exponent γ (dimensionless)")
+      .def_property_readonly("skin_fraction", [](const VolumetricData& d) { return to_numpy(d.materials.skin_fraction); },
+                             "(T,) fraction of the tet's volume that is skin")
+      .def_property_readonly("frames",
+                             [](const VolumetricData& d) {
+                               RowMatX f(long(d.materials.frame.size()), 9);
+                               for (size_t t = 0; t < d.materials.frame.size(); ++t)
+                                 Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(f.row(long(t)).data()) =
+                                     d.materials.frame[t];
+                               return take_numpy(std::move(f), {py::ssize_t(d.materials.frame.size()), 3, 3});
+                             },
+                             "(T, 3, 3) material frames; columns a1 (bone axis on the tangent plane), "
+                             "a2 = a3 × a1, a3 (inward normal)")
+      .def_property_readonly("quality", [](const VolumetricData& d) { return quality_dict(d.templ->quality); },
+                             "dict: min/max dihedral angle (deg), max/mean radius–edge ratio, min volume (m³)")
+      .def_property_readonly("total_mass", &VolumetricData::totalMass, "Σ ρ · volume over tets at X̄(β), kg");
+
   py::class_<BoneInertia>(m, "BoneInertia",
                           "Mass properties of one bone about its joint centre J_b (rest pose, "
                           "world axes).")
@@ -65,27 +160,61 @@ void bind_volume(py::module_& m) {
       "init_volumetric_data(); the skeleton model (soft tissue off) is the default.");
   avatar
       .def(py::init([](std::shared_ptr<BodyModel> body, const py::object& betas, double density,
-                       double voxel_size) {
+                       double voxel_size, double resolution, const std::string& material_file,
+                       const py::object& cache_dir, bool use_cache) {
              if (!body) throw py::value_error("body: expected a BodyModel, got None");
              const VecX b = betas.is_none() ? VecX(VecX::Zero(body->numBetas()))
                                             : to_vector(betas, "betas", -1, "(K,)");
              SoftAvatarSettings settings;
              settings.density = density;
              settings.voxel_size = voxel_size;
+             settings.volumetric.tet_mesh.resolution = resolution;
+             settings.volumetric.material_file = material_file;
+             if (!cache_dir.is_none())
+               settings.volumetric.cache_dir =
+                   py::module_::import("os").attr("fspath")(cache_dir).cast<std::string>();
+             settings.volumetric.use_cache = use_cache;
              return std::make_shared<SoftAvatar>(std::move(body), b, settings);
            }),
            py::arg("body"), py::arg("betas") = py::none(), py::kw_only(),
            py::arg("density") = defaults.density, py::arg("voxel_size") = defaults.voxel_size,
-           "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³; voxel_size "
-           "m (edge of the voxels that integrate the bone inertias).")
+           py::arg("resolution") = 1.0, py::arg("material_file") = std::string(),
+           py::arg("cache_dir") = py::none(), py::arg("use_cache") = true,
+           "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³ and voxel_size "
+           "m (the skeleton's bone inertias). Soft tissue: resolution (interior node density of the "
+           "tet mesh, 1 ≈ 10 000 nodes for SMPL), material_file (JSON, '' = built-in defaults), "
+           "cache_dir (None = $FLSH_CACHE_DIR or ~/.cache/flsh), use_cache.")
       .def("init_volumetric_data",
            [](SoftAvatar& a) {
              py::gil_scoped_release release;
              a.initVolumetricData();
            },
-           "Builds what the configured model needs (skeleton: rest shape, joints, bone "
-           "inertias, capsules). Idempotent; RuntimeError if soft tissue is enabled (not yet "
-           "available).")
+           "Builds what the configured model needs (every model: rest shape, joints, bone "
+           "inertias, capsules; soft tissue: the volumetric body, from the cache when there). "
+           "Idempotent; RuntimeError for the reduced model (ROM, not yet available).")
+      .def_property_readonly("volumetric_data",
+                             [](const SoftAvatar& a) -> const VolumetricData& { return a.volumetricData(); },
+                             py::return_value_policy::reference_internal,
+                             "VolumetricData of a soft avatar (RuntimeError for the skeleton model).")
+      .def_property_readonly("has_volumetric_data", &SoftAvatar::hasVolumetricData)
+      .def_property_readonly("build_report",
+                             [](const SoftAvatar& a) {
+                               const VolumetricBuildReport& r = a.volumetricBuildReport();
+                               py::dict d;
+                               d["template_from_cache"] = r.template_from_cache;
+                               d["data_from_cache"] = r.data_from_cache;
+                               d["warnings"] = r.warnings;
+                               d["seconds_skeleton"] = a.skeletonSeconds();
+                               d["seconds_meshing"] = r.seconds_meshing;
+                               d["seconds_harmonic"] = r.seconds_harmonic;
+                               d["seconds_bone_nodes"] = r.seconds_bone_nodes;
+                               d["seconds_materials"] = r.seconds_materials;
+                               d["seconds_cache_load"] = r.seconds_cache_load;
+                               d["seconds_cache_store"] = r.seconds_cache_store;
+                               d["seconds_volumetric_total"] = r.seconds_total;
+                               return d;
+                             },
+                             "dict: cache hits, warnings and seconds per stage of the build.")
       .def_property_readonly("initialized", &SoftAvatar::initialized)
       .def_property_readonly("soft_tissue_enabled", &SoftAvatar::softTissueEnabled)
       .def_property_readonly("reduced_model_enabled", &SoftAvatar::reducedModelEnabled)

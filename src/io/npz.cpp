@@ -281,7 +281,8 @@ std::vector<uint8_t> fortranToC(const std::vector<uint8_t>& in, const std::vecto
 }
 
 /// Parses one `.npy` blob. Unsupported dtypes are kept with empty bytes (reported on access).
-NpyArray parseNpy(const std::vector<uint8_t>& blob) {
+/// The blob is consumed: its data bytes become the array's without a copy.
+NpyArray parseNpy(std::vector<uint8_t>&& blob) {
   if (blob.size() < kNpyMagicSize + 4 || std::memcmp(blob.data(), kNpyMagic, kNpyMagicSize) != 0)
     throw InputError("not a .npy array (missing the \\x93NUMPY magic)");
   const int major = blob[6];
@@ -321,7 +322,8 @@ NpyArray parseNpy(const std::vector<uint8_t>& blob) {
     throw InputError("data size " + std::to_string(actual) + " bytes does not match the header (" +
                      header.descr + " " + shapeString(header.shape) + " needs " +
                      std::to_string(expected) + " bytes)");
-  array.bytes.assign(blob.begin() + long(data_start), blob.end());
+  blob.erase(blob.begin(), blob.begin() + long(data_start));  // a move, not a second buffer
+  array.bytes = std::move(blob);
   if (header.fortran_order) array.bytes = fortranToC(array.bytes, array.shape, dtype.itemsize);
   return array;
 }
@@ -363,8 +365,17 @@ std::vector<uint8_t> readWholeFile(const std::string& path) {
   if (fs::is_directory(status)) throw FileError(path + ": is a directory, expected an .npz file");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw FileError(path + ": cannot open for reading");
-  std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)),
-                             std::istreambuf_iterator<char>());
+  // One read of the announced size (byte-wise stream iteration costs ~3 ns per byte: 0.15 s
+  // for a cached avatar), then whatever a growing file appended.
+  const auto size = fs::file_size(path, ec);
+  std::vector<uint8_t> bytes(ec ? 0 : size_t(size));
+  in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size()));
+  bytes.resize(size_t(in.gcount()));
+  if (!in.eof() && in.good()) {
+    char chunk[1 << 16];
+    while (in.read(chunk, sizeof(chunk)) || in.gcount() > 0)
+      bytes.insert(bytes.end(), chunk, chunk + in.gcount());
+  }
   if (in.bad()) throw FileError(path + ": read error");
   return bytes;
 }
@@ -524,27 +535,38 @@ NpzFile::NpzFile(const std::string& path) : path_(path) {
       throw InputError(where + ": cannot read member size: " + zip_strerror(archive));
     zip_file_t* file = zip_fopen_index(archive, zip_uint64_t(index), 0);
     if (!file) throw InputError(where + ": cannot open member: " + zip_strerror(archive));
+    // Trust the announced size only as far as the archive can hold it (stored members are at
+    // most its size; deflate expands at most ~1000×), so a corrupt header cannot trigger a huge
+    // allocation; read straight into the buffer, then make sure nothing follows.
     std::vector<uint8_t> blob;
-    // Trust the announced size only as a hint: a corrupt header must not trigger a huge
-    // allocation before the data proves it.
-    blob.reserve(size_t(std::min<zip_uint64_t>(stat.size, bytes.size() * 4 + 4096)));
-    uint8_t chunk[1 << 16];
+    const zip_uint64_t plausible = zip_uint64_t(bytes.size()) * 1032 + 4096;
+    blob.resize(size_t(std::min<zip_uint64_t>(stat.size, plausible)));
+    size_t filled = 0;
     while (true) {
-      const zip_int64_t got = zip_fread(file, chunk, sizeof(chunk));
+      uint8_t overflow[4096];
+      const bool room = filled < blob.size();
+      const zip_int64_t got = room ? zip_fread(file, blob.data() + filled, blob.size() - filled)
+                                   : zip_fread(file, overflow, sizeof(overflow));
       if (got < 0) {
         const std::string text = zip_file_strerror(file);
         zip_fclose(file);
         throw InputError(where + ": corrupt member (" + text + ")");
       }
       if (got == 0) break;
-      blob.insert(blob.end(), chunk, chunk + got);
+      if (!room) {  // more data than announced: keep it for the size check below
+        blob.insert(blob.end(), overflow, overflow + got);
+        filled = blob.size();
+        continue;
+      }
+      filled += size_t(got);
     }
+    blob.resize(filled);
     zip_fclose(file);
     if (blob.size() != stat.size)
       throw InputError(where + ": truncated member (" + std::to_string(blob.size()) + " of " +
                        std::to_string(stat.size) + " bytes)");
     try {
-      arrays_[key] = parseNpy(blob);
+      arrays_[key] = parseNpy(std::move(blob));
     } catch (const InputError& e) {
       throw InputError(where + ": " + e.what());
     }

@@ -267,9 +267,306 @@ MatX colliderOffsetsJacobian(const SimulableParameterView& v) {
   return D;
 }
 
+// ∂g/∂β = ∂g/∂J dJ/dβ + ∂g/∂I dI/dβ + the contact terms of the rest surface: X_i moves by
+// shapedirs_i dβ, so the node by Σ_c w_ic R_c dX_i and y_ib = R_b(X_i − J_b) by R_b dX_i; the
+// node gradient is linear in the vertex area a_i (∂g_x/∂a_i = g_x / a_i).
+// The contact-surface part (X(β), a(β)) of ∂g/∂β; the J and inertia parts are chained by the
+// callers from the RestJoints and BoneInertia Jacobians.
+MatX shapeSurfaceJacobian(const SimulableParameterView& v) {
+  MatX D = MatX::Zero(6 * v.num_bones, v.shapedirs.cols());
+  const std::vector<Mat3> H = contactNodeHessians(v, v.colliders);
+  for (size_t j = 0; j < v.candidates.size(); ++j) {
+    const Vec3 gx = v.contact_gradient.segment<3>(3 * j);
+    if (gx.isZero(0.0) && H[j].isZero(0.0)) continue;
+    const int i = v.candidates[j];
+    const auto S_i = v.shapedirs.middleRows<3>(3 * i);  // 3 × K
+    Mat3 dx_dX = Mat3::Zero();
+    for (int c = 0; c < v.num_bones; ++c) {
+      const double w = v.weights(i, c);
+      if (w == 0.0) continue;
+      dx_dX += w * v.R[c];
+      D.middleRows<3>(6 * c + 3) -= w * skew(gx) * v.R[c] * S_i;
+    }
+    MatX dgx = H[j] * dx_dX * S_i;
+    if (v.contact_areas[j] > 0.0)
+      dgx += (gx / v.contact_areas[j]) * v.areas_shape_jacobian.row(i);
+    addContactRows(v, int(j), dgx, 0, D);
+  }
+  return D;
+}
+
+// ---- vector–Jacobian products: the formulas above contracted with λ, no matrices -----------
+
+// λ of bone b: translation and rotation parts.
+Vec3 lambdaT(const VecX& lambda, int b) { return lambda.segment<3>(6 * b); }
+Vec3 lambdaW(const VecX& lambda, int b) { return lambda.segment<3>(6 * b + 3); }
+
+// λ contracted with the unit tracking gradient of bone b (the row ∂g/∂k_b of addTrackingColumns).
+double trackingWeight(const SimulableParameterView& v, const VecX& lambda, int b) {
+  const Vec6 g = unitTracking(v, b);
+  const int p = v.parents[b];
+  double s = lambdaW(lambda, b).dot(g.tail<3>());
+  if (p >= 0) s += lambdaW(lambda, p).dot(g.head<3>());
+  return s;
+}
+
+// Node cotangent μ_j = Σ_b w_ib (λt_b + λω_b × y_ib) per candidate (3 each): addContactRows
+// contracted with λ is μ_jᵀ dgx.
+VecX contactNodeCotangents(const SimulableParameterView& v, const VecX& lambda) {
+  VecX mu = VecX::Zero(3 * v.candidates.size());
+  for (size_t j = 0; j < v.candidates.size(); ++j) {
+    const int i = v.candidates[j];
+    Vec3 m = Vec3::Zero();
+    for (int b = 0; b < v.num_bones; ++b) {
+      const double w = v.weights(i, b);
+      if (w == 0.0) continue;
+      const Vec3 y = v.R[b] * (v.X.row(i) - v.J.row(b)).transpose();
+      m += w * (lambdaT(lambda, b) + lambdaW(lambda, b).cross(y));
+    }
+    mu.segment<3>(3 * j) = m;
+  }
+  return mu;
+}
+
+double totalMass(const SimulableParameterView& v) {
+  double mass = 0.0;
+  for (const BoneInertia& in : v.inertia) mass += in.mass;
+  return mass;
+}
+
+// Per-step shared data of the products: tracking weights, node cotangents, contact Hessians.
+struct VJPContext {
+  const SimulableParameterView& v;
+  const VecX& lambda;
+  std::vector<std::vector<int>> sub;
+  std::vector<double> tracking;  // trackingWeight per bone (tracking only)
+  VecX mu;
+  std::vector<Mat3> H;  // exact node Hessians against all colliders
+  VJPContext(const SimulableParameterView& view, const VecX& l) : v(view), lambda(l) {
+    if (v.tracking) {
+      sub = subtrees(v);
+      tracking.resize(v.num_bones);
+      for (int b = 0; b < v.num_bones; ++b) tracking[b] = trackingWeight(v, lambda, b);
+    }
+    mu = contactNodeCotangents(v, lambda);
+    H = contactNodeHessians(v, v.colliders);
+  }
+  bool skip(size_t j) const {
+    return v.contact_gradient.segment<3>(3 * j).isZero(0.0) && H[j].isZero(0.0);
+  }
+};
+
+VecX restJointsVJP(const VJPContext& c) {
+  const SimulableParameterView& v = c.v;
+  const VecX& l = c.lambda;
+  VecX out = VecX::Zero(3 * v.num_bones);
+  const double kj = v.options.joint_stiffness;
+  for (int b = 0; b < v.num_bones; ++b) {
+    const int p = v.parents[b];
+    if (p < 0) continue;
+    const Vec3 y = v.R[p] * (v.J.row(b) - v.J.row(p)).transpose();
+    const Vec3 d = y + v.t.row(p).transpose() - v.t.row(b).transpose();
+    // (kj R_p)ᵀ (λt_p − λt_b) + (kj [y − d]× R_p)ᵀ λω_p, +J_b and −J_p.
+    const Vec3 w = kj * v.R[p].transpose() *
+                   (lambdaT(l, p) - lambdaT(l, b) - (y - d).cross(lambdaW(l, p)));
+    out.segment<3>(3 * b) += w;
+    out.segment<3>(3 * p) -= w;
+  }
+  if (v.tracking) {
+    for (int b = 0; b < v.num_bones; ++b) {
+      const double scale = b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness;
+      const double s = scale * c.tracking[b];
+      for (int k : c.sub[b]) {
+        const Vec3 d = (v.J.row(k) - v.J.row(b)).transpose();
+        const Vec3 dI = 2.0 * s * (v.inertia[k].first_moment + v.inertia[k].mass * d);
+        out.segment<3>(3 * k) += dI;
+        out.segment<3>(3 * b) -= dI;
+      }
+    }
+    out.head<3>() -= v.options.root_stiffness * totalMass(v) * lambdaT(l, 0);
+  }
+  for (size_t j = 0; j < v.candidates.size(); ++j) {
+    if (c.skip(j)) continue;
+    const int i = v.candidates[j];
+    const Vec3 gx = v.contact_gradient.segment<3>(3 * j);
+    const Vec3 Hmu = c.H[j] * c.mu.segment<3>(3 * j);
+    for (int k = 0; k < v.num_bones; ++k) {
+      const double w = v.weights(i, k);
+      if (w == 0.0) continue;
+      out.segment<3>(3 * k) += w * v.R[k].transpose() * (lambdaW(l, k).cross(gx) - Hmu);
+    }
+  }
+  return out;
+}
+
+VecX boneInertiaVJP(const VJPContext& c) {
+  const SimulableParameterView& v = c.v;
+  const VecX& l = c.lambda;
+  VecX out = VecX::Zero(kInertiaValues * v.num_bones);
+  const double inv_h2 = 1.0 / (v.options.time_step * v.options.time_step);
+  const Vec3& gravity = v.options.gravity;
+  for (int b = 0; b < v.num_bones; ++b) {
+    const int col = kInertiaValues * b;
+    const Vec3 lt = lambdaT(l, b), lw = lambdaW(l, b);
+    if (!v.is_static) {
+      const Mat3 A = 2.0 * v.R_n[b] - v.R_nm1[b];
+      const Vec3 u = v.t.row(b).transpose() - (2.0 * v.t_n.row(b) - v.t_nm1.row(b)).transpose();
+      out[col] += inv_h2 * u.dot(lt);
+      out.segment<3>(col + 1) +=
+          inv_h2 * ((v.R[b] - A).transpose() * lt + v.R[b].transpose() * u.cross(lw));
+      for (int k = 0; k < 6; ++k) {
+        const Mat3 RSAt = v.R[b] * secondMomentBasis(k) * A.transpose();
+        out[col + 4 + k] += inv_h2 * lw.dot(vee(RSAt - RSAt.transpose()));
+      }
+    }
+    out[col] -= gravity.dot(lt);
+    out.segment<3>(col + 1) += v.R[b].transpose() * lw.cross(gravity);
+  }
+  if (v.tracking) {
+    for (int b = 0; b < v.num_bones; ++b) {
+      const double scale = b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness;
+      const double s = scale * c.tracking[b];
+      for (int k : c.sub[b]) {
+        const Vec3 d = (v.J.row(k) - v.J.row(b)).transpose();
+        const int col = kInertiaValues * k;
+        out[col] += s * d.squaredNorm();
+        out.segment<3>(col + 1) += 2.0 * s * d;
+        out.segment<3>(col + 4).array() += s;  // tr(S)
+      }
+    }
+    const double root = v.options.root_stiffness *
+                        (v.t.row(0).transpose() - v.target_t0).dot(lambdaT(l, 0));
+    for (int k = 0; k < v.num_bones; ++k) out[kInertiaValues * k] += root;
+  }
+  return out;
+}
+
+VecX poseTargetsVJP(const VJPContext& c) {
+  const SimulableParameterView& v = c.v;
+  VecX out = VecX::Zero(3 * v.num_bones);
+  if (!v.tracking) return out;
+  for (int b = 0; b < v.num_bones; ++b) {
+    const int p = v.parents[b];
+    const Mat3 R_p = p < 0 ? Mat3::Identity() : v.R[p];
+    const double stiffness =
+        (b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness) *
+        polarMoment(v, c.sub[b], b);
+    const Vec3 theta = logSO3(v.target_R[b]);
+    const Vec3 e = logSO3(R_p.transpose() * v.R[b] * v.target_R[b].transpose());
+    const Mat3 dw = -stiffness * R_p * leftJacobianInverseSO3(e).transpose() *
+                    leftJacobianSO3(theta);
+    Vec3 lw = lambdaW(c.lambda, b);
+    if (p >= 0) lw -= lambdaW(c.lambda, p);
+    out.segment<3>(3 * b) = dw.transpose() * lw;
+  }
+  return out;
+}
+
+VecX stiffnessesVJP(const VJPContext& c) {
+  const SimulableParameterView& v = c.v;
+  const VecX& l = c.lambda;
+  VecX out = VecX::Zero(4);
+  Vec12 g12;
+  for (int b = 0; b < v.num_bones; ++b) {
+    const int p = v.parents[b];
+    if (p < 0) continue;
+    jointSpringEnergy(v.t.row(p).transpose(), v.R[p], v.t.row(b).transpose(), v.R[b],
+                      v.J.row(p).transpose(), v.J.row(b).transpose(), 1.0, &g12);
+    out[0] += g12.head<6>().dot(l.segment<6>(6 * p)) + g12.tail<6>().dot(l.segment<6>(6 * b));
+  }
+  if (v.tracking) {
+    for (int b = 0; b < v.num_bones; ++b)
+      out[b == 0 ? 2 : 1] += polarMoment(v, c.sub[b], b) * c.tracking[b];
+    out[2] += totalMass(v) * (v.t.row(0).transpose() - v.target_t0).dot(lambdaT(l, 0));
+  }
+  const int n = int(v.candidates.size());
+  if (n > 0) {
+    ContactOptions unit = v.options.contact;
+    unit.stiffness = 1.0;
+    VecX gx = VecX::Zero(3 * n);
+    colliderContactEnergy(v.contact_nodes, v.contact_areas, v.colliders, v.time, unit, &gx);
+    out[3] += gx.dot(c.mu);
+  }
+  return out;
+}
+
+VecX colliderOffsetsVJP(const VJPContext& c) {
+  const SimulableParameterView& v = c.v;
+  const int nc = int(v.colliders.size());
+  VecX out = VecX::Zero(3 * nc);
+  if (v.candidates.empty()) return out;
+  if (nc == 1) {  // the all-collider Hessians are this collider's
+    for (size_t j = 0; j < c.H.size(); ++j) out -= c.H[j] * c.mu.segment<3>(3 * j);
+    return out;
+  }
+  for (int k = 0; k < nc; ++k) {
+    const std::vector<Mat3> H = contactNodeHessians(v, {v.colliders[k]});
+    for (size_t j = 0; j < H.size(); ++j) out.segment<3>(3 * k) -= H[j] * c.mu.segment<3>(3 * j);
+  }
+  return out;
+}
+
+VecX shapeSurfaceVJP(const VJPContext& c) {
+  const SimulableParameterView& v = c.v;
+  VecX out = VecX::Zero(v.shapedirs.cols());
+  for (size_t j = 0; j < v.candidates.size(); ++j) {
+    if (c.skip(j)) continue;
+    const int i = v.candidates[j];
+    const Vec3 gx = v.contact_gradient.segment<3>(3 * j);
+    const Vec3 mu = c.mu.segment<3>(3 * j);
+    Mat3 dx_dX = Mat3::Zero();
+    Vec3 turn = Vec3::Zero();  // Σ_c w R_cᵀ (λω_c × g_x): the rotating lever arms
+    for (int k = 0; k < v.num_bones; ++k) {
+      const double w = v.weights(i, k);
+      if (w == 0.0) continue;
+      dx_dX += w * v.R[k];
+      turn += w * v.R[k].transpose() * lambdaW(c.lambda, k).cross(gx);
+    }
+    const Vec3 node = dx_dX.transpose() * (c.H[j] * mu) - turn;
+    out.noalias() += v.shapedirs.middleRows<3>(3 * i).transpose().lazyProduct(node);
+    if (v.contact_areas[j] > 0.0)
+      out += (gx.dot(mu) / v.contact_areas[j]) * v.areas_shape_jacobian.row(i).transpose();
+  }
+  return out;
+}
+
 }  // namespace
 
-int simParameterSize(SimParameter p, int num_colliders) {
+std::vector<MatX> gradientParameterJacobians(const SimulableParameterView& v,
+                                             const std::vector<SimParameter>& groups,
+                                             bool shape_surface_only) {
+  // RestJoints and BoneInertia are computed once even when Shape chains them too.
+  MatX joints, inertia;
+  bool have_joints = false, have_inertia = false;
+  auto jointsJacobian = [&]() -> const MatX& {
+    if (!have_joints) joints = restJointsJacobian(v), have_joints = true;
+    return joints;
+  };
+  auto inertiaJacobian = [&]() -> const MatX& {
+    if (!have_inertia) inertia = boneInertiaJacobian(v), have_inertia = true;
+    return inertia;
+  };
+  std::vector<MatX> out;
+  out.reserve(groups.size());
+  for (SimParameter p : groups) {
+    switch (p) {
+      case SimParameter::RestJoints: out.push_back(jointsJacobian()); break;
+      case SimParameter::BoneInertia: out.push_back(inertiaJacobian()); break;
+      case SimParameter::Shape:
+        if (shape_surface_only) {
+          out.push_back(shapeSurfaceJacobian(v));
+          break;
+        }
+        out.push_back(jointsJacobian() * v.joints_shape_jacobian +
+                      inertiaJacobian() * v.inertia_shape_jacobian + shapeSurfaceJacobian(v));
+        break;
+      default: out.push_back(gradientParameterJacobian(v, p));
+    }
+  }
+  return out;
+}
+
+int simParameterSize(SimParameter p, int num_colliders, int num_betas) {
   switch (p) {
     case SimParameter::RestJoints: return 3 * kNumJoints;
     case SimParameter::BoneInertia: return kInertiaValues * kNumJoints;
@@ -277,6 +574,7 @@ int simParameterSize(SimParameter p, int num_colliders) {
     case SimParameter::RootTranslationTarget: return 3;
     case SimParameter::Stiffnesses: return 4;
     case SimParameter::ColliderOffsets: return 3 * num_colliders;
+    case SimParameter::Shape: return num_betas;
   }
   throw InputError("SimParameter: unknown parameter group " + std::to_string(int(p)));
 }
@@ -297,6 +595,7 @@ MatX gradientParameterJacobian(const SimulableParameterView& v, SimParameter p) 
     }
     case SimParameter::Stiffnesses: return stiffnessesJacobian(v);
     case SimParameter::ColliderOffsets: return colliderOffsetsJacobian(v);
+    case SimParameter::Shape: return gradientParameterJacobians(v, {p}).front();
   }
   throw InputError("SimParameter: unknown parameter group " + std::to_string(int(p)));
 }
@@ -317,6 +616,106 @@ MatX gradientPreviousStateJacobian(const SimulableParameterView& v, int which) {
     D.block<6, 6>(6 * b, 6 * b) = block;
   }
   return D;
+}
+
+}  // namespace flsh::detail
+
+namespace flsh::detail {
+
+std::vector<VecX> gradientParameterVJPs(const SimulableParameterView& v, const VecX& lambda,
+                                        const std::vector<SimParameter>& groups,
+                                        bool shape_surface_only) {
+  if (lambda.size() != 6 * v.num_bones)
+    throw InputError("Simulable::getGradientParameterVJPs: lambda has " +
+                     std::to_string(lambda.size()) + " values, expected numDofs() = " +
+                     std::to_string(6 * v.num_bones));
+  const VJPContext c(v, lambda);
+  VecX joints, inertia;
+  auto jointsVJP = [&]() -> const VecX& {
+    if (joints.size() == 0) joints = restJointsVJP(c);
+    return joints;
+  };
+  auto inertiaVJP = [&]() -> const VecX& {
+    if (inertia.size() == 0) inertia = boneInertiaVJP(c);
+    return inertia;
+  };
+  std::vector<VecX> out;
+  out.reserve(groups.size());
+  for (SimParameter p : groups) {
+    switch (p) {
+      case SimParameter::RestJoints: out.push_back(jointsVJP()); break;
+      case SimParameter::BoneInertia: out.push_back(inertiaVJP()); break;
+      case SimParameter::PoseTargets: out.push_back(poseTargetsVJP(c)); break;
+      case SimParameter::RootTranslationTarget:
+        out.push_back(v.tracking ? VecX(-v.options.root_stiffness * totalMass(v) *
+                                        lambdaT(lambda, 0))
+                                 : VecX(VecX::Zero(3)));
+        break;
+      case SimParameter::Stiffnesses: out.push_back(stiffnessesVJP(c)); break;
+      case SimParameter::ColliderOffsets: out.push_back(colliderOffsetsVJP(c)); break;
+      case SimParameter::Shape: {
+        VecX shape = shapeSurfaceVJP(c);
+        if (!shape_surface_only) {
+          shape.noalias() += v.joints_shape_jacobian.transpose() * jointsVJP();
+          shape.noalias() += v.inertia_shape_jacobian.transpose() * inertiaVJP();
+        }
+        out.push_back(std::move(shape));
+        break;
+      }
+      default:
+        throw InputError("SimParameter: unknown parameter group " + std::to_string(int(p)));
+    }
+  }
+  return out;
+}
+
+namespace {
+
+void checkPreviousStateVector(const SimulableParameterView& v, const VecX& x, const char* who,
+                              const char* name) {
+  if (x.size() != 6 * v.num_bones)
+    throw InputError(std::string("Simulable::") + who + ": " + name + " has " +
+                     std::to_string(x.size()) + " values, expected numDofs() = " +
+                     std::to_string(6 * v.num_bones));
+}
+
+// Bone b's inertia blocks ∂g_b/∂q_n,b and ∂g_b/∂q_{n−1},b (6 × 6 each).
+void inertiaPreviousBlocks(const SimulableParameterView& v, int b, Mat6& G1, Mat6& G2) {
+  rigidInertiaGradientPreviousStates(v.t.row(b).transpose(), v.R[b], v.t_n.row(b).transpose(),
+                                     v.R_n[b], v.t_nm1.row(b).transpose(), v.R_nm1[b],
+                                     v.inertia[b], v.options.time_step, &G1, &G2);
+}
+
+}  // namespace
+
+void gradientPreviousStatesVJP(const SimulableParameterView& v, const VecX& lambda, VecX* a_n,
+                               VecX* a_nm1) {
+  checkPreviousStateVector(v, lambda, "getGradientPreviousStatesVJP", "lambda");
+  if (a_n) a_n->setZero(lambda.size());
+  if (a_nm1) a_nm1->setZero(lambda.size());
+  if (v.is_static) return;
+  Mat6 G1, G2;
+  for (int b = 0; b < v.num_bones; ++b) {
+    inertiaPreviousBlocks(v, b, G1, G2);
+    const Vec6 l = lambda.segment<6>(6 * b);
+    if (a_n) a_n->segment<6>(6 * b).noalias() = G1.transpose() * l;
+    if (a_nm1) a_nm1->segment<6>(6 * b).noalias() = G2.transpose() * l;
+  }
+}
+
+VecX gradientPreviousStatesJVP(const SimulableParameterView& v, const VecX& dq_n,
+                               const VecX& dq_nm1) {
+  checkPreviousStateVector(v, dq_n, "getGradientPreviousStatesJVP", "dq_n");
+  checkPreviousStateVector(v, dq_nm1, "getGradientPreviousStatesJVP", "dq_nm1");
+  VecX out = VecX::Zero(dq_n.size());
+  if (v.is_static) return out;
+  Mat6 G1, G2;
+  for (int b = 0; b < v.num_bones; ++b) {
+    inertiaPreviousBlocks(v, b, G1, G2);
+    out.segment<6>(6 * b).noalias() =
+        G1 * dq_n.segment<6>(6 * b) + G2 * dq_nm1.segment<6>(6 * b);
+  }
+  return out;
 }
 
 }  // namespace flsh::detail

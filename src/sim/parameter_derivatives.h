@@ -35,10 +35,32 @@ struct SimulableParameterView {
   const VecX& contact_gradient;  // 3 per candidate
   const std::vector<Collider>& colliders;
   double time;
+  // Shape derivatives of the avatar's rest data (for SimParameter::Shape).
+  const MatX& shapedirs;               // 3#V × K
+  const MatX& joints_shape_jacobian;   // 72 × K
+  const MatX& inertia_shape_jacobian;  // 240 × K
+  const MatX& areas_shape_jacobian;    // #V × K
 };
 
-int simParameterSize(SimParameter p, int num_colliders);
+int simParameterSize(SimParameter p, int num_colliders, int num_betas);
 MatX gradientParameterJacobian(const SimulableParameterView& v, SimParameter p);
+/// `shape_surface_only`: the Shape entry is only the contact-surface part (see the VJPs below).
+std::vector<MatX> gradientParameterJacobians(const SimulableParameterView& v,
+                                             const std::vector<SimParameter>& groups,
+                                             bool shape_surface_only = false);
 MatX gradientPreviousStateJacobian(const SimulableParameterView& v, int which);
+
+/// (∂g/∂p)ᵀ λ per group (λ: 6 · num_bones), without forming ∂g/∂p. `shape_surface_only`: the
+/// Shape entry holds only the contact-surface part (X(β), a(β)); the caller chains the
+/// RestJoints and BoneInertia cotangents through dJ/dβ and dI/dβ itself (once per rollout).
+std::vector<VecX> gradientParameterVJPs(const SimulableParameterView& v, const VecX& lambda,
+                                        const std::vector<SimParameter>& groups,
+                                        bool shape_surface_only);
+/// (∂g/∂q_n)ᵀ λ and (∂g/∂q_{n−1})ᵀ λ from the per-bone 6 × 6 inertia blocks (either may be
+/// null); and the tangent ∂g/∂q_n dq_n + ∂g/∂q_{n−1} dq_{n−1}.
+void gradientPreviousStatesVJP(const SimulableParameterView& v, const VecX& lambda, VecX* a_n,
+                               VecX* a_nm1);
+VecX gradientPreviousStatesJVP(const SimulableParameterView& v, const VecX& dq_n,
+                               const VecX& dq_nm1);
 
 }  // namespace flsh::detail

@@ -543,6 +543,95 @@ VecX Simulable::getVelocity() const {
 
 double Simulable::time() const { return impl_->time; }
 
+SimulableStep Simulable::saveStep() const {
+  const Impl& m = *impl_;
+  SimulableStep s;
+  s.R = m.q.R;
+  s.t = m.q.t;
+  s.R_n = m.q_n.R;
+  s.t_n = m.q_n.t;
+  s.R_nm1 = m.q_nm1.R;
+  s.t_nm1 = m.q_nm1.t;
+  s.time = m.time;
+  s.target_R = m.target_R;
+  s.target_t0 = m.target_t0;
+  s.colliders = m.colliders;
+  s.is_static = m.is_static;
+  return s;
+}
+
+void Simulable::restoreStep(const SimulableStep& s) {
+  Impl& m = *impl_;
+  const size_t n = size_t(m.num_bones);
+  for (const auto* R : {&s.R, &s.R_n, &s.R_nm1, &s.target_R})
+    if (R->size() != n)
+      throw InputError("Simulable::restoreStep: the snapshot has " + std::to_string(R->size()) +
+                       " rotations per state, expected " + std::to_string(n) + " bones");
+  for (const auto* t : {&s.t, &s.t_n, &s.t_nm1})
+    if (size_t(t->rows()) != n)
+      throw InputError("Simulable::restoreStep: the snapshot has " +
+                       std::to_string(t->rows()) + " positions per state, expected " +
+                       std::to_string(n) + " bones");
+  m.q.R = s.R;
+  m.q.t = s.t;
+  m.q_n.R = s.R_n;
+  m.q_n.t = s.t_n;
+  m.q_nm1.R = s.R_nm1;
+  m.q_nm1.t = s.t_nm1;
+  m.time = s.time;
+  m.target_R = s.target_R;
+  m.target_t0 = s.target_t0;
+  m.colliders = s.colliders;
+  m.is_static = s.is_static;
+  m.touch();
+  m.ensureContact();  // stats() then report this step's contacts, as after its evaluation
+}
+
+// initialize(): t_0 = J_0 + trans, t_b = R_p (J_b − J_p) + t_p for the first frame's rotations
+// (rest pose: t_b = J_b), velocity (t(frame 1) − t(frame 0))·fps.
+void Simulable::getInitialStateRestJointsJacobian(MatX* state_jacobian,
+                                                  MatX* velocity_jacobian) const {
+  const Impl& m = *impl_;
+  const int nb = m.num_bones;
+  auto translationJacobian = [&](const std::vector<Mat3>& R) {
+    MatX T = MatX::Zero(3 * nb, 3 * nb);
+    for (int b = 0; b < nb; ++b) {
+      const int p = m.parents[b];
+      if (p < 0) {
+        T.block<3, 3>(3 * b, 3 * b) = Mat3::Identity();
+        continue;
+      }
+      T.middleRows<3>(3 * b) = T.middleRows<3>(3 * p);
+      T.block<3, 3>(3 * b, 3 * b) += R[p];
+      T.block<3, 3>(3 * b, 3 * p) -= R[p];
+    }
+    return T;
+  };
+  auto toState = [&](const MatX& T) {
+    MatX D = MatX::Zero(m.dofs(), 3 * nb);
+    for (int b = 0; b < nb; ++b) D.middleRows<3>(6 * b) = T.middleRows<3>(3 * b);
+    return D;
+  };
+  if (!m.mocap) {
+    if (state_jacobian) *state_jacobian = toState(MatX::Identity(3 * nb, 3 * nb));
+    if (velocity_jacobian) *velocity_jacobian = MatX::Zero(m.dofs(), 3 * nb);
+    return;
+  }
+  const Motion& mo = *m.mocap;
+  const MatX T0 =
+      translationJacobian(bonesFromPose(mo.poses.row(0).transpose(), Vec3::Zero(), m.J, m.parents).R);
+  if (state_jacobian) *state_jacobian = toState(T0);
+  if (velocity_jacobian) {
+    if (mo.numFrames() > 1) {
+      const MatX T1 = translationJacobian(
+          bonesFromPose(mo.poses.row(1).transpose(), Vec3::Zero(), m.J, m.parents).R);
+      *velocity_jacobian = toState((T1 - T0) * mo.fps);
+    } else {
+      *velocity_jacobian = MatX::Zero(m.dofs(), 3 * nb);
+    }
+  }
+}
+
 // ---- outputs -----------------------------------------------------------------------------
 
 VecX Simulable::getPose() const {
@@ -958,6 +1047,7 @@ const std::vector<Collider>& Simulable::colliders() const { return impl_->collid
 void Simulable::setStatic(bool on) { impl_->is_static = on; }
 bool Simulable::isStatic() const { return impl_->is_static; }
 const SoftAvatar& Simulable::avatar() const { return *impl_->avatar; }
+std::shared_ptr<const Motion> Simulable::mocap() const { return impl_->mocap; }
 const SimulableOptions& Simulable::options() const { return impl_->options; }
 
 SimulableStats Simulable::stats() const {
@@ -981,21 +1071,43 @@ detail::SimulableParameterView parameterView(const Simulable::Impl& m) {
   return {m.num_bones, m.parents, m.J, m.inertia, m.options, m.mocap && m.options.track_mocap,
           m.is_static, m.q.R, m.q.t, m.q_n.R, m.q_n.t, m.q_nm1.R, m.q_nm1.t, m.target_R,
           m.target_t0, m.avatar->body().weights, m.avatar->restVertices(), m.contact.candidates,
-          m.contact.nodes, m.contact.areas, m.contact.gradient, m.colliders, m.time};
+          m.contact.nodes, m.contact.areas, m.contact.gradient, m.colliders, m.time,
+          m.avatar->body().shapedirs, m.avatar->restJointsShapeJacobian(),
+          m.avatar->boneInertiaShapeJacobian(), m.avatar->vertexAreasShapeJacobian()};
 }
 
 }  // namespace
 
 int Simulable::parameterSize(SimParameter p) const {
-  return detail::simParameterSize(p, int(impl_->colliders.size()));
+  return detail::simParameterSize(p, int(impl_->colliders.size()),
+                                  int(impl_->avatar->betas().size()));
 }
 
 MatX Simulable::getGradientParameterJacobian(SimParameter p) const {
   return detail::gradientParameterJacobian(parameterView(*impl_), p);
 }
 
+std::vector<MatX> Simulable::getGradientParameterJacobians(
+    const std::vector<SimParameter>& groups, bool shape_surface_only) const {
+  return detail::gradientParameterJacobians(parameterView(*impl_), groups, shape_surface_only);
+}
+
 MatX Simulable::getGradientPreviousStateJacobian(int which) const {
   return detail::gradientPreviousStateJacobian(parameterView(*impl_), which);
+}
+
+std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
+                                                     const std::vector<SimParameter>& groups,
+                                                     bool shape_surface_only) const {
+  return detail::gradientParameterVJPs(parameterView(*impl_), lambda, groups, shape_surface_only);
+}
+
+void Simulable::getGradientPreviousStatesVJP(const VecX& lambda, VecX* a_n, VecX* a_nm1) const {
+  detail::gradientPreviousStatesVJP(parameterView(*impl_), lambda, a_n, a_nm1);
+}
+
+VecX Simulable::getGradientPreviousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const {
+  return detail::gradientPreviousStatesJVP(parameterView(*impl_), dq_n, dq_nm1);
 }
 
 VecX Simulable::getParameter(SimParameter p) const {
@@ -1025,12 +1137,17 @@ VecX Simulable::getParameter(SimParameter p) const {
       for (size_t k = 0; k < m.colliders.size(); ++k)
         value.segment<3>(3 * k) = m.colliders[k].path.offsetAt(m.time);
       break;
+    case SimParameter::Shape: value = m.avatar->betas(); break;
   }
   return value;
 }
 
 void Simulable::setParameter(SimParameter p, const VecX& value) {
   Impl& m = *impl_;
+  if (p == SimParameter::Shape)
+    throw InputError(
+        "Simulable::setParameter: Shape (β) is fixed by the SoftAvatar the simulable was built "
+        "with; build a new SoftAvatar with the new β and a new Simulable on it");
   if (value.size() != parameterSize(p))
     throw InputError("Simulable::setParameter: value has " + std::to_string(value.size()) +
                      " entries, expected parameterSize() = " + std::to_string(parameterSize(p)));
@@ -1088,6 +1205,7 @@ void Simulable::setParameter(SimParameter p, const VecX& value) {
         for (Vec3& o : path.offsets) o += shift;
       }
       break;
+    case SimParameter::Shape: break;  // rejected above
   }
   m.touch();
 }

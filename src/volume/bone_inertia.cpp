@@ -1,4 +1,6 @@
-// Bone mass properties of a closed surface filled with a uniform density (computeBoneInertia).
+// Bone mass properties of a closed surface filled with a uniform density: voxel moments lumped
+// to vertices (computeVertexMassMoments, steps 1–4a) and spread over bones (lumpBoneInertia,
+// step 4b); computeBoneInertia is the two in sequence.
 //
 // Pipeline:
 // 1. Columns: a regular grid of vertical lines (along z) at voxel centres (x_i, y_j). Every
@@ -17,10 +19,11 @@
 //    rings of cells); ties go to the smaller vertex index, so the answer does not depend on the
 //    search order. This is the only costly step and runs in parallel; each piece's answer is a
 //    pure function of its centre and results are stored per piece.
-// 4. Accumulation, serial and in piece order (deterministic whatever the thread count): each
+// 4. Accumulation, serial and in piece order (deterministic whatever the thread count): (a) each
 //    piece's mass, first and second moments (including its own box inertia) go to its nearest
-//    vertex, about that vertex; then every vertex spreads its moments over the bones by its
-//    skinning weights, shifted to each bone's joint centre.
+//    vertex, about that vertex; (b) every vertex spreads its moments over the bones by its
+//    skinning weights, shifted to each bone's joint centre (SoftAvatar moves the template's
+//    vertex moments to the shaped vertices first: see soft_avatar.h).
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -173,9 +176,8 @@ class VertexGrid {
   std::vector<int> index_;
 };
 
-void checkInputs(const MatX3& V, const MatX3i& F, const MatX& weights, const MatX3& J,
-                 double density, double voxel_size) {
-  const std::string fn = "computeBoneInertia: ";
+void checkSurface(const MatX3& V, const MatX3i& F, double density, double voxel_size,
+                  const std::string& fn = "computeVertexMassMoments: ") {
   if (V.rows() < 4)
     throw InputError(fn + "V has " + std::to_string(V.rows()) +
                      " vertices, expected at least 4 (a closed surface)");
@@ -187,15 +189,6 @@ void checkInputs(const MatX3& V, const MatX3i& F, const MatX& weights, const Mat
     throw InputError(fn + "F has vertex indices in [" + std::to_string(F.minCoeff()) + ", " +
                      std::to_string(F.maxCoeff()) + "], expected [0, " +
                      std::to_string(V.rows() - 1) + "]");
-  if (weights.rows() != V.rows() || weights.cols() < 1)
-    throw InputError(fn + "weights has shape " +
-                     shapeString({long(weights.rows()), long(weights.cols())}) + ", expected (" +
-                     std::to_string(V.rows()) + ", bones)");
-  if (!weights.allFinite()) throw InputError(fn + "weights contains NaN or Inf");
-  if (J.rows() != weights.cols())
-    throw InputError(fn + "J has shape " + shapeString({long(J.rows()), 3}) + ", expected (" +
-                     std::to_string(weights.cols()) + ", 3) (one joint per weights column)");
-  if (!J.allFinite()) throw InputError(fn + "J contains NaN or Inf");
   if (!(density > 0) || !std::isfinite(density))
     throw InputError(fn + "density = " + std::to_string(density) +
                      ", expected finite and > 0 kg/m³");
@@ -210,11 +203,26 @@ void checkInputs(const MatX3& V, const MatX3i& F, const MatX& weights, const Mat
                      std::to_string(kMaxVoxels) + " (use a larger voxel_size)");
 }
 
+void checkInputs(const MatX3& V, const MatX3i& F, const MatX& weights, const MatX3& J,
+                 double density, double voxel_size) {
+  const std::string fn = "computeBoneInertia: ";
+  checkSurface(V, F, density, voxel_size, fn);
+  if (weights.rows() != V.rows() || weights.cols() < 1)
+    throw InputError(fn + "weights has shape " +
+                     shapeString({long(weights.rows()), long(weights.cols())}) + ", expected (" +
+                     std::to_string(V.rows()) + ", bones)");
+  if (!weights.allFinite()) throw InputError(fn + "weights contains NaN or Inf");
+  if (J.rows() != weights.cols())
+    throw InputError(fn + "J has shape " + shapeString({long(J.rows()), 3}) + ", expected (" +
+                     std::to_string(weights.cols()) + ", 3) (one joint per weights column)");
+  if (!J.allFinite()) throw InputError(fn + "J contains NaN or Inf");
+}
+
 }  // namespace
 
-std::vector<BoneInertia> computeBoneInertia(const MatX3& V, const MatX3i& F, const MatX& weights,
-                                            const MatX3& J, double density, double voxel_size) {
-  checkInputs(V, F, weights, J, density, voxel_size);
+VertexMassMoments computeVertexMassMoments(const MatX3& V, const MatX3i& F, double density,
+                                           double voxel_size) {
+  checkSurface(V, F, density, voxel_size);
   const double h = voxel_size;
   const Vec3 lo = V.colwise().minCoeff(), hi = V.colwise().maxCoeff();
   const voxel::ColumnGrid grid = voxel::columnGrid(lo, hi, h);
@@ -300,40 +308,77 @@ std::vector<BoneInertia> computeBoneInertia(const MatX3& V, const MatX3i& F, con
     }
   }
 
-  // 4. Moments per vertex (about the vertex), then per bone (about its joint).
-  const int nv = int(V.rows()), nb = int(weights.cols());
-  std::vector<double> vertex_mass(nv, 0.0);
-  std::vector<Vec3> vertex_first(nv, Vec3::Zero());
-  std::vector<Mat3> vertex_second(nv, Mat3::Zero());
+  // 4. Moments per vertex, about the vertex.
+  const int nv = int(V.rows());
+  VertexMassMoments moments;
+  moments.mass = VecX::Zero(nv);
+  moments.first_moment = MatX3::Zero(nv, 3);
+  moments.second_moment.assign(nv, Mat3::Zero());
   const double xy_inertia = h * h / 12;  // per unit mass, of an h × h cross-section
   for (size_t p = 0; p < pieces.size(); ++p) {
     const int v = nearest[p];
     const double m = density * h * h * pieces[p].length;
     const Vec3 d = pieces[p].centre - V.row(v).transpose();
-    vertex_mass[v] += m;
-    vertex_first[v] += m * d;
+    moments.mass[v] += m;
+    moments.first_moment.row(v) += m * d.transpose();
     Mat3 own = Mat3::Zero();
     own.diagonal() << xy_inertia, xy_inertia, pieces[p].length * pieces[p].length / 12;
-    vertex_second[v] += m * (d * d.transpose() + own);
+    moments.second_moment[v] += m * (d * d.transpose() + own);
   }
+  return moments;
+}
+
+std::vector<BoneInertia> lumpBoneInertia(const VertexMassMoments& moments, const MatX3& V,
+                                         const MatX& weights, const MatX3& J, double mass_scale) {
+  const std::string fn = "lumpBoneInertia: ";
+  const long nv = V.rows();
+  if (moments.mass.size() != nv || moments.first_moment.rows() != nv ||
+      long(moments.second_moment.size()) != nv)
+    throw InputError(fn + "moments hold " + std::to_string(moments.mass.size()) +
+                     " vertices, expected V's " + std::to_string(nv));
+  if (weights.rows() != nv || J.rows() != weights.cols())
+    throw InputError(fn + "weights has shape " +
+                     shapeString({long(weights.rows()), long(weights.cols())}) + " and J " +
+                     shapeString({long(J.rows()), 3}) + ", expected (" + std::to_string(nv) +
+                     ", bones) and (bones, 3)");
+  if (!(mass_scale > 0) || !std::isfinite(mass_scale))
+    throw InputError(fn + "mass_scale = " + std::to_string(mass_scale) +
+                     ", expected finite and > 0");
+  const int nb = int(weights.cols());
   std::vector<BoneInertia> bones(nb);
   for (int v = 0; v < nv; ++v) {
-    if (vertex_mass[v] == 0) continue;
+    const double vertex_mass = moments.mass[v];
+    if (vertex_mass == 0) continue;
+    const Vec3 vertex_first = moments.first_moment.row(v).transpose();
+    const Mat3& vertex_second = moments.second_moment[v];
     for (int b = 0; b < nb; ++b) {
       const double w = weights(v, b);
       if (w == 0) continue;
       const Vec3 offset = V.row(v).transpose() - J.row(b).transpose();  // vertex − joint
       BoneInertia& bone = bones[b];
-      bone.mass += w * vertex_mass[v];
-      bone.first_moment += w * (vertex_first[v] + vertex_mass[v] * offset);
+      bone.mass += w * vertex_mass;
+      bone.first_moment += w * (vertex_first + vertex_mass * offset);
       bone.second_moment +=
-          w * (vertex_second[v] + vertex_first[v] * offset.transpose() +
-               offset * vertex_first[v].transpose() + vertex_mass[v] * offset * offset.transpose());
+          w * (vertex_second + vertex_first * offset.transpose() +
+               offset * vertex_first.transpose() + vertex_mass * offset * offset.transpose());
     }
   }
-  for (BoneInertia& bone : bones)  // exact symmetry (the sums above are symmetric up to rounding)
+  for (BoneInertia& bone : bones) {
+    // exact symmetry (the sums above are symmetric up to rounding)
     bone.second_moment = 0.5 * (bone.second_moment + bone.second_moment.transpose()).eval();
+    if (mass_scale != 1.0) {
+      bone.mass *= mass_scale;
+      bone.first_moment *= mass_scale;
+      bone.second_moment *= mass_scale;
+    }
+  }
   return bones;
+}
+
+std::vector<BoneInertia> computeBoneInertia(const MatX3& V, const MatX3i& F, const MatX& weights,
+                                            const MatX3& J, double density, double voxel_size) {
+  checkInputs(V, F, weights, J, density, voxel_size);
+  return lumpBoneInertia(computeVertexMassMoments(V, F, density, voxel_size), V, weights, J);
 }
 
 }  // namespace flsh

@@ -2,13 +2,19 @@
 //
 // The skeleton model needs no tetrahedral mesh: its mass properties come from the closed rest
 // surface filled with a uniform density (computeBoneInertia) and its collision proxies are one
-// capsule per bone (fitBoneCapsules). The soft-tissue models (FEM, ROM) are not part of this
-// version; asking for them is an error rather than a silent fallback to the skeleton.
+// capsule per bone (fitBoneCapsules). With soft tissue the volumetric body is built on top
+// (volumetric_data.h). The reduced model (ROM) is not part of this version; asking for it is
+// an error rather than a silent fallback.
 #include "flsh/volume/soft_avatar.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <mutex>
 #include <string>
+#include <tuple>
+#include <vector>
 
 #include "body/body_model_derived.h"
 #include "flsh/body/body_forward.h"
@@ -20,6 +26,39 @@ namespace {
 
 std::string modelName(const BodyModel& m) {
   return m.source.empty() ? std::string("body model") : "body model '" + m.source + "'";
+}
+
+// Template mass moments shared by the avatars of one body model (same density and voxel size):
+// entries stay while their body model is alive, so a second β never re-voxelizes.
+std::shared_ptr<const VertexMassMoments> sharedTemplateMoments(
+    const std::shared_ptr<const BodyModel>& body, const MatX3& template_vertices, double density,
+    double voxel_size) {
+  struct Entry {
+    std::weak_ptr<const BodyModel> body;
+    double density, voxel_size;
+    std::shared_ptr<const VertexMassMoments> moments;
+  };
+  static std::mutex mutex;
+  static std::vector<Entry> cache;
+  std::lock_guard<std::mutex> lock(mutex);
+  cache.erase(std::remove_if(cache.begin(), cache.end(),
+                             [](const Entry& e) { return e.body.expired(); }),
+              cache.end());
+  for (const Entry& e : cache)
+    if (e.body.lock() == body && e.density == density && e.voxel_size == voxel_size)
+      return e.moments;
+  auto moments = std::make_shared<const VertexMassMoments>(
+      computeVertexMassMoments(template_vertices, body->faces, density, voxel_size));
+  cache.push_back({body, density, voxel_size, moments});
+  return moments;
+}
+
+// Enclosed volume of a closed surface (divergence theorem: signed tetrahedra (0, a, b, c)).
+double enclosedVolume(const MatX3& V, const MatX3i& F) {
+  double volume = 0;
+  for (int f = 0; f < F.rows(); ++f)
+    volume += Vec3(V.row(F(f, 0))).dot(Vec3(V.row(F(f, 1))).cross(Vec3(V.row(F(f, 2))))) / 6;
+  return volume;
 }
 
 }  // namespace
@@ -50,13 +89,14 @@ SoftAvatar::SoftAvatar(std::shared_ptr<const BodyModel> body, const VecX& betas,
 
 void SoftAvatar::initVolumetricData() {
   if (initialized_) return;
-  // The reduced model and the cubatures refine the soft-tissue model; without soft tissue
-  // they have nothing to act on and are ignored.
-  if (soft_tissue_)
+  // The cubatures refine the reduced model; without it they have nothing to act on and are
+  // ignored (as the reduced model is without soft tissue).
+  if (soft_tissue_ && reduced_)
     throw Error(
-        "SoftAvatar::initVolumetricData: soft tissue is enabled, but the FEM and ROM "
-        "soft-tissue models are not available yet in this version of flsh (they come with the "
-        "volumetric body); use the skeleton model (enableSoftTissue(false))");
+        "SoftAvatar::initVolumetricData: the reduced soft-tissue model (ROM: handle basis and "
+        "cubature) is not available yet in this version of flsh; use the FEM soft skeleton "
+        "(enableReducedModel(false)) or the skeleton (enableSoftTissue(false))");
+  const auto start = std::chrono::steady_clock::now();
   const BodyModel& body = *body_;
   MatX3 vertices = shapedVertices(body, betas_);
   MatX3 joints = MatX3(body.J_regressor * vertices);
@@ -75,14 +115,113 @@ void SoftAvatar::initVolumetricData() {
                      " encloses a volume of " + std::to_string(volume) +
                      " m³, expected > 0 (a closed surface with outward, counter-clockwise faces)");
 
-  bone_inertia_ = computeBoneInertia(vertices, F, body.weights, joints, settings_.density,
-                                     settings_.voxel_size);
+  // Bone inertia: the template's voxel moments carried by the shaped vertices, masses scaled
+  // to the shaped volume (see soft_avatar.h: smooth in β, for the adjoint).
+  const long K = body.numBetas();
+  const MatX3 template_vertices = shapedVertices(body, VecX::Zero(K));
+  template_volume_ = enclosedVolume(template_vertices, F);
+  if (!(template_volume_ > 0))
+    throw InputError("SoftAvatar::initVolumetricData: the template surface of " +
+                     modelName(body) + " encloses a volume of " +
+                     std::to_string(template_volume_) + " m³, expected > 0");
+  template_moments_ =
+      sharedTemplateMoments(body_, template_vertices, settings_.density, settings_.voxel_size);
+  const double mass_scale = volume / template_volume_;
+  bone_inertia_ = lumpBoneInertia(*template_moments_, vertices, body.weights, joints, mass_scale);
   capsules_ = fitBoneCapsules(vertices, body.weights, joints, body.parents);
+  buildShapeJacobians(vertices, joints, mass_scale);
   rest_vertices_ = std::move(vertices);
   rest_joints_ = std::move(joints);
   vertex_areas_ = std::move(areas);
   volume_ = volume;
+  skeleton_seconds_ =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (soft_tissue_)
+    volumetric_ = std::make_shared<const VolumetricData>(
+        buildVolumetricData(body, betas_, settings_.volumetric, &build_report_));
   initialized_ = true;
+}
+
+const VolumetricData& SoftAvatar::volumetricData() const {
+  if (!volumetric_)
+    throw Error(std::string("SoftAvatar::volumetricData: ") +
+                (soft_tissue_ ? "call initVolumetricData() first"
+                              : "this avatar has no volumetric body (soft tissue is off: "
+                                "enableSoftTissue() before initVolumetricData())"));
+  return *volumetric_;
+}
+
+// Exact β-derivatives of the rest data (all polynomials in β): joints J = J_regressor X(β),
+// areas and volume of the shaped surface, and the bone inertias of lumpBoneInertia with
+// dX_i/dβ = shapedirs_i and the mass scale s = vol(β)/vol(0).
+void SoftAvatar::buildShapeJacobians(const MatX3& X, const MatX3& J, double mass_scale) {
+  const BodyModel& body = *body_;
+  const MatX& S = body.shapedirs;  // 3#V × K
+  const long K = S.cols(), nv = X.rows(), nb = J.rows();
+  const MatX3i& F = body.faces;
+  joints_shape_jacobian_ = MatX::Zero(3 * nb, K);
+  for (int b = 0; b < nb; ++b)
+    for (SpMatR::InnerIterator it(body.J_regressor, b); it; ++it)
+      joints_shape_jacobian_.middleRows<3>(3 * b) += it.value() * S.middleRows<3>(3 * it.col());
+  areas_shape_jacobian_ = MatX::Zero(nv, K);
+  volume_shape_gradient_ = VecX::Zero(K);
+  for (int f = 0; f < F.rows(); ++f) {
+    const int ia = F(f, 0), ib = F(f, 1), ic = F(f, 2);
+    const Vec3 a = X.row(ia), b = X.row(ib), c = X.row(ic);
+    const Vec3 n = (b - a).cross(c - a);
+    const double length = n.norm();
+    const auto Sa = S.middleRows<3>(3 * ia), Sb = S.middleRows<3>(3 * ib), Sc = S.middleRows<3>(3 * ic);
+    // Area = |n|/6 per vertex, with ∂|n|/∂a = n̂ × (c − b) (and cyclically for b, c).
+    if (length > 0) {
+      const Vec3 nh = n / length;
+      const Eigen::RowVectorXd dlength = (nh.cross(c - b)).transpose() * Sa +
+                                         (nh.cross(a - c)).transpose() * Sb +
+                                         (nh.cross(b - a)).transpose() * Sc;
+      for (int k = 0; k < 3; ++k) areas_shape_jacobian_.row(F(f, k)) += dlength / 6;
+    }
+    volume_shape_gradient_ += ((b.cross(c)).transpose() * Sa + (c.cross(a)).transpose() * Sb +
+                               (a.cross(b)).transpose() * Sc)
+                                  .transpose() /
+                              6;
+  }
+  // Bone inertias: unscaled sums U (mass, first, second) and their derivatives, then
+  // d(s U) = ds U + s dU with ds = dvol / vol(0).
+  const VertexMassMoments& M = *template_moments_;
+  const MatX& W = body.weights;
+  inertia_shape_jacobian_ = MatX::Zero(10 * nb, K);
+  const VecX ds = volume_shape_gradient_ / template_volume_;
+  for (int b = 0; b < nb; ++b) {
+    const BoneInertia& in = bone_inertia_[b];  // already scaled: U = in / s
+    const Mat3& Sm = in.second_moment;
+    Eigen::Matrix<double, 10, 1> U;
+    U << in.mass, in.first_moment, Sm(0, 0), Sm(1, 1), Sm(2, 2), Sm(0, 1), Sm(0, 2), Sm(1, 2);
+    inertia_shape_jacobian_.middleRows<10>(10 * b) = (U / mass_scale) * ds.transpose();
+  }
+  for (int v = 0; v < nv; ++v) {
+    const double m = M.mass[v];
+    if (m == 0) continue;
+    const Vec3 fv = M.first_moment.row(v).transpose();
+    const auto Sv = S.middleRows<3>(3 * v);
+    for (int b = 0; b < nb; ++b) {
+      const double w = W(v, b);
+      if (w == 0) continue;
+      const Vec3 o = X.row(v).transpose() - J.row(b).transpose();
+      const double sw = mass_scale * w;
+      for (long k = 0; k < K; ++k) {
+        const Vec3 d = Sv.col(k) - joints_shape_jacobian_.block<3, 1>(3 * b, k);
+        const Mat3 dS = fv * d.transpose() + d * fv.transpose() +
+                        m * (d * o.transpose() + o * d.transpose());
+        auto col = inertia_shape_jacobian_.block<10, 1>(10 * b, k);
+        col.segment<3>(1) += sw * m * d;
+        col[4] += sw * dS(0, 0);
+        col[5] += sw * dS(1, 1);
+        col[6] += sw * dS(2, 2);
+        col[7] += sw * dS(0, 1);
+        col[8] += sw * dS(0, 2);
+        col[9] += sw * dS(1, 2);
+      }
+    }
+  }
 }
 
 double SoftAvatar::totalMass() const {

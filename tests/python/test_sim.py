@@ -98,11 +98,15 @@ def test_avatar_settings_have_paper_aliases(avatar):
     with pytest.raises(ValueError, match="rest_vertices: the avatar is not initialized"):
         fresh.rest_vertices
     fresh.enableSoftTissue()
-    assert fresh.soft_tissue_enabled
-    with pytest.raises(RuntimeError, match="soft tissue"):
+    fresh.enableReducedModel()
+    assert fresh.soft_tissue_enabled and fresh.reduced_model_enabled
+    with pytest.raises(RuntimeError, match="ROM"):
         fresh.initVolumetricData()
     fresh.enable_soft_tissue(False)
     fresh.initVolumetricData()
+    assert not fresh.has_volumetric_data
+    with pytest.raises(RuntimeError, match="soft tissue is off"):
+        fresh.volumetric_data
     assert fresh.initialized and fresh.total_mass > 0
     with pytest.raises(ValueError, match="betas: expected shape"):
         flsh.SoftAvatar(avatar.body, np.zeros((2, 2)))

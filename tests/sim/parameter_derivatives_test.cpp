@@ -138,6 +138,77 @@ TEST(ParameterDerivatives, StiffnessesMatchRebuiltSimulables) {
                                                analytic * scale.asDiagonal(), 1e-5));
 }
 
+// ∂g/∂β against central differences of simulables built on avatars at β ± ε, at the same
+// states and colliders (through J(β), bone inertias, the contact surface and vertex areas).
+TEST(ParameterDerivatives, ShapeMatchesRebuiltAvatars) {
+  Scenario s = walkingAvatarInContact();
+  Simulable& sim = *s.sim;
+  totalGradient(sim);
+  ASSERT_GT(sim.stats().active_contacts, 1);
+  const VecX beta0 = sim.getParameter(SimParameter::Shape);
+  ASSERT_EQ(beta0.size(), sim.parameterSize(SimParameter::Shape));
+  const MatX analytic = sim.getGradientParameterJacobian(SimParameter::Shape);
+  ASSERT_EQ(analytic.rows(), sim.numDofs());
+  ASSERT_EQ(analytic.cols(), beta0.size());
+  const auto gradient = [&](const VecX& beta) {
+    auto avatar = std::make_shared<SoftAvatar>(shared().body, beta, shared().avatar->settings());
+    avatar->initVolumetricData();
+    Simulable rebuilt(avatar, shared().walk, sim.options());
+    rebuilt.initialize();
+    rebuilt.preUpdate();
+    setHistory(rebuilt, s.N, VecX::Zero(s.N.size()), s.M, VecX::Zero(s.N.size()), s.Q);
+    rebuilt.setColliders(sim.colliders());
+    return totalGradient(rebuilt);
+  };
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(gradient, beta0, analytic, 1e-5, 1e-5));
+}
+
+TEST(ParameterDerivatives, SeveralGroupsAtOnceMatchOneByOne) {
+  Scenario s = walkingAvatarInContact();
+  const std::vector<SimParameter> groups = {SimParameter::Shape, SimParameter::Stiffnesses,
+                                            SimParameter::RestJoints, SimParameter::BoneInertia};
+  const std::vector<MatX> together = s.sim->getGradientParameterJacobians(groups);
+  ASSERT_EQ(together.size(), groups.size());
+  for (size_t k = 0; k < groups.size(); ++k)
+    EXPECT_TRUE(together[k].isApprox(s.sim->getGradientParameterJacobian(groups[k]), 1e-14)) << k;
+}
+
+TEST(ParameterDerivatives, ShapeIsFixedByTheAvatar) {
+  Scenario s = walkingAvatarInContact();
+  const std::string msg = messageOf<InputError>(
+      [&] { s.sim->setParameter(SimParameter::Shape, VecX::Zero(10)); });
+  EXPECT_NE(msg.find("SoftAvatar"), std::string::npos) << msg;
+  EXPECT_EQ(s.sim->getParameter(SimParameter::Shape), shared().avatar->betas());
+}
+
+// What initialize() sets, as a function of the rest joints: against setParameter(RestJoints)
+// followed by initialize().
+TEST(ParameterDerivatives, InitialStateRestJointsJacobianMatchesFiniteDifferences) {
+  Simulable sim(shared().avatar, shared().walk);
+  sim.initialize();
+  const VecX J0 = sim.getParameter(SimParameter::RestJoints);
+  const VecX q0 = sim.getState();
+  MatX dq, dv;
+  sim.getInitialStateRestJointsJacobian(&dq, &dv);
+  const auto state = [&](const VecX& J) {
+    sim.setParameter(SimParameter::RestJoints, J);
+    sim.initialize();
+    // Increments relative to q0 (rotations do not move: compare the translations directly).
+    VecX d = sim.getState() - q0;
+    sim.setParameter(SimParameter::RestJoints, J0);
+    return d;
+  };
+  const auto velocity = [&](const VecX& J) {
+    sim.setParameter(SimParameter::RestJoints, J);
+    sim.initialize();
+    const VecX v = sim.getVelocity();
+    sim.setParameter(SimParameter::RestJoints, J0);
+    return v;
+  };
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(state, J0, dq, 1e-7));
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(velocity, J0, dv, 1e-6));
+}
+
 TEST(ParameterDerivatives, PreviousStatesMatchFiniteDifferences) {
   Scenario s = walkingAvatarInContact();
   Simulable& sim = *s.sim;
@@ -171,7 +242,8 @@ TEST(ParameterDerivatives, DerivativeCallsDoNotChangeTheState) {
   const int contacts = sim.stats().active_contacts;
   for (SimParameter p : {SimParameter::RestJoints, SimParameter::BoneInertia,
                          SimParameter::PoseTargets, SimParameter::RootTranslationTarget,
-                         SimParameter::Stiffnesses, SimParameter::ColliderOffsets})
+                         SimParameter::Stiffnesses, SimParameter::ColliderOffsets,
+                         SimParameter::Shape})
     sim.getGradientParameterJacobian(p);
   sim.getGradientPreviousStateJacobian(1);
   sim.getGradientPreviousStateJacobian(2);

@@ -1,17 +1,21 @@
 // Shared inputs of the volume tests: the small synthetic body (generated once per binary),
-// closed analytic meshes (box, icosphere), their exact solid integrals and an inside test.
+// closed analytic meshes (box, icosphere), their exact solid integrals and an inside test, and
+// structured tet meshes of boxes (no CGAL) with the boundary nodes first, as TetMesh requires.
 #pragma once
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <map>
 #include <memory>
 #include <utility>
+#include <vector>
 
 #include "flsh/body/body_model.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/types.h"
+#include "flsh/volume/tet_mesh.h"
 
 namespace flsh::test {
 
@@ -124,6 +128,92 @@ inline MatX weightsOnBoneZero(long vertices, int bones = 24) {
   MatX w = MatX::Zero(vertices, bones);
   w.col(0).setOnes();
   return w;
+}
+
+/// Structured tet mesh of the box [origin, origin + size]: n[0] × n[1] × n[2] cubes, each split
+/// into 6 tets around its main diagonal (the Kuhn split, conforming between cubes), positively
+/// oriented. Nodes are renumbered so that the boundary nodes come first (num_surface_nodes of
+/// them), each group in lexicographic grid order. N = Π(n + 1), #T = 6 Π n.
+inline TetMesh gridTetMesh(const Eigen::Vector3i& n, const Vec3& size,
+                           const Vec3& origin = Vec3::Zero()) {
+  const int nx = n[0] + 1, ny = n[1] + 1, nz = n[2] + 1;
+  auto gridIndex = [&](int i, int j, int k) { return (k * ny + j) * nx + i; };
+  const int total = nx * ny * nz;
+  std::vector<int> renumber(total);
+  std::vector<int> boundary, interior;
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const bool on_boundary =
+            i == 0 || j == 0 || k == 0 || i == nx - 1 || j == ny - 1 || k == nz - 1;
+        (on_boundary ? boundary : interior).push_back(gridIndex(i, j, k));
+      }
+  TetMesh mesh;
+  mesh.num_surface_nodes = int(boundary.size());
+  mesh.nodes.resize(total, 3);
+  int next = 0;
+  for (const std::vector<int>* group : {&boundary, &interior})
+    for (int g : *group) {
+      renumber[g] = next;
+      const int i = g % nx, j = (g / nx) % ny, k = g / (nx * ny);
+      mesh.nodes.row(next++) = (origin + Vec3(size.x() * i / n[0], size.y() * j / n[1],
+                                              size.z() * k / n[2]))
+                                   .transpose();
+    }
+  const int permutations[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2},
+                                  {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  mesh.tets.resize(6 * n[0] * n[1] * n[2], 4);
+  int t = 0;
+  for (int k = 0; k < n[2]; ++k)
+    for (int j = 0; j < n[1]; ++j)
+      for (int i = 0; i < n[0]; ++i)
+        for (const auto& axes : permutations) {
+          // A monotone path from the cube's corner (i, j, k) to its opposite corner.
+          int corner[3] = {i, j, k};
+          int tet[4];
+          tet[0] = renumber[gridIndex(corner[0], corner[1], corner[2])];
+          for (int step = 0; step < 3; ++step) {
+            ++corner[axes[step]];
+            tet[step + 1] = renumber[gridIndex(corner[0], corner[1], corner[2])];
+          }
+          const Vec3 x0 = mesh.nodes.row(tet[0]);
+          const double det = (mesh.nodes.row(tet[1]).transpose() - x0)
+                                 .cross(mesh.nodes.row(tet[2]).transpose() - x0)
+                                 .dot(mesh.nodes.row(tet[3]).transpose() - x0);
+          if (det < 0) std::swap(tet[2], tet[3]);
+          mesh.tets.row(t++) << tet[0], tet[1], tet[2], tet[3];
+        }
+  return mesh;
+}
+
+/// Exact distance of a point inside the axis-aligned box [origin, origin + size] to its boundary.
+inline double distanceInsideBox(const Vec3& x, const Vec3& size, const Vec3& origin = Vec3::Zero()) {
+  const Vec3 low = x - origin, high = origin + size - x;
+  return std::min(low.minCoeff(), high.minCoeff());
+}
+
+/// A "limb": a box of 0.12 × 0.12 × 0.40 m around the z axis (z from 0 to 0.4) with a two-bone
+/// skeleton on its axis (joint 0 at z = 0.02, its child joint 1 at z = 0.2) and smooth weights
+/// that blend from bone 0 to bone 1 around z = 0.2.
+struct Limb {
+  TetMesh mesh;
+  Vec3 size = Vec3(0.12, 0.12, 0.40), origin = Vec3(-0.06, -0.06, 0.0);
+  MatX3 joints;              // 2 × 3
+  std::vector<int> parents;  // {−1, 0}
+  MatX weights;              // #N × 2
+};
+inline Limb makeLimb(const Eigen::Vector3i& cells = Eigen::Vector3i(6, 6, 20)) {
+  Limb limb;
+  limb.mesh = gridTetMesh(cells, limb.size, limb.origin);
+  limb.joints.resize(2, 3);
+  limb.joints << 0, 0, 0.02, 0, 0, 0.2;
+  limb.parents = {-1, 0};
+  limb.weights.resize(limb.mesh.numNodes(), 2);
+  for (int i = 0; i < limb.mesh.numNodes(); ++i) {
+    const double s = 1 / (1 + std::exp(-(limb.mesh.nodes(i, 2) - 0.2) / 0.03));
+    limb.weights.row(i) << 1 - s, s;
+  }
+  return limb;
 }
 
 }  // namespace flsh::test

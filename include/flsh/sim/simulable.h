@@ -62,6 +62,25 @@ enum class SimParameter {
   Stiffnesses,            ///< 4: joint_stiffness (N/m), tracking_stiffness (1/s²),
                           ///< root_stiffness (1/s²), contact stiffness (N/m³)
   ColliderOffsets,        ///< 3 per collider: current translation offset of its path (m)
+  /// K: the avatar's shape β (fixed by the SoftAvatar: setParameter throws, build a new
+  /// avatar instead). Its gradient Jacobian goes through the rest joints J(β), the bone
+  /// inertias (SoftAvatar::boneInertiaShapeJacobian), and the rest surface X(β) and vertex areas
+  /// a(β) of the contact nodes x_i = Σ_b w_ib (R_b (X_i − J_b) + t_b).
+  Shape,
+};
+
+/// What one step of a Simulable depends on besides its model data and parameter groups: the
+/// current and previous states (rotations kept as matrices, so a restore is bitwise exact), the
+/// time, the tracking targets and the colliders. Saved and restored by the adjoint's tape
+/// (Simulable::saveStep / restoreStep).
+struct SimulableStep {
+  std::vector<Mat3> R, R_n, R_nm1;  ///< 24 bone rotations of q, q_n, q_{n−1}
+  MatX3 t, t_n, t_nm1;              ///< 24 × 3 bone positions of q, q_n, q_{n−1}, m
+  double time = 0.0;                ///< s
+  std::vector<Mat3> target_R;       ///< 24 tracking targets (root: global)
+  Vec3 target_t0 = Vec3::Zero();    ///< root position target, m
+  std::vector<Collider> colliders;  ///< with their paths
+  bool is_static = false;
 };
 
 /// Diagnostics of the last energy evaluation.
@@ -109,6 +128,17 @@ class Simulable {
   void setVelocity(const VecX& v);
   VecX getVelocity() const;                  ///< (q_n ⊖ q_{n−1}) / h
   double time() const;
+  /// Snapshot of the step data (states, time, targets, colliders); restoreStep puts them back
+  /// exactly (bitwise) and leaves the state stack alone. Throws InputError if the snapshot
+  /// belongs to a simulable of another size.
+  SimulableStep saveStep() const;
+  void restoreStep(const SimulableStep& step);
+  /// Derivatives of what initialize() sets with respect to the rest joints J (72 values, layout
+  /// of SimParameter::RestJoints): the initial state, as increments (numDofs × 72; rotations do
+  /// not depend on J), and the initial velocity (numDofs × 72). Either pointer may be null.
+  /// (The initial state posed from the mocap's first frame moves with J, and with it the
+  /// velocity from the first two frames.)
+  void getInitialStateRestJointsJacobian(MatX* state_jacobian, MatX* velocity_jacobian) const;
 
   // ---- outputs and Jacobians ---------------------------------------------------------------
   /// SMPL pose (72, axis-angle per joint relative to its parent) and root translation read
@@ -156,11 +186,13 @@ class Simulable {
   bool isStatic() const;
 
   const SoftAvatar& avatar() const;
+  /// The mocap the simulable tracks (null without one).
+  std::shared_ptr<const Motion> mocap() const;
   const SimulableOptions& options() const;
   SimulableStats stats() const;
 
   // ---- parameter derivatives (for the adjoint) ---------------------------------------------
-  /// Number of values of a parameter group (ColliderOffsets: 3 per current collider).
+  /// Number of values of a parameter group (ColliderOffsets: 3 per current collider; Shape: K).
   int parameterSize(SimParameter p) const;
   /// Current values of a parameter group (layout of SimParameter).
   VecX getParameter(SimParameter p) const;
@@ -172,10 +204,28 @@ class Simulable {
   /// ∂g/∂p of the total gradient g = ∇(E_dyn + E_pot) at the current state (exact, increment
   /// chart, kinematic rows not zeroed): numDofs × parameterSize(p). Does not change the state.
   MatX getGradientParameterJacobian(SimParameter p) const;
+  /// The same for several groups at once, sharing the work they have in common (Shape chains
+  /// RestJoints and BoneInertia): one matrix per entry of `groups`, in order.
+  /// `shape_surface_only`: as for getGradientParameterVJPs below.
+  std::vector<MatX> getGradientParameterJacobians(const std::vector<SimParameter>& groups,
+                                                  bool shape_surface_only = false) const;
   /// ∂g/∂q_n (which = 1) or ∂g/∂q_{n−1} (which = 2): numDofs × numDofs, with respect to
   /// increments of that previous state in the same chart (only the inertia term depends on
   /// them; zero when static). Does not change the state.
   MatX getGradientPreviousStateJacobian(int which) const;
+  /// Vector–Jacobian products (∂g/∂p)ᵀ λ for several groups (λ: numDofs), one vector of
+  /// parameterSize(p) per entry of `groups`, without forming the matrices (the adjoint's reverse
+  /// sweep). `shape_surface_only`: the Shape entry holds only the contact-surface part (X(β),
+  /// a(β)); the caller chains the RestJoints and BoneInertia products with
+  /// SoftAvatar::restJointsShapeJacobian / boneInertiaShapeJacobian itself (e.g. once per
+  /// rollout). Throws InputError on a wrong size of λ. Does not change the state.
+  std::vector<VecX> getGradientParameterVJPs(const VecX& lambda,
+                                             const std::vector<SimParameter>& groups,
+                                             bool shape_surface_only = false) const;
+  /// (∂g/∂q_n)ᵀ λ and (∂g/∂q_{n−1})ᵀ λ (numDofs each; either pointer may be null) from the
+  /// per-bone 6 × 6 inertia blocks, and the tangent ∂g/∂q_n dq_n + ∂g/∂q_{n−1} dq_{n−1}.
+  void getGradientPreviousStatesVJP(const VecX& lambda, VecX* a_n, VecX* a_nm1) const;
+  VecX getGradientPreviousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const;
 
   struct Impl;
 

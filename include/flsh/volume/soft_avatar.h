@@ -4,6 +4,19 @@
 // initVolumetricData(). Only what the chosen model needs is built: a skeleton-only avatar
 // (soft tissue off, the default) never builds a tetrahedral mesh; its bone masses and inertias
 // come from the closed body surface filled with a uniform density.
+//
+// Bone inertia as a smooth function of β (so that the adjoint can differentiate it exactly):
+// the TEMPLATE surface (β = 0) is voxelized once; every voxel piece is lumped to its nearest
+// template vertex i, which keeps its mass m_i and its first and second moments f_i, S_i about
+// the vertex (computeVertexMassMoments). For a shape β each vertex's pieces move rigidly with
+// the vertex, X_i(β) = v_template_i + shapedirs_i β, and all masses scale by
+// s(β) = vol(β) / vol(0) (volumes of the closed surfaces, divergence theorem), so the total mass
+// is density × shaped volume. Bone b then gets, with o = X_i(β) − J_b(β) and weights w_ib:
+//   mass = s Σ w m_i,  first = s Σ w (f_i + m_i o),  second = s Σ w (S_i + f_i oᵀ + o f_iᵀ + m_i o oᵀ)
+// (lumpBoneInertia), a polynomial in β. (Voxelizing the shaped surface instead would jump
+// whenever a voxel centre crosses the surface or changes its nearest vertex: not
+// differentiable.) Avatars of one body model with equal density and voxel size share the
+// template data (voxelized once per process while any of them is alive).
 #pragma once
 
 #include <memory>
@@ -12,6 +25,7 @@
 
 #include "flsh/body/body_model.h"
 #include "flsh/core/types.h"
+#include "flsh/volume/volumetric_data.h"
 
 namespace flsh {
 
@@ -31,9 +45,13 @@ struct BoneCapsule {
   double radius = 0.0;
 };
 
+struct VertexMassMoments;
+
 struct SoftAvatarSettings {
   double density = 1010.0;    ///< uniform body density for the skeleton model, kg/m³
   double voxel_size = 0.01;   ///< voxel edge used to integrate mass properties, m
+  /// The volumetric body of the soft-tissue models: tet-mesh resolution, material file, cache.
+  VolumetricSettings volumetric;
 };
 
 class SoftAvatar {
@@ -42,18 +60,23 @@ class SoftAvatar {
   SoftAvatar(std::shared_ptr<const BodyModel> body, const VecX& betas,
              const SoftAvatarSettings& settings = {});
 
-  // Settings of the FLSH paper. The soft-tissue models (FEM, ROM) come with the volumetric
-  // issue; until then enableSoftTissue(true) makes initVolumetricData() throw an Error that
-  // says so.
+  // Settings of the FLSH paper. Soft tissue off: the articulated skeleton (no tet mesh is
+  // built). On: the FEM soft skeleton, whose volumetric body (tet mesh, interior fields, bone
+  // nodes, materials) initVolumetricData() builds or loads from the cache. The reduced model
+  // (ROM: handle basis and cubatures) is not available yet in this version: asking for it makes
+  // initVolumetricData() throw an Error that says so.
   void enableSoftTissue(bool on = true) { soft_tissue_ = on; }
   void enableReducedModel(bool on = true) { reduced_ = on; }
   void enableInertialCubature(bool on = true) { inertial_cubature_ = on; }
   void enableElasticCubature(bool on = true) { elastic_cubature_ = on; }
   bool softTissueEnabled() const { return soft_tissue_; }
   bool reducedModelEnabled() const { return reduced_; }
+  bool inertialCubatureEnabled() const { return inertial_cubature_; }
+  bool elasticCubatureEnabled() const { return elastic_cubature_; }
 
-  /// Builds what the configured model needs (for the skeleton: rest shape, joints, bone
-  /// inertias, capsules). Idempotent.
+  /// Builds what the configured model needs: for every model the rest shape, joints, bone
+  /// inertias and capsules; with soft tissue also the volumetric body. Idempotent; the
+  /// settings cannot change afterwards (make a new avatar).
   void initVolumetricData();
   bool initialized() const { return initialized_; }
 
@@ -71,7 +94,33 @@ class SoftAvatar {
   double totalMass() const;
   double volume() const { return volume_; }  ///< enclosed volume of the rest surface, m³
 
+  /// The volumetric body (soft tissue on); throws Error for a skeleton-only or uninitialized
+  /// avatar.
+  const VolumetricData& volumetricData() const;
+  bool hasVolumetricData() const { return volumetric_ != nullptr; }
+  /// Cache hits, warnings and seconds per stage of the volumetric build (all zero without it);
+  /// `skeletonSeconds()` is the time of the skeleton part (inertia, capsules).
+  const VolumetricBuildReport& volumetricBuildReport() const { return build_report_; }
+  double skeletonSeconds() const { return skeleton_seconds_; }
+
+  // Derivatives with respect to β (K = body().numBetas() columns), for the adjoint. Available
+  // after initVolumetricData(); exact (the data are polynomials in β).
+  /// d restJoints / dβ: 72 × K, row 3b + c = coordinate c of J_b (J_regressor · shapedirs).
+  const MatX& restJointsShapeJacobian() const { return joints_shape_jacobian_; }
+  /// d boneInertia / dβ: (24·10) × K in the layout of SimParameter::BoneInertia (per bone: mass,
+  /// first moment (3), second moment xx, yy, zz, xy, xz, yz).
+  const MatX& boneInertiaShapeJacobian() const { return inertia_shape_jacobian_; }
+  /// d vertexAreas / dβ: #V × K, m² per unit β.
+  const MatX& vertexAreasShapeJacobian() const { return areas_shape_jacobian_; }
+  /// d volume / dβ: K, m³ per unit β.
+  const VecX& volumeShapeGradient() const { return volume_shape_gradient_; }
+  /// The voxelized template (β = 0) lumped to the template vertices (see the top of this file).
+  const VertexMassMoments& templateMassMoments() const { return *template_moments_; }
+  double templateVolume() const { return template_volume_; }  ///< vol(0), m³
+
  private:
+  void buildShapeJacobians(const MatX3& X, const MatX3& J, double mass_scale);
+
   std::shared_ptr<const BodyModel> body_;
   VecX betas_;
   SoftAvatarSettings settings_;
@@ -82,11 +131,39 @@ class SoftAvatar {
   std::vector<BoneCapsule> capsules_;
   VecX vertex_areas_;
   double volume_ = 0.0;
+  std::shared_ptr<const VertexMassMoments> template_moments_;
+  double template_volume_ = 0.0;
+  MatX joints_shape_jacobian_, inertia_shape_jacobian_, areas_shape_jacobian_;
+  VecX volume_shape_gradient_;
+  std::shared_ptr<const VolumetricData> volumetric_;
+  VolumetricBuildReport build_report_;
+  double skeleton_seconds_ = 0.0;
 };
+
+/// Mass, first and second moments of a voxelized solid lumped to surface vertices, each about
+/// its vertex (see the top of this file).
+struct VertexMassMoments {
+  VecX mass;                         ///< #V, kg
+  MatX3 first_moment;                ///< #V × 3, Σ m (x − X_i), kg·m
+  std::vector<Mat3> second_moment;   ///< #V, Σ m (x − X_i)(x − X_i)ᵀ (with each voxel's own), kg·m²
+};
+
+/// Voxelizes the closed surface (V, F) filled with `density` (voxel edge `voxel_size`, m) and
+/// lumps every voxel piece to its nearest vertex (ties: smaller index). Deterministic.
+VertexMassMoments computeVertexMassMoments(const MatX3& V, const MatX3i& F, double density,
+                                           double voxel_size);
+
+/// Bone mass properties from vertex moments carried rigidly by vertices at positions V (#V × 3)
+/// and spread over bones by the skinning weights (#V × bones), about the joints J (bones × 3);
+/// every mass scaled by `mass_scale`.
+std::vector<BoneInertia> lumpBoneInertia(const VertexMassMoments& moments, const MatX3& V,
+                                         const MatX& weights, const MatX3& J,
+                                         double mass_scale = 1.0);
 
 /// Mass properties of a closed surface (V, F) filled with `density`, split over 24 bones by the
 /// skinning weights of the nearest surface vertex, integrated on voxels of edge `voxel_size`.
-/// Joints J (24 × 3) are the bone origins. Used by SoftAvatar; exposed for tests.
+/// Joints J (24 × 3) are the bone origins. lumpBoneInertia(computeVertexMassMoments(V, F, …),
+/// V, weights, J): what SoftAvatar computes at β = 0 (for β ≠ 0 it moves the template's moments).
 std::vector<BoneInertia> computeBoneInertia(const MatX3& V, const MatX3i& F, const MatX& weights,
                                             const MatX3& J, double density, double voxel_size);
 

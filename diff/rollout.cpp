@@ -1,0 +1,338 @@
+// Rollout: forward simulation with a recorded tape, reverse pass and forward sensitivities of
+// one articulated-skeleton Simulable, in the user's coordinates (see rollout.h).
+#include "flsh/diff/rollout.h"
+
+#include <string>
+
+#include "flsh/body/body_forward.h"
+#include "flsh/core/error.h"
+#include "flsh/solve/scene.h"
+
+namespace flsh {
+
+namespace {
+
+constexpr int kGroupShape = int(SimulableGroup::Shape);
+constexpr int kGroupJoints = int(SimulableGroup::RestJoints);
+constexpr int kGroupInertia = int(SimulableGroup::BoneInertia);
+constexpr int kGroupPose = int(SimulableGroup::PoseTargets);
+constexpr int kGroupRoot = int(SimulableGroup::RootTargets);
+constexpr int kGroupStiffnesses = int(SimulableGroup::Stiffnesses);
+constexpr int kGroupColliders = int(SimulableGroup::ColliderOffsets);
+
+void checkVector(const VecX& v, long expected, const std::string& who, const std::string& name,
+                 bool empty_ok = true) {
+  if (empty_ok && v.size() == 0) return;
+  if (v.size() != expected)
+    throw InputError(who + ": " + name + " has " + std::to_string(v.size()) + " values, expected " +
+                     std::to_string(expected) + (empty_ok ? " (or none)" : ""));
+  if (!v.allFinite()) throw InputError(who + ": " + name + " contains NaN or Inf");
+}
+
+void checkMatrix(const RowMatX& m, long rows, long cols, const std::string& who,
+                 const std::string& name, bool empty_ok = true) {
+  if (empty_ok && m.size() == 0) return;
+  if (m.rows() != rows || m.cols() != cols)
+    throw InputError(who + ": " + name + " has shape " +
+                     shapeString({long(m.rows()), long(m.cols())}) + ", expected " +
+                     shapeString({rows, cols}) + (empty_ok ? " (or empty)" : ""));
+  if (!m.allFinite()) throw InputError(who + ": " + name + " contains NaN or Inf");
+}
+
+double dotOrZero(const VecX& a, const VecX& b) { return a.size() && b.size() ? a.dot(b) : 0.0; }
+double dotOrZero(const RowMatX& a, const RowMatX& b) {
+  return a.size() && b.size() ? (a.array() * b.array()).sum() : 0.0;
+}
+
+// Restores the simulable's step data on scope exit.
+class RestoreStepOnExit {
+ public:
+  explicit RestoreStepOnExit(Simulable& s) : s_(s), saved_(s.saveStep()) {}
+  ~RestoreStepOnExit() { s_.restoreStep(saved_); }
+
+ private:
+  Simulable& s_;
+  SimulableStep saved_;
+};
+
+}  // namespace
+
+double dot(const RolloutVariables& a, const RolloutVariables& b) {
+  return dotOrZero(a.shape, b.shape) + dotOrZero(a.rest_joints, b.rest_joints) +
+         dotOrZero(a.bone_inertia, b.bone_inertia) + dotOrZero(a.pose_targets, b.pose_targets) +
+         dotOrZero(a.root_targets, b.root_targets) + dotOrZero(a.stiffnesses, b.stiffnesses) +
+         dotOrZero(a.collider_offsets, b.collider_offsets) +
+         dotOrZero(a.initial_state, b.initial_state) +
+         dotOrZero(a.initial_velocity, b.initial_velocity);
+}
+
+namespace {
+
+template <class M>
+void addMember(M& into, const M& add, const char* name) {
+  if (add.size() == 0) return;
+  if (into.size() == 0) {
+    into = add;
+    return;
+  }
+  if (into.rows() != add.rows() || into.cols() != add.cols())
+    throw InputError(std::string("accumulate: ") + name + " has shapes " +
+                     shapeString({long(into.rows()), long(into.cols())}) + " and " +
+                     shapeString({long(add.rows()), long(add.cols())}) + ", expected equal");
+  into += add;
+}
+
+}  // namespace
+
+void accumulate(RolloutVariables& into, const RolloutVariables& add) {
+  addMember(into.shape, add.shape, "shape");
+  addMember(into.rest_joints, add.rest_joints, "rest_joints");
+  addMember(into.bone_inertia, add.bone_inertia, "bone_inertia");
+  addMember(into.pose_targets, add.pose_targets, "pose_targets");
+  addMember(into.root_targets, add.root_targets, "root_targets");
+  addMember(into.stiffnesses, add.stiffnesses, "stiffnesses");
+  addMember(into.collider_offsets, add.collider_offsets, "collider_offsets");
+  addMember(into.initial_state, add.initial_state, "initial_state");
+  addMember(into.initial_velocity, add.initial_velocity, "initial_velocity");
+}
+
+Rollout::Rollout(std::shared_ptr<Simulable> simulable, const RolloutOptions& options)
+    : model_(simulable), simulable_(std::move(simulable)), options_(options) {
+  base_stiffnesses_ = simulable_->getParameter(SimParameter::Stiffnesses);
+  base_colliders_ = simulable_->colliders();
+}
+
+Rollout::~Rollout() = default;
+
+int Rollout::numSteps() const { return tape_.hasInitial() ? tape_.numSteps() : 0; }
+int Rollout::numDofs() const { return simulable_->numDofs(); }
+const RowMatX& Rollout::states() const { return states_; }
+const VecX& Rollout::initialState() const { return initial_state_; }
+
+void Rollout::checkVariables(const RolloutVariables& v, const std::string& who) const {
+  const int T = numSteps(), n = numDofs();
+  const Simulable& sim = *simulable_;
+  checkVector(v.shape, sim.parameterSize(SimParameter::Shape), who, "shape");
+  checkVector(v.rest_joints, 72, who, "rest_joints");
+  checkVector(v.bone_inertia, sim.parameterSize(SimParameter::BoneInertia), who, "bone_inertia");
+  checkMatrix(v.pose_targets, T, 72, who, "pose_targets");
+  checkMatrix(v.root_targets, T, 3, who, "root_targets");
+  checkVector(v.stiffnesses, 4, who, "stiffnesses");
+  checkVector(v.collider_offsets, 3 * long(base_colliders_.size()), who, "collider_offsets");
+  checkVector(v.initial_state, n, who, "initial_state");
+  checkVector(v.initial_velocity, n, who, "initial_velocity");
+}
+
+void Rollout::requireRun(const char* who) const {
+  if (numSteps() == 0)
+    throw Error(std::string("Rollout::") + who + ": no rollout recorded (call run() first)");
+}
+
+void Rollout::run(int steps, const RolloutInputs& in) {
+  const std::string who = "Rollout::run";
+  Simulable& sim = *simulable_;
+  const int n = sim.numDofs(), nc = int(base_colliders_.size());
+  if (steps < 1) throw InputError(who + ": steps = " + std::to_string(steps) + ", expected ≥ 1");
+  checkMatrix(in.pose_targets, steps, 72, who, "inputs.pose_targets (steps × 72, rad)");
+  checkMatrix(in.root_targets, steps, 3, who, "inputs.root_targets (steps × 3, m)");
+  checkVector(in.initial_state, n, who, "inputs.initial_state");
+  checkVector(in.initial_velocity, n, who, "inputs.initial_velocity");
+  checkVector(in.stiffnesses, 4, who, "inputs.stiffnesses");
+  checkVector(in.collider_offsets, 3 * nc, who,
+              "inputs.collider_offsets (3 per collider, " + std::to_string(nc) + " colliders)");
+  const bool tracking = sim.options().track_mocap && sim.mocap();
+  if ((in.pose_targets.size() || in.root_targets.size()) && !tracking)
+    throw InputError(who +
+                     ": pose or root targets given, but the simulable has no tracking springs "
+                     "(it was built without mocap or with options.track_mocap = false)");
+  const VecX stiffnesses = in.stiffnesses.size() ? in.stiffnesses : base_stiffnesses_;
+  sim.setParameter(SimParameter::Stiffnesses, stiffnesses);  // validates (≥ 0) before changes
+
+  // Colliders: the remembered ones, each path shifted as a whole.
+  std::vector<Collider> colliders = base_colliders_;
+  if (in.collider_offsets.size())
+    for (int k = 0; k < nc; ++k) {
+      ColliderPath& path = colliders[k].path;
+      const Vec3 shift = in.collider_offsets.segment<3>(3 * k);
+      if (path.times.empty()) {
+        path.times = {0.0};
+        path.offsets = {Vec3::Zero()};
+      }
+      for (Vec3& o : path.offsets) o += shift;
+    }
+  Scene scene;
+  scene.addSimulable(simulable_);
+  for (const Collider& c : colliders) scene.addCollider(c);
+  if (!solver_) {
+    const LinearSolverType type = options_.newton.linear_solver == LinearSolverType::Auto
+                                      ? LinearSolverType::SparseLLT
+                                      : options_.newton.linear_solver;
+    solver_ = makeLinearSolver(type, n);
+  }
+
+  // Initial conditions.
+  sim.initialize();
+  state_from_initialize_ = in.initial_state.size() == 0;
+  velocity_from_initialize_ = in.initial_velocity.size() == 0;
+  sim.getInitialStateRestJointsJacobian(&initial_state_joints_jacobian_,
+                                        &initial_velocity_joints_jacobian_);
+  if (!state_from_initialize_) {
+    const VecX v = velocity_from_initialize_ ? sim.getVelocity() : in.initial_velocity;
+    sim.setState(in.initial_state);
+    sim.postUpdate();  // q_n = q_0
+    sim.setVelocity(v);
+  } else if (!velocity_from_initialize_) {
+    sim.setVelocity(in.initial_velocity);
+  }
+  tape_.recordInitial(model_);
+  initial_state_ = sim.getState();
+  states_.resize(steps, n);
+
+  for (int t = 1; t <= steps; ++t) {
+    sim.preUpdate();
+    if (in.pose_targets.size())
+      sim.setParameter(SimParameter::PoseTargets, in.pose_targets.row(t - 1).transpose());
+    if (in.root_targets.size()) {
+      const Vec3 J0 = sim.getParameter(SimParameter::RestJoints).head<3>();
+      sim.setParameter(SimParameter::RootTranslationTarget,
+                       J0 + in.root_targets.row(t - 1).transpose());
+    }
+    const NewtonResult result = newtonSolve(scene, options_.newton, solver_.get());
+    TapeStepInfo info;
+    info.converged = result.converged;
+    info.newton_iterations = result.iterations;
+    info.gradient_norm = result.gradient_norm;
+    tape_.recordStep(model_, info);
+    states_.row(t - 1) = sim.getState().transpose();
+    sim.postUpdate();
+  }
+}
+
+RowMatX Rollout::joints() const {
+  RowMatX J(states_.rows(), 72);
+  for (int t = 0; t < states_.rows(); ++t)
+    for (int b = 0; b < 24; ++b) J.row(t).segment<3>(3 * b) = states_.row(t).segment<3>(6 * b);
+  return J;
+}
+
+MatX3 Rollout::vertices(int t) const {
+  requireRun("vertices");
+  if (t < 0 || t > numSteps())
+    throw InputError("Rollout::vertices: t = " + std::to_string(t) + ", expected 0.." +
+                     std::to_string(numSteps()));
+  RestoreStepOnExit restore(*simulable_);
+  auto& model = const_cast<SimulableAdjointModel&>(model_);
+  model.restoreStep(t == 0 ? tape_.initialSnapshot() : tape_.stepSnapshot(t));
+  return simulable_->getVertices();
+}
+
+VecX Rollout::jointsCotangent(const MatX3& dL_djoints) const {
+  if (dL_djoints.rows() != 24)
+    throw InputError("Rollout::jointsCotangent: dL_djoints has shape " +
+                     shapeString({long(dL_djoints.rows()), 3}) + ", expected (24, 3)");
+  if (!dL_djoints.allFinite())
+    throw InputError("Rollout::jointsCotangent: dL_djoints contains NaN or Inf");
+  VecX a = VecX::Zero(numDofs());
+  for (int b = 0; b < 24; ++b) a.segment<3>(6 * b) = dL_djoints.row(b).transpose();
+  return a;
+}
+
+// vertices = poseBody(β, θ(q), trans(q)) with trans = t_0 − J_0(β): the state part goes through
+// d(θ, trans)/dq (increments) and the chart; β enters directly and through J_0 in trans.
+Rollout::VerticesCotangent Rollout::verticesCotangent(int t, const MatX3& dL_dvertices) const {
+  requireRun("verticesCotangent");
+  const SoftAvatar& avatar = simulable_->avatar();
+  const long nv = avatar.body().numVertices();
+  if (dL_dvertices.rows() != nv)
+    throw InputError("Rollout::verticesCotangent: dL_dvertices has shape " +
+                     shapeString({long(dL_dvertices.rows()), 3}) + ", expected " +
+                     shapeString({nv, 3}));
+  if (!dL_dvertices.allFinite())
+    throw InputError("Rollout::verticesCotangent: dL_dvertices contains NaN or Inf");
+  if (t < 0 || t > numSteps())
+    throw InputError("Rollout::verticesCotangent: t = " + std::to_string(t) + ", expected 0.." +
+                     std::to_string(numSteps()));
+  RestoreStepOnExit restore(*simulable_);
+  auto& model = const_cast<SimulableAdjointModel&>(model_);
+  model.restoreStep(t == 0 ? tape_.initialSnapshot() : tape_.stepSnapshot(t));
+  PosedBodyJacobians jac;
+  poseBody(avatar.body(), avatar.betas(), simulable_->getPose(), simulable_->getTrans(), &jac);
+  const Eigen::Map<const VecX> g(dL_dvertices.data(), 3 * nv);  // row-major: 3i + c
+  VecX pose_trans(75);
+  pose_trans.head<72>() = jac.vertices_pose.transpose() * g;
+  pose_trans.tail<3>() = jac.vertices_trans.transpose() * g;
+  VerticesCotangent out;
+  out.state =
+      model.incrementToStateCotangent(simulable_->getStateJacobian().transpose() * pose_trans);
+  out.direct.shape =
+      jac.vertices_betas.transpose() * g -
+      avatar.restJointsShapeJacobian().topRows<3>().transpose() * pose_trans.tail<3>();
+  out.direct.rest_joints = VecX::Zero(72);
+  out.direct.rest_joints.head<3>() = -pose_trans.tail<3>();
+  return out;
+}
+
+RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVariables& direct) {
+  requireRun("backward");
+  const std::string who = "Rollout::backward";
+  checkMatrix(dL_dstates, numSteps(), numDofs(), who, "dL_dstates (steps × numDofs)", false);
+  checkVariables(direct, who + ": direct");
+  const AdjointResult r = adjointSweep(model_, tape_, dL_dstates);
+  RolloutVariables g;
+  g.shape = r.global[kGroupShape];
+  g.rest_joints = r.global[kGroupJoints];
+  g.bone_inertia = r.global[kGroupInertia];
+  g.pose_targets = r.per_step[kGroupPose];
+  g.root_targets = r.per_step[kGroupRoot];
+  g.stiffnesses = r.global[kGroupStiffnesses];
+  g.collider_offsets = r.global[kGroupColliders];
+  g.initial_state = r.initial_state;
+  g.initial_velocity = r.initial_velocity;
+  // The initial conditions initialize() sets move with the rest joints (and so with β).
+  VecX initial_joints = VecX::Zero(72);
+  if (state_from_initialize_)
+    initial_joints += initial_state_joints_jacobian_.transpose() * r.initial_state_increment;
+  if (velocity_from_initialize_)
+    initial_joints += initial_velocity_joints_jacobian_.transpose() * r.initial_velocity;
+  g.rest_joints += initial_joints;
+  g.shape += simulable_->avatar().restJointsShapeJacobian().transpose() * initial_joints;
+  accumulate(g, direct);
+  return g;
+}
+
+std::vector<RowMatX> Rollout::forwardSensitivities(
+    const std::vector<RolloutVariables>& directions) {
+  requireRun("forwardSensitivities");
+  const std::vector<ParameterGroupInfo> groups = model_.parameterGroups();
+  std::vector<TangentDirection> tangents;
+  tangents.reserve(directions.size());
+  for (size_t d = 0; d < directions.size(); ++d) {
+    const RolloutVariables& v = directions[d];
+    checkVariables(v, "Rollout::forwardSensitivities: direction " + std::to_string(d));
+    TangentDirection t;
+    t.global.resize(groups.size());
+    t.per_step.resize(groups.size());
+    t.global[kGroupShape] = v.shape;
+    t.global[kGroupJoints] = v.rest_joints;
+    t.global[kGroupInertia] = v.bone_inertia;
+    t.per_step[kGroupPose] = v.pose_targets;
+    t.per_step[kGroupRoot] = v.root_targets;
+    t.global[kGroupStiffnesses] = v.stiffnesses;
+    t.global[kGroupColliders] = v.collider_offsets;
+    t.initial_state = v.initial_state;
+    t.initial_velocity = v.initial_velocity;
+    // The initial conditions initialize() sets move with J (and β).
+    VecX dJ = VecX::Zero(72);
+    if (v.rest_joints.size()) dJ += v.rest_joints;
+    if (v.shape.size()) dJ += simulable_->avatar().restJointsShapeJacobian() * v.shape;
+    if (state_from_initialize_) t.initial_state_increment = initial_state_joints_jacobian_ * dJ;
+    if (velocity_from_initialize_) {
+      const VecX dv = initial_velocity_joints_jacobian_ * dJ;
+      t.initial_velocity = v.initial_velocity.size() ? VecX(v.initial_velocity + dv) : dv;
+    }
+    tangents.push_back(std::move(t));
+  }
+  return tangentSweep(model_, tape_, tangents);
+}
+
+}  // namespace flsh

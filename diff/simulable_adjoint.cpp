@@ -1,0 +1,225 @@
+// The articulated skeleton as an AdjointModel: snapshots, exact Hessian, Jacobians of the total
+// gradient and the chart maps of its [t, rotation vector] state.
+#include "flsh/diff/simulable_adjoint.h"
+
+#include <string>
+
+#include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
+#include "flsh/volume/soft_avatar.h"
+
+namespace flsh {
+
+namespace {
+
+struct SimulableSnapshot final : StepSnapshot {
+  SimulableStep step;
+};
+
+constexpr SimParameter kGroupParameter[kNumSimulableGroups] = {SimParameter::Shape,
+                                                               SimParameter::RestJoints,
+                                                               SimParameter::BoneInertia,
+                                                               SimParameter::PoseTargets,
+                                                               SimParameter::RootTranslationTarget,
+                                                               SimParameter::Stiffnesses,
+                                                               SimParameter::ColliderOffsets};
+
+void checkSize(const VecX& v, int n, const char* who, const char* what) {
+  if (v.size() != n)
+    throw InputError(std::string("SimulableAdjointModel::") + who + ": " + what + " has " +
+                     std::to_string(v.size()) +
+                     " values, expected numDofs() = " + std::to_string(n));
+}
+
+}  // namespace
+
+SimulableAdjointModel::SimulableAdjointModel(std::shared_ptr<Simulable> simulable)
+    : simulable_(std::move(simulable)) {
+  if (!simulable_) throw InputError("SimulableAdjointModel: simulable is null");
+  if (!simulable_->options().kinematic_bones.empty())
+    throw Error(
+        "SimulableAdjointModel: the simulable has kinematic bones (options.kinematic_bones, " +
+        std::to_string(simulable_->options().kinematic_bones.size()) +
+        " bones); their DoFs are placed from the parents' predicted state and are not "
+        "differentiated: use a simulable without kinematic bones (e.g. stiff tracking instead)");
+}
+
+int SimulableAdjointModel::numDofs() const { return simulable_->numDofs(); }
+
+std::vector<ParameterGroupInfo> SimulableAdjointModel::parameterGroups() const {
+  const Simulable& s = *simulable_;
+  return {{"shape", s.parameterSize(SimParameter::Shape), false},
+          {"rest_joints", s.parameterSize(SimParameter::RestJoints), false},
+          {"bone_inertia", s.parameterSize(SimParameter::BoneInertia), false},
+          {"pose_targets", s.parameterSize(SimParameter::PoseTargets), true},
+          {"root_targets", s.parameterSize(SimParameter::RootTranslationTarget), true},
+          {"stiffnesses", s.parameterSize(SimParameter::Stiffnesses), false},
+          {"collider_offsets", s.parameterSize(SimParameter::ColliderOffsets), false}};
+}
+
+std::unique_ptr<StepSnapshot> SimulableAdjointModel::saveStep() const {
+  auto snapshot = std::make_unique<SimulableSnapshot>();
+  snapshot->step = simulable_->saveStep();
+  return snapshot;
+}
+
+void SimulableAdjointModel::restoreStep(const StepSnapshot& snapshot) {
+  const auto* s = dynamic_cast<const SimulableSnapshot*>(&snapshot);
+  if (!s)
+    throw InputError(
+        "SimulableAdjointModel::restoreStep: the snapshot was not made by a "
+        "SimulableAdjointModel");
+  simulable_->restoreStep(s->step);
+}
+
+void SimulableAdjointModel::exactHessian(SpMat& H) const {
+  std::vector<Triplet> triplets;
+  simulable_->getDynamicHessianTripletVector(triplets, 0, false);
+  simulable_->getPotentialHessianTripletVector(triplets, 0, false);
+  simulable_->fixMatrixKinematic(triplets, 0);
+  const int n = numDofs();
+  H.resize(n, n);
+  H.setFromTriplets(triplets.begin(), triplets.end());
+}
+
+SpMat SimulableAdjointModel::previousStateJacobian(int which) const {
+  // Block diagonal (one 6 × 6 inertia block per bone): sparse for the sweeps' products.
+  return simulable_->getGradientPreviousStateJacobian(which).sparseView(1.0, 0.0);
+}
+
+void SimulableAdjointModel::parameterJacobians(std::vector<MatX>& out) const {
+  out = simulable_->getGradientParameterJacobians(
+      std::vector<SimParameter>(kGroupParameter, kGroupParameter + kNumSimulableGroups));
+}
+
+void SimulableAdjointModel::previousStatesVJP(const VecX& lambda, VecX& a_n, VecX& a_nm1) const {
+  simulable_->getGradientPreviousStatesVJP(lambda, &a_n, &a_nm1);
+}
+
+VecX SimulableAdjointModel::previousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const {
+  return simulable_->getGradientPreviousStatesJVP(dq_n, dq_nm1);
+}
+
+void SimulableAdjointModel::parameterVJPs(const VecX& lambda, std::vector<VecX>& out) const {
+  out = simulable_->getGradientParameterVJPs(
+      lambda, std::vector<SimParameter>(kGroupParameter, kGroupParameter + kNumSimulableGroups),
+      /*shape_surface_only=*/true);
+}
+
+// p̄_β = Σ_t (dJ/dβ)ᵀ (∂g_t/∂J)ᵀ λ_t + (dI/dβ)ᵀ (∂g_t/∂I)ᵀ λ_t + surface: the first two sums are
+// the RestJoints and BoneInertia cotangents themselves (dJ/dβ, dI/dβ do not change over steps).
+void SimulableAdjointModel::finishParameterVJPs(std::vector<VecX>& global) const {
+  const int shape = int(SimulableGroup::Shape), joints = int(SimulableGroup::RestJoints),
+            inertia = int(SimulableGroup::BoneInertia);
+  if (global.size() != size_t(kNumSimulableGroups) || global[shape].size() == 0) return;
+  const SoftAvatar& avatar = simulable_->avatar();
+  if (global[joints].size())
+    global[shape].noalias() += avatar.restJointsShapeJacobian().transpose() * global[joints];
+  if (global[inertia].size())
+    global[shape].noalias() += avatar.boneInertiaShapeJacobian().transpose() * global[inertia];
+}
+
+void SimulableAdjointModel::parameterJVPs(const std::vector<std::vector<const VecX*>>& directions,
+                                          std::vector<VecX>& out) const {
+  const int shape = int(SimulableGroup::Shape), joints = int(SimulableGroup::RestJoints),
+            inertia = int(SimulableGroup::BoneInertia);
+  const std::vector<MatX> jacobians = simulable_->getGradientParameterJacobians(
+      std::vector<SimParameter>(kGroupParameter, kGroupParameter + kNumSimulableGroups),
+      /*shape_surface_only=*/true);
+  const SoftAvatar& avatar = simulable_->avatar();
+  out.assign(directions.size(), VecX::Zero(numDofs()));
+  for (size_t d = 0; d < directions.size(); ++d) {
+    const auto& dir = directions[d];
+    auto given = [&](int g) { return int(dir.size()) > g && dir[g] && dir[g]->size(); };
+    for (int g = 0; g < kNumSimulableGroups; ++g)
+      if (given(g)) out[d].noalias() += jacobians[g] * *dir[g];
+    if (given(shape)) {
+      const VecX dJ = avatar.restJointsShapeJacobian() * *dir[shape];
+      const VecX dI = avatar.boneInertiaShapeJacobian() * *dir[shape];
+      out[d].noalias() += jacobians[joints] * dJ;
+      out[d].noalias() += jacobians[inertia] * dI;
+    }
+  }
+}
+
+VecX SimulableAdjointModel::state() const { return simulable_->getState(); }
+
+// Per bone: dt = δt, dr = J_l(r)⁻¹ δω with r = log(R_b) (the state vector's rotation).
+VecX SimulableAdjointModel::incrementToStateTangent(const VecX& dq) const {
+  checkSize(dq, numDofs(), "incrementToStateTangent", "dq");
+  const VecX s = state();
+  VecX out = dq;
+  for (int b = 0; b < s.size() / 6; ++b)
+    out.segment<3>(6 * b + 3) =
+        leftJacobianInverseSO3(s.segment<3>(6 * b + 3)) * dq.segment<3>(6 * b + 3);
+  return out;
+}
+
+VecX SimulableAdjointModel::stateToIncrementTangent(const VecX& ds) const {
+  checkSize(ds, numDofs(), "stateToIncrementTangent", "ds");
+  const VecX s = state();
+  VecX out = ds;
+  for (int b = 0; b < s.size() / 6; ++b)
+    out.segment<3>(6 * b + 3) = leftJacobianSO3(s.segment<3>(6 * b + 3)) * ds.segment<3>(6 * b + 3);
+  return out;
+}
+
+VecX SimulableAdjointModel::stateToIncrementCotangent(const VecX& a) const {
+  checkSize(a, numDofs(), "stateToIncrementCotangent", "a");
+  const VecX s = state();
+  VecX out = a;
+  for (int b = 0; b < s.size() / 6; ++b)
+    out.segment<3>(6 * b + 3) =
+        leftJacobianInverseSO3(s.segment<3>(6 * b + 3)).transpose() * a.segment<3>(6 * b + 3);
+  return out;
+}
+
+VecX SimulableAdjointModel::incrementToStateCotangent(const VecX& a) const {
+  checkSize(a, numDofs(), "incrementToStateCotangent", "a");
+  const VecX s = state();
+  VecX out = a;
+  for (int b = 0; b < s.size() / 6; ++b)
+    out.segment<3>(6 * b + 3) =
+        leftJacobianSO3(s.segment<3>(6 * b + 3)).transpose() * a.segment<3>(6 * b + 3);
+  return out;
+}
+
+// q_{−1} = (t_0 − h v_t, exp(−h[v_ω]×) R_0): increments δt_{−1} = δt_0 − h δv_t and
+// δω_{−1} = exp(−h[v_ω]×) δω_0 − h J_l(−h v_ω) δv_ω (left Jacobian: exp(θ + ε) ≈
+// exp([J_l(θ)ε]×) exp(θ)). Evaluated at the restored initial snapshot (q_n = q_0).
+VecX SimulableAdjointModel::initialPreviousStateTangent(const VecX& dq0, const VecX& dv0) const {
+  checkSize(dq0, numDofs(), "initialPreviousStateTangent", "dq0");
+  checkSize(dv0, numDofs(), "initialPreviousStateTangent", "dv0");
+  const SimulableStep s = simulable_->saveStep();
+  const double h = simulable_->options().time_step;
+  const VecX v = simulable_->getVelocity();
+  VecX out(dq0.size());
+  for (int b = 0; b < int(s.R_n.size()); ++b) {
+    const Mat3 back = s.R_nm1[b] * s.R_n[b].transpose();  // exp(−h[v_ω]×)
+    out.segment<3>(6 * b) = dq0.segment<3>(6 * b) - h * dv0.segment<3>(6 * b);
+    out.segment<3>(6 * b + 3) =
+        back * dq0.segment<3>(6 * b + 3) -
+        h * leftJacobianSO3(-h * v.segment<3>(6 * b + 3)) * dv0.segment<3>(6 * b + 3);
+  }
+  return out;
+}
+
+VecX SimulableAdjointModel::initialPreviousStateCotangent(const VecX& a_previous, VecX& a0) const {
+  checkSize(a_previous, numDofs(), "initialPreviousStateCotangent", "a_previous");
+  checkSize(a0, numDofs(), "initialPreviousStateCotangent", "a0");
+  const SimulableStep s = simulable_->saveStep();
+  const double h = simulable_->options().time_step;
+  const VecX v = simulable_->getVelocity();
+  VecX dv(a0.size());
+  for (int b = 0; b < int(s.R_n.size()); ++b) {
+    const Mat3 back = s.R_nm1[b] * s.R_n[b].transpose();
+    a0.segment<3>(6 * b) += a_previous.segment<3>(6 * b);
+    dv.segment<3>(6 * b) = -h * a_previous.segment<3>(6 * b);
+    a0.segment<3>(6 * b + 3) += back.transpose() * a_previous.segment<3>(6 * b + 3);
+    dv.segment<3>(6 * b + 3) = -h * leftJacobianSO3(-h * v.segment<3>(6 * b + 3)).transpose() *
+                               a_previous.segment<3>(6 * b + 3);
+  }
+  return dv;
+}
+
+}  // namespace flsh

@@ -1,0 +1,144 @@
+// Rollout: a differentiable simulation of one Simulable (articulated skeleton) over T steps.
+//
+//   Rollout rollout(simulable, options);
+//   rollout.run(T, inputs);                        // forward: simulate and record the tape
+//   const RowMatX& q = rollout.states();           // T × numDofs state vectors
+//   RolloutVariables grad = rollout.backward(dL_dq);      // reverse pass: dL/d(every input)
+//   std::vector<RowMatX> dq = rollout.forwardSensitivities({direction, …});  // dq_t/dp · v
+//
+// Inputs (RolloutInputs; every empty member means "the simulable's own"): per-step pose targets
+// (T × 72) and root translation targets (T × 3) overriding the mocap's after each preUpdate, the
+// initial state and velocity, the 4 stiffnesses, a translation of every collider's path. The
+// shape β, the rest joints and the bone inertias are the simulable's (β: its SoftAvatar; build
+// a new avatar to change it); their gradients are reported too.
+//
+// Conventions of the gradients and directions (RolloutVariables), chosen so that they are with
+// respect to the raw numbers a user passes (torch.autograd.gradcheck on them works):
+//  - states: Simulable::getState layout, 6 per bone [t_b (m), rotation vector r_b (rad)]; a
+//    cotangent dL/dq_t is with respect to those numbers (not the increment chart).
+//  - initial_state: the same layout; initial_velocity: per DoF in the increment chart (m/s and
+//    world-frame rad/s, Simulable::setVelocity).
+//  - pose_targets: rotation vectors (rad), SMPL layout (bone b ≥ 1 relative to its parent, the
+//    root global); root_targets: SMPL trans (m), the root joint's target being J_0(β) + trans.
+//  - shape: β (K). Its gradient includes everything that moves with β in the simulation: rest
+//    joints, bone inertias (SoftAvatar::boneInertiaShapeJacobian), the contact surface and its
+//    vertex areas, and, when the initial state/velocity come from initialize(), their
+//    dependence on J(β). Terms of a loss on SMPL vertices that depend on β directly come from
+//    verticesCotangent() and are passed to backward() in `direct`.
+//  - rest_joints (72) and bone_inertia (240): as if overridden by Simulable::setParameter before
+//    the run (they are the pieces of the β chain; setParameter(RestJoints) moves the root target
+//    J_0 + trans and, through initialize(), the initial state).
+// Accuracy: the gradients are exact for the converged rollout; they are as accurate as Newton's
+// convergence (RolloutOptions::newton.gradient_tolerance; use ~1e-10 or tighter when comparing
+// with finite differences).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "flsh/diff/simulable_adjoint.h"
+#include "flsh/diff/tape.h"
+#include "flsh/sim/simulable.h"
+#include "flsh/solve/newton.h"
+
+namespace flsh {
+
+/// Inputs of a rollout; empty members take the simulable's own values.
+struct RolloutInputs {
+  RowMatX pose_targets;   ///< T × 72 tracking targets per step (rad); empty = the mocap's
+  RowMatX root_targets;   ///< T × 3 SMPL trans per step (m); empty = the mocap's
+  VecX initial_state;     ///< numDofs (getState layout); empty = what initialize() sets
+  VecX initial_velocity;  ///< numDofs (setVelocity layout); empty = what initialize() sets
+  VecX stiffnesses;       ///< 4 (SimParameter::Stiffnesses); empty = the options at construction
+  VecX collider_offsets;  ///< 3 per collider, added to its whole path (m); empty = zero
+};
+
+/// One value per rollout input group: gradients (backward) or directions (forward
+/// sensitivities). In a direction, empty members are zero.
+struct RolloutVariables {
+  VecX shape;             ///< K
+  VecX rest_joints;       ///< 72
+  VecX bone_inertia;      ///< 240
+  RowMatX pose_targets;   ///< T × 72
+  RowMatX root_targets;   ///< T × 3
+  VecX stiffnesses;       ///< 4
+  VecX collider_offsets;  ///< 3 per collider
+  VecX initial_state;     ///< numDofs
+  VecX initial_velocity;  ///< numDofs
+};
+
+/// Σ over groups of the element-wise products (empty members count as zero): vᵀ(dL/dp).
+double dot(const RolloutVariables& a, const RolloutVariables& b);
+/// into += add, group by group (empty members count as zero). Throws InputError when two
+/// non-empty members differ in shape.
+void accumulate(RolloutVariables& into, const RolloutVariables& add);
+
+struct RolloutOptions {
+  NewtonOptions newton;  ///< per-step solver settings (Auto: sparse Cholesky)
+};
+
+class Rollout {
+ public:
+  /// Keeps the simulable (shared) and remembers its stiffnesses and colliders as the defaults
+  /// of later runs. Throws InputError if null, Error if it has kinematic bones.
+  explicit Rollout(std::shared_ptr<Simulable> simulable, const RolloutOptions& options = {});
+  ~Rollout();
+
+  /// Simulates `steps` steps from the inputs and records the tape: initialize(), the initial
+  /// state/velocity, then per step preUpdate(), the target overrides, Newton, postUpdate(). The
+  /// simulable is left after the last step. Throws InputError on wrong sizes or non-finite
+  /// inputs (before changing anything), or on targets for a simulable that does not track.
+  void run(int steps, const RolloutInputs& inputs = {});
+
+  int numSteps() const;  ///< T of the last run (0 before)
+  int numDofs() const;
+  const RowMatX& states() const;     ///< T × numDofs, row t − 1 = state after step t
+  const VecX& initialState() const;  ///< numDofs, q_0
+  RowMatX joints() const;            ///< T × 72 joint (bone) positions t_b, m
+  /// SMPL vertices (#V × 3, Simulable::getVertices) at step t (0 = initial state).
+  MatX3 vertices(int t) const;
+  const Tape& tape() const { return tape_; }
+  Simulable& simulable() const { return model_.simulable(); }
+
+  // ---- cotangent helpers (map a loss on outputs to dL/dq_t) ----------------------------
+  /// dL/d(state vector) from dL/d(joint positions) (24 × 3): the t_b entries.
+  VecX jointsCotangent(const MatX3& dL_djoints) const;
+  struct VerticesCotangent {
+    VecX state;  ///< dL/d(state vector at step t), numDofs
+    /// The parts that do not go through the state: `shape` (K: SMPL shape and pose blend
+    /// shapes and J_0(β) in trans = t_0 − J_0) and `rest_joints` (72: J_0 in trans). Pass them
+    /// (summed over steps, see accumulate()) to backward() as `direct`.
+    RolloutVariables direct;
+  };
+  /// dL/d(SMPL vertices at step t) (#V × 3) pulled back through getVertices (t = 1..T, or 0).
+  VerticesCotangent verticesCotangent(int t, const MatX3& dL_dvertices) const;
+
+  // ---- derivatives ---------------------------------------------------------------------
+  /// Reverse pass: dL/d(every input) for dL/dq_t (T × numDofs, state-vector layout), plus the
+  /// loss's direct dependence on inputs (`direct`, e.g. VerticesCotangent::direct), added to
+  /// the result. The simulable is left bitwise as it was. Throws InputError on wrong shapes /
+  /// NaN, Error before run().
+  RolloutVariables backward(const RowMatX& dL_dstates, const RolloutVariables& direct = {});
+  /// Forward sensitivities: for each direction v, the T × numDofs changes of the state vectors
+  /// dq_t/dp · v (one back-substitution per direction per step).
+  std::vector<RowMatX> forwardSensitivities(const std::vector<RolloutVariables>& directions);
+
+ private:
+  void requireRun(const char* who) const;
+  void checkVariables(const RolloutVariables& v, const std::string& who) const;
+
+  SimulableAdjointModel model_;
+  std::shared_ptr<Simulable> simulable_;
+  RolloutOptions options_;
+  VecX base_stiffnesses_;
+  std::vector<Collider> base_colliders_;
+  Tape tape_;
+  RowMatX states_;
+  VecX initial_state_;
+  bool state_from_initialize_ = true, velocity_from_initialize_ = true;
+  MatX initial_state_joints_jacobian_, initial_velocity_joints_jacobian_;  // numDofs × 72
+  std::unique_ptr<LinearSolver> solver_;
+};
+
+}  // namespace flsh

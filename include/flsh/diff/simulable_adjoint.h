@@ -1,0 +1,68 @@
+// SimulableAdjointModel: the articulated-skeleton Simulable as an AdjointModel.
+//
+// State vector: 6 values per bone [t_b (m), r_b (rad, rotation vector of R_b)]
+// (Simulable::getState). Increment chart: [δt_b, δω_b] with R_b ← exp([δω_b]×) R_b. The chart
+// map between them is per bone dt = δt, dr = J_l(r)⁻¹ δω (include/flsh/core/rotation.h).
+// Initial velocity: per DoF in the increment chart (m/s, rad/s), q_{−1} = q_0 ⊖ h v_0, i.e.
+// t_{−1} = t_0 − h v_t and R_{−1} = exp(−h [v_ω]×) R_0 (Simulable::setVelocity).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "flsh/diff/adjoint_model.h"
+#include "flsh/sim/simulable.h"
+
+namespace flsh {
+
+/// Parameter groups of SimulableAdjointModel, in parameterGroups() order.
+enum class SimulableGroup {
+  Shape = 0,        ///< K: β (through J(β), bone inertias and the contact surface)
+  RestJoints,       ///< 72: J (m), as if set by Simulable::setParameter(RestJoints)
+  BoneInertia,      ///< 240: per bone mass, first moment, second moment (SimParameter layout)
+  PoseTargets,      ///< per step, 72: tracking target rotation vectors (rad)
+  RootTargets,      ///< per step, 3: root position target t_0 = J_0 + trans (m)
+  Stiffnesses,      ///< 4: joint, tracking, root, contact (SimParameter::Stiffnesses)
+  ColliderOffsets,  ///< 3 per collider: a translation of its whole path (m)
+};
+constexpr int kNumSimulableGroups = 7;
+
+class SimulableAdjointModel final : public AdjointModel {
+ public:
+  /// Throws InputError if the simulable is null, Error if it has kinematic bones (their DoFs
+  /// follow targets placed from the parents' predicted state: not differentiated here).
+  explicit SimulableAdjointModel(std::shared_ptr<Simulable> simulable);
+
+  Simulable& simulable() const { return *simulable_; }
+
+  int numDofs() const override;
+  std::vector<ParameterGroupInfo> parameterGroups() const override;
+  std::unique_ptr<StepSnapshot> saveStep() const override;
+  void restoreStep(const StepSnapshot& snapshot) override;
+  void exactHessian(SpMat& H) const override;
+  SpMat previousStateJacobian(int which) const override;
+  void parameterJacobians(std::vector<MatX>& out) const override;
+  /// Products without matrices (Simulable::getGradientParameterVJPs); the Shape entry holds
+  /// only the contact-surface part per step, finishParameterVJPs adds (dJ/dβ)ᵀ p̄_J +
+  /// (dI/dβ)ᵀ p̄_I once.
+  void previousStatesVJP(const VecX& lambda, VecX& a_n, VecX& a_nm1) const override;
+  VecX previousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const override;
+  void parameterVJPs(const VecX& lambda, std::vector<VecX>& out) const override;
+  void finishParameterVJPs(std::vector<VecX>& global) const override;
+  /// Shape directions are mapped to rest-joint and bone-inertia directions (dJ/dβ β̇,
+  /// dI/dβ β̇) plus the contact-surface part: no per-step matrix–matrix chain.
+  void parameterJVPs(const std::vector<std::vector<const VecX*>>& directions,
+                     std::vector<VecX>& out) const override;
+  VecX state() const override;
+  VecX incrementToStateTangent(const VecX& dq) const override;
+  VecX stateToIncrementTangent(const VecX& ds) const override;
+  VecX stateToIncrementCotangent(const VecX& a) const override;
+  VecX incrementToStateCotangent(const VecX& a) const override;
+  VecX initialPreviousStateTangent(const VecX& dq0, const VecX& dv0) const override;
+  VecX initialPreviousStateCotangent(const VecX& a_previous, VecX& a0) const override;
+
+ private:
+  std::shared_ptr<Simulable> simulable_;
+};
+
+}  // namespace flsh

@@ -1,0 +1,102 @@
+// Tape of converged steps and the two sweeps over it (ARCHITECTURE.md §6), generic over the
+// model (AdjointModel).
+//
+// Recording: after step t (t = 1..T) has converged, recordStep() saves the model's step snapshot
+// and factors the EXACT Hessian H_t = ∂g_t/∂q_t at the converged state once (Newton's last
+// factor belongs to the iterate before its final update, and may be a PSD approximation). The
+// factor is a sparse Cholesky L Lᵀ with one fill-reducing ordering shared by all steps; where H_t
+// is not positive definite (possible with the exact contact/rotation curvature) an LDLᵀ, and if
+// that meets a zero pivot a sparse LU. A singular H_t (not a strict local minimum) is recorded as
+// such and the sweeps then throw an Error naming the step.
+//
+// Reverse sweep (adjoint), with ā_t = dL/dq_t in the increment chart:
+//   for t = T..1:  solve H_t λ_t = ā_t;  ā_{t−1} −= (∂g_t/∂q_{t−1})ᵀ λ_t;
+//                  ā_{t−2} −= (∂g_t/∂q_{t−2})ᵀ λ_t;  p̄ −= (∂g_t/∂p)ᵀ λ_t
+// Forward sweep (tangents), for a direction (ṗ, q̇_0, v̇_0):
+//   q̇_t = −H_t⁻¹ (∂g_t/∂q_{t−1} q̇_{t−1} + ∂g_t/∂q_{t−2} q̇_{t−2} + ∂g_t/∂p ṗ_t)
+// (one back-substitution per direction per step, with the same factors).
+// Both sweeps restore the model to each recorded step to evaluate the Jacobians there, and leave
+// it exactly (bitwise) as they found it.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "flsh/core/types.h"
+#include "flsh/diff/adjoint_model.h"
+
+namespace flsh {
+
+/// Diagnostics of one recorded step.
+struct TapeStepInfo {
+  bool converged = true;  ///< Newton met its tolerance
+  int newton_iterations = 0;
+  double gradient_norm = 0.0;  ///< ‖g‖∞ at the recorded state
+  /// How the exact Hessian was factored: "llt" (positive definite), "ldlt" (indefinite),
+  /// "lu" (indefinite, LDLᵀ met a zero pivot) or "singular" (the sweeps refuse this step).
+  std::string factorization;
+};
+
+class Tape {
+ public:
+  Tape();
+  ~Tape();
+  Tape(Tape&&) noexcept;
+  Tape& operator=(Tape&&) noexcept;
+
+  void clear();
+  /// Records the initial conditions: the model with q_n = q_0, q_{n−1} = q_{−1} (before the
+  /// first step's preparation). Clears earlier steps.
+  void recordInitial(const AdjointModel& model);
+  /// Records the converged step at the model's current state (after the solve, before the
+  /// state history is shifted). `info.factorization` is filled in here.
+  void recordStep(const AdjointModel& model, TapeStepInfo info = {});
+
+  int numSteps() const;  ///< T
+  int numDofs() const;
+  bool hasInitial() const;
+  const TapeStepInfo& stepInfo(int t) const;  ///< t = 1..T
+  const StepSnapshot& initialSnapshot() const;
+  const StepSnapshot& stepSnapshot(int t) const;  ///< t = 1..T
+  /// Solves H_t x = b with step t's factor (t = 1..T).
+  VecX solve(int t, const VecX& b) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Gradients of a rollout loss from the reverse sweep. Groups follow model.parameterGroups():
+/// `global[g]` (size) for rollout-wide groups, `per_step[g]` (T × size, row t − 1 = step t) for
+/// per-step groups; the other entry of each group is empty.
+struct AdjointResult {
+  std::vector<VecX> global;
+  std::vector<RowMatX> per_step;
+  VecX initial_state;            ///< dL/d(state vector q_0)
+  VecX initial_state_increment;  ///< dL/d(increment of q_0) (the same, in the chart)
+  VecX initial_velocity;         ///< dL/dv_0
+};
+
+/// Reverse sweep. `state_cotangents` is T × numDofs: row t − 1 = dL/d(state vector after step t).
+/// Throws InputError on a wrong shape or non-finite values, Error if the tape is empty or a
+/// step's Hessian was singular.
+AdjointResult adjointSweep(AdjointModel& model, const Tape& tape,
+                           const Eigen::Ref<const RowMatX>& state_cotangents);
+
+/// A direction in parameter and initial-condition space for the forward sweep. Empty members
+/// are zero. Groups follow model.parameterGroups() (global: size; per-step: T × size).
+struct TangentDirection {
+  std::vector<VecX> global;
+  std::vector<RowMatX> per_step;
+  VecX initial_state;            ///< change of the state vector q_0
+  VecX initial_state_increment;  ///< added: increments of q_0 (e.g. through model data)
+  VecX initial_velocity;         ///< change of v_0
+};
+
+/// Forward sweep: for each direction, the T × numDofs changes of the state vectors (row t − 1 =
+/// step t). All directions share each step's Jacobian evaluation and factor.
+std::vector<RowMatX> tangentSweep(AdjointModel& model, const Tape& tape,
+                                  const std::vector<TangentDirection>& directions);
+
+}  // namespace flsh

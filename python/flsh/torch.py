@@ -1,0 +1,385 @@
+"""flsh.torch: flsh's differentiable pieces as torch.autograd Functions.
+
+``smpl(model, betas, pose, trans)`` is the SMPL forward pass of flsh's C++ core (ARCHITECTURE.md
+§2) with a backward pass from its analytic Jacobians (PosedBodyJacobians), not from tracing:
+
+    import torch, flsh, flsh.torch
+    model = flsh.make_synthetic_body(vertices=6890)
+    pose = torch.zeros(72, dtype=torch.float64, requires_grad=True)
+    vertices, joints = flsh.torch.smpl(model, torch.zeros(10, dtype=torch.float64), pose)
+    joints[7].sum().backward()  # pose.grad: (72,)
+
+``simulate(simulator, betas=…, pose_targets=…, …)`` is a whole simulated rollout (flsh.Rollout,
+docs/adjoint.md) as an autograd Function: joint (and optionally SMPL vertex) trajectories as
+functions of β, per-step pose and root targets, the 4 stiffnesses and the initial state and
+velocity, with a backward pass by the adjoint method:
+
+    sim = flsh.torch.RolloutSimulator(model, flsh.make_builtin_motion("walk"), steps=8,
+                                      colliders=[flsh.Collider.plane()])
+    betas = torch.zeros(10, dtype=torch.float64, requires_grad=True)
+    joints = flsh.torch.simulate(sim, betas=betas)       # (8, 24, 3)
+    joints[-1, 0, 1].backward()                          # betas.grad: (10,)
+
+Tensors are float64 on the CPU. Lengths in m, angles in rad. The model is immutable and never
+changed; inputs are never modified in place; every simulate() call builds its own avatar and
+simulable. Import it as ``flsh.torch`` (``import flsh`` does not import torch).
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch.autograd.function import once_differentiable
+
+from . import _flsh
+
+__all__ = ["RolloutFunction", "RolloutSimulator", "SmplFunction", "simulate", "smpl"]
+
+_POSE_SIZE = 72
+
+
+def _check_tensor(value, name: str, last: int | None, expected: str) -> torch.Tensor:
+    """`value` as a float64 CPU tensor of shape (last,) or (B, last); ValueError otherwise."""
+    if not isinstance(value, torch.Tensor):
+        raise ValueError(f"{name}: expected a torch.Tensor of shape {expected} and dtype "
+                         f"torch.float64, got {type(value).__name__}")
+    if value.dtype != torch.float64:
+        raise ValueError(f"{name}: expected dtype torch.float64, got {value.dtype} "
+                         f"(convert with .double())")
+    if value.device.type != "cpu":
+        raise ValueError(f"{name}: expected a CPU tensor, got device {value.device}")
+    if value.dim() not in (1, 2) or (last is not None and value.shape[-1] != last):
+        raise ValueError(f"{name}: expected shape {expected}, got {tuple(value.shape)}")
+    return value
+
+
+class SmplFunction(torch.autograd.Function):
+    """Batched SMPL forward pass: (betas (B, K'), pose (B, 72), trans (B, 3)) -> vertices
+    (B, V, 3), joints (B, 24, 3). Use :func:`smpl`, which checks and broadcasts the inputs."""
+
+    @staticmethod
+    def forward(ctx, model, betas, pose, trans):
+        need_jacobians = any(ctx.needs_input_grad[1:4])
+        betas_np = betas.detach().numpy()
+        pose_np = pose.detach().numpy()
+        trans_np = trans.detach().numpy()
+        frames = pose_np.shape[0]
+        vertices = np.empty((frames, model.num_vertices, 3))
+        joints = np.empty((frames, 24, 3))
+        jacobians = []
+        for b in range(frames):
+            posed = _flsh.pose_body(model, betas_np[b], pose_np[b], trans_np[b],
+                                    jacobians=need_jacobians)
+            vertices[b] = posed.vertices
+            joints[b] = posed.joints
+            if need_jacobians:
+                jacobians.append((posed.vertices_betas, posed.vertices_pose,
+                                  posed.joints_betas, posed.joints_pose))
+        ctx.jacobians = jacobians
+        ctx.num_betas = betas_np.shape[1]
+        return torch.from_numpy(vertices), torch.from_numpy(joints)
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, grad_vertices, grad_joints):
+        # dL/dp = Σ_points (dL/dx) · (dx/dp): contractions over (point, coordinate).
+        K = ctx.num_betas
+        grad_v = grad_vertices.detach().numpy()
+        grad_j = grad_joints.detach().numpy()
+        frames = grad_v.shape[0]
+        grad_betas = np.zeros((frames, K))
+        grad_pose = np.zeros((frames, _POSE_SIZE))
+        for b, (v_betas, v_pose, j_betas, j_pose) in enumerate(ctx.jacobians):
+            if K:
+                grad_betas[b] = (np.tensordot(grad_v[b], v_betas[:, :, :K], axes=([0, 1], [0, 1]))
+                                 + np.tensordot(grad_j[b], j_betas[:, :, :K], axes=([0, 1], [0, 1])))
+            grad_pose[b] = (np.tensordot(grad_v[b], v_pose, axes=([0, 1], [0, 1]))
+                            + np.tensordot(grad_j[b], j_pose, axes=([0, 1], [0, 1])))
+        # d(x)/d(trans) is the identity for every vertex and joint.
+        grad_trans = grad_v.sum(axis=1) + grad_j.sum(axis=1)
+        return (None, torch.from_numpy(grad_betas), torch.from_numpy(grad_pose),
+                torch.from_numpy(grad_trans))
+
+
+def smpl(model, betas: torch.Tensor, pose: torch.Tensor, trans: torch.Tensor | None = None):
+    """SMPL vertices and joints of flsh's forward pass, differentiable in betas, pose and trans.
+
+    model: flsh.BodyModel (read only). betas: (K',) or (B, K') with K' ≤ model.num_betas (zero
+    padded). pose: (72,) or (B, 72) axis-angle, rad (SMPL layout). trans: (3,) or (B, 3), m, or
+    None (zero). All float64 CPU tensors; unbatched inputs are shared by every frame.
+
+    Returns (vertices, joints): float64 tensors (V, 3) and (24, 3) in m, or (B, V, 3) and
+    (B, 24, 3) if any input has a batch dimension. Gradients come from the analytic Jacobians
+    (computed only when an input requires grad). ValueError on a wrong dtype, device or shape;
+    TypeError if model is not a flsh.BodyModel.
+    """
+    if not isinstance(model, _flsh.BodyModel):
+        raise TypeError(f"model: expected a flsh.BodyModel, got {type(model).__name__}")
+    K = model.num_betas
+    betas = _check_tensor(betas, "betas", None, f"(K',) or (B, K') with K' <= {K}")
+    if betas.shape[-1] > K:
+        raise ValueError(f"betas: expected at most {K} values (the model's shape components) in "
+                         f"the last dimension, got shape {tuple(betas.shape)}")
+    pose = _check_tensor(pose, "pose", _POSE_SIZE, "(72,) or (B, 72)")
+    if trans is None:
+        trans = torch.zeros(3, dtype=torch.float64)
+    trans = _check_tensor(trans, "trans", 3, "(3,) or (B, 3)")
+
+    batch_sizes = {t.shape[0] for t in (betas, pose, trans) if t.dim() == 2}
+    if len(batch_sizes) > 1:
+        raise ValueError("betas, pose, trans: batch sizes differ: "
+                         f"{tuple(betas.shape)}, {tuple(pose.shape)}, {tuple(trans.shape)}")
+    batched = bool(batch_sizes)
+    frames = batch_sizes.pop() if batched else 1
+
+    def frames_of(t):  # (B, n) views; expand's backward sums the gradients of shared inputs
+        return t.expand(frames, -1) if t.dim() == 1 else t
+
+    vertices, joints = SmplFunction.apply(model, frames_of(betas), frames_of(pose),
+                                          frames_of(trans))
+    if not batched:
+        return vertices[0], joints[0]
+    return vertices, joints
+
+
+# ---------------------------------------------------------------------------------------------
+# Differentiable rollouts
+
+_NUM_STIFFNESSES = 4  # joint (N/m), tracking (1/s²), root (1/s²), contact (N/m³)
+
+
+def _check_fixed(value, name: str, shape: tuple, expected: str) -> torch.Tensor:
+    """`value` as a float64 CPU tensor of exactly `shape` (−1 = any extent); ValueError else."""
+    if not isinstance(value, torch.Tensor):
+        raise ValueError(f"{name}: expected a torch.Tensor of shape {expected} and dtype "
+                         f"torch.float64, got {type(value).__name__}")
+    if value.dtype != torch.float64:
+        raise ValueError(f"{name}: expected dtype torch.float64, got {value.dtype} "
+                         f"(convert with .double())")
+    if value.device.type != "cpu":
+        raise ValueError(f"{name}: expected a CPU tensor, got device {value.device}")
+    if value.dim() != len(shape) or any(e not in (-1, a) for e, a in zip(shape, value.shape)):
+        raise ValueError(f"{name}: expected shape {expected}, got {tuple(value.shape)}")
+    if not bool(torch.isfinite(value).all()):
+        raise ValueError(f"{name}: contains NaN or Inf")
+    return value
+
+
+class RolloutSimulator:
+    """What stays fixed across differentiable rollouts: body model, mocap, simulation options,
+    colliders, Newton options and the number of steps T. Never changed by :func:`simulate`
+    (treat it as read only); shared by any number of calls, each of which builds its own
+    SoftAvatar and Simulable.
+
+    body: flsh.BodyModel. mocap: flsh.Motion to track, or None (no tracking: a passive body
+    starting in the rest pose). steps: T ≥ 1 (h = options.time_step, s). options:
+    flsh.SimulableOptions or None. colliders: flsh.Collider list (e.g. a ground plane). newton:
+    flsh.NewtonOptions or None; the gradients are exact for the converged steps, so the default
+    here is a tight gradient_tolerance of 1e-11 (central differences of the joints then agree
+    with the gradients to ~5e-10 on a 600-vertex body). betas: (≤K,) numpy shape used when simulate() gets betas=None
+    (default zeros). density (kg/m³) and voxel_size (m): SoftAvatar settings.
+
+    The default-shape avatar is built once and kept: it also keeps the voxelized template
+    alive, which every new avatar of the same body and settings reuses.
+    """
+
+    def __init__(self, body, mocap=None, *, steps: int, options=None, colliders=(), newton=None,
+                 betas=None, density: float = 1010.0, voxel_size: float = 0.01):
+        if not isinstance(body, _flsh.BodyModel):
+            raise TypeError(f"body: expected a flsh.BodyModel, got {type(body).__name__}")
+        if mocap is not None and not isinstance(mocap, _flsh.Motion):
+            raise TypeError(f"mocap: expected a flsh.Motion or None, got {type(mocap).__name__}")
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+            raise ValueError(f"steps: expected an integer ≥ 1, got {steps!r}")
+        if options is not None and not isinstance(options, _flsh.SimulableOptions):
+            raise TypeError(f"options: expected a flsh.SimulableOptions or None, got "
+                            f"{type(options).__name__}")
+        colliders = list(colliders)
+        for i, c in enumerate(colliders):
+            if not isinstance(c, _flsh.Collider):
+                raise TypeError(f"colliders[{i}]: expected a flsh.Collider, got {type(c).__name__}")
+        if newton is None:
+            newton = _flsh.NewtonOptions(gradient_tolerance=1e-11, max_iterations=50)
+        elif not isinstance(newton, _flsh.NewtonOptions):
+            raise TypeError(f"newton: expected a flsh.NewtonOptions or None, got "
+                            f"{type(newton).__name__}")
+        self.body = body
+        self.mocap = mocap
+        self.steps = int(steps)
+        self.options = options if options is not None else _flsh.SimulableOptions()
+        self.colliders = tuple(colliders)
+        self.rollout_options = _flsh.RolloutOptions(newton=newton)
+        self.density = float(density)
+        self.voxel_size = float(voxel_size)
+        default_betas = np.zeros(body.num_betas) if betas is None else np.asarray(betas, float)
+        self._default_avatar = self._make_avatar(default_betas)
+        self.num_dofs = 6 * _flsh.NUM_JOINTS
+
+    @property
+    def num_betas(self) -> int:
+        return self.body.num_betas
+
+    @property
+    def num_vertices(self) -> int:
+        return self.body.num_vertices
+
+    @property
+    def default_betas(self) -> np.ndarray:
+        """(K,) the shape simulate() uses when betas is None."""
+        return self._default_avatar.betas
+
+    def _make_avatar(self, betas: np.ndarray):
+        avatar = _flsh.SoftAvatar(self.body, betas, density=self.density,
+                                  voxel_size=self.voxel_size)
+        avatar.init_volumetric_data()
+        return avatar
+
+    def make_simulable(self, betas: np.ndarray | None = None):
+        """A new flsh.Simulable with these settings and colliders, of shape `betas` (≤K,) or the
+        default shape (None; then the avatar is the shared, immutable default one)."""
+        avatar = self._default_avatar if betas is None else self._make_avatar(betas)
+        simulable = _flsh.Simulable(avatar, self.mocap, self.options)
+        if self.colliders:
+            simulable.set_colliders(list(self.colliders))
+        return simulable
+
+    def rollout(self, betas: np.ndarray | None = None, **inputs):
+        """A new flsh.Rollout of T steps, already run: shape `betas` (numpy (≤K,) or None) and
+        numpy inputs by the names of flsh.RolloutInputs (None = the simulable's own)."""
+        rollout = _flsh.Rollout(self.make_simulable(betas), self.rollout_options)
+        rollout.run(self.steps, _flsh.RolloutInputs(**inputs))
+        return rollout
+
+    def own_inputs(self, betas: np.ndarray | None = None) -> dict:
+        """The simulable's own values of every rollout input, as numpy arrays keyed by the
+        simulate() argument names: what simulate() uses for None (a start for optimizing them).
+        pose_targets (T, 72) and root_targets (T, 3) are the mocap's at steps 1..T (absent
+        without a mocap); stiffnesses (4,); initial_state and initial_velocity (numDofs,) as
+        initialize() sets them for shape `betas` (None = the default shape)."""
+        simulable = self.make_simulable(betas)
+        simulable.initialize()
+        values = {"stiffnesses": simulable.get_parameter(_flsh.SimParameter.Stiffnesses),
+                  "initial_state": simulable.get_state(),
+                  "initial_velocity": simulable.get_velocity()}
+        if self.mocap is not None:
+            root_joint = simulable.get_parameter(_flsh.SimParameter.RestJoints)[:3]
+            pose = np.empty((self.steps, 72))
+            root = np.empty((self.steps, 3))
+            for t in range(self.steps):
+                simulable.pre_update()  # the targets of step t + 1 (they depend on time only)
+                pose[t] = simulable.get_parameter(_flsh.SimParameter.PoseTargets)
+                root[t] = (simulable.get_parameter(_flsh.SimParameter.RootTranslationTarget)
+                           - root_joint)
+                simulable.post_update()
+            values["pose_targets"] = pose
+            values["root_targets"] = root
+        return values
+
+    def __repr__(self):
+        return (f"RolloutSimulator(vertices={self.num_vertices}, steps={self.steps}, "
+                f"mocap={'yes' if self.mocap is not None else 'none'}, "
+                f"colliders={len(self.colliders)})")
+
+
+# Names of the tensor inputs of RolloutFunction, in argument order, and their RolloutInputs /
+# RolloutVariables member (betas: the `shape` gradient; the avatar is built from them).
+_ROLLOUT_INPUTS = ("pose_targets", "root_targets", "stiffnesses", "initial_state",
+                   "initial_velocity")
+
+
+class RolloutFunction(torch.autograd.Function):
+    """One simulated rollout: (betas, pose_targets, root_targets, stiffnesses, initial_state,
+    initial_velocity), each a float64 tensor or None (= the simulable's own) -> joints (T, 24, 3)
+    and vertices (T, V, 3) (empty (T, 0, 3) unless requested). Use :func:`simulate`, which
+    checks the inputs."""
+
+    @staticmethod
+    def forward(ctx, simulator, want_vertices, betas, pose_targets, root_targets, stiffnesses,
+                initial_state, initial_velocity):
+        tensors = (pose_targets, root_targets, stiffnesses, initial_state, initial_velocity)
+        inputs = {name: t.detach().numpy() for name, t in zip(_ROLLOUT_INPUTS, tensors)
+                  if t is not None}
+        betas_np = None if betas is None else betas.detach().numpy()
+        rollout = simulator.rollout(betas_np, **inputs)
+        joints = torch.from_numpy(rollout.joints())
+        if want_vertices:
+            vertices = torch.from_numpy(rollout.vertex_trajectory())
+        else:
+            vertices = torch.empty((simulator.steps, 0, 3), dtype=torch.float64)
+            ctx.mark_non_differentiable(vertices)
+        ctx.rollout = rollout if any(ctx.needs_input_grad[2:]) else None
+        ctx.want_vertices = want_vertices
+        ctx.num_betas = 0 if betas is None else betas.shape[0]
+        return joints, vertices
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, grad_joints, grad_vertices):
+        rollout = ctx.rollout
+        grad_v = grad_vertices.detach().numpy() if ctx.want_vertices else None
+        states_cotangent, direct = rollout.trajectory_cotangent(
+            grad_joints.detach().numpy(), grad_v)
+        grad = rollout.backward(states_cotangent, direct)
+
+        def as_tensor(needed, values):
+            return torch.from_numpy(values) if needed and values is not None else None
+
+        needs = ctx.needs_input_grad
+        grad_betas = None
+        if needs[2] and grad.shape is not None:  # (K,): the padded components are dropped
+            grad_betas = torch.from_numpy(grad.shape[:ctx.num_betas].copy())
+        return (None, None, grad_betas,
+                as_tensor(needs[3], grad.pose_targets), as_tensor(needs[4], grad.root_targets),
+                as_tensor(needs[5], grad.stiffnesses), as_tensor(needs[6], grad.initial_state),
+                as_tensor(needs[7], grad.initial_velocity))
+
+
+def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
+             pose_targets: torch.Tensor | None = None, root_targets: torch.Tensor | None = None,
+             stiffnesses: torch.Tensor | None = None, initial_state: torch.Tensor | None = None,
+             initial_velocity: torch.Tensor | None = None, *, vertices: bool = False):
+    """Simulates simulator.steps steps and returns the joint trajectory, differentiable in every
+    tensor input (adjoint method, flsh.Rollout).
+
+    simulator: RolloutSimulator (body, mocap, options, colliders, T). Inputs, float64 CPU
+    tensors or None (= the simulable's own):
+      betas (K',) body shape, K' ≤ K (zero padded; a new avatar is built);
+      pose_targets (T, 72) tracking target rotation vectors per step, rad (SMPL layout: bone
+        b ≥ 1 relative to its parent, the root global); None = the mocap's;
+      root_targets (T, 3) SMPL trans per step, m (root joint target J_0(β) + trans);
+      stiffnesses (4,) joint (N/m), tracking (1/s²), root (1/s²), contact (N/m³);
+      initial_state (numDofs,) per bone [t_b m, rotation vector r_b rad] (Simulable.get_state);
+      initial_velocity (numDofs,) per DoF, m/s and world-frame rad/s (Simulable.set_velocity).
+    Targets need a mocap (the simulable tracks only then).
+
+    Returns joints (T, 24, 3), the bone positions t_b after steps 1..T (m); with vertices=True
+    (joints, vertices) with the SMPL vertices (T, V, 3) (m; costs a skinning per step forward
+    and an SMPL Jacobian per step backward). ValueError on a wrong dtype, device, shape or a
+    non-finite value; TypeError if simulator is not a RolloutSimulator.
+    """
+    if not isinstance(simulator, RolloutSimulator):
+        raise TypeError(f"simulator: expected a flsh.torch.RolloutSimulator, got "
+                        f"{type(simulator).__name__}")
+    T, K, n = simulator.steps, simulator.num_betas, simulator.num_dofs
+    if betas is not None:
+        _check_fixed(betas, "betas", (-1,), f"(K',) with K' <= {K}")
+        if betas.shape[0] > K:
+            raise ValueError(f"betas: expected at most {K} values (the model's shape "
+                             f"components), got shape {tuple(betas.shape)}")
+    expected = {"pose_targets": ((T, 72), f"(T, 72) = ({T}, 72)"),
+                "root_targets": ((T, 3), f"(T, 3) = ({T}, 3)"),
+                "stiffnesses": ((_NUM_STIFFNESSES,), f"({_NUM_STIFFNESSES},)"),
+                "initial_state": ((n,), f"(numDofs,) = ({n},)"),
+                "initial_velocity": ((n,), f"(numDofs,) = ({n},)")}
+    given = {"pose_targets": pose_targets, "root_targets": root_targets,
+             "stiffnesses": stiffnesses, "initial_state": initial_state,
+             "initial_velocity": initial_velocity}
+    for name, value in given.items():
+        if value is not None:
+            _check_fixed(value, name, *expected[name])
+    if simulator.mocap is None and (pose_targets is not None or root_targets is not None):
+        raise ValueError("pose_targets, root_targets: the simulator has no mocap, so its "
+                         "simulable does not track targets")
+    joints, vertex_trajectory = RolloutFunction.apply(
+        simulator, bool(vertices), betas, pose_targets, root_targets, stiffnesses,
+        initial_state, initial_velocity)
+    return (joints, vertex_trajectory) if vertices else joints

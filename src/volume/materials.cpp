@@ -1,0 +1,609 @@
+// The log-linear material model, its JSON file (docs/materials.md), and per-tet materials with
+// their orthotropy frames (materials.h).
+#include "flsh/volume/materials.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "flsh/core/error.h"
+#include "flsh/io/atomic_file.h"
+#include "flsh/volume/soft_avatar.h"
+#include "volume/surface_query.h"
+
+namespace flsh {
+
+namespace {
+
+using json = nlohmann::json;
+
+constexpr const char* kFormatName = "flsh-materials";
+constexpr int kFormatVersion = 1;
+// Plausibility bounds that catch unit mistakes (g/cm³ for kg/m³, mm for m).
+constexpr double kMinDensity = 100, kMaxDensity = 3000;  // kg/m³
+constexpr double kMaxSkinThickness = 0.05;               // m
+// Below this length of the bone axis projected on the tangent plane (axis within ~11.5° of the
+// normal) the frame uses a world axis instead: the projection's direction is ill-conditioned.
+constexpr double kMinProjectedAxis = 0.2;
+
+const std::vector<std::string> kLayerQuantities = {
+    "density", "E1", "E2", "E3", "nu12", "nu13", "nu23", "G12", "G13", "G23", "fung_gamma"};
+const std::vector<std::string> kBodyQuantities = {"skin_thickness", "tissue_fraction"};
+const std::vector<std::string> kLayerNames = {"skin", "soft_tissue"};
+
+int layeredIndex(const std::string& quantity) {
+  const auto it = std::find(kLayerQuantities.begin(), kLayerQuantities.end(), quantity);
+  return it == kLayerQuantities.end() ? -1 : int(it - kLayerQuantities.begin());
+}
+int bodyIndex(const std::string& quantity) {
+  const auto it = std::find(kBodyQuantities.begin(), kBodyQuantities.end(), quantity);
+  return it == kBodyQuantities.end() ? -1 : int(it - kBodyQuantities.begin());
+}
+
+std::string numberText(double x) {
+  std::ostringstream s;
+  s.precision(17);
+  s << x;
+  return s.str();
+}
+
+/// Orthotropic compliance of the normal block (3 × 3, 1/Pa) from E (3) and ν12, ν13, ν23.
+Mat3 normalCompliance(const Vec3& E, const Vec3& nu) {
+  Mat3 S;
+  S << 1 / E[0], -nu[0] / E[0], -nu[1] / E[0],  //
+      -nu[0] / E[0], 1 / E[1], -nu[2] / E[1],   //
+      -nu[1] / E[0], -nu[2] / E[1], 1 / E[2];
+  return S;
+}
+
+VecX padded(const VecX& betas, int K, const char* who) {
+  if (betas.size() > K)
+    throw InputError(std::string(who) + ": betas has " + std::to_string(betas.size()) +
+                     " values, expected at most " + std::to_string(K) +
+                     " (the material model's K)");
+  if (!betas.allFinite()) throw InputError(std::string(who) + ": betas contains NaN or Inf");
+  VecX b = VecX::Zero(K);
+  b.head(betas.size()) = betas;
+  return b;
+}
+
+/// JSON text with objects indented by two spaces per level and arrays of numbers on one line;
+/// keys sorted (nlohmann::json keeps objects in a std::map), numbers in nlohmann's shortest
+/// round-trip form.
+void writeCompact(const json& j, int depth, std::string& out) {
+  if (j.is_object()) {
+    const std::string indent(2 * (depth + 1), ' ');
+    out += "{\n";
+    bool first = true;
+    for (const auto& item : j.items()) {
+      out += (first ? "" : ",\n") + indent + json(item.key()).dump() + ": ";
+      writeCompact(item.value(), depth + 1, out);
+      first = false;
+    }
+    out += "\n" + std::string(2 * depth, ' ') + "}";
+  } else if (j.is_array()) {
+    out += "[";
+    for (size_t k = 0; k < j.size(); ++k) {
+      if (k) out += ", ";
+      writeCompact(j[k], depth + 1, out);
+    }
+    out += "]";
+  } else {
+    out += j.dump();
+  }
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// MaterialModel
+
+const std::vector<std::string>& MaterialModel::layerQuantities() { return kLayerQuantities; }
+const std::vector<std::string>& MaterialModel::bodyQuantities() { return kBodyQuantities; }
+const std::vector<std::string>& MaterialModel::layerNames() { return kLayerNames; }
+
+int MaterialModel::index(const std::string& quantity, int layer) const {
+  const int layered = layeredIndex(quantity), body = bodyIndex(quantity);
+  if (layered >= 0) {
+    if (layer != kSkin && layer != kSoftTissue)
+      throw InputError("MaterialModel: quantity '" + quantity + "' needs layer 0 (skin) or 1 " +
+                       "(soft tissue), got " + std::to_string(layer));
+    return layer * int(kLayerQuantities.size()) + layered;
+  }
+  if (body >= 0) {
+    if (layer != kBodyLevel)
+      throw InputError("MaterialModel: quantity '" + quantity +
+                       "' is body-level, expected layer kBodyLevel (−1), got " +
+                       std::to_string(layer));
+    return kNumLayers * int(kLayerQuantities.size()) + body;
+  }
+  std::string known;
+  for (const auto& q : kLayerQuantities) known += q + ", ";
+  for (const auto& q : kBodyQuantities) known += q + (q == kBodyQuantities.back() ? "" : ", ");
+  throw InputError("MaterialModel: unknown quantity '" + quantity + "', expected one of " + known);
+}
+
+MaterialModel MaterialModel::defaults(int num_betas) {
+  if (num_betas < 0)
+    throw InputError("MaterialModel::defaults: num_betas = " + std::to_string(num_betas) +
+                     ", expected ≥ 0");
+  MaterialModel m;
+  m.num_betas_ = num_betas;
+  m.coefficients_.assign(kNumLayers * kLayerQuantities.size() + kBodyQuantities.size(),
+                         Coefficient{1.0, VecX::Zero(num_betas)});
+  // Log-slopes on β₀ (size / height) and β₁ (weight): bigger, heavier bodies get softer and
+  // thicker tissue (docs/materials.md).
+  auto set = [&](const std::string& q, int layer, double value, double slope0, double slope1) {
+    VecX b = VecX::Zero(num_betas);
+    if (num_betas > 0) b[0] = slope0;
+    if (num_betas > 1) b[1] = slope1;
+    m.setCoefficient(q, layer, value, b);
+  };
+  // Skin: dermis and epidermis, stiffer in plane than through the thickness, strongly
+  // strain-stiffening.
+  set("density", kSkin, 1070.0, 0.0, 0.0);
+  set("E1", kSkin, 120e3, 0.0, -0.03);
+  set("E2", kSkin, 80e3, 0.0, -0.03);
+  set("E3", kSkin, 40e3, 0.0, -0.03);
+  set("nu12", kSkin, 0.42, 0.0, 0.0);
+  set("nu13", kSkin, 0.45, 0.0, 0.0);
+  set("nu23", kSkin, 0.45, 0.0, 0.0);
+  set("G12", kSkin, 34e3, 0.0, -0.03);
+  set("G13", kSkin, 24e3, 0.0, -0.03);
+  set("G23", kSkin, 19e3, 0.0, -0.03);
+  set("fung_gamma", kSkin, 8.0, 0.0, 0.0);
+  // Soft tissue: a fat and relaxed-muscle mix (≈ 30 % fat), stiffer along the bone (muscle
+  // fibres) than across.
+  set("density", kSoftTissue, 1030.0, 0.0, -0.004);
+  set("E1", kSoftTissue, 15e3, -0.02, -0.08);
+  set("E2", kSoftTissue, 10e3, -0.02, -0.08);
+  set("E3", kSoftTissue, 10e3, -0.02, -0.08);
+  set("nu12", kSoftTissue, 0.45, 0.0, 0.0);
+  set("nu13", kSoftTissue, 0.45, 0.0, 0.0);
+  set("nu23", kSoftTissue, 0.45, 0.0, 0.0);
+  set("G12", kSoftTissue, 4.2e3, -0.02, -0.08);
+  set("G13", kSoftTissue, 4.2e3, -0.02, -0.08);
+  set("G23", kSoftTissue, 3.4e3, -0.02, -0.08);
+  set("fung_gamma", kSoftTissue, 3.0, 0.0, -0.03);
+  set("skin_thickness", kBodyLevel, 0.002, 0.02, 0.04);
+  set("tissue_fraction", kBodyLevel, 0.5, 0.01, 0.05);
+  m.validate("MaterialModel::defaults");
+  return m;
+}
+
+double MaterialModel::baseValue(const std::string& quantity, int layer) const {
+  return coefficients_[index(quantity, layer)].base;
+}
+const VecX& MaterialModel::logSlopes(const std::string& quantity, int layer) const {
+  return coefficients_[index(quantity, layer)].slopes;
+}
+void MaterialModel::setCoefficient(const std::string& quantity, int layer, double base_value,
+                                   const VecX& log_slopes) {
+  const int i = index(quantity, layer);
+  if (!(std::isfinite(base_value) && base_value > 0))
+    throw InputError("MaterialModel::setCoefficient: " + quantity + " value " +
+                     numberText(base_value) + ", expected finite and > 0");
+  if (log_slopes.size() != num_betas_ || !log_slopes.allFinite())
+    throw InputError("MaterialModel::setCoefficient: " + quantity + " log_slopes has " +
+                     std::to_string(log_slopes.size()) + " values, expected " +
+                     std::to_string(num_betas_) + " finite values");
+  coefficients_[i] = Coefficient{base_value, log_slopes};
+}
+
+double MaterialModel::value(const std::string& quantity, int layer, const VecX& betas) const {
+  const Coefficient& c = coefficients_[index(quantity, layer)];
+  if (betas.size() == 0) return c.base;
+  const VecX b = padded(betas, num_betas_, "MaterialModel::value");
+  return c.base * std::exp(c.slopes.dot(b));
+}
+
+VecX MaterialModel::valueGradient(const std::string& quantity, int layer, const VecX& betas) const {
+  const VecX b = padded(betas, num_betas_, "MaterialModel::valueGradient");
+  const double v = value(quantity, layer, b);
+  VecX g(1 + num_betas_);
+  g[0] = v;
+  g.tail(num_betas_) = v * b;
+  return g;
+}
+
+int MaterialModel::numParameters() const { return int(coefficients_.size()) * (1 + num_betas_); }
+int MaterialModel::parameterOffset(const std::string& quantity, int layer) const {
+  return index(quantity, layer) * (1 + num_betas_);
+}
+VecX MaterialModel::parameters() const {
+  VecX p(numParameters());
+  for (size_t i = 0; i < coefficients_.size(); ++i) {
+    p[i * (1 + num_betas_)] = std::log(coefficients_[i].base);
+    p.segment(i * (1 + num_betas_) + 1, num_betas_) = coefficients_[i].slopes;
+  }
+  return p;
+}
+void MaterialModel::setParameters(const VecX& parameters) {
+  if (parameters.size() != numParameters() || !parameters.allFinite())
+    throw InputError("MaterialModel::setParameters: parameters has " +
+                     std::to_string(parameters.size()) + " values, expected " +
+                     std::to_string(numParameters()) + " finite values");
+  MaterialModel candidate = *this;
+  for (size_t i = 0; i < coefficients_.size(); ++i) {
+    candidate.coefficients_[i].base = std::exp(parameters[i * (1 + num_betas_)]);
+    candidate.coefficients_[i].slopes = parameters.segment(i * (1 + num_betas_) + 1, num_betas_);
+  }
+  candidate.validate("MaterialModel::setParameters: parameters");
+  *this = std::move(candidate);
+}
+
+void MaterialModel::validate(const std::string& origin, const VecX& betas) const {
+  const VecX b = padded(betas, num_betas_, "MaterialModel::validate");
+  for (int layer = 0; layer < kNumLayers; ++layer) {
+    const std::string where = origin + ": layers." + kLayerNames[layer] + ".";
+    auto v = [&](const std::string& q) { return value(q, layer, b); };
+    for (const auto& q : kLayerQuantities)
+      if (!(std::isfinite(v(q)) && v(q) > 0))
+        throw InputError(where + q + ": value " + numberText(v(q)) + ", expected finite and > 0");
+    if (v("density") < kMinDensity || v("density") > kMaxDensity)
+      throw InputError(where + "density: " + numberText(v("density")) + " kg/m³, expected " +
+                       numberText(kMinDensity) + ".." + numberText(kMaxDensity) + " (SI units)");
+    for (const char* q : {"nu12", "nu13", "nu23"})
+      if (v(q) >= 0.5)
+        throw InputError(where + q + ": Poisson ratio " + numberText(v(q)) +
+                         (b.isZero() ? "" : " at the given β") + ", expected < 0.5");
+    const Vec3 E(v("E1"), v("E2"), v("E3")), nu(v("nu12"), v("nu13"), v("nu23"));
+    // Scaled by E3 so the positive-definiteness test is independent of the units' magnitude.
+    const Eigen::LLT<Mat3> llt(normalCompliance(E, nu) * E[2]);
+    if (llt.info() != Eigen::Success)
+      throw InputError(where +
+                       "E1..E3, nu12..nu23: orthotropic compliance is not positive "
+                       "definite (E = " +
+                       numberText(E[0]) + ", " + numberText(E[1]) + ", " + numberText(E[2]) +
+                       " Pa; ν = " + numberText(nu[0]) + ", " + numberText(nu[1]) + ", " +
+                       numberText(nu[2]) +
+                       "), expected ν12² < E1/E2, ν13² < E1/E3, ν23² < E2/E3 and det > 0");
+  }
+  const double skin = value("skin_thickness", kBodyLevel, b),
+               fraction = value("tissue_fraction", kBodyLevel, b);
+  if (!(std::isfinite(skin) && skin > 0 && skin <= kMaxSkinThickness))
+    throw InputError(origin + ": body.skin_thickness: " + numberText(skin) +
+                     " m, expected in (0, 0.05] m (SI units)");
+  if (!(std::isfinite(fraction) && fraction > 0 && fraction < 1))
+    throw InputError(origin + ": body.tissue_fraction: " + numberText(fraction) +
+                     ", expected in (0, 1) (soft-tissue thickness over body radius)");
+}
+
+bool MaterialModel::operator==(const MaterialModel& other) const {
+  if (num_betas_ != other.num_betas_ || coefficients_.size() != other.coefficients_.size())
+    return false;
+  for (size_t i = 0; i < coefficients_.size(); ++i)
+    if (coefficients_[i].base != other.coefficients_[i].base ||
+        coefficients_[i].slopes != other.coefficients_[i].slopes)
+      return false;
+  return true;
+}
+
+// ---------------------------------------------------------------------------------------------
+// JSON
+
+std::string MaterialModel::canonicalText() const {
+  auto coefficient = [&](const std::string& q, int layer) {
+    const Coefficient& c = coefficients_[index(q, layer)];
+    json slopes = json::array();
+    for (int k = 0; k < num_betas_; ++k) slopes.push_back(c.slopes[k]);
+    return json{{"value", c.base}, {"log_slopes", slopes}};
+  };
+  json root;
+  root["format"] = kFormatName;
+  root["version"] = kFormatVersion;
+  for (int layer = 0; layer < kNumLayers; ++layer)
+    for (const auto& q : kLayerQuantities)
+      root["layers"][kLayerNames[layer]][q] = coefficient(q, layer);
+  for (const auto& q : kBodyQuantities) root["body"][q] = coefficient(q, kBodyLevel);
+  std::string text;
+  writeCompact(root, 0, text);
+  return text + "\n";
+}
+
+void MaterialModel::save(const std::string& path) const {
+  const std::string text = canonicalText();
+  io::writeFileAtomically(path, [&](std::ostream& out) { out << text; });
+}
+
+MaterialModel MaterialModel::load(const std::string& path, int num_betas) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw FileError("MaterialModel::load: cannot open '" + path + "'");
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) throw FileError("MaterialModel::load: cannot read '" + path + "'");
+  return fromText(text.str(), num_betas, path);
+}
+
+MaterialModel MaterialModel::fromText(const std::string& text, int num_betas,
+                                      const std::string& origin) {
+  if (num_betas < 0)
+    throw InputError(origin + ": num_betas = " + std::to_string(num_betas) + ", expected ≥ 0");
+  json root;
+  try {
+    root = json::parse(text);
+  } catch (const json::exception& e) {  // syntax errors, and numbers beyond double's range
+    throw InputError(origin + ": not valid JSON (" + e.what() + ")");
+  }
+  auto typeName = [](const json& j) { return std::string(j.type_name()); };
+  auto requireObject = [&](const json& j, const std::string& key,
+                           const std::vector<std::string>& keys) {
+    if (!j.is_object())
+      throw InputError(origin + ": " + key + ": expected an object, got " + typeName(j));
+    for (const auto& k : keys)
+      if (!j.contains(k))
+        throw InputError(origin + ": " + (key.empty() ? "" : key + ".") + k + ": missing key");
+    for (const auto& item : j.items())
+      if (std::find(keys.begin(), keys.end(), item.key()) == keys.end()) {
+        std::string known;
+        for (const auto& k : keys) known += (known.empty() ? "" : ", ") + k;
+        throw InputError(origin + ": " + (key.empty() ? "" : key + ".") + item.key() +
+                         ": unknown key, expected one of " + known);
+      }
+  };
+  requireObject(root, "(top level)", {"format", "version", "layers", "body"});
+  if (!root["format"].is_string() || root["format"].get<std::string>() != kFormatName)
+    throw InputError(origin + ": format: expected \"" + kFormatName + "\", got " +
+                     root["format"].dump());
+  if (!root["version"].is_number_integer() || root["version"].get<long>() != kFormatVersion)
+    throw InputError(origin + ": version: expected " + std::to_string(kFormatVersion) + ", got " +
+                     root["version"].dump());
+  requireObject(root["layers"], "layers", kLayerNames);
+
+  MaterialModel m;
+  m.num_betas_ = num_betas;
+  m.coefficients_.assign(kNumLayers * kLayerQuantities.size() + kBodyQuantities.size(),
+                         Coefficient{1.0, VecX::Zero(num_betas)});
+  auto readCoefficient = [&](const json& j, const std::string& key, const std::string& q,
+                             int layer) {
+    requireObject(j, key, {"value", "log_slopes"});
+    const json& v = j["value"];
+    if (!v.is_number())
+      throw InputError(origin + ": " + key + ".value: expected a number, got " + typeName(v));
+    const double base = v.get<double>();
+    if (!(std::isfinite(base) && base > 0))
+      throw InputError(origin + ": " + key + ".value: " + v.dump() +
+                       ", expected a finite number > 0");
+    const json& s = j["log_slopes"];
+    if (!s.is_array())
+      throw InputError(origin + ": " + key + ".log_slopes: expected an array of numbers, got " +
+                       typeName(s));
+    VecX slopes = VecX::Zero(num_betas);
+    for (size_t k = 0; k < s.size(); ++k) {
+      const std::string at = key + ".log_slopes[" + std::to_string(k) + "]";
+      if (!s[k].is_number())
+        throw InputError(origin + ": " + at + ": expected a number, got " + typeName(s[k]));
+      const double x = s[k].get<double>();
+      if (!std::isfinite(x))
+        throw InputError(origin + ": " + at + ": " + s[k].dump() + ", expected a finite number");
+      if (int(k) < num_betas)
+        slopes[k] = x;
+      else if (x != 0)
+        throw InputError(origin + ": " + key + ".log_slopes: " + std::to_string(s.size()) +
+                         " values with a non-zero one at index " + std::to_string(k) +
+                         ", expected at most " + std::to_string(num_betas) +
+                         " (the body's shape components) or zeros beyond");
+    }
+    m.coefficients_[m.index(q, layer)] = Coefficient{base, slopes};
+  };
+  for (int layer = 0; layer < kNumLayers; ++layer) {
+    const std::string key = "layers." + kLayerNames[layer];
+    const json& j = root["layers"][kLayerNames[layer]];
+    requireObject(j, key, kLayerQuantities);
+    for (const auto& q : kLayerQuantities) readCoefficient(j[q], key + "." + q, q, layer);
+  }
+  requireObject(root["body"], "body", kBodyQuantities);
+  for (const auto& q : kBodyQuantities)
+    readCoefficient(root["body"][q], "body." + q, q, kBodyLevel);
+  m.validate(origin);
+  return m;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Per-tet materials
+
+namespace {
+
+void checkSkeleton(const std::string& fn, const MatX& weights, long rows, const MatX3& joints,
+                   const std::vector<int>& parents) {
+  const long nb = joints.rows();
+  if (nb < 1) throw InputError(fn + "joints has 0 rows, expected at least 1");
+  if (weights.rows() != rows || weights.cols() != nb)
+    throw InputError(fn + "weights has shape " +
+                     shapeString({long(weights.rows()), long(weights.cols())}) + ", expected " +
+                     shapeString({rows, nb}));
+  if (long(parents.size()) != nb)
+    throw InputError(fn + "parents has " + std::to_string(parents.size()) + " entries, expected " +
+                     std::to_string(nb) + " (one per joint)");
+  if (!weights.allFinite() || !joints.allFinite())
+    throw InputError(fn + "weights or joints contains NaN or Inf");
+}
+
+/// Unit axis of each bone: its capsule's segment, else the direction to its only child, else
+/// zero (the frame then falls back to a world axis).
+std::vector<Vec3> boneAxes(const std::vector<BoneCapsule>& capsules, const MatX3& joints,
+                           const std::vector<int>& parents) {
+  const int nb = int(joints.rows());
+  std::vector<int> child_count(nb, 0), only_child(nb, -1);
+  for (int b = 1; b < nb; ++b)
+    if (parents[b] >= 0) ++child_count[parents[b]], only_child[parents[b]] = b;
+  std::vector<Vec3> axes(nb, Vec3::Zero());
+  for (int b = 0; b < nb; ++b) {
+    Vec3 axis = capsules[b].b - capsules[b].a;
+    if (axis.norm() <= 1e-9 && child_count[b] == 1)
+      axis = (joints.row(only_child[b]) - joints.row(b)).transpose();
+    if (axis.norm() > 1e-9) axes[b] = axis.normalized();
+  }
+  return axes;
+}
+
+/// Orthonormal frame [a1 a2 a3] with a3 = inward normal, a1 = axis projected on the tangent
+/// plane (or the world axis least aligned with a3 when that projection is short).
+Mat3 tissueFrame(const Vec3& inward, const Vec3& axis) {
+  const Vec3 a3 = inward.normalized();
+  Vec3 a1 = axis - axis.dot(a3) * a3;
+  if (a1.norm() < kMinProjectedAxis) {
+    int least = 0;
+    a3.cwiseAbs().minCoeff(&least);  // |a3[least]| ≤ 1/√3: projection length ≥ √(2/3)
+    a1 = Vec3::Unit(least) - a3[least] * a3;
+  }
+  a1.normalize();
+  Mat3 frame;
+  frame.col(0) = a1;
+  frame.col(1) = a3.cross(a1);
+  frame.col(2) = a3;
+  return frame;
+}
+
+/// Fraction of a tet's volume that is skin: the skin under a boundary face (area × thickness, to
+/// first order in thickness) is given to the tet owning the face, so the skin volume summed over
+/// the tets is the surface area times the thickness; capped at 1 (tets thinner than ~3 t).
+/// |volume|: a shape may invert a sliver (reported by the simulation, not here).
+double skinFraction(double boundary_area, double volume, double thickness) {
+  if (boundary_area == 0) return 0;
+  const double skin = boundary_area * thickness;
+  return skin >= std::abs(volume) ? 1.0 : skin / std::abs(volume);
+}
+
+}  // namespace
+
+VecX surfaceTissueThickness(const MatX3& surface_vertices, const MatX& surface_weights,
+                            const MatX3& joints, const std::vector<int>& parents,
+                            const MaterialModel& model, const VecX& betas) {
+  const std::string fn = "surfaceTissueThickness: ";
+  checkSkeleton(fn, surface_weights, surface_vertices.rows(), joints, parents);
+  if (!surface_vertices.allFinite()) throw InputError(fn + "surface_vertices contains NaN or Inf");
+  const double fraction = model.value("tissue_fraction", MaterialModel::kBodyLevel, betas);
+  const std::vector<BoneCapsule> capsules =
+      fitBoneCapsules(surface_vertices, surface_weights, joints, parents);
+  VecX thickness(surface_vertices.rows());
+  for (int v = 0; v < surface_vertices.rows(); ++v) {
+    int dominant = 0;
+    surface_weights.row(v).maxCoeff(&dominant);
+    const BoneCapsule& c = capsules[dominant];
+    const Vec3 x = surface_vertices.row(v).transpose(), ab = c.b - c.a;
+    const double t =
+        ab.squaredNorm() > 0 ? std::clamp((x - c.a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
+    thickness[v] = fraction * (x - c.a - t * ab).norm();
+  }
+  return thickness;
+}
+
+TetMaterials computeTetMaterials(const TetMesh& mesh, const MatX3& shaped_nodes,
+                                 const MatX& node_weights, const MatX3& joints,
+                                 const std::vector<int>& parents, const MaterialModel& model,
+                                 const VecX& betas) {
+  const std::string fn = "computeTetMaterials: ";
+  detail::checkTetMesh(mesh, shaped_nodes, "computeTetMaterials", false);
+  checkSkeleton(fn, node_weights, mesh.numNodes(), joints, parents);
+  model.validate("computeTetMaterials: material model", betas);
+  std::vector<int> owners;
+  const MatX3i F = detail::outwardBoundaryFaces(mesh, "computeTetMaterials", &owners);
+  if (F.rows() == 0) throw InputError(fn + "the tet mesh has no boundary faces");
+  const int nv = mesh.num_surface_nodes, nt = mesh.numTets();
+
+  // Layer coefficients at β and the layers' stiffness (normal block, 3 × 3) in the local frame.
+  struct Layer {
+    double density, fung;
+    Vec3 young, poisson, shear;
+    Mat3 normal_stiffness;
+  };
+  Layer layers[MaterialModel::kNumLayers];
+  for (int l = 0; l < MaterialModel::kNumLayers; ++l) {
+    auto v = [&](const char* q) { return model.value(q, l, betas); };
+    layers[l] = Layer{v("density"),
+                      v("fung_gamma"),
+                      Vec3(v("E1"), v("E2"), v("E3")),
+                      Vec3(v("nu12"), v("nu13"), v("nu23")),
+                      Vec3(v("G12"), v("G13"), v("G23")),
+                      Mat3::Zero()};
+    layers[l].normal_stiffness = normalCompliance(layers[l].young, layers[l].poisson).inverse();
+  }
+  const double skin_thickness = model.value("skin_thickness", MaterialModel::kBodyLevel, betas);
+
+  const MatX3 surface = shaped_nodes.topRows(nv);
+  const std::vector<Vec3> axes = boneAxes(
+      fitBoneCapsules(surface, node_weights.topRows(nv), joints, parents), joints, parents);
+  const MatX3 normals = detail::vertexNormals(shaped_nodes, F);
+  const detail::SurfaceDistance distance(shaped_nodes, F);
+
+  // Boundary area and volume of each tet.
+  VecX boundary_area = VecX::Zero(nt), volume(nt);
+  for (int t = 0; t < nt; ++t) {
+    const Vec3 x0 = shaped_nodes.row(mesh.tets(t, 0));
+    volume[t] = (shaped_nodes.row(mesh.tets(t, 1)).transpose() - x0)
+                    .cross(shaped_nodes.row(mesh.tets(t, 2)).transpose() - x0)
+                    .dot(shaped_nodes.row(mesh.tets(t, 3)).transpose() - x0) /
+                6;
+  }
+  for (int f = 0; f < F.rows(); ++f) {
+    const Vec3 a = shaped_nodes.row(F(f, 0)), b = shaped_nodes.row(F(f, 1)),
+               c = shaped_nodes.row(F(f, 2));
+    boundary_area[owners[f]] += 0.5 * (b - a).cross(c - a).norm();
+  }
+
+  TetMaterials out;
+  out.density.resize(nt);
+  out.young.resize(nt, 3);
+  out.poisson.resize(nt, 3);
+  out.shear.resize(nt, 3);
+  out.fung.resize(nt);
+  out.frame.resize(nt);
+  out.layer.resize(nt);
+  out.skin_fraction.resize(nt);
+  const Layer& skin = layers[MaterialModel::kSkin];
+  const Layer& tissue = layers[MaterialModel::kSoftTissue];
+#pragma omp parallel for schedule(static)
+  for (int t = 0; t < nt; ++t) {
+    Vec3 centroid = Vec3::Zero();
+    Eigen::RowVectorXd tet_weights = Eigen::RowVectorXd::Zero(node_weights.cols());
+    for (int k = 0; k < 4; ++k) {
+      centroid += shaped_nodes.row(mesh.tets(t, k)).transpose() / 4;
+      tet_weights += node_weights.row(mesh.tets(t, k));
+    }
+    int dominant = 0;
+    tet_weights.maxCoeff(&dominant);
+    const detail::SurfaceDistance::Hit hit = distance.closest(centroid);
+    Vec3 outward = Vec3::Zero();
+    for (int c = 0; c < 3; ++c)
+      outward += hit.barycentric[c] * normals.row(F(hit.face, c)).transpose();
+    if (outward.norm() < 1e-9) {  // opposite normals cancel (a sharp crease): the face normal
+      const Vec3 a = shaped_nodes.row(F(hit.face, 0)), b = shaped_nodes.row(F(hit.face, 1)),
+                 c = shaped_nodes.row(F(hit.face, 2));
+      outward = (b - a).cross(c - a);
+    }
+    out.frame[t] = tissueFrame(-outward, axes[dominant]);
+
+    const double f = skinFraction(boundary_area[t], volume[t], skin_thickness);
+    out.skin_fraction[t] = f;
+    out.layer[t] = f >= 0.5 ? MaterialModel::kSkin : MaterialModel::kSoftTissue;
+    if (f == 0 || f == 1) {
+      const Layer& l = f == 1 ? skin : tissue;
+      out.density[t] = l.density;
+      out.fung[t] = l.fung;
+      out.young.row(t) = l.young.transpose();
+      out.poisson.row(t) = l.poisson.transpose();
+      out.shear.row(t) = l.shear.transpose();
+      continue;
+    }
+    // Voigt mixture: volume average of the stiffness tensors (same frame, so still orthotropic
+    // and positive definite), converted back to engineering constants.
+    out.density[t] = f * skin.density + (1 - f) * tissue.density;
+    out.fung[t] = f * skin.fung + (1 - f) * tissue.fung;
+    out.shear.row(t) = (f * skin.shear + (1 - f) * tissue.shear).transpose();
+    const Mat3 compliance =
+        (f * skin.normal_stiffness + (1 - f) * tissue.normal_stiffness).inverse();
+    const Vec3 young(1 / compliance(0, 0), 1 / compliance(1, 1), 1 / compliance(2, 2));
+    out.young.row(t) = young.transpose();
+    out.poisson.row(t) << -compliance(0, 1) * young[0], -compliance(0, 2) * young[0],
+        -compliance(1, 2) * young[1];
+  }
+  return out;
+}
+
+}  // namespace flsh

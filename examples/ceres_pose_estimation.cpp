@@ -32,40 +32,6 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// Joints, then 3 markers per bone: vertices skinned mostly to it, spread by farthest points.
-KeypointSelection jointsAndMarkers(const BodyModel& model, int per_bone) {
-  KeypointSelection s = KeypointSelection::allJoints();
-  for (int j = 0; j < kNumJoints; ++j) {
-    Eigen::Index best;
-    model.weights.col(j).maxCoeff(&best);
-    std::vector<int> candidates;
-    for (int i = 0; i < model.numVertices(); ++i)
-      if (model.weights(i, j) >= 0.5 * model.weights(best, j)) candidates.push_back(i);
-    std::vector<int> chosen = {int(best)};
-    while (int(chosen.size()) < per_bone && chosen.size() < candidates.size()) {
-      int farthest = candidates[0];
-      double farthest_distance = -1.0;
-      for (int i : candidates) {
-        double d = std::numeric_limits<double>::infinity();
-        for (int c : chosen)
-          d = std::min(d, (model.v_template.row(i) - model.v_template.row(c)).norm());
-        if (d > farthest_distance) farthest_distance = d, farthest = i;
-      }
-      chosen.push_back(farthest);
-    }
-    s.vertices.insert(s.vertices.end(), chosen.begin(), chosen.end());
-  }
-  return s;
-}
-
-MatX3 keypointsOf(const PosedBody& posed, const KeypointSelection& sel) {
-  MatX3 x(sel.size(), 3);
-  const int nj = int(sel.joints.size());
-  for (int k = 0; k < nj; ++k) x.row(k) = posed.joints.row(sel.joints[k]);
-  for (int k = nj; k < sel.size(); ++k) x.row(k) = posed.vertices.row(sel.vertices[k - nj]);
-  return x;
-}
-
 VecX uniform(int n, double scale, std::mt19937& rng) {
   std::uniform_real_distribution<double> u(-scale, scale);
   VecX v(n);
@@ -124,8 +90,8 @@ int main(int argc, char** argv) {
     const VecX true_betas = uniform(K, 1.0, rng);
     const Vec3 true_trans(0.15, 0.05, -0.2);
     const PosedBody truth = poseBody(*model, true_betas, true_pose, true_trans);
-    const KeypointSelection sel = jointsAndMarkers(*model, 3);
-    const MatX3 points = keypointsOf(truth, sel);
+    const KeypointSelection sel = KeypointSelection::jointsAndMarkers(*model, 3);
+    const MatX3 points = sel.pick(truth);
     std::printf("body: %d vertices, %d shape components; %d keypoints (24 joints, %zu markers)\n",
                 model->numVertices(), K, sel.size(), sel.vertices.size());
 

@@ -5,6 +5,7 @@
 #include <Eigen/LU>
 #include <cmath>
 #include <exception>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -79,6 +80,42 @@ KeypointSelection KeypointSelection::allJoints() {
   KeypointSelection s;
   for (int j = 0; j < kNumJoints; ++j) s.joints.push_back(j);
   return s;
+}
+
+KeypointSelection KeypointSelection::jointsAndMarkers(const BodyModel& model, int per_bone) {
+  if (per_bone < 0) throw InputError("jointsAndMarkers: per_bone = " + std::to_string(per_bone) +
+                                     ", expected ≥ 0");
+  KeypointSelection s = allJoints();
+  for (int j = 0; j < model.numJoints(); ++j) {
+    Eigen::Index best;
+    model.weights.col(j).maxCoeff(&best);
+    if (per_bone == 0 || model.weights(best, j) <= 0) continue;
+    std::vector<int> candidates;
+    for (int i = 0; i < model.numVertices(); ++i)
+      if (model.weights(i, j) >= 0.5 * model.weights(best, j)) candidates.push_back(i);
+    std::vector<int> chosen = {int(best)};
+    while (int(chosen.size()) < per_bone && chosen.size() < candidates.size()) {
+      int farthest = candidates[0];
+      double farthest_distance = -1.0;
+      for (int i : candidates) {
+        double d = std::numeric_limits<double>::infinity();
+        for (int c : chosen)
+          d = std::min(d, (model.v_template.row(i) - model.v_template.row(c)).norm());
+        if (d > farthest_distance) farthest_distance = d, farthest = i;
+      }
+      chosen.push_back(farthest);
+    }
+    s.vertices.insert(s.vertices.end(), chosen.begin(), chosen.end());
+  }
+  return s;
+}
+
+MatX3 KeypointSelection::pick(const PosedBody& posed) const {
+  MatX3 x(size(), 3);
+  const int nj = int(joints.size());
+  for (int k = 0; k < nj; ++k) x.row(k) = posed.joints.row(joints[k]);
+  for (int k = nj; k < size(); ++k) x.row(k) = posed.vertices.row(vertices[k - nj]);
+  return x;
 }
 
 SmplKeypointFunction::SmplKeypointFunction(std::shared_ptr<const BodyModel> model,

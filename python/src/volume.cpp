@@ -46,11 +46,12 @@ py::dict quality_dict(const TetMeshQuality& q) {
 void bind_volume(py::module_& m) {
   m.def(
       "tetrahedralize_surface",
-      [](const py::object& V, const py::object& F, double resolution) {
+      [](const py::object& V, const py::object& F, double resolution, bool improve_quality) {
         const MatX3 vertices = to_points(V, "vertices");
         const MatX3i faces = to_triangles(F, "faces");
         TetMeshOptions options;
         options.resolution = resolution;
+        options.improve_quality = improve_quality;
         TetMesh mesh;
         {
           py::gil_scoped_release release;
@@ -60,9 +61,11 @@ void bind_volume(py::module_& m) {
                               quality_dict(tetMeshQuality(mesh)));
       },
       py::arg("vertices"), py::arg("faces"), py::kw_only(), py::arg("resolution") = 1.0,
+      py::arg("improve_quality") = true,
       "Tet mesh of a closed, outward-oriented surface (vertices (V, 3) m, faces (F, 3)) keeping "
       "the surface: returns (nodes (N, 3) m with nodes[:V] == vertices, tets (T, 4) int32 "
-      "positively oriented, quality dict). resolution scales the interior node count.");
+      "positively oriented, quality dict). resolution scales the interior node count; "
+      "improve_quality runs the flip/smoothing pass on the worst tets (surface untouched).");
 
   py::class_<VolumetricData>(
       m, "VolumetricData",

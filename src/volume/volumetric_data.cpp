@@ -94,6 +94,8 @@ std::string volumetricTemplateKey(const BodyModel& body, const TetMeshOptions& o
   hashBody(h, body);
   h.updateField("resolution", &options.resolution, sizeof(options.resolution));
   h.updateField("seed", &options.seed, sizeof(options.seed));
+  const char improve = options.improve_quality ? 1 : 0;
+  h.updateField("improve_quality", &improve, 1);
   return h.hexDigest();
 }
 

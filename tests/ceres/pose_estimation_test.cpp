@@ -47,42 +47,6 @@ Truth makeTruth(const BodyModel& body) {
   return t;
 }
 
-// All joints, then a marker set as in optical motion capture: `per_bone` surface vertices on
-// each of the 24 bones (vertices skinned mostly to it, spread by farthest-point sampling), so
-// that every bone's rotation, including the twist of end bones, is seen.
-KeypointSelection jointsAndMarkers(const BodyModel& model, int per_bone) {
-  KeypointSelection s = KeypointSelection::allJoints();
-  for (int j = 0; j < kNumJoints; ++j) {
-    Eigen::Index best;
-    model.weights.col(j).maxCoeff(&best);
-    std::vector<int> candidates;
-    for (int i = 0; i < model.numVertices(); ++i)
-      if (model.weights(i, j) >= 0.5 * model.weights(best, j)) candidates.push_back(i);
-    std::vector<int> chosen = {int(best)};
-    while (int(chosen.size()) < per_bone && chosen.size() < candidates.size()) {
-      int farthest = candidates[0];
-      double farthest_distance = -1.0;
-      for (int i : candidates) {
-        double d = std::numeric_limits<double>::infinity();
-        for (int c : chosen)
-          d = std::min(d, (model.v_template.row(i) - model.v_template.row(c)).norm());
-        if (d > farthest_distance) farthest_distance = d, farthest = i;
-      }
-      chosen.push_back(farthest);
-    }
-    s.vertices.insert(s.vertices.end(), chosen.begin(), chosen.end());
-  }
-  return s;
-}
-
-MatX3 keypointsOf(const PosedBody& posed, const KeypointSelection& sel) {
-  MatX3 x(sel.size(), 3);
-  const int nj = int(sel.joints.size());
-  for (int k = 0; k < nj; ++k) x.row(k) = posed.joints.row(sel.joints[k]);
-  for (int k = nj; k < sel.size(); ++k) x.row(k) = posed.vertices.row(sel.vertices[k - nj]);
-  return x;
-}
-
 double meanRowDistance(const MatX3& a, const MatX3& b) { return (a - b).rowwise().norm().mean(); }
 
 // Median over joints of the angle (rad) between estimated and true global bone rotations.
@@ -126,10 +90,10 @@ struct FitErrors {
 FitErrors fit3d(double sigma, double prior) {
   const auto model = body();
   const Truth truth = makeTruth(*model);
-  const KeypointSelection sel = jointsAndMarkers(*model, 3);
+  const KeypointSelection sel = KeypointSelection::jointsAndMarkers(*model, 3);
   std::mt19937 rng(7);
   std::normal_distribution<double> noise(0.0, 1.0);
-  MatX3 observed = keypointsOf(truth.posed, sel);
+  MatX3 observed = sel.pick(truth.posed);
   for (int i = 0; i < observed.size(); ++i) observed.data()[i] += sigma * noise(rng);
 
   VecX pose = VecX::Zero(72), betas = VecX::Zero(model->numBetas());
@@ -178,8 +142,8 @@ TEST(PoseEstimation, From3dKeypointsWithNoise) {
 TEST(PoseEstimation, From2dKeypointsInTwoCamerasWithNoise) {
   const auto model = body();
   const Truth truth = makeTruth(*model);
-  const KeypointSelection sel = jointsAndMarkers(*model, 3);
-  const MatX3 points = keypointsOf(truth.posed, sel);
+  const KeypointSelection sel = KeypointSelection::jointsAndMarkers(*model, 3);
+  const MatX3 points = sel.pick(truth.posed);
   const Vec3 centre(0.0, 0.9, 0.0);
   const std::vector<PinholeCamera> cameras = {
       PinholeCamera::lookAt(centre + Vec3(0.0, 0.3, 3.5), centre, Vec3::UnitY(), 1000.0, 1000.0,

@@ -27,6 +27,10 @@ def test_tetrahedralize_surface_keeps_the_surface(body):
     enclosed = np.einsum("ij,ij->i", p, np.cross(q, r)).sum() / 6
     assert volumes.sum() == pytest.approx(enclosed, rel=1e-10)
     assert 0 < quality["min_dihedral_deg"] < 70.6 < quality["max_dihedral_deg"] < 180
+    raw_nodes, raw_tets, raw_quality = flsh.tetrahedralize_surface(
+        body.v_template, body.faces, resolution=0.5, improve_quality=False)
+    np.testing.assert_array_equal(raw_nodes[:V], body.v_template)
+    assert quality["min_dihedral_deg"] >= raw_quality["min_dihedral_deg"]
     with pytest.raises(ValueError, match="faces"):
         flsh.tetrahedralize_surface(body.v_template, body.faces[:, :2])
     with pytest.raises(ValueError, match="open|boundary|edge"):

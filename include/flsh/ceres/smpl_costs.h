@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "flsh/body/body_forward.h"
 #include "flsh/body/body_model.h"
 #include "flsh/core/types.h"
 
@@ -41,6 +42,12 @@ struct KeypointSelection {
   int size() const { return int(joints.size() + vertices.size()); }
   /// All 24 SMPL joints.
   static KeypointSelection allJoints();
+  /// All 24 joints, then a marker set as in optical motion capture: `per_bone` surface vertices
+  /// on each bone (vertices skinned mostly to it, spread by farthest-point sampling on the
+  /// template), so that every bone's rotation, including the twist of end bones, is observed.
+  static KeypointSelection jointsAndMarkers(const BodyModel& model, int per_bone);
+  /// The selected points of a posed body (size() × 3, m): posed joints, then posed vertices.
+  MatX3 pick(const PosedBody& posed) const;
 };
 
 /// The posed keypoints of a selection and their analytic Jacobians: the common part of the

@@ -72,8 +72,11 @@ struct TetMeshImprovement {
 /// and (2) moves of their interior nodes (to the neighbours' centroid, then ascent steps on the
 /// worst incident dihedral sine, with a line search); an operation is accepted only if it raises
 /// the worst quality among the tets it replaces or moves, so the mesh's worst tet never gets
-/// worse and no tet inverts. Tets come out in the canonical order of tetrahedralizeSurface.
-/// Deterministic. Throws InputError if a tet has out-of-range or repeated indices or volume ≤ 0.
+/// worse and no tet inverts, and only if no tet it creates has a radius–edge ratio above 2.5 or
+/// above the worst ratio among the tets it replaces. Tets come out in the canonical order of
+/// tetrahedralizeSurface (their number usually drops: 3–2 flips). Deterministic; about 0.1 s for
+/// a 40 000-tet body. Throws InputError if a tet has out-of-range or repeated indices or volume
+/// ≤ 0, or num_surface_nodes is outside [0, #N].
 TetMeshImprovement improveTetMeshQuality(TetMesh& mesh);
 
 /// Dihedral angles, radius–edge ratios and the smallest volume over all tets.

@@ -312,20 +312,16 @@ double trackingWeight(const SimulableParameterView& v, const VecX& lambda, int b
 
 // Node cotangent μ_j = Σ_b w_ib (λt_b + λω_b × y_ib) per candidate (3 each): addContactRows
 // contracted with λ is μ_jᵀ dgx.
-VecX contactNodeCotangents(const SimulableParameterView& v, const VecX& lambda) {
-  VecX mu = VecX::Zero(3 * v.candidates.size());
-  for (size_t j = 0; j < v.candidates.size(); ++j) {
-    const int i = v.candidates[j];
-    Vec3 m = Vec3::Zero();
-    for (int b = 0; b < v.num_bones; ++b) {
-      const double w = v.weights(i, b);
-      if (w == 0.0) continue;
-      const Vec3 y = v.R[b] * (v.X.row(i) - v.J.row(b)).transpose();
-      m += w * (lambdaT(lambda, b) + lambdaW(lambda, b).cross(y));
-    }
-    mu.segment<3>(3 * j) = m;
+Vec3 contactNodeCotangent(const SimulableParameterView& v, const VecX& lambda, size_t j) {
+  const int i = v.candidates[j];
+  Vec3 m = Vec3::Zero();
+  for (int b = 0; b < v.num_bones; ++b) {
+    const double w = v.weights(i, b);
+    if (w == 0.0) continue;
+    const Vec3 y = v.R[b] * (v.X.row(i) - v.J.row(b)).transpose();
+    m += w * (lambdaT(lambda, b) + lambdaW(lambda, b).cross(y));
   }
-  return mu;
+  return m;
 }
 
 double totalMass(const SimulableParameterView& v) {
@@ -348,8 +344,11 @@ struct VJPContext {
       tracking.resize(v.num_bones);
       for (int b = 0; b < v.num_bones; ++b) tracking[b] = trackingWeight(v, lambda, b);
     }
-    mu = contactNodeCotangents(v, lambda);
     H = contactNodeHessians(v, v.colliders);
+    // Only touching candidates (non-zero node gradient or Hessian) enter the contact products.
+    mu = VecX::Zero(3 * v.candidates.size());
+    for (size_t j = 0; j < v.candidates.size(); ++j)
+      if (!skip(j)) mu.segment<3>(3 * j) = contactNodeCotangent(v, lambda, j);
   }
   bool skip(size_t j) const {
     return v.contact_gradient.segment<3>(3 * j).isZero(0.0) && H[j].isZero(0.0);
@@ -485,7 +484,13 @@ VecX stiffnessesVJP(const VJPContext& c) {
     unit.stiffness = 1.0;
     VecX gx = VecX::Zero(3 * n);
     colliderContactEnergy(v.contact_nodes, v.contact_areas, v.colliders, v.time, unit, &gx);
-    out[3] += gx.dot(c.mu);
+    for (int j = 0; j < n; ++j) {
+      const Vec3 g = gx.segment<3>(3 * j);
+      if (g.isZero(0.0)) continue;
+      // A zero contact stiffness leaves g_x = 0 (skipped in μ) but not the unit gradient.
+      out[3] += g.dot(c.skip(j) ? contactNodeCotangent(v, c.lambda, j)
+                                : Vec3(c.mu.segment<3>(3 * j)));
+    }
   }
   return out;
 }
@@ -501,7 +506,11 @@ VecX colliderOffsetsVJP(const VJPContext& c) {
   }
   for (int k = 0; k < nc; ++k) {
     const std::vector<Mat3> H = contactNodeHessians(v, {v.colliders[k]});
-    for (size_t j = 0; j < H.size(); ++j) out.segment<3>(3 * k) -= H[j] * c.mu.segment<3>(3 * j);
+    for (size_t j = 0; j < H.size(); ++j) {
+      if (H[j].isZero(0.0)) continue;
+      const Vec3 mu = c.skip(j) ? contactNodeCotangent(v, c.lambda, j) : Vec3(c.mu.segment<3>(3 * j));
+      out.segment<3>(3 * k) -= H[j] * mu;
+    }
   }
   return out;
 }

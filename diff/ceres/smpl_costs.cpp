@@ -159,9 +159,7 @@ MatX3 SmplKeypointFunction::evaluate(const double* pose, const double* betas, co
 
   const int nj = int(keypoints_.joints.size());
   const int N = numKeypoints();
-  MatX3 points(N, 3);
-  for (int k = 0; k < nj; ++k) points.row(k) = posed.joints.row(keypoints_.joints[k]);
-  for (int k = nj; k < N; ++k) points.row(k) = posed.vertices.row(keypoints_.vertices[k - nj]);
+  MatX3 points = keypoints_.pick(posed);
   if (!need_jacobians) return points;
 
   // Row 3k + c of each Jacobian: joint rows come from joints_*, vertex rows from vertices_*.

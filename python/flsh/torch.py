@@ -37,8 +37,8 @@ __all__ = ["RolloutFunction", "RolloutSimulator", "SmplFunction", "simulate", "s
 _POSE_SIZE = 72
 
 
-def _check_tensor(value, name: str, last: int | None, expected: str) -> torch.Tensor:
-    """`value` as a float64 CPU tensor of shape (last,) or (B, last); ValueError otherwise."""
+def _check_float64_cpu(value, name: str, expected: str) -> None:
+    """ValueError unless `value` is a float64 CPU tensor (`expected` names the wanted shape)."""
     if not isinstance(value, torch.Tensor):
         raise ValueError(f"{name}: expected a torch.Tensor of shape {expected} and dtype "
                          f"torch.float64, got {type(value).__name__}")
@@ -47,6 +47,11 @@ def _check_tensor(value, name: str, last: int | None, expected: str) -> torch.Te
                          f"(convert with .double())")
     if value.device.type != "cpu":
         raise ValueError(f"{name}: expected a CPU tensor, got device {value.device}")
+
+
+def _check_tensor(value, name: str, last: int | None, expected: str) -> torch.Tensor:
+    """`value` as a float64 CPU tensor of shape (last,) or (B, last); ValueError otherwise."""
+    _check_float64_cpu(value, name, expected)
     if value.dim() not in (1, 2) or (last is not None and value.shape[-1] != last):
         raise ValueError(f"{name}: expected shape {expected}, got {tuple(value.shape)}")
     return value
@@ -149,14 +154,7 @@ _NUM_STIFFNESSES = 4  # joint (N/m), tracking (1/s²), root (1/s²), contact (N/
 
 def _check_fixed(value, name: str, shape: tuple, expected: str) -> torch.Tensor:
     """`value` as a float64 CPU tensor of exactly `shape` (−1 = any extent); ValueError else."""
-    if not isinstance(value, torch.Tensor):
-        raise ValueError(f"{name}: expected a torch.Tensor of shape {expected} and dtype "
-                         f"torch.float64, got {type(value).__name__}")
-    if value.dtype != torch.float64:
-        raise ValueError(f"{name}: expected dtype torch.float64, got {value.dtype} "
-                         f"(convert with .double())")
-    if value.device.type != "cpu":
-        raise ValueError(f"{name}: expected a CPU tensor, got device {value.device}")
+    _check_float64_cpu(value, name, expected)
     if value.dim() != len(shape) or any(e not in (-1, a) for e, a in zip(shape, value.shape)):
         raise ValueError(f"{name}: expected shape {expected}, got {tuple(value.shape)}")
     if not bool(torch.isfinite(value).all()):

@@ -241,11 +241,11 @@ void Simulable::Impl::buildClusters() {
   for (int b = 0; b < num_bones; ++b) {
     std::vector<int>& verts = dominated[b];
     auto local = [&](int i) -> Vec3 { return (X.row(i) - J.row(b)).transpose(); };
-    std::vector<std::pair<int, int>> todo;
-    if (!verts.empty()) todo.emplace_back(0, int(verts.size()));
-    while (!todo.empty()) {
-      const auto [begin, end] = todo.back();
-      todo.pop_back();
+    std::vector<std::pair<int, int>> pending;
+    if (!verts.empty()) pending.emplace_back(0, int(verts.size()));
+    while (!pending.empty()) {
+      const auto [begin, end] = pending.back();
+      pending.pop_back();
       Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
       for (int k = begin; k < end; ++k) {
         lo = lo.cwiseMin(local(verts[k]));
@@ -257,8 +257,8 @@ void Simulable::Impl::buildClusters() {
         const int mid = (begin + end) / 2;
         std::nth_element(verts.begin() + begin, verts.begin() + mid, verts.begin() + end,
                          [&](int i, int j) { return X(i, axis) < X(j, axis); });
-        todo.emplace_back(begin, mid);
-        todo.emplace_back(mid, end);
+        pending.emplace_back(begin, mid);
+        pending.emplace_back(mid, end);
         continue;
       }
       VertexCluster cluster{0.5 * (lo + hi), 0.0, begin, end};
@@ -277,14 +277,14 @@ void Simulable::Impl::buildStiffnesses() {
   for (int b = 1; b < num_bones; ++b) children[parents[b]].push_back(b);
   auto polarMoment = [&](int b) {
     double I = 0.0;
-    std::vector<int> todo = {b};
-    while (!todo.empty()) {
-      const int c = todo.back();
-      todo.pop_back();
+    std::vector<int> pending = {b};
+    while (!pending.empty()) {
+      const int c = pending.back();
+      pending.pop_back();
       const Vec3 d = (J.row(c) - J.row(b)).transpose();
       I += inertia[c].second_moment.trace() + 2.0 * inertia[c].first_moment.dot(d) +
            inertia[c].mass * d.squaredNorm();
-      for (int child : children[c]) todo.push_back(child);
+      for (int child : children[c]) pending.push_back(child);
     }
     return I;
   };

@@ -447,11 +447,11 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
     for (int b = 0; b < bones; ++b) {
       data->group_rest.push_back(restBound(b, group[b].data(), group[b].data() + group[b].size()));
       // Median splits along the longest axis until the pieces are small.
-      std::vector<std::pair<int, int>> todo;
-      if (!group[b].empty()) todo.emplace_back(0, int(group[b].size()));
-      while (!todo.empty()) {
-        const auto [begin, end] = todo.back();
-        todo.pop_back();
+      std::vector<std::pair<int, int>> pending;
+      if (!group[b].empty()) pending.emplace_back(0, int(group[b].size()));
+      while (!pending.empty()) {
+        const auto [begin, end] = pending.back();
+        pending.pop_back();
         int* first = group[b].data() + begin;
         int* last = group[b].data() + end;
         if (end - begin <= kClusterSize) {
@@ -469,8 +469,8 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
         int* middle = first + (end - begin) / 2;
         std::nth_element(first, middle, last,
                          [&](int u, int v) { return X(u, axis) < X(v, axis); });
-        todo.emplace_back(begin, begin + (end - begin) / 2);
-        todo.emplace_back(begin + (end - begin) / 2, end);
+        pending.emplace_back(begin, begin + (end - begin) / 2);
+        pending.emplace_back(begin + (end - begin) / 2, end);
       }
       data->bone_clusters.push_back(int(data->cluster_bone.size()));
     }

@@ -21,6 +21,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/volume/soft_avatar.h"
+#include "volume/kinematic_tree.h"
 
 namespace flsh {
 
@@ -51,13 +52,7 @@ std::vector<BoneCapsule> fitBoneCapsules(const MatX3& V, const MatX& weights, co
     throw InputError(fn + "weights has shape " +
                      shapeString({long(weights.rows()), long(weights.cols())}) + ", expected " +
                      shapeString({long(V.rows()), long(nb)}) + " (#V × bones)");
-  if (int(parents.size()) != nb)
-    throw InputError(fn + "parents has " + std::to_string(parents.size()) + " entries, expected " +
-                     std::to_string(nb) + " (one per joint)");
-  for (int b = 0; b < nb; ++b)
-    if (parents[b] >= b || parents[b] < -1)
-      throw InputError(fn + "parents[" + std::to_string(b) + "] = " + std::to_string(parents[b]) +
-                       ", expected −1 or a joint index below " + std::to_string(b));
+  detail::checkParents(parents, nb, fn);
   if (!V.allFinite() || !J.allFinite() || !weights.allFinite())
     throw InputError(fn + "V, J or weights contains NaN or Inf");
 
@@ -68,9 +63,7 @@ std::vector<BoneCapsule> fitBoneCapsules(const MatX3& V, const MatX& weights, co
     weights.row(v).maxCoeff(&dominant);
     part[dominant].push_back(V.row(v).transpose());
   }
-  std::vector<std::vector<int>> children(nb);
-  for (int b = 1; b < nb; ++b)
-    if (parents[b] >= 0) children[parents[b]].push_back(b);
+  const std::vector<std::vector<int>> children = detail::jointChildren(parents);
 
   std::vector<BoneCapsule> capsules(nb);
   for (int b = 0; b < nb; ++b) {

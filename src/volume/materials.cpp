@@ -15,6 +15,7 @@
 #include "flsh/io/atomic_file.h"
 #include "flsh/volume/soft_avatar.h"
 #include "volume/surface_query.h"
+#include "volume/kinematic_tree.h"
 
 namespace flsh {
 
@@ -429,14 +430,12 @@ void checkSkeleton(const std::string& fn, const MatX& weights, long rows, const 
 std::vector<Vec3> boneAxes(const std::vector<BoneCapsule>& capsules, const MatX3& joints,
                            const std::vector<int>& parents) {
   const int nb = int(joints.rows());
-  std::vector<int> child_count(nb, 0), only_child(nb, -1);
-  for (int b = 1; b < nb; ++b)
-    if (parents[b] >= 0) ++child_count[parents[b]], only_child[parents[b]] = b;
+  const std::vector<std::vector<int>> children = detail::jointChildren(parents);
   std::vector<Vec3> axes(nb, Vec3::Zero());
   for (int b = 0; b < nb; ++b) {
     Vec3 axis = capsules[b].b - capsules[b].a;
-    if (axis.norm() <= 1e-9 && child_count[b] == 1)
-      axis = (joints.row(only_child[b]) - joints.row(b)).transpose();
+    if (axis.norm() <= 1e-9 && children[b].size() == 1)
+      axis = (joints.row(children[b][0]) - joints.row(b)).transpose();
     if (axis.norm() > 1e-9) axes[b] = axis.normalized();
   }
   return axes;

@@ -13,6 +13,7 @@
 
 #include "flsh/core/error.h"
 #include "volume/surface_query.h"
+#include "volume/kinematic_tree.h"
 
 namespace flsh {
 
@@ -282,13 +283,7 @@ VecXi selectBoneNodes(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX
   if (weights.rows() != n || weights.cols() != nb)
     throw InputError(fn + "weights has shape " + shape2(weights.rows(), weights.cols()) +
                      ", expected " + shape2(n, nb) + " (#N × bones)");
-  if (int(parents.size()) != nb)
-    throw InputError(fn + "parents has " + std::to_string(parents.size()) + " entries, expected " +
-                     std::to_string(nb) + " (one per joint)");
-  for (int b = 0; b < nb; ++b)
-    if (parents[b] >= b || parents[b] < -1)
-      throw InputError(fn + "parents[" + std::to_string(b) + "] = " + std::to_string(parents[b]) +
-                       ", expected −1 or a joint index below " + std::to_string(b));
+  detail::checkParents(parents, nb, fn);
   if (surface_tissue_thickness.size() != nv)
     throw InputError(fn + "surface_tissue_thickness has " +
                      std::to_string(surface_tissue_thickness.size()) + " values, expected " +
@@ -302,9 +297,7 @@ VecXi selectBoneNodes(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX
   VecXi bone = VecXi::Constant(n, -1);
   const MatX3i F = detail::outwardBoundaryFaces(mesh, "selectBoneNodes");
   if (F.rows() == 0 || nv == n) return bone;
-  std::vector<std::vector<int>> children(nb);
-  for (int b = 1; b < nb; ++b)
-    if (parents[b] >= 0) children[parents[b]].push_back(b);
+  const std::vector<std::vector<int>> children = detail::jointChildren(parents);
   auto boneDistance = [&](const Vec3& x, int b) {
     const Vec3 joint = joints.row(b).transpose();
     if (children[b].empty()) return (x - joint).norm();

@@ -4,7 +4,8 @@
 //   flsh motion --name walk --out MOTION.npz [--seconds S] [--fps F]
 //   flsh pose --model BODY.npz --motion MOTION.npz --out OUT.npz [--betas b0,b1,…]
 //   flsh demo [--out DIR] [--vertices N] [--motion NAME]
-//   flsh simulate [SCENE.json] [--out DIR] [--duration S] [--time-step H]
+//   flsh simulate [SCENE.json] [--out DIR] [--duration S] [--time-step H] [--cache DIR]
+//                 [--no-cache]
 //   flsh avatar --model BODY.npz [--betas b0,b1,…] [--soft fem|rom] [--cache DIR]
 //               [--resolution R] [--materials FILE] [--no-cache]
 //
@@ -15,6 +16,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -384,8 +386,10 @@ struct AvatarRun {
   std::shared_ptr<SoftAvatar> avatar;
   std::shared_ptr<const Motion> motion;
   std::shared_ptr<Simulable> simulable;
+  bool soft = false;  ///< "simulation": "fem"
   // Per saved frame:
   std::vector<VecX> states, poses;
+  std::vector<VecX> displacement_norms;  ///< soft only: ‖u_i‖ of the surface vertices, #V, m
   std::vector<Vec3> trans;
   std::vector<MatX3> vertices, joints;
   std::vector<std::vector<Mat3>> rotations;
@@ -453,8 +457,36 @@ std::vector<AvatarRun> buildAvatars(const SceneSpec& scene) {
     if (betas.size() == 0 && motion && motion->betas.size() > 0)
       betas = fitBetas(motion->betas, *body, motion->source);
     if (betas.size() == 0) betas = VecX::Zero(body->numBetas());
-    run.avatar = std::make_shared<SoftAvatar>(body, betas);
+    SoftAvatarSettings settings;
+    run.soft = spec.simulation == "fem";
+    if (run.soft) {
+      settings.volumetric.tet_mesh.resolution = spec.resolution;
+      settings.volumetric.material_file = spec.material_file;
+      settings.volumetric.cache_dir = scene.cache_dir;
+      settings.volumetric.use_cache = scene.use_cache;
+    }
+    run.avatar = std::make_shared<SoftAvatar>(body, betas, settings);
+    if (run.soft) {
+      std::fprintf(stderr, "simulate: building the volumetric body of avatar '%s'...\n",
+                   spec.name.c_str());
+      run.avatar->enableSoftTissue();
+    }
     run.avatar->initVolumetricData();
+    if (run.soft) {
+      const VolumetricBuildReport& report = run.avatar->volumetricBuildReport();
+      const VolumetricData& data = run.avatar->volumetricData();
+      if (!report.warnings.empty())
+        std::fprintf(stderr, "simulate: warning: avatar '%s': %s", spec.name.c_str(),
+                     report.warnings.c_str());
+      std::fprintf(stderr,
+                   "simulate: avatar '%s': %d nodes (%d soft tissue), %d tets; cache: %s\n",
+                   spec.name.c_str(), data.numNodes(), data.numNodes() - data.numBoneNodes(),
+                   data.numTets(),
+                   !scene.use_cache                ? "off"
+                   : report.data_from_cache        ? "hit"
+                   : report.template_from_cache    ? "template hit, shape built"
+                                                   : "miss (built and stored)");
+    }
     SimulableOptions options = spec.options;
     options.time_step = scene.time_step;
     run.simulable = std::make_shared<Simulable>(run.avatar, run.motion, options);
@@ -470,6 +502,12 @@ void recordFrame(AvatarRun& run) {
   run.vertices.push_back(sim.getVertices());
   run.joints.push_back(sim.bonePositions());
   run.rotations.push_back(sim.boneRotations());
+  if (run.soft) run.displacement_norms.push_back(sim.getSoftTissueDisplacements().rowwise().norm());
+}
+
+/// Largest ‖u_i‖ of a saved frame, mm (0 for an empty frame).
+double maxDisplacementMm(const VecX& norms) {
+  return norms.size() > 0 ? 1000.0 * norms.maxCoeff() : 0.0;
 }
 
 /// (T, …) float64 array of per-frame matrices stacked in C order.
@@ -504,6 +542,11 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
 
   SceneOptions scene_options;
   scene_options.newton = scene.newton;
+  // Soft-tissue scenes keep their own solver choices (PSD Hessian, CHOLMOD, lagged factor) and
+  // take the scene's convergence settings.
+  scene_options.soft_tissue_newton.max_iterations = scene.newton.max_iterations;
+  scene_options.soft_tissue_newton.gradient_tolerance = scene.newton.gradient_tolerance;
+  scene_options.soft_tissue_newton.step_tolerance = scene.newton.step_tolerance;
   scene_options.avatar_contact = scene.avatar_contact;
   Scene sim_scene(scene_options);
   for (auto& run : runs) sim_scene.addSimulable(run.simulable);
@@ -591,6 +634,11 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
         for (int c = 0; c < 3; ++c) faces[3 * f + c] = run.body->faces(f, c);
       npz.add(name + "_faces", faces.data(), {F, 3});
       npz.add(name + "_betas", Eigen::Ref<const VecX>(run.avatar->betas()));
+      if (run.soft) {
+        VecX max_mm(T);
+        for (int k = 0; k < T; ++k) max_mm[k] = maxDisplacementMm(run.displacement_norms[k]);
+        npz.add(name + "_max_displacement_mm", Eigen::Ref<const VecX>(max_mm));
+      }
     }
     for (size_t c = 0; c < scene.colliders.size(); ++c)
       addStacked(npz, scene.colliders[c].name + "_offset", collider_offsets[c], {3});
@@ -635,20 +683,36 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
     written.push_back("animation.glb");
   }
 
+  double sheet_max_mm = 0.0;  // colour scale of the soft avatars in sheet.png
   if (scene.outputs.png) {
     // All avatars and the sphere/capsule colliders in one mesh per shown frame, framed on the
     // avatars (a collider far away is cut off rather than shrinking the bodies).
     const int shown = std::min(scene.outputs.png_frames, T);
+    auto shownFrame = [&](int j) { return shown > 1 ? j * (T - 1) / (shown - 1) : 0; };
+    // Soft avatars are coloured by ‖u_i‖ with one scale over the whole sheet.
+    for (int j = 0; j < shown; ++j)
+      for (const auto& run : runs)
+        if (run.soft)
+          sheet_max_mm = std::max(sheet_max_mm,
+                                  maxDisplacementMm(run.displacement_norms[shownFrame(j)]));
     MatX3i faces;
     std::vector<MatX3> frames, colors;
     Eigen::AlignedBox3d box;
     for (int j = 0; j < shown; ++j) {
-      const int k = shown > 1 ? j * (T - 1) / (shown - 1) : 0;
+      const int k = shownFrame(j);
       std::vector<std::pair<MatX3, MatX3i>> parts;
-      std::vector<Vec3> part_colors;
+      std::vector<MatX3> part_colors;  // #part vertices × 3 each
+      auto uniform = [](long rows, const Vec3& color) {
+        MatX3 C(rows, 3);
+        C.rowwise() = color.transpose();
+        return C;
+      };
       for (size_t i = 0; i < runs.size(); ++i) {
         parts.emplace_back(runs[i].vertices[k], runs[i].body->faces);
-        part_colors.push_back(kAvatarColors[i % 4]);
+        const AvatarRun& run = runs[i];
+        part_colors.push_back(
+            run.soft ? render::displacementColors(1000.0 * run.displacement_norms[k], sheet_max_mm)
+                     : uniform(run.vertices[k].rows(), kAvatarColors[i % 4]));
         for (Eigen::Index v = 0; v < runs[i].vertices[k].rows(); ++v)
           box.extend(runs[i].vertices[k].row(v).transpose());
       }
@@ -658,7 +722,7 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
         if (!colliderMesh(scene.colliders[c], V, F)) continue;
         V.rowwise() += collider_offsets[c][k].transpose();
         parts.emplace_back(V, F);
-        part_colors.push_back(kColliderColor);
+        part_colors.push_back(uniform(V.rows(), kColliderColor));
       }
       long nv = 0, nf = 0;
       for (const auto& p : parts) nv += p.first.rows(), nf += p.second.rows();
@@ -667,7 +731,7 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
       long v0 = 0, f0 = 0;
       for (size_t p = 0; p < parts.size(); ++p) {
         V.middleRows(v0, parts[p].first.rows()) = parts[p].first;
-        C.middleRows(v0, parts[p].first.rows()).rowwise() = part_colors[p].transpose();
+        C.middleRows(v0, parts[p].first.rows()) = part_colors[p];
         F.middleRows(f0, parts[p].second.rows()) = parts[p].second.array() + int(v0);
         v0 += parts[p].first.rows();
         f0 += parts[p].second.rows();
@@ -689,6 +753,21 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
 
   std::string outputs;
   for (const auto& w : written) outputs += (outputs.empty() ? "" : ", ") + w;
+  for (const auto& run : runs) {
+    if (!run.soft) continue;
+    double run_max_mm = 0.0;
+    for (const VecX& norms : run.displacement_norms)
+      run_max_mm = std::max(run_max_mm, maxDisplacementMm(norms));
+    std::printf("simulate: avatar '%s' (fem): max soft-tissue displacement |u| %.3f mm over the "
+                "saved frames\n",
+                run.spec->name.c_str(), run_max_mm);
+  }
+  const bool any_soft =
+      std::any_of(runs.begin(), runs.end(), [](const AvatarRun& r) { return r.soft; });
+  if (scene.outputs.png && any_soft)
+    std::printf("simulate: sheet.png colours soft avatars by |u| (viridis): 0 mm dark purple to "
+                "%.3f mm yellow\n",
+                sheet_max_mm);
   if (unconverged > 0)
     std::fprintf(stderr, "simulate: warning: %d of %d steps did not converge (first: %s)\n",
                  unconverged, steps, first_unconverged.c_str());
@@ -750,6 +829,14 @@ int main(int argc, char** argv) {
   simulate->add_option("--out", sim_out, "output directory (overrides outputs.dir)");
   simulate->add_option("--duration", duration, "simulated time, s (overrides duration)");
   simulate->add_option("--time-step", time_step, "time step, s (overrides time_step)");
+  std::string sim_cache;
+  bool sim_no_cache = false;
+  auto* sim_cache_option = simulate->add_option(
+      "--cache", sim_cache,
+      "avatar cache directory of \"fem\" avatars (overrides cache_dir; default: "
+      "$FLSH_CACHE_DIR, else ~/.cache/flsh)");
+  simulate->add_flag("--no-cache", sim_no_cache, "neither read nor write the avatar cache")
+      ->excludes(sim_cache_option);
 
   AvatarArgs avatar_args;
   auto* avatar = app.add_subcommand(
@@ -783,6 +870,10 @@ int main(int argc, char** argv) {
       overrides.duration = duration;
       overrides.time_step = time_step;
       overrides.output_dir = sim_out;
+      overrides.cache_dir = sim_cache;
+      overrides.no_cache = sim_no_cache;
+      if (simulate->count("--cache") && sim_cache.empty())
+        throw InputError("--cache: expected a directory, got an empty string");
       if (simulate->count("--duration") && duration == 0.0)
         throw InputError("--duration: expected a time > 0 s, got 0");
       if (simulate->count("--time-step") && time_step == 0.0)

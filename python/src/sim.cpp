@@ -298,6 +298,50 @@ void bind_sim(py::module_& m) {
                             [](const S& s) { return to_numpy(s.bonePositions()); },
                             "(24, 3) joint centres t_b, m.");
 
+  // ---- soft tissue (FEM soft skeleton)
+  sim.def("hasSoftTissue", &S::hasSoftTissue,
+          "True for the FEM soft skeleton (an avatar with enable_soft_tissue()): the state then "
+          "holds a displacement per soft-tissue node after the 144 bone values.");
+  alias("hasSoftTissue", "has_soft_tissue");
+  sim.def("numBoneDofs", &S::numBoneDofs, "Number of bone DoFs, 6 · 24 = 144 (the state's head).");
+  sim.def_property_readonly("num_bone_dofs", &S::numBoneDofs,
+                            "Number of bone DoFs, 6 · 24 = 144 (the state's head).");
+  sim.def("softNodes",
+          [](const S& s) {
+            const VecXi& nodes = s.softNodes();
+            py::array_t<int> a(py::ssize_t(nodes.size()));
+            std::copy(nodes.data(), nodes.data() + nodes.size(), a.mutable_data());
+            return a;
+          },
+          "(S,) int32 tet-node index of each soft-tissue node in state order: node softNodes()[k] "
+          "has its displacement at state[numBoneDofs() + 3k : … + 3]; empty for the skeleton.");
+  alias("softNodes", "soft_nodes");
+  sim.def("nodeSoftDof", &S::nodeSoftDof, py::arg("j"),
+          "State index of tet node j's first displacement value, −1 for a bone node (and every "
+          "vertex of the skeleton model); ValueError for j outside the nodes.");
+  alias("nodeSoftDof", "node_soft_dof");
+  sim.def("getSoftTissueDisplacements",
+          [](const S& s) { return to_numpy(s.getSoftTissueDisplacements()); },
+          "(V, 3) float64 soft-tissue displacements u of the surface vertices, m, in the unposed "
+          "(rest) space; zero on bone nodes and for the skeleton model.");
+  alias("getSoftTissueDisplacements", "get_soft_tissue_displacements");
+  sim.def("getUnposedSurface", [](const S& s) { return to_numpy(s.getUnposedSurface()); },
+          "(V, 3) float64 unposed surface Y, m: the rest surface X̄(β), plus for the soft-tissue "
+          "model the held pose blend offsets and u.");
+  alias("getUnposedSurface", "get_unposed_surface");
+  sim.def("getVolumeNodes",
+          [](const S& s) {
+            MatX3 X;
+            {
+              py::gil_scoped_release release;
+              X = s.getVolumeNodes();
+            }
+            return to_numpy(X);
+          },
+          "(N, 3) float64 world positions of every tet node, m (surface vertices first); the "
+          "skeleton model: the (V, 3) surface nodes.");
+  alias("getVolumeNodes", "get_volume_nodes");
+
   // ---- energies
   sim.def("getDynamicEnergyScalar", &S::getDynamicEnergyScalar,
           "Inertia 1/(2h²) Σ m ‖x(q) − x̂‖², J (0 when static).");

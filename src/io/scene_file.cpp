@@ -184,11 +184,29 @@ class SceneReader {
     return p.string();
   }
 
+  /// A folder that may not exist yet (it is created on use), resolved like existingFile;
+  /// an existing path must be a folder.
+  std::string directoryPath(const std::string& text, const std::string& path) const {
+    if (text.empty()) fail(path, "expected a directory, got an empty string");
+    fs::path p(text);
+    if (p.is_relative()) p = fs::path(base_dir_) / p;
+    std::error_code absolute_error;
+    const fs::path absolute = fs::absolute(p, absolute_error);
+    if (!absolute_error) p = absolute;
+    p = p.lexically_normal();
+    std::error_code ec;
+    if (fs::exists(p, ec) && !fs::is_directory(p, ec))
+      throw FileError(origin_ + ": " + path + ": expected a directory, but " + p.string() +
+                      " is a file");
+    return p.string();
+  }
+
   SceneSpec read(const json& root, const SceneOverrides& overrides) const {
     if (!root.is_object()) fail("(top level)", "expected a JSON object, got " + describe(root));
     checkKeys(
         root, "",
-        {"time_step", "duration", "avatar_contact", "newton", "avatars", "colliders", "outputs"});
+        {"time_step", "duration", "avatar_contact", "newton", "avatars", "colliders", "outputs",
+         "cache_dir", "use_cache"});
     SceneSpec scene;
     if (root.contains("time_step"))
       scene.time_step = toRange(root["time_step"], "time_step", 0.0, 1.0, true, "s");
@@ -228,6 +246,11 @@ class SceneReader {
     }
     if (root.contains("outputs")) scene.outputs = readOutputs(root["outputs"], "outputs");
     if (!overrides.output_dir.empty()) scene.outputs.dir = overrides.output_dir;
+    if (root.contains("cache_dir"))
+      scene.cache_dir = directoryPath(toString(root["cache_dir"], "cache_dir"), "cache_dir");
+    if (root.contains("use_cache")) scene.use_cache = toBool(root["use_cache"], "use_cache");
+    if (!overrides.cache_dir.empty()) scene.cache_dir = overrides.cache_dir;
+    if (overrides.no_cache) scene.use_cache = false;
     return scene;
   }
 
@@ -280,8 +303,8 @@ class SceneReader {
                         const SceneSpec& scene) const {
     requireObject(node, path);
     checkKeys(node, path,
-              {"name", "model", "vertices", "betas", "simulation", "motion", "motion_seconds",
-               "offset", "yaw_degrees", "options"});
+              {"name", "model", "vertices", "betas", "simulation", "resolution", "materials",
+               "motion", "motion_seconds", "offset", "yaw_degrees", "options"});
     AvatarSpec avatar;
     avatar.name = node.contains("name") ? toName(node["name"], child(path, "name"))
                                         : "avatar" + std::to_string(index);
@@ -308,13 +331,25 @@ class SceneReader {
     if (node.contains("simulation")) {
       const std::string p = child(path, "simulation");
       const std::string simulation = toString(node["simulation"], p);
-      if (simulation == "fem" || simulation == "rom")
-        fail(p, "\"" + simulation +
-                    "\" is not available yet: the FEM/ROM soft-tissue models are not "
-                    "implemented in this version (use \"skeleton\")");
-      if (simulation != "skeleton")
-        fail(p, "expected \"skeleton\" (later: \"fem\", \"rom\"), got \"" + simulation + "\"");
+      if (simulation == "rom")
+        fail(p, "\"rom\" is not available yet: the ROM soft-tissue model is not implemented in "
+                "this version (use \"skeleton\" or \"fem\")");
+      if (simulation != "skeleton" && simulation != "fem")
+        fail(p, "expected \"skeleton\" or \"fem\" (later: \"rom\"), got \"" + simulation + "\"");
       avatar.simulation = simulation;
+    }
+    // Settings of the volumetric body, which only the soft-tissue model builds.
+    const char* only_fem = "only for \"simulation\": \"fem\" (the skeleton builds no tet mesh)";
+    if (node.contains("resolution")) {
+      const std::string p = child(path, "resolution");
+      if (avatar.simulation != "fem") fail(p, only_fem);
+      avatar.resolution = toRange(node["resolution"], p, 0.01, 100.0, false,
+                                  "interior node density relative to the default");
+    }
+    if (node.contains("materials")) {
+      const std::string p = child(path, "materials");
+      if (avatar.simulation != "fem") fail(p, only_fem);
+      avatar.material_file = existingFile(toString(node["materials"], p), p, "material");
     }
     bool builtin_motion = false;
     if (node.contains("motion")) {

@@ -537,4 +537,35 @@ Image renderSheet(const std::vector<MatX3>& frames, const Eigen::Ref<const MatX3
   return sheet;
 }
 
+MatX3 displacementColors(const VecX& magnitudes, double max_value) {
+  // viridis at t = k/6 (sRGB, 0-255): perceptually uniform and readable in grey scale.
+  static constexpr int kStops = 7;
+  static constexpr unsigned char kViridis[kStops][3] = {
+      {0x44, 0x01, 0x54}, {0x44, 0x3a, 0x83}, {0x31, 0x68, 0x8e}, {0x21, 0x90, 0x8c},
+      {0x35, 0xb7, 0x79}, {0x8f, 0xd7, 0x44}, {0xfd, 0xe7, 0x25}};
+  if (!std::isfinite(max_value) || max_value < 0.0) {
+    std::ostringstream msg;
+    msg << "displacementColors: argument max_value is " << max_value
+        << ", expected a finite value ≥ 0 (the value shown in the top colour)";
+    throw InputError(msg.str());
+  }
+  MatX3 colors(magnitudes.size(), 3);
+  for (Eigen::Index i = 0; i < magnitudes.size(); ++i) {
+    if (!std::isfinite(magnitudes[i])) {
+      std::ostringstream msg;
+      msg << "displacementColors: argument magnitudes (shape "
+          << shapeString({long(magnitudes.size())}) << ") has the non-finite value "
+          << magnitudes[i] << " at index " << i;
+      throw InputError(msg.str());
+    }
+    const double t = max_value > 0.0 ? std::clamp(magnitudes[i] / max_value, 0.0, 1.0) : 0.0;
+    const double s = t * (kStops - 1);
+    const int k = std::min(int(s), kStops - 2);
+    const double f = s - k;
+    for (int c = 0; c < 3; ++c)
+      colors(i, c) = ((1.0 - f) * kViridis[k][c] + f * kViridis[k + 1][c]) / 255.0;
+  }
+  return colors;
+}
+
 }  // namespace flsh::render

@@ -15,6 +15,7 @@
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
 #include "flsh/sim/skeleton_energies.h"
+#include "soft_tissue.h"
 
 namespace flsh {
 
@@ -144,8 +145,20 @@ struct Simulable::Impl {
   mutable std::vector<char> pair_touched;
   mutable std::vector<int> pair_list;
 
+  // FEM soft skeleton (null for the articulated skeleton): node data, displacements u.
+  std::unique_ptr<detail::SoftTissue> soft;
+  std::vector<VecX> u_stack;  // displacements saved with `stack` (same depth)
+  mutable int soft_active_contacts = 0;
+
   void touch() { ++state_version; }
-  int dofs() const { return kDofsPerBone * num_bones; }
+  int boneDofs() const { return kDofsPerBone * num_bones; }
+  int dofs() const { return boneDofs() + (soft ? soft->numSoftDofs() : 0); }
+  detail::BoneFrames frames(const BoneStates& s) const { return {s.R, s.t}; }
+  // Node positions of the current state (soft tissue only).
+  void prepareSoft() const { soft->prepare(state_version, frames(q)); }
+  void setSoftPrediction() {
+    soft->setPrediction(frames(q_n), frames(q_nm1));
+  }
 
   void validateOptions() const;
   void buildSkinning();
@@ -348,6 +361,15 @@ Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar,
   m.pair_blocks.assign(m.num_bones * m.num_bones, Mat6::Zero());
   m.pair_touched.assign(m.num_bones * m.num_bones, 0);
   m.q = m.q_n = m.q_nm1 = restBones(m.J);
+  if (m.avatar->softTissueEnabled()) {
+    if (!m.avatar->hasVolumetricData())
+      throw InputError(fn + "the avatar has soft tissue enabled but no volumetric data "
+                            "(call SoftAvatar::initVolumetricData())");
+    m.soft = std::make_unique<detail::SoftTissue>(*m.avatar, m.J, m.parents,
+                                                  m.options.time_step);
+    m.soft->setPoseBlend(m.q.R);
+    m.setSoftPrediction();
+  }
   m.updateTargets(0.0);
 }
 
@@ -411,8 +433,17 @@ void Simulable::initialize() {
   m.time = 0.0;
   m.updateTargets(0.0);
   m.stack_depth = 0;
+  if (m.soft) {
+    m.soft->u.setZero();
+    m.soft->u_n.setZero();
+    m.soft->u_nm1.setZero();
+  }
   if (!m.mocap) {
     m.q = m.q_n = m.q_nm1 = restBones(m.J);
+    if (m.soft) {
+      m.soft->setPoseBlend(m.q.R);
+      m.setSoftPrediction();
+    }
     m.touch();
     return;
   }
@@ -420,12 +451,16 @@ void Simulable::initialize() {
   m.q = bonesFromPose(mo.poses.row(0).transpose(), mo.trans.row(0).transpose(), m.J, m.parents);
   m.q_n = m.q;
   m.q_nm1 = m.q;
+  if (m.soft) {
+    m.soft->setPoseBlend(m.q.R);
+    m.setSoftPrediction();
+  }
   m.touch();
   if (mo.numFrames() > 1) {
     // Initial velocity from the first two frames; q_{n−1} = q_n ⊖ h v.
     const BoneStates next =
         bonesFromPose(mo.poses.row(1).transpose(), mo.trans.row(1).transpose(), m.J, m.parents);
-    VecX v(m.dofs());
+    VecX v = VecX::Zero(m.dofs());  // soft tissue starts at rest
     for (int b = 0; b < m.num_bones; ++b) {
       v.segment<3>(6 * b) = (next.t.row(b) - m.q.t.row(b)).transpose() * mo.fps;
       v.segment<3>(6 * b + 3) = logSO3(next.R[b] * m.q.R[b].transpose()) * mo.fps;
@@ -444,6 +479,13 @@ void Simulable::preUpdate() {
     m.q.R[b] = rodrigues(logSO3(m.q_n.R[b] * m.q_nm1.R[b].transpose())) * m.q_n.R[b];
   }
   m.placeKinematicBones();
+  if (m.soft) {
+    // Pose blend offsets of the last converged pose, held during the step; displacements
+    // start from their extrapolation like the bones.
+    m.soft->setPoseBlend(m.q_n.R);
+    m.setSoftPrediction();
+    m.soft->u = 2.0 * m.soft->u_n - m.soft->u_nm1;
+  }
   m.touch();
 }
 
@@ -451,6 +493,10 @@ void Simulable::postUpdate() {
   Impl& m = *impl_;
   m.q_nm1 = m.q_n;
   m.q_n = m.q;
+  if (m.soft) {
+    m.soft->u_nm1 = m.soft->u_n;
+    m.soft->u_n = m.soft->u;
+  }
 }
 
 // ---- state -------------------------------------------------------------------------------
@@ -464,6 +510,7 @@ VecX Simulable::getState() const {
     q.segment<3>(6 * b) = m.q.t.row(b).transpose();
     q.segment<3>(6 * b + 3) = logSO3(m.q.R[b]);
   }
+  if (m.soft) q.tail(m.soft->numSoftDofs()) = m.soft->u;
   return q;
 }
 
@@ -472,12 +519,13 @@ void Simulable::setState(const VecX& q) {
   if (q.size() != m.dofs())
     throw InputError("Simulable::setState: q has " + std::to_string(q.size()) +
                      " values, expected numDofs() = " + std::to_string(m.dofs()) +
-                     " (6 per bone: t, rotation vector)");
+                     " (6 per bone: t, rotation vector; then 3 per soft-tissue node)");
   if (!q.allFinite()) throw InputError("Simulable::setState: q contains NaN or Inf");
   for (int b = 0; b < m.num_bones; ++b) {
     m.q.t.row(b) = q.segment<3>(6 * b).transpose();
     m.q.R[b] = rodrigues(q.segment<3>(6 * b + 3));
   }
+  if (m.soft) m.soft->u = q.tail(m.soft->numSoftDofs());
   m.touch();
 }
 
@@ -491,6 +539,7 @@ void Simulable::updateState(const VecX& dq) {
     m.q.t.row(b) += dq.segment<3>(6 * b).transpose();
     m.q.R[b] = rodrigues(dq.segment<3>(6 * b + 3)) * m.q.R[b];
   }
+  if (m.soft) m.soft->u += dq.tail(m.soft->numSoftDofs());
   m.touch();
 }
 
@@ -498,6 +547,10 @@ void Simulable::pushState() {
   Impl& m = *impl_;
   if (m.stack.size() <= m.stack_depth) m.stack.push_back(m.q);
   else m.stack[m.stack_depth] = m.q;
+  if (m.soft) {
+    if (m.u_stack.size() <= m.stack_depth) m.u_stack.push_back(m.soft->u);
+    else m.u_stack[m.stack_depth] = m.soft->u;
+  }
   ++m.stack_depth;
 }
 
@@ -506,6 +559,7 @@ void Simulable::popState() {
   if (m.stack_depth == 0)
     throw Error("Simulable::popState: the state stack is empty (popState without pushState)");
   m.q = m.stack[--m.stack_depth];
+  if (m.soft) m.soft->u = m.u_stack[m.stack_depth];
   m.touch();
 }
 
@@ -528,6 +582,11 @@ void Simulable::setVelocity(const VecX& v) {
     m.q_nm1.t.row(b) = m.q_n.t.row(b) - h * v.segment<3>(6 * b).transpose();
     m.q_nm1.R[b] = rodrigues(-h * v.segment<3>(6 * b + 3)) * m.q_n.R[b];
   }
+  if (m.soft) {
+    m.soft->u_nm1 = m.soft->u_n - h * v.tail(m.soft->numSoftDofs());
+    m.setSoftPrediction();
+  }
+  m.touch();
 }
 
 VecX Simulable::getVelocity() const {
@@ -538,6 +597,7 @@ VecX Simulable::getVelocity() const {
     v.segment<3>(6 * b) = (m.q_n.t.row(b) - m.q_nm1.t.row(b)).transpose() / h;
     v.segment<3>(6 * b + 3) = logSO3(m.q_n.R[b] * m.q_nm1.R[b].transpose()) / h;
   }
+  if (m.soft) v.tail(m.soft->numSoftDofs()) = (m.soft->u_n - m.soft->u_nm1) / h;
   return v;
 }
 
@@ -557,6 +617,12 @@ SimulableStep Simulable::saveStep() const {
   s.target_t0 = m.target_t0;
   s.colliders = m.colliders;
   s.is_static = m.is_static;
+  if (m.soft) {
+    s.u = m.soft->u;
+    s.u_n = m.soft->u_n;
+    s.u_nm1 = m.soft->u_nm1;
+    s.pose_blend = m.soft->poseBlend();
+  }
   return s;
 }
 
@@ -572,6 +638,13 @@ void Simulable::restoreStep(const SimulableStep& s) {
       throw InputError("Simulable::restoreStep: the snapshot has " +
                        std::to_string(t->rows()) + " positions per state, expected " +
                        std::to_string(n) + " bones");
+  if (m.soft) {
+    const Eigen::Index nu = m.soft->numSoftDofs();
+    if (s.u.size() != nu || s.u_n.size() != nu || s.u_nm1.size() != nu ||
+        s.pose_blend.rows() != m.soft->numNodes())
+      throw InputError("Simulable::restoreStep: the snapshot's soft-tissue displacements have " +
+                       std::to_string(s.u.size()) + " values, expected " + std::to_string(nu));
+  }
   m.q.R = s.R;
   m.q.t = s.t;
   m.q_n.R = s.R_n;
@@ -583,6 +656,13 @@ void Simulable::restoreStep(const SimulableStep& s) {
   m.target_t0 = s.target_t0;
   m.colliders = s.colliders;
   m.is_static = s.is_static;
+  if (m.soft) {
+    m.soft->u = s.u;
+    m.soft->u_n = s.u_n;
+    m.soft->u_nm1 = s.u_nm1;
+    m.soft->setPoseBlendOffsets(s.pose_blend);
+    m.setSoftPrediction();
+  }
   m.touch();
   m.ensureContact();  // stats() then report this step's contacts, as after its evaluation
 }
@@ -592,6 +672,10 @@ void Simulable::restoreStep(const SimulableStep& s) {
 void Simulable::getInitialStateRestJointsJacobian(MatX* state_jacobian,
                                                   MatX* velocity_jacobian) const {
   const Impl& m = *impl_;
+  if (m.soft)
+    throw Error(
+        "Simulable::getInitialStateRestJointsJacobian: available for the articulated skeleton "
+        "only (the adjoint layer does not cover the FEM soft tissue)");
   const int nb = m.num_bones;
   auto translationJacobian = [&](const std::vector<Mat3>& R) {
     MatX T = MatX::Zero(3 * nb, 3 * nb);
@@ -670,6 +754,7 @@ MatX Simulable::getStateJacobian() const {
 }
 
 MatX3 Simulable::getVertices() const {
+  if (impl_->soft) return getNodes();
   const SoftAvatar& avatar = *impl_->avatar;
   return poseBody(avatar.body(), avatar.betas(), getPose(), getTrans()).vertices;
 }
@@ -686,6 +771,10 @@ Vec3 Simulable::Impl::node(int i) const {
 
 MatX3 Simulable::getNodes() const {
   const Impl& m = *impl_;
+  if (m.soft) {
+    m.prepareSoft();
+    return m.soft->currentPositions().topRows(m.soft->numSurface());
+  }
   MatX3 nodes(m.avatar->restVertices().rows(), 3);
   for (int i = 0; i < nodes.rows(); ++i) nodes.row(i) = m.node(i).transpose();
   return nodes;
@@ -694,6 +783,14 @@ MatX3 Simulable::getNodes() const {
 // ∂x_i/∂t_b = w_ib I, ∂x_i/∂δω_b = −w_ib [R_b(X_i − J_b)]×.
 SpMat Simulable::getNodesStateJacobian() const {
   const Impl& m = *impl_;
+  if (m.soft) {
+    m.prepareSoft();
+    std::vector<Triplet> triplets;
+    m.soft->surfaceJacobian(triplets, m.boneDofs());
+    SpMat D(3 * m.soft->numSurface(), m.dofs());
+    D.setFromTriplets(triplets.begin(), triplets.end());
+    return D;
+  }
   const MatX3& X = m.avatar->restVertices();
   std::vector<Triplet> triplets;
   triplets.reserve(m.influences.size() * 9);
@@ -713,6 +810,45 @@ SpMat Simulable::getNodesStateJacobian() const {
   return D;
 }
 
+// ---- soft tissue --------------------------------------------------------------------------
+
+bool Simulable::hasSoftTissue() const { return impl_->soft != nullptr; }
+int Simulable::numBoneDofs() const { return impl_->boneDofs(); }
+const VecXi& Simulable::softNodes() const {
+  static const VecXi none;
+  return impl_->soft ? impl_->soft->softNodes() : none;
+}
+int Simulable::nodeSoftDof(int j) const {
+  const Impl& m = *impl_;
+  const int n = m.soft ? m.soft->numNodes() : int(m.avatar->restVertices().rows());
+  if (j < 0 || j >= n)
+    throw InputError("Simulable::nodeSoftDof: node " + std::to_string(j) + " outside [0, " +
+                     std::to_string(n) + ")");
+  if (!m.soft || m.soft->nodeDof(j) < 0) return -1;
+  return m.boneDofs() + m.soft->nodeDof(j);
+}
+MatX3 Simulable::getSoftTissueDisplacements() const {
+  const Impl& m = *impl_;
+  const int V = int(m.avatar->restVertices().rows());
+  MatX3 u = MatX3::Zero(V, 3);
+  if (m.soft)
+    for (int i = 0; i < V; ++i)
+      if (m.soft->nodeDof(i) >= 0) u.row(i) = m.soft->u.segment<3>(m.soft->nodeDof(i)).transpose();
+  return u;
+}
+MatX3 Simulable::getUnposedSurface() const {
+  const Impl& m = *impl_;
+  if (!m.soft) return m.avatar->restVertices();
+  m.prepareSoft();
+  return m.soft->currentUnposed().topRows(m.soft->numSurface());
+}
+MatX3 Simulable::getVolumeNodes() const {
+  const Impl& m = *impl_;
+  if (!m.soft) return getNodes();
+  m.prepareSoft();
+  return m.soft->currentPositions();
+}
+
 const std::vector<Mat3>& Simulable::boneRotations() const { return impl_->q.R; }
 const MatX3& Simulable::bonePositions() const { return impl_->q.t; }
 
@@ -727,6 +863,14 @@ const MatX3& Simulable::bonePositions() const { return impl_->q.t; }
 void Simulable::Impl::ensureContact() const {
   ContactCache& cc = contact;
   if (cc.version == state_version) return;
+  if (soft) {  // every surface node is evaluated: the FEM step costs far more than this
+    prepareSoft();
+    cc.candidates.clear();
+    cc.energy = soft->contact(colliders, time, options.contact, nullptr, nullptr, 0, true,
+                              &cc.active);
+    cc.version = state_version;
+    return;
+  }
   cc.candidates.clear();
   cc.points.clear();
   cc.energy = 0.0;
@@ -886,6 +1030,10 @@ void Simulable::Impl::addContactHessian(std::vector<Triplet>& H, int offset, boo
 double Simulable::getDynamicEnergyScalar() const {
   const Impl& m = *impl_;
   if (m.is_static) return 0.0;
+  if (m.soft) {
+    m.prepareSoft();
+    return m.soft->inertia(nullptr, nullptr, 0, true);
+  }
   double E = 0.0;
   for (int b = 0; b < m.num_bones; ++b)
     E += rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(),
@@ -897,6 +1045,11 @@ double Simulable::getDynamicEnergyScalar() const {
 void Simulable::getDynamicGradientVector(VecX& g, int offset) const {
   const Impl& m = *impl_;
   if (m.is_static) return;
+  if (m.soft) {
+    m.prepareSoft();
+    m.soft->inertia(&g, nullptr, offset, true);
+    return;
+  }
   Vec6 gb;
   for (int b = 0; b < m.num_bones; ++b) {
     rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(), m.q_n.R[b],
@@ -910,6 +1063,11 @@ void Simulable::getDynamicHessianTripletVector(std::vector<Triplet>& H, int offs
                                                bool psd) const {
   const Impl& m = *impl_;
   if (m.is_static) return;
+  if (m.soft) {
+    m.prepareSoft();
+    m.soft->inertia(nullptr, &H, offset, psd);
+    return;
+  }
   Mat6 Hb;
   for (int b = 0; b < m.num_bones; ++b) {
     rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(), m.q_n.R[b],
@@ -925,7 +1083,7 @@ double Simulable::getPotentialEnergyScalar() const {
   const bool tracking = m.mocap && m.options.track_mocap;
   for (int b = 0; b < m.num_bones; ++b) {
     const Vec3 t_b = m.q.t.row(b).transpose();
-    E += gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity);
+    if (!m.soft) E += gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity);
     const int p = m.parents[b];
     if (p < 0) {
       if (tracking)
@@ -938,6 +1096,11 @@ double Simulable::getPotentialEnergyScalar() const {
                            m.options.joint_stiffness);
     if (tracking) E += trackingSpringEnergy(m.q.R[p], m.q.R[b], m.target_R[b], m.tracking_k[b]);
   }
+  if (m.soft) {
+    m.prepareSoft();
+    E += m.soft->gravity(m.options.gravity, nullptr, nullptr, 0, true) +
+         m.soft->elastic(nullptr, nullptr, 0, true);
+  }
   return E + m.contactEnergy();
 }
 
@@ -949,8 +1112,10 @@ void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
   for (int b = 0; b < m.num_bones; ++b) {
     const Vec3 t_b = m.q.t.row(b).transpose();
     const int ib = offset + 6 * b;
-    gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, &g6);
-    g.segment<6>(ib) += g6;
+    if (!m.soft) {
+      gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, &g6);
+      g.segment<6>(ib) += g6;
+    }
     const int p = m.parents[b];
     if (p < 0) {
       if (tracking) {
@@ -971,6 +1136,13 @@ void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
       g.segment<3>(ib + 3) += g6.tail<3>();
     }
   }
+  if (m.soft) {
+    m.prepareSoft();
+    m.soft->gravity(m.options.gravity, &g, nullptr, offset, true);
+    m.soft->elastic(&g, nullptr, offset, true);
+    m.soft->contact(m.colliders, m.time, m.options.contact, &g, nullptr, offset, true);
+    return;
+  }
   m.addContactGradient(g, offset);
 }
 
@@ -983,8 +1155,10 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int of
   for (int b = 0; b < m.num_bones; ++b) {
     const Vec3 t_b = m.q.t.row(b).transpose();
     const int ib = offset + 6 * b;
-    gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, nullptr, &H6, psd);
-    addBlock(H, ib + 3, ib + 3, H6.bottomRightCorner<3, 3>());  // only the rotation block
+    if (!m.soft) {
+      gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, nullptr, &H6, psd);
+      addBlock(H, ib + 3, ib + 3, H6.bottomRightCorner<3, 3>());  // only the rotation block
+    }
     const int p = m.parents[b];
     if (p < 0) {
       if (tracking) {
@@ -1011,6 +1185,13 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int of
       addBlock(H, ib + 3, ib + 3, H6.bottomRightCorner<3, 3>());
     }
   }
+  if (m.soft) {
+    m.prepareSoft();
+    m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd);
+    m.soft->elastic(nullptr, &H, offset, psd);
+    m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd);
+    return;
+  }
   m.addContactHessian(H, offset, psd);
 }
 
@@ -1025,7 +1206,7 @@ void Simulable::fixMatrixKinematic(std::vector<Triplet>& H, int offset) const {
   if (m.options.kinematic_bones.empty()) return;
   auto isKinematic = [&](int index) {
     const int local = index - offset;
-    return local >= 0 && local < m.dofs() && m.kinematic[local / kDofsPerBone];
+    return local >= 0 && local < m.boneDofs() && m.kinematic[local / kDofsPerBone];
   };
   H.erase(std::remove_if(H.begin(), H.end(),
                          [&](const Triplet& t) { return isKinematic(t.row()) || isKinematic(t.col()); }),
@@ -1067,6 +1248,10 @@ namespace flsh {
 namespace {
 
 detail::SimulableParameterView parameterView(const Simulable::Impl& m) {
+  if (m.soft)
+    throw Error(
+        "Simulable: parameter derivatives (the adjoint layer) are available for the articulated "
+        "skeleton only; this avatar has soft tissue (FEM)");
   m.ensureContact();
   return {m.num_bones, m.parents, m.J, m.inertia, m.options, m.mocap && m.options.track_mocap,
           m.is_static, m.q.R, m.q.t, m.q_n.R, m.q_n.t, m.q_nm1.R, m.q_nm1.t, m.target_R,

@@ -3,9 +3,9 @@
 #include <Eigen/Cholesky>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
-#include <vector>
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "flsh/core/error.h"
 #include "solve/linear_solver_detail.h"
@@ -73,6 +73,17 @@ class DenseCholeskySolver final : public LinearSolver {
     return llt_.solve(b);
   }
 
+  void solveInPlace(VecX& b) const override {
+    if (!has_factor_ || b.size() != dense_.rows()) {
+      b = solve(b);  // throws the same errors as solve()
+      return;
+    }
+    llt_.solveInPlace(b);
+  }
+
+  bool hasFactor() const override { return has_factor_; }
+  int factorRows() const override { return has_factor_ ? int(dense_.rows()) : 0; }
+
   std::string name() const override { return "dense-llt"; }
 
  private:
@@ -84,7 +95,8 @@ class DenseCholeskySolver final : public LinearSolver {
 /// Eigen's simplicial LLᵀ with the permuted copy P A Pᵀ kept between factorizations: Eigen's own
 /// factorize() rebuilds it (with heap allocations) on every call, here only the values are
 /// gathered through an index map computed once per pattern.
-class PermutedSimplicialLLT : public Eigen::SimplicialLLT<SpMat, Eigen::Lower, Eigen::AMDOrdering<int>> {
+class PermutedSimplicialLLT
+    : public Eigen::SimplicialLLT<SpMat, Eigen::Lower, Eigen::AMDOrdering<int>> {
  public:
   /// Ordering, elimination tree and value map for the pattern of A (compressed).
   void analyze(const SpMat& A) {
@@ -110,7 +122,7 @@ class PermutedSimplicialLLT : public Eigen::SimplicialLLT<SpMat, Eigen::Lower, E
   }
 
  private:
-  SpMat permuted_;  // upper triangle of P A Pᵀ, n × n
+  SpMat permuted_;           // upper triangle of P A Pᵀ, n × n
   std::vector<int> source_;  // value index in A of each stored entry of permuted_
 };
 
@@ -157,6 +169,9 @@ class SparseCholeskySolver final : public LinearSolver {
                        " entries, got " + std::to_string(b.size()));
     return llt_.solve(b);
   }
+
+  bool hasFactor() const override { return has_factor_; }
+  int factorRows() const override { return has_factor_ ? int(n_) : 0; }
 
   std::string name() const override { return "eigen-simplicial-llt"; }
 

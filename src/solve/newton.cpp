@@ -1,6 +1,7 @@
 #include "flsh/solve/newton.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -41,6 +42,73 @@ void validate(const NewtonOptions& o) {
   if (!(o.armijo > 0.0 && o.armijo < 1.0)) bad("armijo", "in (0, 1)", o.armijo);
   if (!(o.initial_regularization > 0.0) || !std::isfinite(o.initial_regularization))
     bad("initial_regularization", "finite and > 0", o.initial_regularization);
+  const LaggedFactorOptions& lag = o.lagged;
+  if (!(lag.cg_relative_tolerance > 0.0 && lag.cg_relative_tolerance < 1.0))
+    bad("lagged.cg_relative_tolerance", "in (0, 1)", lag.cg_relative_tolerance);
+  if (lag.max_cg_iterations < 1) bad("lagged.max_cg_iterations", "≥ 1", lag.max_cg_iterations);
+  if (lag.refactor_after_cg_iterations < 0)
+    bad("lagged.refactor_after_cg_iterations", "≥ 0", lag.refactor_after_cg_iterations);
+}
+
+using Clock = std::chrono::steady_clock;
+
+/// Adds the seconds from construction to destruction to `total`.
+class ScopedSeconds {
+ public:
+  explicit ScopedSeconds(double& total) : total_(total), start_(Clock::now()) {}
+  ~ScopedSeconds() { total_ += std::chrono::duration<double>(Clock::now() - start_).count(); }
+  ScopedSeconds(const ScopedSeconds&) = delete;
+  ScopedSeconds& operator=(const ScopedSeconds&) = delete;
+
+ private:
+  double& total_;
+  Clock::time_point start_;
+};
+
+enum class CgOutcome { Converged, NonPositiveCurvature, NotConverged, NotFinite };
+
+/// Work vectors of PCG, kept across Newton iterations (each n).
+struct CgWorkspace {
+  VecX residual, preconditioned, direction, product;
+};
+
+/// Preconditioned conjugate gradients on H x = b from x = 0 with M⁻¹ = preconditioner's held
+/// factor; stops when ‖b − H x‖₂ ≤ residual_tolerance. H is symmetric in full storage and need
+/// not be positive definite: a direction with pᵀHp ≤ 0 stops it (NonPositiveCurvature). Every
+/// iterate is a descent direction of ½xᵀHx − bᵀx as long as the curvatures met were positive.
+CgOutcome preconditionedCg(const SpMat& H, const VecX& b, double residual_tolerance,
+                           int max_iterations, const LinearSolver& preconditioner, VecX& x,
+                           CgWorkspace& w, int& iterations) {
+  x.setZero(b.size());
+  w.residual = b;
+  w.preconditioned = w.residual;
+  preconditioner.solveInPlace(w.preconditioned);
+  w.direction = w.preconditioned;
+  double rz = w.residual.dot(w.preconditioned);
+  if (!std::isfinite(rz) || !(rz > 0.0)) return CgOutcome::NotFinite;
+  for (int k = 0; k < max_iterations; ++k) {
+    // Serial on purpose: Eigen's OpenMP row-major product (Hᵀp) was 15× slower per iteration
+    // on the shared 2-core machine (threads waiting at barriers), and Hp costs ~1/10 of the
+    // preconditioner's triangular solves anyway.
+    w.product.noalias() = H * w.direction;
+    ++iterations;
+    const double curvature = w.direction.dot(w.product);
+    if (!std::isfinite(curvature)) return CgOutcome::NotFinite;
+    if (!(curvature > 0.0)) return CgOutcome::NonPositiveCurvature;
+    const double alpha = rz / curvature;
+    x.noalias() += alpha * w.direction;
+    w.residual.noalias() -= alpha * w.product;
+    const double residual_norm = w.residual.norm();
+    if (!std::isfinite(residual_norm)) return CgOutcome::NotFinite;
+    if (residual_norm <= residual_tolerance) return CgOutcome::Converged;
+    w.preconditioned = w.residual;
+    preconditioner.solveInPlace(w.preconditioned);
+    const double rz_next = w.residual.dot(w.preconditioned);
+    if (!std::isfinite(rz_next) || !(rz_next > 0.0)) return CgOutcome::NotFinite;
+    w.direction = w.preconditioned + (rz_next / rz) * w.direction;
+    rz = rz_next;
+  }
+  return CgOutcome::NotConverged;
 }
 
 /// Pointers to the stored diagonal of H, inserting explicit zeros where it has none, so that a
@@ -80,8 +148,13 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     own_solver = makeLinearSolver(options.linear_solver, n);
     solver = own_solver.get();
   }
+  const LaggedFactorOptions& lag = options.lagged;
 
-  double energy = objective.energy();
+  double energy = 0.0;
+  {
+    ScopedSeconds timer(result.seconds_energy);
+    energy = objective.energy();
+  }
   result.energy = energy;
   if (n == 0) {
     result.converged = true;
@@ -97,15 +170,44 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
   SpMat H;
   std::vector<double*> diagonal;
   VecX diagonal_values;
+  CgWorkspace cg;
   double initial_gradient_norm = 0.0;
+  double previous_gradient_norm2 = 0.0;
   double last_step_norm = std::numeric_limits<double>::infinity();
+  // The Hessian form held in H, unshifted (−1: none or shifted), so that a failed PCG solve
+  // factors the matrix it already assembled.
+  int assembled_form = -1;
+  // Lagged mode: once this call finds the exact Hessian indefinite, PCG uses the PSD form.
+  bool exact_found_indefinite = !options.exact_hessian;
+
+  const auto evaluateHessian = [&](bool psd) {
+    {
+      ScopedSeconds timer(result.seconds_hessian);
+      objective.hessian(H, psd);
+      objective.fixKinematic(g, &H);
+    }
+    if (H.rows() != n || H.cols() != n)
+      throw Error("newtonSolve: Objective::hessian returned " +
+                  shapeString({long(H.rows()), long(H.cols())}) + ", expected (" +
+                  std::to_string(n) + ", " + std::to_string(n) + ")");
+    diagonalPointers(H, diagonal);
+    assembled_form = psd ? 1 : 0;
+  };
+  const auto factorize = [&]() {
+    ScopedSeconds timer(result.seconds_factorization);
+    ++result.factorizations;
+    return solver->factorize(H);
+  };
 
   for (int iteration = 0;; ++iteration) {
-    objective.gradient(g);
-    if (g.size() != n)
-      throw Error("newtonSolve: Objective::gradient returned " + std::to_string(g.size()) +
-                  " entries, expected numDofs() = " + std::to_string(n));
-    objective.fixKinematic(g, nullptr);
+    {
+      ScopedSeconds timer(result.seconds_gradient);
+      objective.gradient(g);
+      if (g.size() != n)
+        throw Error("newtonSolve: Objective::gradient returned " + std::to_string(g.size()) +
+                    " entries, expected numDofs() = " + std::to_string(n));
+      objective.fixKinematic(g, nullptr);
+    }
     if (!g.allFinite()) {
       result.message = "the gradient is not finite; stopped at the last finite state";
       break;
@@ -113,7 +215,9 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     const double gradient_norm = g.lpNorm<Eigen::Infinity>();
     result.gradient_norm = gradient_norm;
     if (iteration == 0) initial_gradient_norm = gradient_norm;
-    if (gradient_norm <= options.gradient_tolerance * std::max(1.0, initial_gradient_norm)) {
+    const double gradient_target =
+        options.gradient_tolerance * std::max(1.0, initial_gradient_norm);
+    if (gradient_norm <= gradient_target) {
       result.converged = true;
       result.message = format("gradient tolerance reached (|g|inf = %.3g)", gradient_norm);
       break;
@@ -129,73 +233,133 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
                               options.max_iterations, gradient_norm);
       break;
     }
+    const double gradient_norm2 = g.norm();
+    assembled_form = -1;  // the state moved: H, if any, is of an earlier iterate
+    bool counted_psd_fallback = false;
 
-    // ---- Newton direction: H dq = −g. The exact Hessian first (quadratic convergence); if it
-    // is not positive definite, the objective's PSD form; then diagonal shifts until it is.
-    bool have_direction = false;
-    double diagonal_scale = 1.0;
-    for (int form = options.exact_hessian ? 0 : 1; form < 2 && !have_direction; ++form) {
-      const bool psd = form == 1;
-      if (psd && options.exact_hessian) ++result.psd_fallbacks;
-      objective.hessian(H, psd);
-      objective.fixKinematic(g, &H);
-      if (H.rows() != n || H.cols() != n)
-        throw Error("newtonSolve: Objective::hessian returned " +
-                    shapeString({long(H.rows()), long(H.cols())}) + ", expected (" +
-                    std::to_string(n) + ", " + std::to_string(n) + ")");
-      diagonalPointers(H, diagonal);
-      diagonal_scale = 0.0;
-      for (int k = 0; k < n; ++k) diagonal_scale += std::abs(*diagonal[k]);
-      diagonal_scale /= n;
-      if (!(diagonal_scale > 0.0) || !std::isfinite(diagonal_scale)) diagonal_scale = 1.0;
-      have_direction = solver->factorize(H);
-    }
-    if (!have_direction) {
-      diagonal_values.resize(n);
-      for (int k = 0; k < n; ++k) diagonal_values[k] = *diagonal[k];
-      double shift = options.initial_regularization * diagonal_scale;
-      for (int attempt = 0; attempt < kMaxRegularizationTries && !have_direction; ++attempt) {
-        for (int k = 0; k < n; ++k) *diagonal[k] = diagonal_values[k] + shift;
-        ++result.regularizations;
-        have_direction = solver->factorize(H);
-        shift *= 10.0;
-      }
-    }
-    if (have_direction) {
-      rhs = -g;
-      dq = solver->solve(rhs);
-      if (!dq.allFinite()) have_direction = false;
-    }
-    double slope = have_direction ? g.dot(dq) : 0.0;
-    if (!have_direction || !(slope < 0.0)) {
-      // No usable Newton direction (H singular beyond repair or not finite): scaled steepest
-      // descent still decreases the energy and the line search keeps the state finite.
-      dq = -g / diagonal_scale;
-      slope = g.dot(dq);
-    }
-
-    // ---- Backtracking line search (Armijo); non-finite energies count as rejected.
-    double alpha = 1.0;
+    // Attempt 0 may take the lagged-factor PCG direction; if PCG fails (no convergence,
+    // non-positive curvature, no descent) the same attempt factors the Hessian it assembled,
+    // and if the line search rejects a PCG direction, attempt 1 factors. Either refreshes the
+    // lagged factor.
     bool accepted = false;
-    for (int trial = 0;; ++trial) {
-      trial_step = alpha * dq;
-      objective.push();
-      objective.step(trial_step);
-      const double trial_energy = objective.energy();
-      if (std::isfinite(trial_energy) && trial_energy <= energy + options.armijo * alpha * slope +
-                                                             kEnergyRoundOff * std::abs(energy)) {
-        if (!objective.discardPushed()) {
-          objective.pop();
-          objective.step(trial_step);
+    double alpha = 1.0;
+    for (int attempt = 0; attempt < 2 && !accepted; ++attempt) {
+      bool have_direction = false;
+      bool direction_from_cg = false;
+      double diagonal_scale = 1.0;
+      const auto scaleOfDiagonal = [&]() {
+        diagonal_scale = 0.0;
+        for (int k = 0; k < n; ++k) diagonal_scale += std::abs(*diagonal[k]);
+        diagonal_scale /= n;
+        if (!(diagonal_scale > 0.0) || !std::isfinite(diagonal_scale)) diagonal_scale = 1.0;
+      };
+
+      // ---- Lagged factor: PCG on the current Hessian, preconditioned by an earlier factor.
+      if (attempt == 0 && lag.enabled && !solver->factorStale() && solver->hasFactor() &&
+          solver->factorRows() == n) {
+        const bool psd = exact_found_indefinite;
+        if (psd && options.exact_hessian && !counted_psd_fallback) {
+          ++result.psd_fallbacks;
+          counted_psd_fallback = true;
         }
-        energy = trial_energy;
-        accepted = true;
-        break;
+        evaluateHessian(psd);
+        scaleOfDiagonal();
+        double forcing = lag.cg_relative_tolerance;
+        if (lag.adaptive_forcing && iteration > 0)
+          forcing = std::min(forcing, gradient_norm2 / previous_gradient_norm2);
+        // No oversolving: a linear residual 10× below the gradient target cannot matter.
+        const double residual_tolerance = std::max(forcing * gradient_norm2, 0.1 * gradient_target);
+        rhs = -g;
+        int iterations = 0;
+        CgOutcome outcome;
+        {
+          ScopedSeconds timer(result.seconds_solve);
+          outcome = preconditionedCg(H, rhs, residual_tolerance, lag.max_cg_iterations, *solver, dq,
+                                     cg, iterations);
+        }
+        result.cg_iterations += iterations;
+        if (iterations > lag.refactor_after_cg_iterations) solver->setFactorStale(true);
+        if (outcome == CgOutcome::NonPositiveCurvature && !psd) exact_found_indefinite = true;
+        if (outcome == CgOutcome::Converged && dq.allFinite() && g.dot(dq) < 0.0) {
+          have_direction = true;
+          direction_from_cg = true;
+        }
       }
-      objective.pop();
-      if (trial >= options.max_line_search_steps) break;
-      alpha *= 0.5;
-      ++result.line_search_steps;
+
+      // ---- Factored Newton direction: H dq = −g. The exact Hessian first (quadratic
+      // convergence); if it is not positive definite, the objective's PSD form; then diagonal
+      // shifts until it is.
+      if (!have_direction) {
+        const int first_form =
+            options.exact_hessian && !(lag.enabled && exact_found_indefinite) ? 0 : 1;
+        for (int form = first_form; form < 2 && !have_direction; ++form) {
+          const bool psd = form == 1;
+          if (psd && options.exact_hessian && !counted_psd_fallback) {
+            ++result.psd_fallbacks;
+            counted_psd_fallback = true;
+          }
+          if (assembled_form != form) evaluateHessian(psd);
+          scaleOfDiagonal();
+          have_direction = factorize();
+          if (!have_direction && !psd) exact_found_indefinite = true;
+        }
+        if (!have_direction) {
+          diagonal_values.resize(n);
+          for (int k = 0; k < n; ++k) diagonal_values[k] = *diagonal[k];
+          assembled_form = -1;  // H is shifted from here on
+          double shift = options.initial_regularization * diagonal_scale;
+          for (int attempt_shift = 0; attempt_shift < kMaxRegularizationTries && !have_direction;
+               ++attempt_shift) {
+            for (int k = 0; k < n; ++k) *diagonal[k] = diagonal_values[k] + shift;
+            ++result.regularizations;
+            have_direction = factorize();
+            shift *= 10.0;
+          }
+        }
+        solver->setFactorStale(false);
+        if (have_direction) {
+          ScopedSeconds timer(result.seconds_solve);
+          rhs = -g;
+          dq = rhs;
+          solver->solveInPlace(dq);
+          if (!dq.allFinite()) have_direction = false;
+        }
+      }
+      double slope = have_direction ? g.dot(dq) : 0.0;
+      if (!have_direction || !(slope < 0.0)) {
+        // No usable Newton direction (H singular beyond repair or not finite): scaled steepest
+        // descent still decreases the energy and the line search keeps the state finite.
+        dq = -g / diagonal_scale;
+        slope = g.dot(dq);
+      }
+
+      // ---- Backtracking line search (Armijo); non-finite energies count as rejected.
+      alpha = 1.0;
+      for (int trial = 0;; ++trial) {
+        trial_step = alpha * dq;
+        objective.push();
+        objective.step(trial_step);
+        double trial_energy = 0.0;
+        {
+          ScopedSeconds timer(result.seconds_energy);
+          trial_energy = objective.energy();
+        }
+        if (std::isfinite(trial_energy) && trial_energy <= energy + options.armijo * alpha * slope +
+                                                               kEnergyRoundOff * std::abs(energy)) {
+          if (!objective.discardPushed()) {
+            objective.pop();
+            objective.step(trial_step);
+          }
+          energy = trial_energy;
+          accepted = true;
+          break;
+        }
+        objective.pop();
+        if (trial >= options.max_line_search_steps) break;
+        alpha *= 0.5;
+        ++result.line_search_steps;
+      }
+      if (!direction_from_cg) break;  // a factored direction gets no second attempt
     }
     if (!accepted) {
       result.message =
@@ -203,6 +367,7 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
                  options.max_line_search_steps, gradient_norm);
       break;
     }
+    previous_gradient_norm2 = gradient_norm2;
     last_step_norm = alpha * dq.lpNorm<Eigen::Infinity>();
     result.iterations = iteration + 1;
   }

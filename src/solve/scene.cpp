@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "flsh/contact/contact_energy.h"
@@ -31,10 +32,20 @@ Mat3 rotationCurvature(const Vec3& g, const Vec3& p) {
 }  // namespace
 
 /// Skinning data of one simulable and its posed capsules and (lazily) nodes at the last state
-/// seen. Nodes are x_i = Σ_b w_ib (R_b (X_i − J_b) + t_b), the formula of
-/// Simulable::getNodes, computed only for the vertex groups the broad phase keeps.
+/// seen. Nodes are x_i = Σ_b w_ib (R_b (Y_i − J_b) + t_b), the formula of
+/// Simulable::getNodes, computed only for the vertex groups the broad phase keeps. Y is the
+/// unposed surface: the rest vertices X for the skeleton, getUnposedSurface() (moving with the
+/// soft-tissue displacements) for the soft-tissue model. The rest bounds below are taken on X;
+/// a soft vertex is further off by at most |Σ_b w_ib R_b (Y_i − X_i)| ≤ Σ_b |w_ib| |Y_i − X_i|.
 struct Scene::AvatarContactData {
   int bones = 0;
+  // Soft tissue: the state index (in the simulable) of each vertex's u, −1 for none (bone
+  // nodes), and the unposed surface Y (#V × 3, m) of the cached posed data; with it the
+  // displacement margins of each cluster and bone group (m).
+  bool soft = false;
+  std::vector<int> soft_dof;
+  MatX3 surface;
+  std::vector<double> cluster_shift, group_shift;
   // Per vertex i, its nonzero skinning weights: bones weight_bone[k], values weight_value[k]
   // for k in [weight_start[i], weight_start[i + 1]).
   std::vector<int> weight_start, weight_bone;
@@ -57,7 +68,8 @@ struct Scene::AvatarContactData {
   std::vector<int> bone_clusters, cluster_start, cluster_vertices, cluster_bone;
   std::vector<Bound> group_rest, cluster_rest;
 
-  // Cache key: the bone transforms the posed data below belong to; `version` counts changes.
+  // Cache key: the bone transforms (and for soft tissue the surface Y) the posed data below
+  // belong to; `version` counts changes.
   bool valid = false;
   long version = 0;
   std::vector<Mat3> key_rotations;
@@ -72,8 +84,8 @@ struct Scene::AvatarContactData {
   std::vector<Vec3> group_center, cluster_center;
   std::vector<double> group_bound, cluster_bound;
   std::vector<double> rotation_gap, joint_gap, joint_gap_c;  // per bone pair b·bones + c
-  std::vector<char> cluster_posed;              // nodes of the cluster computed for this state
-  MatX3 nodes;                                  // #V × 3, valid for posed clusters only
+  std::vector<char> cluster_posed;  // nodes of the cluster computed for this state
+  MatX3 nodes;                      // #V × 3, valid for posed clusters only
   struct PosedCapsule {
     int bone = 0;
     Vec3 a_rotated, b_rotated;  // R_b (a − J_b), R_b (b − J_b): a' = a_rotated + t_b
@@ -86,6 +98,13 @@ struct Scene::AvatarContactData {
 };
 
 namespace {
+/// Appends the dense block B at (row, col) as triplets.
+template <class Derived>
+void appendBlock(std::vector<Triplet>& H, int row, int col, const Eigen::MatrixBase<Derived>& B) {
+  for (int c = 0; c < B.cols(); ++c)
+    for (int r = 0; r < B.rows(); ++r) H.emplace_back(row + r, col + c, B(r, c));
+}
+
 /// Squared distance from x to the segment [a, b].
 double segmentDistanceSquared(const Vec3& x, const Vec3& a, const Vec3& b) {
   const Vec3 ab = b - a;
@@ -136,6 +155,249 @@ struct Scene::BlockAccumulator {
   }
 };
 
+// ---- general Hessian pattern -------------------------------------------------------------------
+
+void HessianAssembler::setGroups(std::vector<int> group_start) {
+  if (group_start.empty() || group_start.front() != 0)
+    throw InputError(
+        "HessianAssembler::setGroups: group_start must start at 0, got " +
+        (group_start.empty() ? std::string("an empty list") : std::to_string(group_start.front())));
+  for (size_t k = 1; k < group_start.size(); ++k)
+    if (group_start[k] <= group_start[k - 1])
+      throw InputError("HessianAssembler::setGroups: group_start must increase strictly; entry " +
+                       std::to_string(k) + " is " + std::to_string(group_start[k]) + " after " +
+                       std::to_string(group_start[k - 1]));
+  group_start_ = std::move(group_start);
+  group_of_.clear();
+  pattern_ = SpMat();
+  pending_blocks_.clear();
+  slot_key_.clear();
+  slot_index_.clear();
+}
+
+void HessianAssembler::addBlocks(const std::vector<std::pair<int, int>>& blocks) {
+  pending_blocks_.insert(pending_blocks_.end(), blocks.begin(), blocks.end());
+}
+
+void HessianAssembler::assemble(const std::vector<Triplet>& triplets,
+                                const std::vector<size_t>& segment_end, int n, SpMat& H) {
+  if (n < 0)
+    throw InputError("HessianAssembler::assemble: n must be ≥ 0, got " + std::to_string(n));
+  if (!group_start_.empty() && group_start_.back() != n)
+    throw InputError("HessianAssembler::assemble: the DoF groups cover " +
+                     std::to_string(group_start_.back()) +
+                     " DoFs (setGroups), but n = " + std::to_string(n));
+  for (size_t s = 0; s < segment_end.size(); ++s)
+    if (segment_end[s] > triplets.size() || (s > 0 && segment_end[s] < segment_end[s - 1]) ||
+        (s + 1 == segment_end.size() && segment_end[s] != triplets.size()))
+      throw InputError("HessianAssembler::assemble: segment_end must increase and end at the " +
+                       std::to_string(triplets.size()) + " triplets; entry " + std::to_string(s) +
+                       " is " + std::to_string(segment_end[s]));
+  if (int(group_of_.size()) != n) {
+    group_of_.resize(n);
+    if (group_start_.empty()) {
+      for (int d = 0; d < n; ++d) group_of_[d] = d;
+    } else {
+      for (size_t k = 0; k + 1 < group_start_.size(); ++k)
+        std::fill(group_of_.begin() + group_start_[k], group_of_.begin() + group_start_[k + 1],
+                  int(k));
+    }
+  }
+  if (pattern_.rows() != n) {
+    // First build: every diagonal block, so that Newton's diagonal shifts keep the pattern.
+    const int groups = group_start_.empty() ? n : int(group_start_.size()) - 1;
+    for (int k = 0; k < groups; ++k) pending_blocks_.emplace_back(k, k);
+  }
+  if (!pending_blocks_.empty()) grow(n);
+  const std::vector<size_t> whole{triplets.size()};
+  const std::vector<size_t>& ends = segment_end.empty() ? whole : segment_end;
+  if (fill(triplets, ends, H)) return;
+  grow(n);  // fill() left the missing blocks in pending_blocks_
+  if (!fill(triplets, ends, H))
+    throw Error("HessianAssembler::assemble: the grown pattern still misses a triplet");
+}
+
+// Old slots searched ahead for a moved triplet's key (a removed run of triplets up to this long
+// is recognized; a longer one costs one lookup per later slot).
+constexpr long kResyncWindow = 48;
+
+// Sums the triplets into H on pattern_; false (and the missing blocks in pending_blocks_) if
+// some triplet falls outside it.
+bool HessianAssembler::fill(const std::vector<Triplet>& triplets,
+                            const std::vector<size_t>& segment_end, SpMat& H) {
+  const SpMat& P = pattern_;
+  const int n = int(P.rows());
+  const Eigen::Index nnz = P.nonZeros();
+  const bool same = H.rows() == n && H.cols() == n && H.isCompressed() && H.nonZeros() == nnz &&
+                    std::equal(P.outerIndexPtr(), P.outerIndexPtr() + n + 1, H.outerIndexPtr()) &&
+                    std::equal(P.innerIndexPtr(), P.innerIndexPtr() + nnz, H.innerIndexPtr());
+  if (!same) H = P;
+  double* values = H.valuePtr();
+  std::fill(values, values + nnz, 0.0);
+  const int* outer = P.outerIndexPtr();
+  const int* inner = P.innerIndexPtr();
+  if (slot_key_.size() < segment_end.size()) {
+    slot_key_.resize(segment_end.size());
+    slot_index_.resize(segment_end.size());
+  }
+  last_lookups_ = 0;
+  bool complete = true;
+  size_t begin = 0;
+  for (size_t s = 0; s < segment_end.size(); ++s) {
+    const size_t count = segment_end[s] - begin;
+    std::vector<long long>& keys = slot_key_[s];
+    std::vector<int>& index = slot_index_[s];
+    if (keys.size() < count) {
+      keys.resize(count, -1);
+      index.resize(count, 0);
+    }
+    const Triplet* t = triplets.data() + begin;
+    // After the first moved slot, slots are matched against the previous call's from there on
+    // (old_key_) with a running shift: triplets inserted or removed in the middle of a segment
+    // then cost one lookup each instead of one for every later slot.
+    bool moved = false;
+    size_t moved_from = 0;
+    long shift = 0;
+    for (size_t k = 0; k < count; ++k) {
+      const int r = t[k].row(), c = t[k].col();
+      if (unsigned(r) >= unsigned(n) || unsigned(c) >= unsigned(n))
+        throw InputError("HessianAssembler::assemble: triplet " + std::to_string(begin + k) +
+                         " at (" + std::to_string(r) + ", " + std::to_string(c) +
+                         ") is outside the " + std::to_string(n) + " × " + std::to_string(n) +
+                         " matrix");
+      const long long key = (long long)r * n + c;
+      if (!moved && key == keys[k]) {
+        values[index[k]] += t[k].value();
+        continue;
+      }
+      if (!moved) {
+        moved = true;
+        moved_from = k;
+        old_key_.assign(keys.begin() + k, keys.end());
+        old_index_.assign(index.begin() + k, index.end());
+      }
+      const long old_count = long(old_key_.size());
+      const long o = long(k - moved_from) + shift;  // this slot's place among the old ones
+      int slot = -1;
+      if (o >= 0 && o < old_count && old_key_[o] == key) {
+        slot = old_index_[o];
+      } else {
+        // Removed triplets: the key a little further on (not where no old slot was filled).
+        const long scan_end = o >= 0 && o < old_count && old_key_[o] >= 0
+                                  ? std::min(old_count, o + 1 + kResyncWindow)
+                                  : 0;
+        for (long p = std::max(0L, o + 1); p < scan_end; ++p)
+          if (old_key_[p] == key) {
+            shift += p - o;
+            slot = old_index_[p];
+            break;
+          }
+        if (slot < 0) {
+          ++last_lookups_;
+          const int* found = std::lower_bound(inner + outer[c], inner + outer[c + 1], r);
+          if (found == inner + outer[c + 1] || *found != r) {
+            pending_blocks_.emplace_back(group_of_[r], group_of_[c]);
+            complete = false;
+            keys[k] = -1;
+            --shift;  // taken as inserted: the next slot is matched with the same old one
+            continue;
+          }
+          slot = int(found - inner);
+          --shift;
+        }
+      }
+      keys[k] = key;
+      index[k] = slot;
+      values[slot] += t[k].value();
+    }
+    begin = segment_end[s];
+  }
+  return complete;
+}
+
+// Adds pending_blocks_ (whole group × group blocks) to the pattern, column by column, and moves
+// the cached value slots to their entries' new places (a linear pass: no sort of the triplets).
+void HessianAssembler::grow(int n) {
+  const bool grouped = !group_start_.empty();
+  const int groups = grouped ? int(group_start_.size()) - 1 : n;
+  const auto first = [&](int g) { return grouped ? group_start_[g] : g; };
+  const auto last = [&](int g) { return grouped ? group_start_[g + 1] : g + 1; };
+  // Pending row groups bucketed by column group, without duplicates, sorted.
+  std::vector<int> start(groups + 1, 0);
+  for (const auto& [gr, gc] : pending_blocks_) {
+    if (gr < 0 || gr >= groups || gc < 0 || gc >= groups)
+      throw InputError("HessianAssembler::addBlocks: block (" + std::to_string(gr) + ", " +
+                       std::to_string(gc) + ") is outside the " + std::to_string(groups) +
+                       " DoF groups");
+    ++start[gc + 1];
+  }
+  for (int g = 0; g < groups; ++g) start[g + 1] += start[g];
+  std::vector<int> row_groups(pending_blocks_.size());
+  {
+    std::vector<int> next(start.begin(), start.end() - 1);
+    for (const auto& [gr, gc] : pending_blocks_) row_groups[next[gc]++] = gr;
+  }
+  pending_blocks_.clear();
+  std::vector<int> mark(groups, -1), unique_end(groups, 0);
+  for (int gc = 0; gc < groups; ++gc) {
+    int* begin = row_groups.data() + start[gc];
+    int* end = begin;
+    for (int k = start[gc]; k < start[gc + 1]; ++k)
+      if (mark[row_groups[k]] != gc) mark[row_groups[k]] = gc, *end++ = row_groups[k];
+    std::sort(begin, end);
+    unique_end[gc] = int(end - row_groups.data());
+  }
+
+  const bool had_pattern = pattern_.rows() == n;
+  const int* old_outer = had_pattern ? pattern_.outerIndexPtr() : nullptr;
+  const int* old_inner = had_pattern ? pattern_.innerIndexPtr() : nullptr;
+  const Eigen::Index old_nnz = had_pattern ? pattern_.nonZeros() : 0;
+  std::vector<int> outer(n + 1, 0), inner, moved(old_nnz);
+  inner.reserve(size_t(old_nnz) + row_groups.size());
+  std::vector<int> added;
+  for (int c = 0; c < n; ++c) {
+    const int gc = grouped ? group_of_[c] : c;
+    added.clear();
+    for (int k = start[gc]; k < unique_end[gc]; ++k)
+      for (int r = first(row_groups[k]); r < last(row_groups[k]); ++r) added.push_back(r);
+    // Merge the column's old rows (sorted) with the added ones (sorted), recording where each
+    // old entry lands.
+    int o = had_pattern ? old_outer[c] : 0;
+    const int o_end = had_pattern ? old_outer[c + 1] : 0;
+    size_t a = 0;
+    while (o < o_end || a < added.size()) {
+      if (a == added.size() || (o < o_end && old_inner[o] <= added[a])) {
+        if (a < added.size() && old_inner[o] == added[a]) ++a;
+        moved[o] = int(inner.size());
+        inner.push_back(old_inner[o++]);
+      } else {
+        inner.push_back(added[a++]);
+      }
+    }
+    outer[c + 1] = int(inner.size());
+  }
+  if (inner.size() > size_t(std::numeric_limits<int>::max()))
+    throw Error("HessianAssembler: the Hessian pattern exceeds 2^31 entries");
+  const std::vector<double> zeros(inner.size(), 0.0);
+  pattern_ = Eigen::Map<const SpMat>(n, n, Eigen::Index(inner.size()), outer.data(), inner.data(),
+                                     zeros.data());
+  if (had_pattern) {
+    for (auto& index : slot_index_)
+      for (int& i : index) i = i < old_nnz ? moved[i] : 0;
+  } else {
+    for (auto& keys : slot_key_) std::fill(keys.begin(), keys.end(), -1);
+  }
+  ++pattern_builds_;
+}
+
+NewtonOptions softTissueNewtonDefaults() {
+  NewtonOptions options;
+  options.exact_hessian = false;
+  options.linear_solver = LinearSolverType::Cholmod;
+  options.lagged.enabled = true;  // one 25k-DoF factorization costs ~20 preconditioned CG steps
+  return options;
+}
+
 Scene::Scene(const SceneOptions& options)
     : options_(options), blocks_(std::make_unique<BlockAccumulator>()) {
   const double k = options.avatar_contact_options.stiffness;
@@ -164,6 +426,7 @@ void Scene::addSimulable(std::shared_ptr<Simulable> simulable) {
   num_dofs_ += simulable->numDofs();
   simulables_.push_back(std::move(simulable));
   contact_data_.emplace_back();
+  general_.reset();  // its DoF groups follow the simulables
 }
 
 void Scene::addCollider(const Collider& collider) {
@@ -177,15 +440,27 @@ void Scene::initialize() {
     if (data) data->valid = false;
 }
 
+bool Scene::hasSoftTissue() const {
+  for (const auto& s : simulables_)
+    if (s->numDofs() > s->numBoneDofs()) return true;
+  return false;
+}
+
+const NewtonOptions& Scene::newtonOptions() const {
+  return hasSoftTissue() ? options_.soft_tissue_newton : options_.newton;
+}
+
 void Scene::ensureSolver() {
-  // Auto: the simplicial sparse Cholesky. The scene's Hessian is block tree-sparse with a fixed
-  // pattern, so one analysis serves every step; measured on the walking SMPL-size avatar it
-  // factors in ~36 µs against ~70 µs for the dense LLT (144 DoFs) and ~290 µs for CHOLMOD's
-  // supernodal factor, and ~73 µs against ~380 µs (dense) for two avatars.
+  // Auto, skeleton: the simplicial sparse Cholesky. The scene's Hessian is block tree-sparse
+  // with a fixed pattern, so one analysis serves every step; measured on the walking SMPL-size
+  // avatar it factors in ~36 µs against ~70 µs for the dense LLT (144 DoFs) and ~290 µs for
+  // CHOLMOD's supernodal factor, and ~73 µs against ~380 µs (dense) for two avatars.
+  // Auto, soft tissue: CHOLMOD's supernodal factor (thousands of 3 × 3 node blocks).
   if (!solver_) {
-    const LinearSolverType type = options_.newton.linear_solver == LinearSolverType::Auto
-                                      ? LinearSolverType::SparseLLT
-                                      : options_.newton.linear_solver;
+    const LinearSolverType requested = newtonOptions().linear_solver;
+    const LinearSolverType type = requested != LinearSolverType::Auto ? requested
+                                  : hasSoftTissue()                   ? LinearSolverType::Cholmod
+                                                                      : LinearSolverType::SparseLLT;
     solver_ = makeLinearSolver(type, num_dofs_);
     last_solver_dofs_ = num_dofs_;
   }
@@ -198,7 +473,7 @@ StepStats Scene::step() {
   for (auto& s : simulables_) s->preUpdate();
   ensureSolver();
   StepStats stats;
-  stats.newton = newtonSolve(*this, options_.newton, solver_.get());
+  stats.newton = newtonSolve(*this, newtonOptions(), solver_.get());
   // Newton's last evaluation is the gradient at the final state, so these counts belong to it.
   for (auto& s : simulables_) stats.active_contacts += s->stats().active_contacts;
   stats.active_contacts += avatar_contacts_;
@@ -238,19 +513,27 @@ void Scene::gradient(VecX& g) {
 
 void Scene::hessian(SpMat& H, bool psd) {
   triplets_.clear();
+  if (usesGeneralPattern()) {
+    // One cached segment per energy kind, so a term whose triplet count changes (contacts)
+    // does not move the others' value slots.
+    segment_end_.clear();
+    for (size_t i = 0; i < simulables_.size(); ++i) {
+      simulables_[i]->getDynamicHessianTripletVector(triplets_, offsets_[i], psd);
+      segment_end_.push_back(triplets_.size());
+      simulables_[i]->getPotentialHessianTripletVector(triplets_, offsets_[i], psd);
+      segment_end_.push_back(triplets_.size());
+    }
+    if (avatarContactActive()) avatarContactEnergy(nullptr, &triplets_, psd);
+    segment_end_.push_back(triplets_.size());
+    if (!general_) setUpGeneralPattern();
+    general_->assemble(triplets_, segment_end_, num_dofs_, H);
+    return;
+  }
   for (size_t i = 0; i < simulables_.size(); ++i) {
     simulables_[i]->getDynamicHessianTripletVector(triplets_, offsets_[i], psd);
     simulables_[i]->getPotentialHessianTripletVector(triplets_, offsets_[i], psd);
   }
   if (avatarContactActive()) avatarContactEnergy(nullptr, &triplets_, psd);
-  if (num_dofs_ % 6 != 0) {
-    // Not bone blocks: plain assembly, with a stored diagonal so that Newton's diagonal shifts
-    // keep the pattern.
-    for (int k = 0; k < num_dofs_; ++k) triplets_.emplace_back(k, k, 0.0);
-    H.resize(num_dofs_, num_dofs_);
-    H.setFromTriplets(triplets_.begin(), triplets_.end());
-    return;
-  }
   if (!fillHessian(H)) {
     // A block outside the pattern (a new avatar–avatar pair): grow the pattern once.
     rebuildHessianPattern();
@@ -332,6 +615,66 @@ void Scene::rebuildHessianPattern() {
   fill_key_.clear();  // value indices refer to the old pattern
 }
 
+bool Scene::usesGeneralPattern() const {
+  if (options_.general_hessian_pattern) return true;
+  for (const auto& s : simulables_)
+    if (s->numDofs() != s->numBoneDofs()) return true;  // not only bone blocks
+  return false;
+}
+
+void Scene::setUpGeneralPattern() {
+  // DoF groups: 6 per bone, 3 per soft-tissue node (leftover DoFs of another layout: 1 each).
+  std::vector<int> group_start{0};
+  std::vector<int> first_group(simulables_.size());
+  for (size_t i = 0; i < simulables_.size(); ++i) {
+    const Simulable& sim = *simulables_[i];
+    first_group[i] = int(group_start.size()) - 1;
+    const int end = offsets_[i] + sim.numDofs();
+    int dof = offsets_[i];
+    for (; dof + 6 <= offsets_[i] + sim.numBoneDofs(); dof += 6) group_start.push_back(dof + 6);
+    for (; dof + 3 <= end && dof >= offsets_[i] + sim.numBoneDofs(); dof += 3)
+      group_start.push_back(dof + 3);
+    for (; dof < end; ++dof) group_start.push_back(dof + 1);
+  }
+  general_ = std::make_unique<HessianAssembler>();
+  general_->setGroups(group_start);
+  // Couplings collider contacts create (as for the block pattern): within each simulable,
+  // every pair of bones that share a surface vertex, and each soft surface vertex's u with
+  // those bones.
+  std::vector<std::pair<int, int>> blocks;
+  std::vector<int> influencing;
+  std::vector<char> pair_seen;
+  for (size_t i = 0; i < simulables_.size(); ++i) {
+    const Simulable& sim = *simulables_[i];
+    const MatX& W = sim.avatar().body().weights;  // #V × bones
+    const int bones = int(W.cols());
+    if (sim.numBoneDofs() != 6 * bones) continue;
+    const int bone0 = first_group[i];
+    pair_seen.assign(size_t(bones) * bones, 0);
+    const bool soft = sim.numDofs() > sim.numBoneDofs();
+    for (int v = 0; v < W.rows(); ++v) {
+      influencing.clear();
+      for (int b = 0; b < bones; ++b)
+        if (W(v, b) != 0.0) influencing.push_back(b);
+      for (int a : influencing)
+        for (int b : influencing)
+          if (!pair_seen[size_t(a) * bones + b]) {
+            pair_seen[size_t(a) * bones + b] = 1;
+            blocks.emplace_back(bone0 + a, bone0 + b);
+          }
+      const int u = soft ? sim.nodeSoftDof(v) : -1;
+      if (u < 0) continue;
+      // The u group of a soft node: its first DoF's group (groups of 3 after the bones).
+      const int group = bone0 + bones + (u - sim.numBoneDofs()) / 3;
+      for (int b : influencing) {
+        blocks.emplace_back(group, bone0 + b);
+        blocks.emplace_back(bone0 + b, group);
+      }
+    }
+  }
+  general_->addBlocks(blocks);
+}
+
 void Scene::step(const VecX& dq) {
   if (dq.size() != num_dofs_)
     throw InputError("Scene::step: dq must have numDofs() = " + std::to_string(num_dofs_) +
@@ -389,11 +732,10 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
   if (!slot) {
     const MatX& W = avatar.body().weights;
     const int V = int(W.rows()), bones = int(W.cols());
-    if (sim.numDofs() != 6 * bones)
+    if (sim.numBoneDofs() != 6 * bones)
       throw Error("Scene::avatarContactEnergy: simulable " + std::to_string(i) + " has " +
-                  std::to_string(sim.numDofs()) +
-                  " DoFs; avatar–avatar contact needs the "
-                  "articulated skeleton model (6 per bone = " +
+                  std::to_string(sim.numBoneDofs()) +
+                  " bone DoFs; avatar–avatar contact needs 6 per skinning bone (" +
                   std::to_string(6 * bones) + ")");
     if (X.rows() != V || avatar.vertexAreas().size() != V || J.rows() != bones)
       throw Error("Scene::avatarContactEnergy: simulable " + std::to_string(i) +
@@ -401,6 +743,20 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
                   shapeString({long(V), long(bones)}) + " (is the avatar initialized?)");
     auto data = std::make_unique<AvatarContactData>();
     data->bones = bones;
+    data->soft = sim.numDofs() > sim.numBoneDofs();
+    if (data->soft) {
+      data->soft_dof.resize(V);
+      for (int v = 0; v < V; ++v) {
+        data->soft_dof[v] = sim.nodeSoftDof(v);
+        if (data->soft_dof[v] >= 0 &&
+            (data->soft_dof[v] < sim.numBoneDofs() || data->soft_dof[v] + 3 > sim.numDofs()))
+          throw Error("Scene::avatarContactEnergy: simulable " + std::to_string(i) +
+                      ": nodeSoftDof(" + std::to_string(v) +
+                      ") = " + std::to_string(data->soft_dof[v]) +
+                      " is outside the soft-tissue DoFs [" + std::to_string(sim.numBoneDofs()) +
+                      ", " + std::to_string(sim.numDofs()) + ")");
+      }
+    }
     data->weight_start.reserve(V + 1);
     std::vector<int> dominant(V, 0);
     for (int v = 0; v < V; ++v) {
@@ -480,6 +836,8 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
     data->cluster_center.assign(clusters, Vec3::Zero());
     data->cluster_bound.assign(clusters, 0.0);
     data->cluster_posed.assign(clusters, 0);
+    data->cluster_shift.assign(clusters, 0.0);
+    data->group_shift.assign(bones, 0.0);
     data->rotation_gap.assign(bones * bones, 0.0);
     data->joint_gap.assign(bones * bones, 0.0);
     data->joint_gap_c.assign(bones * bones, 0.0);
@@ -487,18 +845,48 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
     slot = std::move(data);
   }
 
-  // Refresh the posed data when the bone transforms changed since the last call.
+  // Refresh the posed data when the bone transforms (or the unposed surface) changed since the
+  // last call.
   AvatarContactData& data = *slot;
   const std::vector<Mat3>& R = sim.boneRotations();
   const MatX3& T = sim.bonePositions();
   bool same = data.valid && data.key_positions.rows() == T.rows() && data.key_positions == T;
   for (int b = 0; same && b < data.bones; ++b) same = data.key_rotations[b] == R[b];
+  MatX3 surface;
+  if (data.soft) {
+    surface = sim.getUnposedSurface();
+    if (surface.rows() != X.rows())
+      throw Error("Scene::avatarContactEnergy: simulable " + std::to_string(i) +
+                  ": getUnposedSurface() has " + std::to_string(surface.rows()) +
+                  " rows, expected #V = " + std::to_string(X.rows()));
+    same = same && surface.rows() == data.surface.rows() && surface == data.surface;
+  }
   if (same) return data;
 
   data.key_rotations = R;
   data.key_positions = T;
   ++data.version;
   const int bones = data.bones;
+  if (data.soft &&
+      !(data.valid && surface.rows() == data.surface.rows() && surface == data.surface)) {
+    data.surface = std::move(surface);
+    for (size_t k = 0; k < data.cluster_bone.size(); ++k) {
+      double shift = 0.0;
+      for (int c = data.cluster_start[k]; c < data.cluster_start[k + 1]; ++c) {
+        const int v = data.cluster_vertices[c];
+        double weight_sum = 0.0;
+        for (int w = data.weight_start[v]; w < data.weight_start[v + 1]; ++w)
+          weight_sum += std::abs(data.weight_value[w]);
+        shift = std::max(shift, weight_sum * (data.surface.row(v) - X.row(v)).norm());
+      }
+      data.cluster_shift[k] = shift;
+    }
+    for (int b = 0; b < bones; ++b) {
+      data.group_shift[b] = 0.0;
+      for (int k = data.bone_clusters[b]; k < data.bone_clusters[b + 1]; ++k)
+        data.group_shift[b] = std::max(data.group_shift[b], data.cluster_shift[k]);
+    }
+  }
   for (int b = 0; b < bones; ++b) {
     for (const auto& co : data.group_rest[b].coweights) {
       const int c = co.bone;
@@ -521,11 +909,14 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
     center = R[b] * rest.offset + T.row(b).transpose();
     bound = rest.radius + margin;
   };
-  for (int b = 0; b < bones; ++b)
+  for (int b = 0; b < bones; ++b) {
     posedBound(b, data.group_rest[b], data.group_center[b], data.group_bound[b]);
+    data.group_bound[b] += data.group_shift[b];
+  }
   for (size_t k = 0; k < data.cluster_bone.size(); ++k) {
     posedBound(data.cluster_bone[k], data.cluster_rest[k], data.cluster_center[k],
                data.cluster_bound[k]);
+    data.cluster_bound[k] += data.cluster_shift[k];
     data.cluster_posed[k] = 0;
   }
   data.capsules.clear();
@@ -552,17 +943,17 @@ void Scene::poseCluster(int i, int cluster) const {
   AvatarContactData& data = *contact_data_[i];
   if (data.cluster_posed[cluster]) return;
   const Simulable& sim = *simulables_[i];
-  const MatX3& X = sim.avatar().restVertices();
+  const MatX3& Y = data.soft ? data.surface : sim.avatar().restVertices();
   const MatX3& J = sim.avatar().restJoints();
   const std::vector<Mat3>& R = sim.boneRotations();
   const MatX3& T = sim.bonePositions();
   for (int k = data.cluster_start[cluster]; k < data.cluster_start[cluster + 1]; ++k) {
     const int v = data.cluster_vertices[k];
-    const Vec3 Xv = X.row(v).transpose();
+    const Vec3 Yv = Y.row(v).transpose();
     Vec3 x = Vec3::Zero();
     for (int w = data.weight_start[v]; w < data.weight_start[v + 1]; ++w) {
       const int b = data.weight_bone[w];
-      x += data.weight_value[w] * (R[b] * (Xv - J.row(b).transpose()) + T.row(b).transpose());
+      x += data.weight_value[w] * (R[b] * (Yv - J.row(b).transpose()) + T.row(b).transpose());
     }
     data.nodes.row(v) = x.transpose();
   }
@@ -599,7 +990,7 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
     AvatarContactData& A = *contact_data_[ia];
     const Simulable& simA = *simulables_[ia];
     const SoftAvatar& avatarA = simA.avatar();
-    const MatX3& XA = avatarA.restVertices();
+    const MatX3& YA = A.soft ? A.surface : avatarA.restVertices();
     const MatX3& JA = avatarA.restJoints();
     const VecX& areas = avatarA.vertexAreas();
     const std::vector<Mat3>& RA = simA.boneRotations();
@@ -641,21 +1032,24 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
         const Vec3 x = A.nodes.row(v).transpose();
         ++contacts;
         const bool derivatives = g || H;
-        energy += vertexCapsulePenalty(x, cap.a, cap.b, cap.radius, stiffness * areas[v],
-                                       contact_options, derivatives ? &grad9 : nullptr,
-                                       H ? &hess9 : nullptr);
+        energy +=
+            vertexCapsulePenalty(x, cap.a, cap.b, cap.radius, stiffness * areas[v], contact_options,
+                                 derivatives ? &grad9 : nullptr, H ? &hess9 : nullptr);
         if (!derivatives) continue;
 
-        // Chain rule through x = Σ_k w_k (R_k (X − J_k) + t_k) and a' = R_b (a − J_b) + t_b.
+        // Chain rule through x = Σ_k w_k (R_k (Y − J_k) + t_k) (+ u: ∂x/∂u = M = Σ_k w_k R_k)
+        // and a' = R_b (a − J_b) + t_b.
         const int w_begin = A.weight_start[v], w_end = A.weight_start[v + 1];
         const int nw = w_end - w_begin;
+        const int soft_dof = A.soft ? A.soft_dof[v] : -1;
         p_rotated.resize(nw);
+        Mat3 M = Mat3::Zero();
         for (int w = 0; w < nw; ++w) {
           const int bone = A.weight_bone[w_begin + w];
-          p_rotated[w] = RA[bone] * (XA.row(v) - JA.row(bone)).transpose();
+          p_rotated[w] = RA[bone] * (YA.row(v) - JA.row(bone)).transpose();
+          if (soft_dof >= 0) M += A.weight_value[w_begin + w] * RA[bone];
         }
-        const Vec3 gx = grad9.segment<3>(0), ga = grad9.segment<3>(3),
-                   gb = grad9.segment<3>(6);
+        const Vec3 gx = grad9.segment<3>(0), ga = grad9.segment<3>(3), gb = grad9.segment<3>(6);
         if (g) {
           for (int w = 0; w < nw; ++w) {
             const int dof = offsets_[ia] + 6 * A.weight_bone[w_begin + w];
@@ -666,6 +1060,7 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
           const int dof = offsets_[ib] + 6 * cap.bone;
           g->segment<3>(dof) += ga + gb;
           g->segment<3>(dof + 3) += cap.a_rotated.cross(ga) + cap.b_rotated.cross(gb);
+          if (soft_dof >= 0) g->segment<3>(offsets_[ia] + soft_dof) += M.transpose() * gx;
         }
         if (!H) continue;
         P.resize(nw);
@@ -690,14 +1085,31 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
         for (int w = 0; w < nw; ++w) {
           const int bone_k = A.weight_bone[w_begin + w];
           for (int u = 0; u < nw; ++u)
-            blocks_->at(bone_k, A.weight_bone[w_begin + u]).noalias() +=
-                P[w].transpose() * HxxP[u];
+            blocks_->at(bone_k, A.weight_bone[w_begin + u]).noalias() += P[w].transpose() * HxxP[u];
           const Mat6 cross = P[w].transpose() * HxyQ;
           blocks_->at(bone_k, bone_b) += cross;
           blocks_->at(bone_b, bone_k) += cross.transpose();
           if (!psd)
             blocks_->at(bone_k, bone_k).bottomRightCorner<3, 3>() +=
                 A.weight_value[w_begin + w] * rotationCurvature(gx, p_rotated[w]);
+        }
+        if (soft_dof >= 0) {
+          // u rows: Mᵀ Hxx M with itself, Mᵀ Hxx P_k with A's bones (plus, exact, the term of
+          // x's change w_k [δω_k]× R_k δu: ∂²E/∂u∂δω_k = w_k R_kᵀ [gx]×), Mᵀ Hxy Q with B's bone.
+          const int du = offsets_[ia] + soft_dof;
+          const Mat3 MtH = M.transpose() * Hxx;
+          appendBlock(*H, du, du, MtH * M);
+          for (int w = 0; w < nw; ++w) {
+            const int bone_k = A.weight_bone[w_begin + w];
+            Mat36 Huk = MtH * P[w];
+            if (!psd)
+              Huk.rightCols<3>() += A.weight_value[w_begin + w] * RA[bone_k].transpose() * skew(gx);
+            appendBlock(*H, du, offsets_[ia] + 6 * bone_k, Huk);
+            appendBlock(*H, offsets_[ia] + 6 * bone_k, du, Huk.transpose());
+          }
+          const Mat36 HuB = M.transpose() * HxyQ;
+          appendBlock(*H, du, offsets_[ib] + 6 * cap.bone, HuB);
+          appendBlock(*H, offsets_[ib] + 6 * cap.bone, du, HuB.transpose());
         }
       }
       if (H) {

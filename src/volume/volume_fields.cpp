@@ -274,6 +274,13 @@ VecX nodeDepths(const TetMesh& mesh, const MatX3& shaped_nodes) {
   return depth;
 }
 
+namespace {
+// Every bone with nodes keeps at least this many (or this fraction of the nodes it dominates)
+// attached to it.
+constexpr int kMinAnchorNodes = 4;
+constexpr double kMinAnchorFraction = 0.05;
+}  // namespace
+
 VecXi selectBoneNodes(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX& weights,
                       const MatX3& joints, const std::vector<int>& parents,
                       const VecX& surface_tissue_thickness) {
@@ -324,6 +331,38 @@ VecXi selectBoneNodes(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX
       if (d < attached_distance) attached = b, attached_distance = d;
     }
     bone[i] = attached;
+  }
+
+  // Anchors: where a bone has fewer deep nodes than kMinAnchorFraction of the nodes it
+  // dominates (thin parts such as hands and forearms, whose interior a coarse mesh barely
+  // samples), the nodes it dominates nearest to its segment are attached too, interior ones
+  // first, then surface ones. Without them such a part would hang on soft tissue alone.
+  std::vector<std::vector<std::pair<double, int>>> dominated(nb);  // (key, node)
+  std::vector<int> attached_count(nb, 0);
+  for (int i = 0; i < n; ++i) {
+    if (bone[i] >= 0) {
+      ++attached_count[bone[i]];
+      continue;
+    }
+    const Vec3 x = shaped_nodes.row(i).transpose();
+    const double largest = weights.row(i).maxCoeff();
+    int owner = -1;
+    double owner_distance = std::numeric_limits<double>::infinity();
+    for (int b = 0; b < nb; ++b) {
+      if (weights(i, b) != largest) continue;
+      const double d = boneDistance(x, b);
+      if (d < owner_distance) owner = b, owner_distance = d;
+    }
+    // Surface nodes sort after every interior node: key = distance + (surface ? 1e6 : 0).
+    dominated[owner].emplace_back(owner_distance + (i < nv ? 1e6 : 0.0), i);
+  }
+  for (int b = 0; b < nb; ++b) {
+    const int total = attached_count[b] + int(dominated[b].size());
+    const int wanted = std::min(
+        total, std::max(kMinAnchorNodes, int(std::ceil(kMinAnchorFraction * total))));
+    if (attached_count[b] >= wanted) continue;
+    std::sort(dominated[b].begin(), dominated[b].end());
+    for (int k = 0; k < wanted - attached_count[b]; ++k) bone[dominated[b][k].second] = b;
   }
   return bone;
 }

@@ -68,6 +68,10 @@ std::string dataKey(const std::string& template_key, const VecX& betas,
   h.update("flsh volumetric data");
   const int version = AvatarCache::kFormatVersion;
   h.updateField("version", &version, sizeof(version));
+  // Revision of the shape-level rules (2: bones with too few deep nodes get anchor nodes),
+  // so that data cached under an older rule is rebuilt rather than reused.
+  const int rules = 2;
+  h.updateField("shape rules", &rules, sizeof(rules));
   h.update(template_key);
   h.updateMatrix("betas", betas);
   const std::string text = materials.canonicalText();

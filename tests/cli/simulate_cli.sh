@@ -142,8 +142,12 @@ expect_error "bad.json: malformed JSON at byte" \
   '{"avatars": [{"vertices": 600}],, }'
 expect_error "avatars[0].motion: motion file not found: $here/data/missing.npz" \
   '{"avatars": [{"vertices": 600, "motion": "data/missing.npz"}]}'
-expect_error "avatars[0].simulation: \"fem\" is not available yet: the FEM/ROM soft-tissue models are not implemented in this version" \
-  '{"avatars": [{"vertices": 600, "simulation": "fem"}]}'
+expect_error "avatars[0].simulation: \"rom\" is not available yet: the ROM soft-tissue model is not implemented in this version" \
+  '{"avatars": [{"vertices": 600, "simulation": "rom"}]}'
+expect_error "avatars[0].resolution: only for \"simulation\": \"fem\"" \
+  '{"avatars": [{"vertices": 600, "resolution": 0.5}]}'
+expect_error "avatars[0].materials: material file not found: $here/data/soft.json" \
+  '{"avatars": [{"vertices": 600, "simulation": "fem", "materials": "data/soft.json"}]}'
 expect_error "bad.json: time_step: expected 0 < value <= 1 (s), got -0.01" \
   '{"time_step": -0.01, "avatars": [{"vertices": 600}]}'
 expect_error "colliders[0].radius: expected 0 < value (m), got 0" \

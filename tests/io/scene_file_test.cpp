@@ -179,11 +179,12 @@ TEST(SceneFile, WrongTypesAndValuesAreNamedWithTheirPath) {
        "avatars[0].offset: expected 3 numbers [x, y, z], got array [1,2]"},
       {R"({"avatars": [{"options": {"gravity": [0, "down", 0]}}]})",
        "avatars[0].options.gravity[1]: expected a number"},
-      {R"({"avatars": [{"simulation": "fem"}]})",
-       "avatars[0].simulation: \"fem\" is not available yet: the FEM/ROM soft-tissue models are "
-       "not implemented in this version"},
-      {R"({"avatars": [{"simulation": "rom"}]})", "not available yet"},
-      {R"({"avatars": [{"simulation": "cloth"}]})", "avatars[0].simulation: expected \"skeleton\""},
+      {R"({"avatars": [{"simulation": "rom"}]})",
+       "avatars[0].simulation: \"rom\" is not available yet: the ROM soft-tissue model is not "
+       "implemented in this version (use \"skeleton\" or \"fem\")"},
+      {R"({"avatars": [{"simulation": "cloth"}]})",
+       "avatars[0].simulation: expected \"skeleton\" or \"fem\" (later: \"rom\"), got \"cloth\""},
+      {R"({"avatars": [{"simulation": "FEM"}]})", "avatars[0].simulation: expected \"skeleton\""},
       {R"({"avatars": [{"vertices": 50}]})",
        "avatars[0].vertices: expected an integer in [200, 100000], got 50"},
       {R"({"avatars": [{"name": "a/b"}]})", "avatars[0].name: expected a name"},
@@ -222,6 +223,87 @@ TEST(SceneFile, WrongTypesAndValuesAreNamedWithTheirPath) {
       {R"({"avatars": [{}], "outputs": {"dir": ""}})", "outputs.dir: expected a directory"},
       {R"({"avatars": [{}], "duration": 1e400})",
        "scene.json: invalid JSON: [json.exception.out_of_range.406] number overflow"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.json);
+    EXPECT_THAT(inputError(c.json), HasSubstr(c.expected));
+  }
+}
+
+TEST(SceneFile, FemAvatarsReadTheirVolumetricSettings) {
+  const SceneSpec plain = parse(R"({"avatars": [{"simulation": "fem"}]})");
+  EXPECT_EQ(plain.avatars[0].simulation, "fem");
+  EXPECT_DOUBLE_EQ(plain.avatars[0].resolution, TetMeshOptions().resolution);
+  EXPECT_TRUE(plain.avatars[0].material_file.empty());
+  EXPECT_TRUE(plain.cache_dir.empty());
+  EXPECT_TRUE(plain.use_cache);
+
+  const std::string dir = test::freshTempDir("scene_fem");
+  fs::create_directories(fs::path(dir) / "data");
+  writeText((fs::path(dir) / "data" / "soft.json").string(), "{}");
+  const std::string scene_path = (fs::path(dir) / "scene.json").string();
+  writeText(scene_path, R"({"cache_dir": "cache", "use_cache": false, "avatars": [
+      {"name": "soft", "vertices": 600, "simulation": "fem", "resolution": 0.25,
+       "materials": "data/soft.json"},
+      {"name": "rigid", "vertices": 600, "simulation": "skeleton"}]})");
+  const SceneSpec scene = loadSceneFile(scene_path);
+  ASSERT_EQ(scene.avatars.size(), 2u);
+  EXPECT_EQ(scene.avatars[0].simulation, "fem");
+  EXPECT_DOUBLE_EQ(scene.avatars[0].resolution, 0.25);
+  EXPECT_EQ(fs::path(scene.avatars[0].material_file),
+            (fs::path(dir) / "data" / "soft.json").lexically_normal());
+  EXPECT_EQ(scene.avatars[1].simulation, "skeleton");
+  EXPECT_EQ(fs::path(scene.cache_dir), (fs::path(dir) / "cache").lexically_normal());
+  EXPECT_FALSE(scene.use_cache);
+
+  // The command line's --cache / --no-cache win over the file.
+  SceneOverrides overrides;
+  overrides.cache_dir = "elsewhere";
+  EXPECT_EQ(loadSceneFile(scene_path, overrides).cache_dir, "elsewhere");
+  writeText(scene_path, R"({"use_cache": true, "avatars": [{"simulation": "fem"}]})");
+  overrides = SceneOverrides();
+  overrides.no_cache = true;
+  EXPECT_FALSE(loadSceneFile(scene_path, overrides).use_cache);
+  EXPECT_TRUE(loadSceneFile(scene_path).use_cache);
+
+  // A missing material file names the key and the resolved path; a cache_dir that is a file
+  // cannot be a cache.
+  writeText(scene_path, R"({"avatars": [{"simulation": "fem", "materials": "none.json"}]})");
+  EXPECT_THAT(messageOf<FileError>([&] { loadSceneFile(scene_path); }),
+              HasSubstr(scene_path + ": avatars[0].materials: material file not found: " +
+                        (fs::path(dir) / "none.json").string()));
+  writeText(scene_path, R"({"cache_dir": "data/soft.json", "avatars": [{"simulation": "fem"}]})");
+  EXPECT_THAT(messageOf<FileError>([&] { loadSceneFile(scene_path); }),
+              HasSubstr(scene_path + ": cache_dir: expected a directory, but " +
+                        (fs::path(dir) / "data" / "soft.json").string() + " is a file"));
+}
+
+TEST(SceneFile, BadFemSettingsAreNamedWithTheirPath) {
+  struct Case {
+    const char* json;
+    const char* expected;
+  };
+  const Case cases[] = {
+      {R"({"avatars": [{"resolution": 0.5}]})",
+       "scene.json: avatars[0].resolution: only for \"simulation\": \"fem\""},
+      {R"({"avatars": [{"simulation": "skeleton", "materials": "m.json"}]})",
+       "avatars[0].materials: only for \"simulation\": \"fem\""},
+      {R"({"avatars": [{"simulation": "fem", "resolution": 0}]})",
+       "avatars[0].resolution: expected 0.01 <= value <= 100 (interior node density relative to "
+       "the default), got 0"},
+      {R"({"avatars": [{"simulation": "fem", "resolution": -2}]})",
+       "avatars[0].resolution: expected 0.01 <= value <= 100"},
+      {R"({"avatars": [{"simulation": "fem", "resolution": 500}]})", "got 500"},
+      {R"({"avatars": [{"simulation": "fem", "resolution": "low"}]})",
+       "avatars[0].resolution: expected a number, got string \"low\""},
+      {R"({"avatars": [{"simulation": "fem", "materials": 3}]})",
+       "avatars[0].materials: expected a string, got number 3"},
+      {R"({"avatars": [{"simulation": "fem", "materials": ""}]})",
+       "avatars[0].materials: expected a file path, got an empty string"},
+      {R"({"avatars": [{}], "cache_dir": ""})", "scene.json: cache_dir: expected a directory"},
+      {R"({"avatars": [{}], "cache_dir": 1})", "cache_dir: expected a string, got number 1"},
+      {R"({"avatars": [{}], "use_cache": "no"})", "use_cache: expected true or false"},
+      {R"({"avatars": [{}], "cache": "x"})", "cache: unknown key (known: "},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.json);

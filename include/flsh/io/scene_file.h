@@ -17,7 +17,13 @@ struct AvatarSpec {
   std::string model = "synthetic";      ///< SMPL .npz path, or "synthetic"
   int synthetic_vertices = 6890;        ///< for model = "synthetic"
   VecX betas;                           ///< shape; empty = zeros (or the motion's)
-  std::string simulation = "skeleton";  ///< "skeleton" (FEM/ROM come with their issues)
+  /// "skeleton" (articulated rigid bones) or "fem" (FEM soft skeleton: the avatar is built with
+  /// enableSoftTissue() and its volumetric body); "rom" is not available yet.
+  std::string simulation = "skeleton";
+  /// "fem" only: interior node density of the tet mesh relative to the default (TetMeshOptions).
+  double resolution = TetMeshOptions().resolution;
+  /// "fem" only: material file (JSON, docs/materials.md), resolved; empty = built-in materials.
+  std::string material_file;
   std::string motion;                   ///< AMASS .npz path or builtin:NAME; empty = none
   double motion_seconds = 0.0;          ///< length of a built-in motion, s; 0 = the duration
   Vec3 offset = Vec3::Zero();           ///< added to the motion's root translation, m
@@ -44,6 +50,10 @@ struct SceneSpec {
   NewtonOptions newton;
   bool avatar_contact = true;
   OutputSpec outputs;
+  /// Avatar cache of the "fem" avatars' volumetric bodies: folder (resolved; empty = the
+  /// default, $FLSH_CACHE_DIR or ~/.cache/flsh) and whether it is read and written.
+  std::string cache_dir;
+  bool use_cache = true;
 };
 
 /// Command-line overrides, applied before validation (so that e.g. collider velocities span
@@ -52,6 +62,8 @@ struct SceneOverrides {
   double duration = 0.0;   ///< s (--duration)
   double time_step = 0.0;  ///< s (--time-step)
   std::string output_dir;  ///< --out
+  std::string cache_dir;   ///< --cache (relative to the working directory)
+  bool no_cache = false;   ///< --no-cache: neither read nor write the avatar cache
 };
 
 /// Parses and validates a scene file; relative paths are relative to the file's folder.

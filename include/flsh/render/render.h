@@ -44,6 +44,15 @@ Image renderSheet(const std::vector<MatX3>& frames, const Eigen::Ref<const MatX3
                   const RenderOptions& options = {}, int columns = 0,
                   const std::vector<MatX3>& colors = {});
 
+/// Colours (#V × 3 in [0, 1], sRGB) of the perceptual sequential map viridis for values
+/// (#V, e.g. displacement magnitudes in any unit) over [0, max_value] (same unit): 0 is dark
+/// purple (0.267, 0.004, 0.329), max_value is yellow (0.993, 0.906, 0.144). The map
+/// interpolates linearly in sRGB between 7 stops at t = k/6 (viridis #440154, #443a83, #31688e,
+/// #21908c, #35b779, #8fd744, #fde725); its relative luminance increases with t. Values are
+/// clamped to [0, max_value]; max_value = 0 maps everything to the 0 colour. Throws InputError
+/// for a non-finite value (naming its index) or a negative or non-finite max_value.
+MatX3 displacementColors(const VecX& magnitudes, double max_value);
+
 /// Writes an 8-bit RGB PNG atomically. Throws FileError on failure.
 void writePng(const std::string& path, const Image& image);
 

@@ -81,6 +81,10 @@ struct SimulableStep {
   Vec3 target_t0 = Vec3::Zero();    ///< root position target, m
   std::vector<Collider> colliders;  ///< with their paths
   bool is_static = false;
+  /// Soft tissue only (empty otherwise): displacements of q, q_n, q_{n−1} (3 per soft node, m)
+  /// and the held pose blend offsets (#N × 3, m).
+  VecX u, u_n, u_nm1;
+  MatX3 pose_blend;
 };
 
 /// Diagnostics of the last energy evaluation.
@@ -114,7 +118,7 @@ class Simulable {
   void postUpdate();
 
   // ---- state -----------------------------------------------------------------------------
-  int numDofs() const;                       ///< 6 · 24 for the skeleton
+  int numDofs() const;                       ///< 6 · 24 (+ 3 per soft-tissue node)
   VecX getState() const;                     ///< layout above
   void setState(const VecX& q);              ///< throws InputError on size / non-finite
   void updateState(const VecX& dq);          ///< increment chart
@@ -147,10 +151,11 @@ class Simulable {
   Vec3 getTrans() const;
   /// d(θ, trans)/dq: 75 × numDofs (rows 0..71 pose, 72..74 trans).
   MatX getStateJacobian() const;
-  /// Mesh vertices (#V × 3): SMPL skinning (with pose blend shapes) of getPose()/getTrans().
+  /// Mesh vertices (#V × 3): SMPL skinning (with pose blend shapes) of getPose()/getTrans();
+  /// with soft tissue, the simulated surface getNodes() (pose blend and displacements included).
   MatX3 getVertices() const;
-  /// Simulation nodes: for the skeleton, the surface vertices by linear blend skinning of the
-  /// bone transforms, x_i = Σ_b w_ib (R_b (X_i − J_b) + t_b) (used by contact).
+  /// Simulation nodes on the surface (#V × 3), used by contact: linear blend skinning of the
+  /// unposed surface, x_i = Σ_b w_ib (R_b (Y_i − J_b) + t_b) (Y = getUnposedSurface()).
   MatX3 getNodes() const;
   /// d(nodes)/dq: 3#V × numDofs, sparse.
   SpMat getNodesStateJacobian() const;
@@ -158,6 +163,30 @@ class Simulable {
   /// Current bone transforms: rotations R_b (24) and joint positions t_b (24 × 3).
   const std::vector<Mat3>& boneRotations() const;
   const MatX3& bonePositions() const;
+
+  // ---- soft tissue (FEM soft skeleton, docs/fem.md) ------------------------------------------
+  // With SoftAvatar::enableSoftTissue() the state is the 24 bones (6 values each, as above)
+  // followed by one displacement u_j (3 values, m, in the unposed space) per soft-tissue node of
+  // the avatar's tet mesh, in softNodes() order. A tet node j (bone node or not) is at
+  //   x_j = Σ_b w_jb (R_b (Y_j − J_b) + t_b),  Y_j = X̄_j(β) + P_j(θ_n) + u_j,
+  // with P_j the pose blend offsets at the pose of the last converged state (held during a
+  // step) and u_j = 0 on bone nodes. The surface vertices are tet nodes 0..V−1.
+  bool hasSoftTissue() const;
+  int numBoneDofs() const;  ///< 6 · 24
+  /// Tet-node index of each soft-tissue node, in state order ((numDofs − numBoneDofs) / 3
+  /// entries; empty for the skeleton model).
+  const VecXi& softNodes() const;
+  /// State index of tet node j's first displacement value, −1 for a bone node (and for every
+  /// vertex of the skeleton model). Throws InputError for j outside the nodes.
+  int nodeSoftDof(int j) const;
+  /// Soft-tissue displacements u of the surface vertices (#V × 3, m, unposed space); zero on
+  /// bone nodes and for the skeleton model.
+  MatX3 getSoftTissueDisplacements() const;
+  /// Unposed surface Y_i (#V × 3, m): the rest surface X̄(β), plus for the soft-tissue model the
+  /// held pose blend offsets and u_i. Contact and skinning of the surface read it.
+  MatX3 getUnposedSurface() const;
+  /// World positions of every tet node (#N × 3, m); the skeleton model: the surface vertices.
+  MatX3 getVolumeNodes() const;
 
   // ---- energies (values at the current state) ------------------------------------------------
   double getDynamicEnergyScalar() const;

@@ -30,14 +30,26 @@ class LinearSolver {
   /// Solves A x = b with the factor of the last factorize() call. Throws Error if that call
   /// failed or there was none, or InputError if b has the wrong size.
   virtual VecX solve(const VecX& b) const = 0;
+  /// solve() writing x over b (no result allocation: PCG calls it once per iteration).
+  virtual void solveInPlace(VecX& b) const { b = solve(b); }
+  /// True while the last factorize() succeeded: solve() then uses that factor. A failed
+  /// factorize() drops it. The factor persists across newtonSolve calls (lagged preconditioner).
+  virtual bool hasFactor() const = 0;
+  /// Unknowns of the held factor (0 without one).
+  virtual int factorRows() const = 0;
   virtual std::string name() const = 0;
   /// Counters, for benchmarks: numeric factorizations and symbolic analyses done.
   int numFactorizations() const { return factorizations_; }
   int numAnalyses() const { return analyses_; }
+  /// Newton's lagged mode marks the held factor stale when it preconditioned a PCG solve poorly,
+  /// so that the next direction refactors; kept here because the lag spans newtonSolve calls.
+  bool factorStale() const { return factor_stale_; }
+  void setFactorStale(bool stale) { factor_stale_ = stale; }
 
  protected:
   int factorizations_ = 0;
   int analyses_ = 0;
+  bool factor_stale_ = false;
 };
 
 /// Creates a solver; Auto picks Dense when n ≤ dense_threshold.

@@ -1,6 +1,11 @@
 // Scene: several simulables (avatars) and colliders stepped together. Their states are merged
 // into one vector (simulable i at offset(i)) and one sparse Hessian; avatar–avatar contact
 // couples them through each avatar's capsules (one per bone, moving with the bone).
+//
+// Two Hessian assemblies: skeleton-only scenes keep a pattern of whole 6 × 6 bone blocks (the
+// fastest path, a few µs per evaluation); scenes with soft-tissue DoFs (a simulable with
+// numDofs() > numBoneDofs()) or SceneOptions::general_hessian_pattern use a HessianAssembler
+// (general CSC pattern grown by DoF-group blocks: 6 per bone, 3 per soft-tissue node).
 #pragma once
 
 #include <memory>
@@ -12,15 +17,83 @@
 
 namespace flsh {
 
+/// Sums Hessian triplets (duplicates added) into a column-major n × n matrix on a pattern kept
+/// across calls, in one linear pass: the value slot of every triplet is cached with its
+/// position, so while the triplet order repeats (it does between Newton iterations) no lookup,
+/// sort or setFromTriplets happens. A triplet whose position changed is looked up in its
+/// column (binary search); one outside the pattern makes the pattern grow by the whole block of
+/// its DoF groups (row group × column group, see setGroups), then the pass is redone. The
+/// pattern always stores the diagonal blocks (Newton's diagonal shifts keep the pattern) and
+/// only grows, so a linear solver keeps its symbolic analysis between growths.
+/// The triplet list may be split into segments (e.g. one per energy term) with their own caches,
+/// so that a segment whose length changes (contacts) does not move the others' slots.
+class HessianAssembler {
+ public:
+  /// DoF groups: group k holds DoFs [group_start[k], group_start[k + 1]); group_start starts at
+  /// 0, increases strictly and ends at n. Resets the pattern. Without a call, every DoF is its
+  /// own group (the pattern is then the union of the positions seen, plus the diagonal).
+  void setGroups(std::vector<int> group_start);
+  /// Adds the blocks (row group, column group) to the pattern before the next assembly
+  /// (structure known in advance, e.g. couplings that contacts may create later).
+  void addBlocks(const std::vector<std::pair<int, int>>& blocks);
+  /// H = Σ triplets on the pattern (H takes the pattern when it has another one). `segment_end`:
+  /// end index of each segment of `triplets`, increasing, the last = triplets.size() (empty:
+  /// one segment). Throws InputError for a triplet outside n × n or bad segment ends.
+  void assemble(const std::vector<Triplet>& triplets, const std::vector<size_t>& segment_end, int n,
+                SpMat& H);
+  const SpMat& pattern() const { return pattern_; }
+  int numPatternBuilds() const { return pattern_builds_; }  ///< first build and growths
+  /// Triplets of the last assemble() whose value slot had to be looked up (not cached).
+  size_t lastLookups() const { return last_lookups_; }
+
+ private:
+  void grow(int n);
+  bool fill(const std::vector<Triplet>& triplets, const std::vector<size_t>& segment_end, SpMat& H);
+  SpMat pattern_;                 // values unused (zero)
+  std::vector<int> group_start_;  // as set by setGroups (empty: one DoF per group)
+  std::vector<int> group_of_;     // group of each DoF
+  std::vector<std::pair<int, int>> pending_blocks_;  // (row group, column group) to add
+  // Per segment: pattern row·n + col key and value index of each triplet slot.
+  std::vector<std::vector<long long>> slot_key_;
+  std::vector<std::vector<int>> slot_index_;
+  std::vector<long long> old_key_;  // a segment's previous slots from its first moved one
+  std::vector<int> old_index_;
+  int pattern_builds_ = 0;
+  size_t last_lookups_ = 0;
+};
+
+/// The Newton settings SceneOptions::soft_tissue_newton starts from (see there).
+NewtonOptions softTissueNewtonDefaults();
+
 struct SceneOptions {
-  /// newton.linear_solver = Auto gives the scene the simplicial sparse Cholesky (SparseLLT):
-  /// its Hessian has a fixed block tree-sparse pattern (see Scene::hessian).
+  /// Newton of skeleton-only scenes. newton.linear_solver = Auto gives the scene the simplicial
+  /// sparse Cholesky (SparseLLT): its Hessian has a fixed block tree-sparse pattern (see
+  /// Scene::hessian).
   NewtonOptions newton;
+  /// Newton of scenes in which any simulable has soft tissue (hasSoftTissue()), used instead
+  /// of `newton`. Defaults (softTissueNewtonDefaults()): the PSD Hessian (exact_hessian = false:
+  /// the exact FEM Hessian is rarely positive definite, and a failed Cholesky of a 25 000-DoF
+  /// system costs ~0.4 s before the PSD retry), CHOLMOD's supernodal Cholesky
+  /// (linear_solver = Cholmod; Auto also means Cholmod here) and the lagged-factor PCG
+  /// (lagged.enabled = true: the factor of an earlier Hessian, kept by the scene's solver across
+  /// steps, preconditions CG; see LaggedFactorOptions).
+  NewtonOptions soft_tissue_newton = softTissueNewtonDefaults();
+  /// Assemble the Hessian on the general pattern (HessianAssembler) even when no simulable has
+  /// soft tissue. The skeleton then gets bitwise the same Hessians and states (its general
+  /// pattern equals the block pattern) at some cost in speed: for tests and comparisons.
+  bool general_hessian_pattern = false;
   /// Vertices of each avatar against the other avatars' bone capsules.
   bool avatar_contact = true;
   ContactOptions avatar_contact_options;
 };
 
+/// What one Scene::step() did. `newton` is Newton's report: convergence, iterations, line-search
+/// halvings, PSD fallbacks and regularizations, the final energy and ‖g‖∞; numeric
+/// factorizations and PCG iterations (lagged factor) of the step; and where the step's time
+/// went, in s: newton.seconds_energy (energies, line search included), seconds_gradient,
+/// seconds_hessian (triplets and their assembly into the pattern), seconds_factorization
+/// (numeric factorizations and symbolic analyses) and seconds_solve (back-substitutions and PCG).
+/// What is left of `seconds` (preUpdate, postUpdate, Newton's own vector work) is the rest.
 struct StepStats {
   NewtonResult newton;
   int active_contacts = 0;  ///< vertex–collider and vertex–capsule pairs in contact
@@ -38,8 +111,13 @@ class Scene : public Objective {
   void addCollider(const Collider& collider);
   /// Calls initialize() on every simulable.
   void initialize();
-  /// One backward-Euler step of every simulable: preUpdate, Newton, postUpdate.
+  /// One backward-Euler step of every simulable: preUpdate, Newton (options().newton, or
+  /// options().soft_tissue_newton when hasSoftTissue()), postUpdate.
   StepStats step();
+  /// True when some simulable has soft-tissue DoFs (numDofs() > numBoneDofs()).
+  bool hasSoftTissue() const;
+  /// The Newton settings step() uses (see step()).
+  const NewtonOptions& newtonOptions() const;
   double time() const;
   void setStatic(bool on);
 
@@ -65,7 +143,11 @@ class Scene : public Objective {
   /// a_i) against B's bone capsules moving with B's bones (a' = R_b(a − J_b) + t_b):
   /// Σ vertexCapsulePenalty(x_i, a', b', r, k·a_i). `g` (size numDofs()) is added to, `H`
   /// triplets (both triangles, merged indices) appended; psd = Gauss–Newton, else exact.
-  /// Needs the articulated-skeleton node map x_i = Σ_b w_ib (R_b (X_i − J_b) + t_b).
+  /// Surface nodes x_i = Σ_b w_ib (R_b (Y_i − J_b) + t_b) with Y = getUnposedSurface() (the
+  /// rest vertices for the skeleton). A vertex with soft-tissue DoFs u_i (nodeSoftDof(i) ≥ 0)
+  /// also moves with them, ∂x_i/∂u_i = M_i = Σ_b w_ib R_b: its gradient gains M_iᵀ ∂E/∂x_i and
+  /// its Hessian the u–u, u–(A's bones) and u–(B's capsule bone) blocks, plus in the exact form
+  /// the rotation–displacement term of x_i's change w_ib [δω_b]× R_b δu_i.
   double avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd,
                              int* active = nullptr) const;
 
@@ -97,6 +179,15 @@ class Scene : public Objective {
   mutable std::vector<int> fill_index_;
   void rebuildHessianPattern();
   bool fillHessian(SpMat& H) const;
+  // General pattern (soft tissue, or SceneOptions::general_hessian_pattern): DoF groups of 6
+  // per bone and 3 per soft-tissue node, and the couplings known in advance (as for the block
+  // pattern: bone pairs sharing a vertex; with soft tissue also each surface node's u with its
+  // bones), so that collider contacts never grow it. segment_end_: one triplet segment per
+  // simulable and energy kind, then avatar–avatar contact.
+  bool usesGeneralPattern() const;
+  void setUpGeneralPattern();
+  std::unique_ptr<HessianAssembler> general_;
+  std::vector<size_t> segment_end_;
   // Per-simulable skinning data and the posed nodes/capsules of the last state seen.
   mutable std::vector<std::unique_ptr<AvatarContactData>> contact_data_;
   struct BlockAccumulator;

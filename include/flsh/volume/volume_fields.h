@@ -71,10 +71,14 @@ MatX3 shapedNodes(const TetMesh& mesh, const InteriorFields& fields, const VecX&
 /// Bone nodes (#N): result[i] = b when node i is interior and its distance to the surface of
 /// `shaped_nodes` (the tet mesh's boundary) exceeds the local soft-tissue thickness, i.e.
 /// surface_tissue_thickness interpolated at the nearest surface point; −1 otherwise (soft
-/// tissue; every surface node is soft). The attached bone b is the node's largest weight; exact
-/// ties go to the bone whose segment (joint to child joints) is nearest, then to the lower index.
-/// Deterministic. Monotone in depth: at one nearest surface point, a deeper node is bone
-/// whenever a shallower one is. Tets inverted by the shape are accepted (a distance query).
+/// tissue). The attached bone b is the node's largest weight; exact ties go to the bone whose
+/// segment (joint to child joints) is nearest, then to the lower index. Anchors: a bone with
+/// fewer such deep nodes than max(4, 5 %) of the nodes it dominates also gets its dominated
+/// nodes nearest to its segment (interior ones first, then surface ones) — thin parts (hands,
+/// forearms) of coarse meshes, whose tissue would otherwise hang on soft tissue alone.
+/// Deterministic. Among the deep nodes, monotone in depth: at one nearest surface point, a
+/// deeper node is bone whenever a shallower one is. Tets inverted by the shape are accepted (a
+/// distance query).
 ///   shaped_nodes: #N × 3 (m), weights: #N × B, joints: B × 3 (m), parents: B (parents[0] = −1),
 ///   surface_tissue_thickness: V (m, ≥ 0).
 /// Throws InputError naming the argument with the wrong shape or value.

@@ -1,0 +1,114 @@
+// Elastic kernel of the FEM soft skeleton (ARCHITECTURE.md §4): orthotropic St. Venant–Kirchhoff
+// with Fung saturation, per material point and per linear tet, as pure functions on fixed-size
+// Eigen types (no heap). The simulable assembles them per tet; the adjoint reuses them.
+//
+// Conventions.
+// - F (3 × 3) deformation gradient, E = ½(FᵀF − I) Green strain, A (3 × 3, columns a1 a2 a3,
+//   orthonormal, det +1) the material frame, Ê = Aᵀ E A the strain in the frame.
+// - Voigt order 11, 22, 33, 23, 13, 12 with engineering shear: ε = (E11, E22, E33, 2E23, 2E13,
+//   2E12). The stiffness C (6 × 6, Pa) maps ε̂ to the stress (Ŝ11, Ŝ22, Ŝ33, Ŝ23, Ŝ13, Ŝ12), so
+//   Ψ_S = ½ ε̂ᵀ C ε̂ (Pa = J/m³) and ∂Ψ_S/∂ε̂ = C ε̂.
+// - vec(·) is column-major: vec(F)[i + 3j] = F(i, j). dP/dF (9 × 9) has entry
+//   (i + 3j, k + 3l) = ∂P_ij/∂F_kl.
+// - Element vectors are node-major: entry 3a + k is component k of node a (a = 0..3).
+//
+// Fung saturation: Ψ = (μ/γ)(exp(γ Ψ_S/μ) − 1) with γ ≥ 0 dimensionless (the `fung_gamma` of
+// docs/materials.md) and μ = (E1 + E2 + E3)/3, the mean Young's modulus of the element: the
+// modulus scale of every strain direction, so γ Ψ_S/μ ≈ γ·(strain)²/2 whatever the anisotropy.
+// It is evaluated as Ψ_S · expm1(x)/x, x = γΨ_S/μ (series for |x| < 1e-5), so γ = 0 gives Ψ_S
+// exactly and nothing divides by γ.
+// Overflow guard: for x > kFungExponentCap = 50 the exponential is continued by its second-order
+// Taylor polynomial at the cap, expm1(x) → expm1(x_c) + e^{x_c}(d + d²/2), d = x − x_c. Value,
+// gradient and Hessian are those of this continued function (C² at the cap, convex and
+// increasing in Ψ_S like the exponential), so they stay mutually consistent and finite for any
+// F with |F_ij| ≲ 1e12 (the energy grows like |F|⁸ there).
+#pragma once
+
+#include <Eigen/Core>
+
+#include "flsh/core/types.h"
+#include "flsh/volume/materials.h"
+
+namespace flsh {
+
+// Same aliases as flsh/sim/skeleton_energies.h (a redeclaration of the same type is legal).
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+using Mat9 = Eigen::Matrix<double, 9, 9>;
+using Vec12 = Eigen::Matrix<double, 12, 1>;
+using Mat12 = Eigen::Matrix<double, 12, 12>;
+/// Nodal values of one tet (3 × 4): column a is node a.
+using Mat34 = Eigen::Matrix<double, 3, 4>;
+
+/// Exponent x = γΨ_S/μ beyond which the Fung exponential is continued quadratically.
+constexpr double kFungExponentCap = 50.0;
+
+/// Orthotropic stiffness (6 × 6, Pa, Voigt order above) as the inverse of the compliance of
+/// docs/materials.md: normal block [[1/E1, −ν12/E1, −ν13/E1], [−ν12/E1, 1/E2, −ν23/E2],
+/// [−ν13/E1, −ν23/E2, 1/E3]], shear diag(1/G23, 1/G13, 1/G12) (in Voigt order 23, 13, 12).
+///   young: E1 E2 E3 (Pa), poisson: ν12 ν13 ν23, shear: G12 G13 G23 (Pa).
+/// Throws InputError on non-finite or non-positive moduli, or a compliance that is not positive
+/// definite (message names the arguments and their values).
+Mat6 orthotropicStiffness(const Vec3& young, const Vec3& poisson, const Vec3& shear);
+
+/// The same elastic law expressed on world-axis strains: T(A)ᵀ C T(A), where T(A) (6 × 6) maps
+/// the Voigt strain ε of E to the Voigt strain ε̂ of Aᵀ E A. Symmetric positive definite when C
+/// is.
+Mat6 stiffnessInWorldAxes(const Mat6& C, const Mat3& frame);
+
+/// Material of one element (model data, immutable during a simulation).
+struct FemMaterialPoint {
+  Mat6 C;                ///< stiffness in the frame (6 × 6, Pa)
+  Mat3 frame;            ///< A: columns a1 a2 a3, orthonormal, det +1
+  Mat6 C_world;          ///< stiffnessInWorldAxes(C, frame): what the kernels use (Pa)
+  double modulus = 1.0;  ///< μ = (E1 + E2 + E3)/3 (Pa), normalizes Ψ_S in the Fung exponent
+  double gamma = 0.0;    ///< Fung exponent γ ≥ 0 (dimensionless); 0 is pure StVK
+};
+
+/// Material point from E (Pa), ν (ν12 ν13 ν23), G (G12 G13 G23, Pa), frame and γ.
+/// InputError on a bad stiffness (see orthotropicStiffness), a frame that is not orthonormal
+/// with det +1 (tolerance 1e-6) or γ not finite and ≥ 0.
+FemMaterialPoint makeFemMaterialPoint(const Vec3& young, const Vec3& poisson, const Vec3& shear,
+                                      const Mat3& frame, double gamma);
+
+/// Material point of tet t of `materials` (rows young/poisson/shear/fung/frame at t).
+/// InputError if t is out of range of any of these arrays, or as makeFemMaterialPoint (the
+/// message names the tet).
+FemMaterialPoint femMaterialPoint(const TetMaterials& materials, int t);
+
+/// Energy density Ψ(F) (Pa = J/m³). When not null: P (3 × 3, Pa) = ∂Ψ/∂F = F S with S the second
+/// Piola–Kirchhoff stress; dPdF (9 × 9, Pa) = ∂vec(P)/∂vec(F).
+/// psd = false: exact dPdF. psd = true: (∂ε/∂F)ᵀ Ψ_εε (∂ε/∂F) + S⁺ ⊗ I₃ (entry (i + 3j, i + 3l)
+/// = S⁺_jl) where Ψ_εε = f′C_world + f″ σσᵀ (f′ ≥ 1, f″ ≥ 0 the derivatives of the Fung map, σ =
+/// C_world ε) is positive definite and S⁺ is S with its negative eigenvalues set to 0 (a 3 × 3
+/// eigensolve, skipped when S ⪰ 0). The result is PSD (the first term is Bᵀ·PD·B, the second
+/// has the eigenvalues of S⁺, each three times) and equals the exact dPdF where S ⪰ 0.
+/// Any finite F is valid (flat, inverted): the StVK energy has no barrier. InputError on a
+/// non-finite F.
+double fungEnergyDensity(const Mat3& F, const FemMaterialPoint& material, Mat3* P = nullptr,
+                         Mat9* dPdF = nullptr, bool psd = false);
+
+/// Rest geometry of a linear tet.
+struct TetElementRest {
+  Mat3 Dm_inv;          ///< inverse of Dm = [X1 − X0, X2 − X0, X3 − X0] (1/m)
+  double volume = 0.0;  ///< det(Dm)/6 > 0 (m³)
+};
+
+/// Rest data of tet `tet_index` from its four rest nodes (columns of X, m). InputError naming
+/// the tet if a node is not finite, or the tet is inverted (det Dm < 0) or degenerate
+/// (|det Dm| ≤ 1e-12 · (longest edge)³).
+TetElementRest tetElementRest(const Mat34& X, int tet_index);
+
+/// F = I + Du · Dm_inv, Du = [u1 − u0, u2 − u0, u3 − u0] from the nodal displacements (columns
+/// of u, m).
+Mat3 tetDeformationGradient(const TetElementRest& rest, const Mat34& u);
+
+/// Elastic energy volume · Ψ(F(u)) (J) of one tet. When not null: gradient (12) and Hessian
+/// (12 × 12) with respect to the nodal displacements (node-major). psd as fungEnergyDensity:
+/// the PSD tangent maps to a PSD element Hessian (Bᵀ · PSD · B), exact Hessian otherwise.
+/// Formed directly on the 6 × 12 strain map (no 9 × 9 intermediate). InputError on non-finite u.
+double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& material,
+                        const Mat34& u, Vec12* gradient = nullptr, Mat12* hessian = nullptr,
+                        bool psd = false);
+
+}  // namespace flsh

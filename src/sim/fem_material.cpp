@@ -1,0 +1,295 @@
+#include "flsh/sim/fem_material.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <cmath>
+#include <sstream>
+#include <string>
+
+#include "flsh/core/error.h"
+
+namespace flsh {
+
+namespace {
+
+using Mat6x9 = Eigen::Matrix<double, 6, 9>;
+using Mat6x12 = Eigen::Matrix<double, 6, 12>;
+
+std::string numberText(double x) {
+  std::ostringstream s;
+  s.precision(6);
+  s << x;
+  return s.str();
+}
+
+std::string vecText(const Vec3& v) {
+  return "(" + numberText(v[0]) + ", " + numberText(v[1]) + ", " + numberText(v[2]) + ")";
+}
+
+/// Voigt strain (11, 22, 33, 23, 13, 12; engineering shear) of E = ½(FᵀF − I).
+Vec6 voigtGreenStrain(const Mat3& F) {
+  const Mat3 FtF = F.transpose() * F;
+  Vec6 eps;
+  eps << 0.5 * (FtF(0, 0) - 1.0), 0.5 * (FtF(1, 1) - 1.0), 0.5 * (FtF(2, 2) - 1.0), FtF(1, 2),
+      FtF(0, 2), FtF(0, 1);
+  return eps;
+}
+
+/// Symmetric 3 × 3 tensor of a Voigt stress (11, 22, 33, 23, 13, 12; no factor 2).
+Mat3 stressTensor(const Vec6& s) {
+  Mat3 S;
+  S << s[0], s[5], s[4],  //
+      s[5], s[1], s[3],   //
+      s[4], s[3], s[2];
+  return S;
+}
+
+/// Voigt strain of sym(f gᵀ): the strain variation δε of δE = sym(Fᵀ δF) for δF = e_k gᵀ, with
+/// f = row k of F. Every column of ∂ε/∂vec(F) and of ∂ε/∂u is one of these.
+Vec6 symmetricProductStrain(const Vec3& f, const Vec3& g) {
+  Vec6 e;
+  e << f[0] * g[0], f[1] * g[1], f[2] * g[2], f[1] * g[2] + f[2] * g[1], f[0] * g[2] + f[2] * g[0],
+      f[0] * g[1] + f[1] * g[0];
+  return e;
+}
+
+/// Ψ and its first two derivatives with respect to Ψ_S of the (capped) Fung map.
+struct FungMap {
+  double psi;  ///< Ψ (Pa)
+  double d1;   ///< dΨ/dΨ_S (dimensionless, ≥ 1)
+  double d2;   ///< d²Ψ/dΨ_S² (1/Pa, ≥ 0)
+};
+
+FungMap fungMap(double psi_s, double gamma, double modulus) {
+  const double k = gamma / modulus;  // 1/Pa
+  const double x = k * psi_s;
+  if (x <= kFungExponentCap) {
+    const double ex = std::exp(x);
+    // expm1(x)/x → 1 as x → 0; the series keeps γ = 0 (x = 0) exact and avoids 0/0.
+    const double ratio = std::abs(x) < 1e-5 ? 1.0 + x * (0.5 + x / 6.0) : std::expm1(x) / x;
+    return {psi_s * ratio, ex, k * ex};
+  }
+  // Beyond the cap: the second-order Taylor continuation of expm1 at the cap (x > 50, so x ≠ 0).
+  const double ec = std::exp(kFungExponentCap), d = x - kFungExponentCap;
+  const double g = std::expm1(kFungExponentCap) + ec * (d + 0.5 * d * d);
+  return {psi_s * (g / x), ec * (1.0 + d), k * ec};
+}
+
+/// The stress-dependent state shared by the density and the element kernels.
+struct FungState {
+  Vec6 sigma_s;  ///< C_world ε: the StVK stress in Voigt form (Pa)
+  FungMap map;
+  Mat3 S;  ///< second Piola–Kirchhoff stress d1 · σ_s as a tensor (Pa)
+};
+
+FungState fungState(const Mat3& F, const FemMaterialPoint& material) {
+  const Vec6 eps = voigtGreenStrain(F);
+  FungState state;
+  state.sigma_s.noalias() = material.C_world * eps;
+  const double psi_s = 0.5 * eps.dot(state.sigma_s);
+  state.map = fungMap(psi_s, material.gamma, material.modulus);
+  state.S = state.map.d1 * stressTensor(state.sigma_s);
+  return state;
+}
+
+/// Ψ_εε = f′ C_world + f″ σσᵀ: positive definite (C ≻ 0, f′ ≥ 1, f″ ≥ 0).
+Mat6 strainHessian(const FungState& state, const FemMaterialPoint& material) {
+  return state.map.d1 * material.C_world + state.map.d2 * state.sigma_s * state.sigma_s.transpose();
+}
+
+/// S with its negative eigenvalues set to 0. The principal-minor test (all ≥ 0 ⇔ PSD) skips
+/// the eigensolve in the common stretched case.
+Mat3 clampedStress(const Mat3& S) {
+  const double m01 = S(0, 0) * S(1, 1) - S(0, 1) * S(0, 1);
+  const double m02 = S(0, 0) * S(2, 2) - S(0, 2) * S(0, 2);
+  const double m12 = S(1, 1) * S(2, 2) - S(1, 2) * S(1, 2);
+  if (S(0, 0) >= 0 && S(1, 1) >= 0 && S(2, 2) >= 0 && m01 >= 0 && m02 >= 0 && m12 >= 0 &&
+      S.determinant() >= 0)
+    return S;
+  Eigen::SelfAdjointEigenSolver<Mat3> eigen;
+  eigen.computeDirect(S);
+  const Vec3 lambda = eigen.eigenvalues().cwiseMax(0.0);
+  const Mat3& V = eigen.eigenvectors();
+  return V * lambda.asDiagonal() * V.transpose();
+}
+
+void requireFinite(const Mat3& F, const char* who) {
+  if (!F.allFinite())
+    throw InputError(std::string(who) + ": deformation gradient F has a non-finite entry");
+}
+
+}  // namespace
+
+Mat6 orthotropicStiffness(const Vec3& young, const Vec3& poisson, const Vec3& shear) {
+  const std::string args = "orthotropicStiffness: young (E1, E2, E3) = " + vecText(young) +
+                           " Pa, poisson (ν12, ν13, ν23) = " + vecText(poisson) +
+                           ", shear (G12, G13, G23) = " + vecText(shear) + " Pa";
+  if (!young.allFinite() || !poisson.allFinite() || !shear.allFinite())
+    throw InputError(args + ": expected finite values");
+  if ((young.array() <= 0).any() || (shear.array() <= 0).any())
+    throw InputError(args + ": expected positive moduli");
+  Mat3 normal_compliance;
+  normal_compliance << 1 / young[0], -poisson[0] / young[0], -poisson[1] / young[0],  //
+      -poisson[0] / young[0], 1 / young[1], -poisson[2] / young[1],                   //
+      -poisson[1] / young[0], -poisson[2] / young[1], 1 / young[2];
+  // Scaled by the mean modulus so the test does not depend on the magnitude of the units.
+  const Mat3 scaled = normal_compliance * (young.sum() / 3.0);
+  const Eigen::LLT<Mat3> llt(scaled);
+  if (llt.info() != Eigen::Success || !(llt.matrixLLT().diagonal().minCoeff() > 1e-8))
+    throw InputError(args +
+                     ": orthotropic compliance is not positive definite, expected ν12² < E1/E2, "
+                     "ν13² < E1/E3, ν23² < E2/E3 and a positive determinant");
+  Mat6 C = Mat6::Zero();
+  C.topLeftCorner<3, 3>() = normal_compliance.inverse();
+  // Voigt order 23, 13, 12 of the shear block against the argument order G12, G13, G23.
+  C(3, 3) = shear[2];
+  C(4, 4) = shear[1];
+  C(5, 5) = shear[0];
+  return C;
+}
+
+Mat6 stiffnessInWorldAxes(const Mat6& C, const Mat3& frame) {
+  // T (6 × 6): column k is the frame strain ε̂ of the unit world strain e_k.
+  Mat6 T;
+  for (int k = 0; k < 6; ++k) {
+    Vec6 unit = Vec6::Zero();
+    unit[k] = 1.0;
+    // Engineering shear: a unit ε_23 is E23 = E32 = ½, which stressTensor's layout matches
+    // after halving the shear entries.
+    Vec6 tensor_entries = unit;
+    tensor_entries.tail<3>() *= 0.5;
+    const Mat3 E = stressTensor(tensor_entries);
+    const Mat3 E_frame = frame.transpose() * E * frame;
+    T.col(k) << E_frame(0, 0), E_frame(1, 1), E_frame(2, 2), 2 * E_frame(1, 2), 2 * E_frame(0, 2),
+        2 * E_frame(0, 1);
+  }
+  const Mat6 C_world = T.transpose() * C * T;
+  return 0.5 * (C_world + C_world.transpose());
+}
+
+FemMaterialPoint makeFemMaterialPoint(const Vec3& young, const Vec3& poisson, const Vec3& shear,
+                                      const Mat3& frame, double gamma) {
+  FemMaterialPoint material;
+  material.C = orthotropicStiffness(young, poisson, shear);
+  if (!frame.allFinite() ||
+      (frame.transpose() * frame - Mat3::Identity()).cwiseAbs().maxCoeff() > 1e-6 ||
+      std::abs(frame.determinant() - 1.0) > 1e-6) {
+    std::ostringstream s;
+    s.precision(6);
+    s << "makeFemMaterialPoint: frame (columns a1 a2 a3) = [" << frame.row(0) << "; "
+      << frame.row(1) << "; " << frame.row(2)
+      << "], expected orthonormal with det +1 (tolerance 1e-6)";
+    throw InputError(s.str());
+  }
+  if (!(std::isfinite(gamma) && gamma >= 0))
+    throw InputError("makeFemMaterialPoint: Fung exponent gamma = " + numberText(gamma) +
+                     ", expected finite and ≥ 0");
+  material.frame = frame;
+  material.C_world = stiffnessInWorldAxes(material.C, frame);
+  material.modulus = young.sum() / 3.0;
+  material.gamma = gamma;
+  return material;
+}
+
+FemMaterialPoint femMaterialPoint(const TetMaterials& materials, int t) {
+  const std::string where = "femMaterialPoint: tet " + std::to_string(t);
+  const auto check = [&](long size, const char* field) {
+    if (t < 0 || t >= size)
+      throw InputError(where + ": TetMaterials." + field + " has " + std::to_string(size) +
+                       " rows, expected more than " + std::to_string(t));
+  };
+  check(materials.young.rows(), "young");
+  check(materials.poisson.rows(), "poisson");
+  check(materials.shear.rows(), "shear");
+  check(materials.fung.size(), "fung");
+  check(static_cast<long>(materials.frame.size()), "frame");
+  try {
+    return makeFemMaterialPoint(
+        materials.young.row(t).transpose(), materials.poisson.row(t).transpose(),
+        materials.shear.row(t).transpose(), materials.frame[t], materials.fung[t]);
+  } catch (const InputError& e) {
+    throw InputError(where + ": " + e.what());
+  }
+}
+
+double fungEnergyDensity(const Mat3& F, const FemMaterialPoint& material, Mat3* P, Mat9* dPdF,
+                         bool psd) {
+  requireFinite(F, "fungEnergyDensity");
+  const FungState state = fungState(F, material);
+  if (P) P->noalias() = F * state.S;
+  if (dPdF) {
+    // ∂ε/∂vec(F): column k + 3i is the strain of δF = e_k e_iᵀ.
+    Mat6x9 B;
+    for (int i = 0; i < 3; ++i)
+      for (int k = 0; k < 3; ++k)
+        B.col(k + 3 * i) = symmetricProductStrain(F.row(k).transpose(), Vec3::Unit(i));
+    const Mat6 psi_ee = strainHessian(state, material);
+    dPdF->noalias() = B.transpose() * psi_ee * B;
+    // Geometric term S : (δFᵀ δF): entry (k + 3i, k + 3j) = S_ij.
+    const Mat3 S = psd ? clampedStress(state.S) : state.S;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        for (int k = 0; k < 3; ++k) (*dPdF)(k + 3 * i, k + 3 * j) += S(i, j);
+  }
+  return state.map.psi;
+}
+
+TetElementRest tetElementRest(const Mat34& X, int tet_index) {
+  const std::string where = "tetElementRest: tet " + std::to_string(tet_index);
+  if (!X.allFinite()) throw InputError(where + ": a rest node is not finite");
+  Mat3 Dm;
+  Dm << X.col(1) - X.col(0), X.col(2) - X.col(0), X.col(3) - X.col(0);
+  double longest = 0.0;
+  for (int a = 0; a < 4; ++a)
+    for (int b = a + 1; b < 4; ++b) longest = std::max(longest, (X.col(a) - X.col(b)).norm());
+  const double det = Dm.determinant();
+  const double tolerance = 1e-12 * longest * longest * longest;
+  if (std::abs(det) <= tolerance)
+    throw InputError(where + ": degenerate rest tet, volume " + numberText(det / 6.0) +
+                     " m³ with longest edge " + numberText(longest) +
+                     " m, expected det(Dm) > 1e-12 · edge³");
+  if (det < 0)
+    throw InputError(where + ": inverted rest tet, volume " + numberText(det / 6.0) +
+                     " m³, expected > 0 (nodes in positive orientation)");
+  return {Dm.inverse(), det / 6.0};
+}
+
+Mat3 tetDeformationGradient(const TetElementRest& rest, const Mat34& u) {
+  Mat3 Du;
+  Du << u.col(1) - u.col(0), u.col(2) - u.col(0), u.col(3) - u.col(0);
+  return Mat3::Identity() + Du * rest.Dm_inv;
+}
+
+double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& material,
+                        const Mat34& u, Vec12* gradient, Mat12* hessian, bool psd) {
+  if (!u.allFinite())
+    throw InputError("tetElasticEnergy: nodal displacements u have a non-finite entry");
+  // F = I + u Gᵀ with G's columns the shape-function gradients g_a (g_0 = −g_1 − g_2 − g_3).
+  Mat34 G;
+  G.rightCols<3>() = rest.Dm_inv.transpose();
+  G.col(0) = -G.rightCols<3>().rowwise().sum();
+  const Mat3 F = Mat3::Identity() + u * G.transpose();
+  const FungState state = fungState(F, material);
+  if (!gradient && !hessian) return rest.volume * state.map.psi;
+  // ∂ε/∂u (6 × 12): column 3a + k is the strain of δF = e_k g_aᵀ.
+  Mat6x12 B;
+  for (int a = 0; a < 4; ++a)
+    for (int k = 0; k < 3; ++k)
+      B.col(3 * a + k) = symmetricProductStrain(F.row(k).transpose(), G.col(a));
+  if (gradient)
+    gradient->noalias() = (rest.volume * state.map.d1) * (B.transpose() * state.sigma_s);
+  if (hessian) {
+    const Mat6x12 psi_ee_B = (rest.volume * strainHessian(state, material)) * B;
+    hessian->noalias() = B.transpose() * psi_ee_B;
+    // Geometric term: block (a, b) = V (g_aᵀ S g_b) I₃.
+    const Mat3 S = psd ? clampedStress(state.S) : state.S;
+    const Eigen::Matrix4d GSG = rest.volume * (G.transpose() * S * G);
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b)
+        for (int k = 0; k < 3; ++k) (*hessian)(3 * a + k, 3 * b + k) += GSG(a, b);
+  }
+  return rest.volume * state.map.psi;
+}
+
+}  // namespace flsh

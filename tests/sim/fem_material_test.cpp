@@ -1,0 +1,562 @@
+// The FEM material kernel (orthotropic StVK with Fung saturation) against closed forms and
+// central finite differences, at random, nearly flat, inverted and very large deformations,
+// for several Fung exponents and random material frames.
+#include "flsh/sim/fem_material.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
+#include "support/test_support.h"
+
+namespace flsh {
+namespace {
+
+using test::jacobianMatchesFiniteDifferences;
+using test::messageOf;
+using Mat9x12 = Eigen::Matrix<double, 9, 12>;
+
+// Default skin and soft-tissue coefficients of docs/materials.md.
+const Vec3 kSkinYoung(120e3, 80e3, 40e3), kSkinPoisson(0.42, 0.45, 0.45),
+    kSkinShear(34e3, 24e3, 19e3);
+const Vec3 kTissueYoung(15e3, 10e3, 10e3), kTissuePoisson(0.45, 0.45, 0.45),
+    kTissueShear(4.2e3, 4.2e3, 3.4e3);
+const std::vector<double> kGammas = {0.0, 1e-8, 3.0, 8.0};
+
+class Random {
+ public:
+  explicit Random(unsigned seed) : engine_(seed) {}
+  double uniform(double a, double b) {
+    return std::uniform_real_distribution<double>(a, b)(engine_);
+  }
+  Vec3 vec(double scale) { return Vec3(uniform(-1, 1), uniform(-1, 1), uniform(-1, 1)) * scale; }
+  Mat3 mat(double scale) {
+    Mat3 M;
+    for (int i = 0; i < 9; ++i) M.data()[i] = uniform(-scale, scale);
+    return M;
+  }
+  Mat3 rotation() { return rodrigues(vec(3.0)); }
+
+ private:
+  std::mt19937 engine_;
+};
+
+FemMaterialPoint skin(const Mat3& frame, double gamma) {
+  return makeFemMaterialPoint(kSkinYoung, kSkinPoisson, kSkinShear, frame, gamma);
+}
+FemMaterialPoint tissue(const Mat3& frame, double gamma) {
+  return makeFemMaterialPoint(kTissueYoung, kTissuePoisson, kTissueShear, frame, gamma);
+}
+
+/// Deformation gradients of every regime: random moderate, nearly flat (det ≈ 1e-4) and
+/// inverted (det < 0).
+struct NamedF {
+  std::string name;
+  Mat3 F;
+};
+std::vector<NamedF> testDeformations(Random& random) {
+  std::vector<NamedF> out;
+  out.push_back({"random", Mat3::Identity() + random.mat(0.3)});
+  out.push_back(
+      {"near-flat", random.rotation() * Vec3(1.2, 0.9, 1e-4).asDiagonal() * random.rotation()});
+  out.push_back(
+      {"inverted", random.rotation() * Vec3(1.1, 0.8, -0.3).asDiagonal() * random.rotation()});
+  return out;
+}
+
+VecX vecOf(const Mat3& M) { return Eigen::Map<const VecX>(M.data(), 9); }
+Mat3 matOf(const VecX& v) { return Eigen::Map<const Mat3>(v.data()); }
+
+double psiOf(const Mat3& F, const FemMaterialPoint& m) { return fungEnergyDensity(F, m); }
+Mat3 stressOf(const Mat3& F, const FemMaterialPoint& m) {
+  Mat3 P;
+  fungEnergyDensity(F, m, &P);
+  return P;
+}
+Mat9 tangentOf(const Mat3& F, const FemMaterialPoint& m, bool psd) {
+  Mat3 P;
+  Mat9 D;
+  fungEnergyDensity(F, m, &P, &D, psd);
+  return D;
+}
+
+/// Ψ_S computed independently in the frame: Ê = Aᵀ E A, ε̂ (engineering shear), ½ ε̂ᵀ C ε̂.
+double frameStVK(const Mat3& F, const FemMaterialPoint& m) {
+  const Mat3 E = 0.5 * (F.transpose() * F - Mat3::Identity());
+  const Mat3 Eh = m.frame.transpose() * E * m.frame;
+  Vec6 e;
+  e << Eh(0, 0), Eh(1, 1), Eh(2, 2), 2 * Eh(1, 2), 2 * Eh(0, 2), 2 * Eh(0, 1);
+  return 0.5 * e.dot(m.C * e);
+}
+
+double minEigenvalue(const MatX& M) {
+  return Eigen::SelfAdjointEigenSolver<MatX>(0.5 * (M + M.transpose())).eigenvalues().minCoeff();
+}
+
+/// ∂vec(F)/∂u (9 × 12, node-major u) of a tet: ∂F_ij/∂u_{a,k} = δ_ik g_aj.
+Mat9x12 deformationMap(const TetElementRest& rest) {
+  Eigen::Matrix<double, 3, 4> G;
+  G.rightCols<3>() = rest.Dm_inv.transpose();
+  G.col(0) = -G.rightCols<3>().rowwise().sum();
+  Mat9x12 B = Mat9x12::Zero();
+  for (int a = 0; a < 4; ++a)
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) B(i + 3 * j, 3 * a + i) = G(j, a);
+  return B;
+}
+
+/// A ~2 cm tet (the default body resolution), positively oriented.
+Mat34 restTet(Random& random) {
+  Mat34 X;
+  X << 0, 0.02, 0, 0,  //
+      0, 0, 0.02, 0,   //
+      0, 0, 0, 0.02;
+  for (int a = 0; a < 4; ++a) X.col(a) += random.vec(0.003);
+  return X;
+}
+
+VecX flatten(const Mat34& u) { return Eigen::Map<const VecX>(u.data(), 12); }
+Mat34 unflatten(const VecX& v) { return Eigen::Map<const Mat34>(v.data()); }
+
+TEST(OrthotropicStiffness, InvertsTheComplianceWithShearInVoigtOrder) {
+  const Mat6 C = orthotropicStiffness(kSkinYoung, kSkinPoisson, kSkinShear);
+  Mat6 S = Mat6::Zero();
+  const Vec3& E = kSkinYoung;
+  const Vec3& nu = kSkinPoisson;
+  S.topLeftCorner<3, 3>() << 1 / E[0], -nu[0] / E[0], -nu[1] / E[0],  //
+      -nu[0] / E[0], 1 / E[1], -nu[2] / E[1],                         //
+      -nu[1] / E[0], -nu[2] / E[1], 1 / E[2];
+  S(3, 3) = 1 / kSkinShear[2];  // 23
+  S(4, 4) = 1 / kSkinShear[1];  // 13
+  S(5, 5) = 1 / kSkinShear[0];  // 12
+  EXPECT_LT((C * S - Mat6::Identity()).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT((C - C.transpose()).cwiseAbs().maxCoeff(), 1e-9 * C.cwiseAbs().maxCoeff());
+  EXPECT_GT(minEigenvalue(C), 0.0);
+  // Uniaxial stress along a1 gives strain 1/E1 along a1 and −ν12/E1, −ν13/E1 across.
+  Vec6 stress = Vec6::Zero();
+  stress[0] = 1.0;
+  const Vec6 strain = C.inverse() * stress;
+  EXPECT_NEAR(strain[0] * E[0], 1.0, 1e-12);
+  EXPECT_NEAR(-strain[1] / strain[0], nu[0], 1e-12);
+  EXPECT_NEAR(-strain[2] / strain[0], nu[1], 1e-12);
+}
+
+TEST(OrthotropicStiffness, RejectsNonPhysicalInputWithAMessage) {
+  const std::string indefinite = messageOf<InputError>(
+      [] { orthotropicStiffness(Vec3(1e4, 1e4, 1e4), Vec3(0.9, 0.3, 0.3), Vec3(3e3, 3e3, 3e3)); });
+  EXPECT_NE(indefinite.find("not positive definite"), std::string::npos) << indefinite;
+  EXPECT_NE(indefinite.find("0.9"), std::string::npos) << indefinite;
+  const std::string negative = messageOf<InputError>(
+      [] { orthotropicStiffness(Vec3(1e4, -1e4, 1e4), Vec3(0.3, 0.3, 0.3), Vec3(3e3, 3e3, 3e3)); });
+  EXPECT_NE(negative.find("young"), std::string::npos) << negative;
+  EXPECT_NE(negative.find("positive"), std::string::npos) << negative;
+  const std::string nan = messageOf<InputError>(
+      [] { orthotropicStiffness(Vec3(1e4, 1e4, 1e4), Vec3(0.3, 0.3, 0.3), Vec3(3e3, NAN, 3e3)); });
+  EXPECT_NE(nan.find("finite"), std::string::npos) << nan;
+}
+
+TEST(FemMaterialPoint, WorldStiffnessGivesTheFrameEnergy) {
+  Random random(3);
+  for (int trial = 0; trial < 5; ++trial) {
+    const FemMaterialPoint m = skin(random.rotation(), 0.0);
+    const Mat3 F = Mat3::Identity() + random.mat(0.3);
+    const double expected = frameStVK(F, m);
+    ASSERT_GT(expected, 0.0);
+    EXPECT_NEAR(psiOf(F, m), expected, 1e-12 * expected);
+  }
+}
+
+TEST(FemMaterialPoint, BuiltFromATetMaterialsRow) {
+  Random random(4);
+  TetMaterials materials;
+  materials.young.resize(2, 3);
+  materials.poisson.resize(2, 3);
+  materials.shear.resize(2, 3);
+  materials.fung.resize(2);
+  materials.young << kSkinYoung.transpose(), kTissueYoung.transpose();
+  materials.poisson << kSkinPoisson.transpose(), kTissuePoisson.transpose();
+  materials.shear << kSkinShear.transpose(), kTissueShear.transpose();
+  materials.fung << 8.0, 3.0;
+  materials.frame = {random.rotation(), random.rotation()};
+  const FemMaterialPoint m = femMaterialPoint(materials, 1);
+  EXPECT_LT((m.C - orthotropicStiffness(kTissueYoung, kTissuePoisson, kTissueShear))
+                .cwiseAbs()
+                .maxCoeff(),
+            1e-9);
+  EXPECT_EQ(m.frame, materials.frame[1]);
+  EXPECT_DOUBLE_EQ(m.modulus, kTissueYoung.sum() / 3.0);
+  EXPECT_EQ(m.gamma, 3.0);
+
+  const std::string range = messageOf<InputError>([&] { femMaterialPoint(materials, 2); });
+  EXPECT_NE(range.find("tet 2"), std::string::npos) << range;
+  EXPECT_NE(range.find("young"), std::string::npos) << range;
+
+  TetMaterials bad_frame = materials;
+  bad_frame.frame[0] = 2.0 * Mat3::Identity();
+  const std::string frame = messageOf<InputError>([&] { femMaterialPoint(bad_frame, 0); });
+  EXPECT_NE(frame.find("tet 0"), std::string::npos) << frame;
+  EXPECT_NE(frame.find("orthonormal"), std::string::npos) << frame;
+
+  TetMaterials reflected = materials;
+  reflected.frame[0] = -Mat3::Identity();
+  EXPECT_THROW(femMaterialPoint(reflected, 0), InputError);
+
+  TetMaterials bad_gamma = materials;
+  bad_gamma.fung[1] = -1.0;
+  const std::string gamma = messageOf<InputError>([&] { femMaterialPoint(bad_gamma, 1); });
+  EXPECT_NE(gamma.find("gamma"), std::string::npos) << gamma;
+}
+
+TEST(FungEnergyDensity, StressAndTangentMatchFiniteDifferences) {
+  Random random(5);
+  for (double gamma : kGammas) {
+    for (int material_index = 0; material_index < 2; ++material_index) {
+      const Mat3 frame = random.rotation();
+      const FemMaterialPoint m = material_index == 0 ? skin(frame, gamma) : tissue(frame, gamma);
+      for (const NamedF& d : testDeformations(random)) {
+        SCOPED_TRACE("gamma " + std::to_string(gamma) + ", material " +
+                     std::to_string(material_index) + ", F " + d.name);
+        Mat3 P;
+        Mat9 dPdF;
+        const double psi = fungEnergyDensity(d.F, m, &P, &dPdF, false);
+        EXPECT_GT(psi, 0.0);
+        EXPECT_NEAR(psi, psiOf(d.F, m), 0.0);
+        const MatX P_row = vecOf(P).transpose();
+        EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+            [&](const VecX& x) { return VecX::Constant(1, psiOf(matOf(x), m)); }, vecOf(d.F),
+            P_row));
+        EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+            [&](const VecX& x) { return vecOf(stressOf(matOf(x), m)); }, vecOf(d.F), dPdF));
+        EXPECT_LT((dPdF - dPdF.transpose()).cwiseAbs().maxCoeff(),
+                  1e-12 * dPdF.cwiseAbs().maxCoeff());
+      }
+    }
+  }
+}
+
+TEST(FungEnergyDensity, BeyondTheExponentCapStaysConsistent) {
+  Random random(6);
+  const FemMaterialPoint m = skin(random.rotation(), 8.0);
+  for (const Mat3& F : {Mat3(3.0 * Mat3::Identity()), Mat3(2.0 * random.rotation())}) {
+    // The exponent x = γΨ_S/μ is past the cap: the continued branch is what is tested.
+    ASSERT_GT(m.gamma * frameStVK(F, m) / m.modulus, kFungExponentCap);
+    Mat3 P;
+    Mat9 dPdF;
+    const double psi = fungEnergyDensity(F, m, &P, &dPdF, false);
+    ASSERT_TRUE(std::isfinite(psi) && P.allFinite() && dPdF.allFinite());
+    EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+        [&](const VecX& x) { return VecX::Constant(1, psiOf(matOf(x), m)); }, vecOf(F),
+        MatX(vecOf(P).transpose()), 1e-6, 1e-6));
+    EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+        [&](const VecX& x) { return vecOf(stressOf(matOf(x), m)); }, vecOf(F), dPdF, 1e-6, 1e-6));
+  }
+  // Across the cap the value and slope are continuous: Ψ(s·F) for s crossing the cap.
+  const Mat3 direction = Mat3::Identity() + random.mat(0.2);
+  double s_low = 1.0, s_high = 4.0;  // bisect for the scale where x = cap
+  const auto exponent = [&](double s) {
+    return m.gamma * frameStVK(s * direction, m) / m.modulus - kFungExponentCap;
+  };
+  ASSERT_LT(exponent(s_low), 0.0);
+  ASSERT_GT(exponent(s_high), 0.0);
+  for (int it = 0; it < 200; ++it) {
+    const double mid = 0.5 * (s_low + s_high);
+    (exponent(mid) < 0 ? s_low : s_high) = mid;
+  }
+  const double below = psiOf(s_low * direction, m), above = psiOf(s_high * direction, m);
+  EXPECT_NEAR(below, above, 1e-9 * std::abs(below));
+  const Mat3 P_below = stressOf(s_low * direction, m), P_above = stressOf(s_high * direction, m);
+  EXPECT_LT((P_below - P_above).cwiseAbs().maxCoeff(), 1e-9 * P_below.cwiseAbs().maxCoeff());
+}
+
+TEST(FungEnergyDensity, ZeroAtRestAndUnderRotations) {
+  Random random(7);
+  for (double gamma : kGammas) {
+    const FemMaterialPoint m = skin(random.rotation(), gamma);
+    for (const Mat3& F : {Mat3(Mat3::Identity()), random.rotation(), random.rotation()}) {
+      Mat3 P;
+      const double psi = fungEnergyDensity(F, m, &P);
+      EXPECT_LE(std::abs(psi), 1e-20 * m.modulus);
+      EXPECT_LE(P.cwiseAbs().maxCoeff(), 1e-10 * m.modulus);
+    }
+  }
+}
+
+TEST(FungEnergyDensity, InvariantUnderWorldRotations) {
+  Random random(8);
+  for (double gamma : kGammas) {
+    const FemMaterialPoint m = tissue(random.rotation(), gamma);
+    for (const NamedF& d : testDeformations(random)) {
+      const Mat3 Q = random.rotation();
+      Mat3 P, P_rotated;
+      const double psi = fungEnergyDensity(d.F, m, &P);
+      const double psi_rotated = fungEnergyDensity(Q * d.F, m, &P_rotated);
+      ASSERT_GT(psi, 0.0);
+      EXPECT_NEAR(psi_rotated, psi, 1e-12 * psi) << d.name;
+      EXPECT_LT((P_rotated - Q * P).cwiseAbs().maxCoeff(), 1e-10 * P.cwiseAbs().maxCoeff())
+          << d.name;
+    }
+  }
+}
+
+TEST(FungEnergyDensity, IsotropicModuliGiveTextbookStVK) {
+  Random random(9);
+  const double E = 20e3, nu = 0.3, G = E / (2 * (1 + nu));
+  const double mu = G, lambda = E * nu / ((1 + nu) * (1 - 2 * nu));
+  const FemMaterialPoint m = makeFemMaterialPoint(Vec3::Constant(E), Vec3::Constant(nu),
+                                                  Vec3::Constant(G), random.rotation(), 0.0);
+  for (const NamedF& d : testDeformations(random)) {
+    const Mat3 Eg = 0.5 * (d.F.transpose() * d.F - Mat3::Identity());
+    const double expected = mu * (Eg * Eg).trace() + 0.5 * lambda * Eg.trace() * Eg.trace();
+    const Mat3 expected_P = d.F * (lambda * Eg.trace() * Mat3::Identity() + 2 * mu * Eg);
+    Mat3 P;
+    const double psi = fungEnergyDensity(d.F, m, &P);
+    ASSERT_GT(expected, 0.0);
+    EXPECT_NEAR(psi, expected, 1e-12 * expected) << d.name;
+    EXPECT_LT((P - expected_P).cwiseAbs().maxCoeff(), 1e-10 * expected_P.cwiseAbs().maxCoeff())
+        << d.name;
+  }
+}
+
+TEST(FungEnergyDensity, FungMapAndItsZeroExponentLimit) {
+  Random random(10);
+  const Mat3 frame = random.rotation();
+  for (const NamedF& d : testDeformations(random)) {
+    const double psi_s = frameStVK(d.F, skin(frame, 0.0));
+    ASSERT_GT(psi_s, 0.0);
+    // γ = 0 is StVK exactly; tiny γ differs from it only at order γΨ_S/μ.
+    EXPECT_NEAR(psiOf(d.F, skin(frame, 0.0)), psi_s, 1e-13 * psi_s) << d.name;
+    const FemMaterialPoint tiny = skin(frame, 1e-14);
+    EXPECT_NEAR(psiOf(d.F, tiny), psi_s, 1e-13 * psi_s) << d.name;
+    const FemMaterialPoint small = skin(frame, 1e-8);
+    const double x_small = small.gamma * psi_s / small.modulus;
+    EXPECT_NEAR(psiOf(d.F, small), psi_s * (1 + 0.5 * x_small), 1e-13 * psi_s) << d.name;
+    // The closed form (μ/γ)(exp(γΨ_S/μ) − 1) where it is well conditioned.
+    const FemMaterialPoint stiff = skin(frame, 3.0);
+    const double x = stiff.gamma * psi_s / stiff.modulus;
+    ASSERT_LT(x, kFungExponentCap);
+    const double expected = stiff.modulus / stiff.gamma * std::expm1(x);
+    EXPECT_NEAR(psiOf(d.F, stiff), expected, 1e-12 * expected) << d.name;
+    EXPECT_GT(psiOf(d.F, stiff), psi_s);
+  }
+}
+
+TEST(FungEnergyDensity, ProjectedTangentIsPSDAndExactWhereStressIsPSD) {
+  Random random(11);
+  int projected_cases = 0, exact_cases = 0, negative_definite_cases = 0;
+  for (double gamma : kGammas) {
+    const Mat3 frame = random.rotation();
+    const FemMaterialPoint m = skin(frame, gamma);
+    std::vector<NamedF> cases = testDeformations(random);
+    cases.push_back({"compressed", random.rotation() * Vec3(0.6, 0.7, 0.8).asDiagonal()});
+    cases.push_back({"random 2", Mat3::Identity() + random.mat(0.4)});
+    // Stretch along the frame axes: Ŝ = C_normal ε̂ > 0 entrywise, so S ⪰ 0.
+    cases.push_back(
+        {"stretched", random.rotation() * Vec3(1.3, 1.2, 1.25).asDiagonal() * frame.transpose()});
+    for (const NamedF& d : cases) {
+      SCOPED_TRACE("gamma " + std::to_string(gamma) + ", F " + d.name);
+      const Mat9 exact = tangentOf(d.F, m, false), psd = tangentOf(d.F, m, true);
+      const double scale = exact.cwiseAbs().maxCoeff();
+      ASSERT_GT(scale, 0.0);
+      EXPECT_GE(minEigenvalue(psd), -1e-10 * scale);
+      EXPECT_LT((psd - psd.transpose()).cwiseAbs().maxCoeff(), 1e-12 * scale);
+      const Mat3 S = d.F.inverse() * stressOf(d.F, m);
+      const Vec3 s_eigen =
+          Eigen::SelfAdjointEigenSolver<Mat3>(0.5 * (S + S.transpose())).eigenvalues();
+      const double s_min = s_eigen.minCoeff(), s_size = S.cwiseAbs().maxCoeff();
+      if (s_min >= 1e-9 * s_size) {
+        ++exact_cases;
+        EXPECT_LT((psd - exact).cwiseAbs().maxCoeff(), 1e-12 * scale);
+      } else if (s_min < -1e-6 * s_size) {
+        ++projected_cases;
+        // The projection removes exactly the negative part of S from S ⊗ I₃: exact − psd is
+        // negative semidefinite with S's most negative eigenvalue as its smallest.
+        const Eigen::VectorXd removed =
+            Eigen::SelfAdjointEigenSolver<MatX>(MatX(exact - psd)).eigenvalues();
+        EXPECT_NEAR(removed.minCoeff(), s_min, 1e-10 * scale);
+        EXPECT_LE(removed.maxCoeff(), 1e-10 * scale);
+        // S ≺ 0: the exact tangent has negative curvature along infinitesimal rotations.
+        if (s_eigen.maxCoeff() < 0) {
+          ++negative_definite_cases;
+          EXPECT_LT(minEigenvalue(exact), -1e-6 * scale);
+        }
+      }
+    }
+  }
+  // Both branches of the projection were exercised.
+  EXPECT_GE(exact_cases, 4);
+  EXPECT_GE(projected_cases, 4);
+  EXPECT_GE(negative_definite_cases, 1);
+}
+
+TEST(FungEnergyDensity, FiniteAtVeryLargeStrain) {
+  Random random(12);
+  for (double gamma : kGammas) {
+    const FemMaterialPoint m = skin(random.rotation(), gamma);
+    for (const Mat3& F :
+         {Mat3(10.0 * Mat3::Identity()), random.mat(1e3), Mat3(1e3 * Mat3::Ones())}) {
+      for (bool psd : {false, true}) {
+        Mat3 P;
+        Mat9 dPdF;
+        const double psi = fungEnergyDensity(F, m, &P, &dPdF, psd);
+        EXPECT_TRUE(std::isfinite(psi) && psi > 0);
+        EXPECT_TRUE(P.allFinite());
+        EXPECT_TRUE(dPdF.allFinite());
+      }
+    }
+  }
+  EXPECT_THROW(fungEnergyDensity(Mat3::Constant(NAN), skin(Mat3::Identity(), 3.0)), InputError);
+}
+
+TEST(TetElement, RestGeometryAndDeformationGradient) {
+  Random random(13);
+  const Mat34 X = restTet(random);
+  const TetElementRest rest = tetElementRest(X, 0);
+  Mat3 Dm;
+  Dm << X.col(1) - X.col(0), X.col(2) - X.col(0), X.col(3) - X.col(0);
+  EXPECT_NEAR(rest.volume, Dm.determinant() / 6.0, 1e-18);
+  EXPECT_GT(rest.volume, 0.0);
+  // A linear displacement field u = M X + c has F = I + M.
+  const Mat3 M = random.mat(0.3);
+  const Vec3 c = random.vec(0.1);
+  Mat34 u;
+  for (int a = 0; a < 4; ++a) u.col(a) = M * X.col(a) + c;
+  EXPECT_LT((tetDeformationGradient(rest, u) - (Mat3::Identity() + M)).cwiseAbs().maxCoeff(),
+            1e-12);
+}
+
+TEST(TetElement, DegenerateOrInvertedRestTetIsAnInputError) {
+  Mat34 flat;
+  flat << 0, 0.02, 0, 0.01,  //
+      0, 0, 0.02, 0.01,      //
+      0, 0, 0, 0;
+  const std::string degenerate = messageOf<InputError>([&] { tetElementRest(flat, 7); });
+  EXPECT_NE(degenerate.find("tet 7"), std::string::npos) << degenerate;
+  EXPECT_NE(degenerate.find("degenerate"), std::string::npos) << degenerate;
+  Mat34 inverted;
+  inverted << 0, 0, 0.02, 0,  //
+      0, 0.02, 0, 0,          //
+      0, 0, 0, 0.02;
+  const std::string flipped = messageOf<InputError>([&] { tetElementRest(inverted, 3); });
+  EXPECT_NE(flipped.find("tet 3"), std::string::npos) << flipped;
+  EXPECT_NE(flipped.find("inverted"), std::string::npos) << flipped;
+  Mat34 collapsed = Mat34::Zero();
+  EXPECT_NE(messageOf<InputError>([&] { tetElementRest(collapsed, 1); }).find("degenerate"),
+            std::string::npos);
+  Mat34 nan = inverted;
+  nan(1, 2) = NAN;
+  EXPECT_NE(messageOf<InputError>([&] { tetElementRest(nan, 2); }).find("not finite"),
+            std::string::npos);
+}
+
+TEST(TetElement, GradientAndHessianMatchFiniteDifferences) {
+  Random random(14);
+  for (double gamma : kGammas) {
+    const FemMaterialPoint m = skin(random.rotation(), gamma);
+    const TetElementRest rest = tetElementRest(restTet(random), 0);
+    // Moderate strain, and a displacement that inverts the tet (node 3 pushed through).
+    Mat34 moderate = Mat34::Zero(), inverting = Mat34::Zero();
+    for (int a = 0; a < 4; ++a) moderate.col(a) = random.vec(0.004);
+    inverting.col(3) = Vec3(0.002, 0.001, -0.03);
+    for (const Mat34& u : {moderate, inverting}) {
+      SCOPED_TRACE("gamma " + std::to_string(gamma));
+      Vec12 gradient;
+      Mat12 hessian;
+      const double energy = tetElasticEnergy(rest, m, u, &gradient, &hessian, false);
+      const Mat3 F = tetDeformationGradient(rest, u);
+      EXPECT_NEAR(energy, rest.volume * psiOf(F, m), 1e-12 * energy);
+      // Quantities of a 2 cm tet are small in J: tighten the absolute tolerance accordingly.
+      EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+          [&](const VecX& x) { return VecX::Constant(1, tetElasticEnergy(rest, m, unflatten(x))); },
+          flatten(u), MatX(gradient.transpose()), 1e-9, 1e-7));
+      EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+          [&](const VecX& x) {
+            Vec12 g;
+            tetElasticEnergy(rest, m, unflatten(x), &g);
+            return VecX(g);
+          },
+          flatten(u), hessian, 1e-7, 1e-7));
+      // The same as the density's tangent mapped through ∂vec(F)/∂u, exact and projected.
+      const Mat9x12 B = deformationMap(rest);
+      for (bool psd : {false, true}) {
+        Mat12 h;
+        tetElasticEnergy(rest, m, u, nullptr, &h, psd);
+        const Mat12 expected = rest.volume * B.transpose() * tangentOf(F, m, psd) * B;
+        EXPECT_LT((h - expected).cwiseAbs().maxCoeff(), 1e-10 * expected.cwiseAbs().maxCoeff());
+      }
+      Mat3 P;
+      fungEnergyDensity(F, m, &P);
+      EXPECT_LT((gradient - rest.volume * B.transpose() * vecOf(P)).cwiseAbs().maxCoeff(),
+                1e-10 * gradient.cwiseAbs().maxCoeff());
+    }
+  }
+}
+
+TEST(TetElement, ProjectedHessianIsPSD) {
+  Random random(15);
+  for (double gamma : kGammas) {
+    const FemMaterialPoint m = tissue(random.rotation(), gamma);
+    const TetElementRest rest = tetElementRest(restTet(random), 0);
+    for (double scale : {0.002, 0.006, 0.015}) {
+      Mat34 u;
+      for (int a = 0; a < 4; ++a) u.col(a) = random.vec(scale);
+      Mat12 exact, psd;
+      tetElasticEnergy(rest, m, u, nullptr, &exact, false);
+      tetElasticEnergy(rest, m, u, nullptr, &psd, true);
+      const double size = exact.cwiseAbs().maxCoeff();
+      ASSERT_GT(size, 0.0);
+      EXPECT_GE(minEigenvalue(psd), -1e-10 * size) << "gamma " << gamma << ", scale " << scale;
+    }
+  }
+}
+
+TEST(TetElement, InvariantUnderRigidTranslation) {
+  Random random(16);
+  const FemMaterialPoint m = skin(random.rotation(), 8.0);
+  const TetElementRest rest = tetElementRest(restTet(random), 0);
+  Mat34 u;
+  for (int a = 0; a < 4; ++a) u.col(a) = random.vec(0.004);
+  Vec12 gradient;
+  Mat12 hessian;
+  const double energy = tetElasticEnergy(rest, m, u, &gradient, &hessian);
+  ASSERT_GT(gradient.cwiseAbs().maxCoeff(), 0.0);
+  const Mat34 shifted = u.colwise() + Vec3(0.3, -0.2, 0.5);
+  EXPECT_NEAR(tetElasticEnergy(rest, m, shifted), energy, 1e-12 * energy);
+  // Net force and every translation column of the Hessian vanish.
+  const Vec3 net = gradient.reshaped(3, 4).rowwise().sum();
+  EXPECT_LT(net.cwiseAbs().maxCoeff(), 1e-12 * gradient.cwiseAbs().maxCoeff());
+  for (int k = 0; k < 3; ++k) {
+    Vec12 translation = Vec12::Zero();
+    for (int a = 0; a < 4; ++a) translation[3 * a + k] = 1.0;
+    EXPECT_LT((hessian * translation).cwiseAbs().maxCoeff(), 1e-10 * hessian.cwiseAbs().maxCoeff());
+  }
+}
+
+TEST(TetElement, FiniteAtVeryLargeDisplacement) {
+  Random random(17);
+  const FemMaterialPoint m = skin(random.rotation(), 8.0);
+  const TetElementRest rest = tetElementRest(restTet(random), 0);
+  Mat34 u;
+  for (int a = 0; a < 4; ++a) u.col(a) = random.vec(20.0);  // |F − I| ~ 1e3
+  ASSERT_GT(tetDeformationGradient(rest, u).cwiseAbs().maxCoeff(), 100.0);
+  for (bool psd : {false, true}) {
+    Vec12 gradient;
+    Mat12 hessian;
+    const double energy = tetElasticEnergy(rest, m, u, &gradient, &hessian, psd);
+    EXPECT_TRUE(std::isfinite(energy) && energy > 0);
+    EXPECT_TRUE(gradient.allFinite());
+    EXPECT_TRUE(hessian.allFinite());
+  }
+  Mat34 bad = u;
+  bad(2, 1) = INFINITY;
+  EXPECT_THROW(tetElasticEnergy(rest, m, bad), InputError);
+}
+
+}  // namespace
+}  // namespace flsh

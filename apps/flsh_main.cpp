@@ -542,11 +542,13 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
 
   SceneOptions scene_options;
   scene_options.newton = scene.newton;
-  // Soft-tissue scenes keep their own solver choices (PSD Hessian, CHOLMOD, lagged factor) and
-  // take the scene's convergence settings.
+  // Soft-tissue scenes keep their own solver choices (PSD Hessian, CHOLMOD, lagged factor,
+  // tolerance 1e-5) and take the scene's iteration limit and step tolerance; their gradient
+  // tolerance comes from the scene file's "soft_tissue_gradient_tolerance".
   scene_options.soft_tissue_newton.max_iterations = scene.newton.max_iterations;
-  scene_options.soft_tissue_newton.gradient_tolerance = scene.newton.gradient_tolerance;
   scene_options.soft_tissue_newton.step_tolerance = scene.newton.step_tolerance;
+  if (scene.soft_tissue_gradient_tolerance > 0)
+    scene_options.soft_tissue_newton.gradient_tolerance = scene.soft_tissue_gradient_tolerance;
   scene_options.avatar_contact = scene.avatar_contact;
   Scene sim_scene(scene_options);
   for (auto& run : runs) sim_scene.addSimulable(run.simulable);

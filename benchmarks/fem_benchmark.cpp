@@ -4,11 +4,20 @@
 // Goal on the 2-core machine (issue "FEM soft skeleton"): ≥ 2 converged steps/s (at least ≥ 1).
 //
 // Usage: fem_benchmark [STEPS=30] [--resolution R] [--tolerance T] [--no-lag] [--threads N]
+//                      [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME]
+//                      [--no-ground]
 //   --tolerance: Newton's relative gradient tolerance (default: the scene default);
-//   --no-lag:    factor every Newton iteration (plain Newton on CHOLMOD) for comparison.
+//   --no-lag:    factor every Newton iteration (plain Newton on CHOLMOD) for comparison;
+//   --reference: also run a second scene at tolerance T_REF in lockstep (untimed) and print
+//                the largest difference of the nodes' positions from it (the cost of the
+//                tolerance in accuracy);
+//   --cg:        the lagged-factor settings (NewtonOptions::lagged): CG forcing term, refactor
+//                after this many CG iterations, CG iteration limit;
+//   --motion:    a built-in motion instead of "walk" (e.g. jumping_jacks).
 // Prints steps/s over the timed steps (after 3 warm-up steps) and the per-step breakdown:
 // Newton iterations, seconds in energy / gradient / Hessian assembly / factorization / solves,
 // factorizations and PCG iterations per step, and the largest soft-tissue displacement.
+// FLSH_BENCH_VERBOSE=1 prints every timed step (iterations, halvings, factorizations, CG).
 #include <omp.h>
 
 #include <algorithm>
@@ -37,18 +46,30 @@ double seconds(Clock::time_point a, Clock::time_point b) {
 int main(int argc, char** argv) {
   int steps = 30;
   double resolution = 1.0, tolerance = -1.0;
-  bool lag = true;
+  bool lag = true, ground = true;
+  std::string motion_name = "walk";
+  double reference = -1.0;
+  double cg_tolerance = -1.0;
+  int refactor_after = 0, max_cg = 0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--resolution" && i + 1 < argc) resolution = std::atof(argv[++i]);
     else if (a == "--tolerance" && i + 1 < argc) tolerance = std::atof(argv[++i]);
     else if (a == "--no-lag") lag = false;
+    else if (a == "--no-ground") ground = false;
+    else if (a == "--motion" && i + 1 < argc) motion_name = argv[++i];
+    else if (a == "--cg" && i + 3 < argc) {  // forcing term, refactor-after, max CG iterations
+      cg_tolerance = std::atof(argv[++i]);
+      refactor_after = std::atoi(argv[++i]);
+      max_cg = std::atoi(argv[++i]);
+    }
+    else if (a == "--reference" && i + 1 < argc) reference = std::atof(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) omp_set_num_threads(std::atoi(argv[++i]));
     else if (!a.empty() && a[0] != '-') steps = std::max(1, std::atoi(a.c_str()));
     else {
       std::fprintf(stderr,
                    "usage: fem_benchmark [STEPS] [--resolution R] [--tolerance T] [--no-lag] "
-                   "[--threads N]\n");
+                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground]\n");
       return 2;
     }
   }
@@ -66,22 +87,45 @@ int main(int argc, char** argv) {
                 data.numNodes(), data.numBoneNodes(), data.numTets(), seconds(t0, t1));
 
     const double h = 1.0 / 30.0;
-    auto walk = std::make_shared<Motion>(makeBuiltinMotion("walk", 20.0, 30.0));
+    auto walk = std::make_shared<Motion>(makeBuiltinMotion(motion_name, 20.0, 30.0));
     SimulableOptions options;
     options.time_step = h;
     auto sim = std::make_shared<Simulable>(avatar, walk, options);
     SceneOptions scene_options;
     if (tolerance > 0) scene_options.soft_tissue_newton.gradient_tolerance = tolerance;
     if (!lag) scene_options.soft_tissue_newton.lagged.enabled = false;
+    if (cg_tolerance > 0) {
+      scene_options.soft_tissue_newton.lagged.cg_relative_tolerance = cg_tolerance;
+      scene_options.soft_tissue_newton.lagged.refactor_after_cg_iterations = refactor_after;
+      scene_options.soft_tissue_newton.lagged.max_cg_iterations = max_cg;
+    }
     Scene scene(scene_options);
     scene.addSimulable(sim);
     scene.initialize();
-    scene.addCollider(
-        Collider::plane(Vec3(0, sim->getNodes().col(1).minCoeff() - 0.002, 0), Vec3::UnitY()));
+    if (ground)
+      scene.addCollider(
+          Collider::plane(Vec3(0, sim->getNodes().col(1).minCoeff() - 0.002, 0), Vec3::UnitY()));
     std::printf("state: %d DoFs (%d soft-tissue nodes); Newton tolerance %.1e (relative), "
                 "lagged factor %s\n",
                 sim->numDofs(), int(sim->softNodes().size()),
                 scene_options.soft_tissue_newton.gradient_tolerance, lag ? "on" : "off");
+
+    // The reference: the same scene solved to `reference`, stepped after each timed step.
+    std::unique_ptr<Scene> ref_scene;
+    std::shared_ptr<Simulable> ref_sim;
+    if (reference > 0) {
+      SceneOptions ref_options = scene_options;
+      ref_options.soft_tissue_newton.gradient_tolerance = reference;
+      ref_options.soft_tissue_newton.max_iterations = 200;
+      ref_sim = std::make_shared<Simulable>(avatar, walk, options);
+      ref_scene = std::make_unique<Scene>(ref_options);
+      ref_scene->addSimulable(ref_sim);
+      ref_scene->initialize();
+      for (const Collider& c : scene.colliders()) ref_scene->addCollider(c);
+      for (int k = 0; k < 3; ++k) ref_scene->step();
+    }
+    double largest_difference = 0.0;
+    auto untimed = std::chrono::duration<double>::zero();
 
     for (int k = 0; k < 3; ++k) scene.step();  // warm-up: symbolic analysis, first factor
     NewtonResult sum;
@@ -91,6 +135,10 @@ int main(int argc, char** argv) {
     for (int k = 0; k < steps; ++k) {
       const StepStats s = scene.step();
       const NewtonResult& r = s.newton;
+      if (std::getenv("FLSH_BENCH_VERBOSE"))
+        std::printf("  step %d: %d iterations, %d line-search halvings, %d factorizations, %d CG, "
+                    "|g| %.2e, %s\n", k, r.iterations, r.line_search_steps, r.factorizations,
+                    r.cg_iterations, r.gradient_norm, r.message.c_str());
       unconverged += r.converged ? 0 : 1;
       sum.iterations += r.iterations;
       sum.factorizations += r.factorizations;
@@ -100,9 +148,17 @@ int main(int argc, char** argv) {
       sum.seconds_hessian += r.seconds_hessian;
       sum.seconds_factorization += r.seconds_factorization;
       sum.seconds_solve += r.seconds_solve;
+      const auto pause = Clock::now();
       largest_u = std::max(largest_u, sim->getSoftTissueDisplacements().rowwise().norm().maxCoeff());
+      if (ref_scene) {
+        ref_scene->step();
+        largest_difference = std::max(
+            largest_difference,
+            (sim->getVolumeNodes() - ref_sim->getVolumeNodes()).rowwise().norm().maxCoeff());
+      }
+      untimed += Clock::now() - pause;
     }
-    const double total = seconds(start, Clock::now());
+    const double total = seconds(start, Clock::now()) - untimed.count();
     const double n = steps;
     std::printf("steps: %d in %.2f s -> %.2f steps/s (%d not converged)\n", steps, total,
                 steps / total, unconverged);
@@ -115,6 +171,9 @@ int main(int argc, char** argv) {
                 (total - sum.seconds_energy - sum.seconds_gradient - sum.seconds_hessian -
                  sum.seconds_factorization - sum.seconds_solve) / n);
     std::printf("largest soft-tissue displacement: %.1f mm\n", 1000.0 * largest_u);
+    if (ref_scene)
+      std::printf("largest node distance from the run at tolerance %.0e: %.4f mm\n", reference,
+                  1000.0 * largest_difference);
     return unconverged == 0 ? 0 : 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "fem_benchmark: %s\n", e.what());

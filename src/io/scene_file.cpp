@@ -218,7 +218,13 @@ class SceneReader {
                            " steps, expected at most " + std::to_string(kMaxSteps));
     if (root.contains("avatar_contact"))
       scene.avatar_contact = toBool(root["avatar_contact"], "avatar_contact");
-    if (root.contains("newton")) scene.newton = readNewton(root["newton"], "newton");
+    if (root.contains("newton")) {
+      scene.newton = readNewton(root["newton"], "newton");
+      if (root["newton"].contains("soft_tissue_gradient_tolerance"))
+        scene.soft_tissue_gradient_tolerance =
+            toRange(root["newton"]["soft_tissue_gradient_tolerance"],
+                    "newton.soft_tissue_gradient_tolerance", 0.0, 1.0, true);
+    }
 
     if (!root.contains("avatars")) fail("avatars", "missing (a scene needs at least one avatar)");
     const json& avatars = root["avatars"];
@@ -273,7 +279,8 @@ class SceneReader {
   NewtonOptions readNewton(const json& node, const std::string& path) const {
     requireObject(node, path);
     checkKeys(node, path,
-              {"max_iterations", "gradient_tolerance", "step_tolerance", "linear_solver"});
+              {"max_iterations", "gradient_tolerance", "step_tolerance", "linear_solver",
+               "soft_tissue_gradient_tolerance"});
     NewtonOptions newton;
     if (node.contains("max_iterations"))
       newton.max_iterations =

@@ -15,6 +15,7 @@
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
 #include "flsh/sim/skeleton_energies.h"
+#include "hessian_blocks.h"
 #include "soft_tissue.h"
 
 namespace flsh {
@@ -59,16 +60,7 @@ BoneStates bonesFromPose(const Eigen::Ref<const VecX>& pose, const Vec3& trans,
   return s;
 }
 
-// Appends a dense block (fixed-size expressions: no temporaries in the hot path).
-template <class Derived>
-void addBlock(std::vector<Triplet>& H, int row0, int col0, const Eigen::MatrixBase<Derived>& block) {
-  // One resize, then plain stores: emplace_back per entry was not inlined (a call each).
-  const size_t start = H.size();
-  H.resize(start + size_t(block.rows() * block.cols()));
-  Triplet* out = H.data() + start;
-  for (int c = 0; c < block.cols(); ++c)
-    for (int r = 0; r < block.rows(); ++r) *out++ = Triplet(row0 + r, col0 + c, block(r, c));
-}
+using detail::addBlock;
 
 std::string motionName(const Motion& m) {
   return m.source.empty() ? std::string("mocap") : "mocap '" + m.source + "'";
@@ -141,9 +133,7 @@ struct Simulable::Impl {
   };
   mutable ContactCache contact;
   // Scratch for assembling contact Hessians bone pair by bone pair.
-  mutable std::vector<Mat6> pair_blocks;
-  mutable std::vector<char> pair_touched;
-  mutable std::vector<int> pair_list;
+  mutable detail::BonePairBlocks pair_blocks;
 
   // FEM soft skeleton (null for the articulated skeleton): node data, displacements u.
   std::unique_ptr<detail::SoftTissue> soft;
@@ -358,8 +348,7 @@ Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar,
   for (int b : m.options.kinematic_bones) m.kinematic[b] = 1;
   m.buildSkinning();
   m.buildStiffnesses();
-  m.pair_blocks.assign(m.num_bones * m.num_bones, Mat6::Zero());
-  m.pair_touched.assign(m.num_bones * m.num_bones, 0);
+  m.pair_blocks.resize(m.num_bones);
   m.q = m.q_n = m.q_nm1 = restBones(m.J);
   if (m.avatar->softTissueEnabled()) {
     if (!m.avatar->hasVolumetricData())
@@ -965,16 +954,7 @@ void Simulable::Impl::addContactHessian(std::vector<Triplet>& H, int offset, boo
   colliderContactEnergy(contact.nodes, contact.areas, colliders, time, contact_options, nullptr,
                         &node_hessian, 0, nullptr);
   const MatX3& X = avatar->restVertices();
-  pair_list.clear();
-  auto block = [&](int b, int c) -> Mat6& {
-    const int key = b * num_bones + c;
-    if (!pair_touched[key]) {
-      pair_touched[key] = 1;
-      pair_blocks[key].setZero();
-      pair_list.push_back(key);
-    }
-    return pair_blocks[key];
-  };
+  auto block = [&](int b, int c) -> Mat6& { return pair_blocks.block(b, c); };
   // colliderContactEnergy emits 9 consecutive triplets (one 3 × 3 block) per active pair.
   Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
   int bones[kNumJoints];
@@ -1018,11 +998,7 @@ void Simulable::Impl::addContactHessian(std::vector<Triplet>& H, int offset, boo
   for (int b = 0; b < num_bones; ++b)
     if (has_curvature[b])
       block(b, b).bottomRightCorner<3, 3>() += psd ? projectToPSD<3>(curvature[b]) : curvature[b];
-  for (int key : pair_list) {
-    const int b = key / num_bones, c = key % num_bones;
-    addBlock(H, offset + 6 * b, offset + 6 * c, pair_blocks[key]);
-    pair_touched[key] = 0;
-  }
+  pair_blocks.emit(H, offset);
 }
 
 // ---- energies ----------------------------------------------------------------------------

@@ -1,6 +1,8 @@
 // Soft-tissue terms of the FEM soft skeleton; see soft_tissue.h for the formulas.
 #include "soft_tissue.h"
 
+#include "hessian_blocks.h"
+
 #include <algorithm>
 #include <cmath>
 #include <exception>
@@ -23,14 +25,6 @@ namespace {
 constexpr double kMinInteriorWeight = 0.01;
 constexpr int kMaxInteriorInfluences = 4;
 
-template <class Derived>
-void addBlock(std::vector<Triplet>& H, int row0, int col0, const Eigen::MatrixBase<Derived>& block) {
-  const size_t start = H.size();
-  H.resize(start + size_t(block.rows() * block.cols()));
-  Triplet* out = H.data() + start;
-  for (int c = 0; c < block.cols(); ++c)
-    for (int r = 0; r < block.rows(); ++r) *out++ = Triplet(row0 + r, col0 + c, block(r, c));
-}
 
 }  // namespace
 
@@ -141,8 +135,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
 
   areas_ = avatar.vertexAreas();
   x_hat_ = rest_;
-  pair_blocks_.assign(size_t(num_bones_) * num_bones_, Mat6::Zero());
-  pair_touched_.assign(size_t(num_bones_) * num_bones_, 0);
+  pair_blocks_.resize(num_bones_);
   all_nodes_.resize(n);
   for (int j = 0; j < n; ++j) all_nodes_[j] = j;
 }
@@ -234,16 +227,7 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
                             const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset,
                             bool psd) const {
   const std::vector<Mat3>& R = *cur_R_;
-  pair_list_.clear();
-  auto block = [&](int b, int c) -> Mat6& {
-    const int key = b * num_bones_ + c;
-    if (!pair_touched_[key]) {
-      pair_touched_[key] = 1;
-      pair_blocks_[key].setZero();
-      pair_list_.push_back(key);
-    }
-    return pair_blocks_[key];
-  };
+  auto block = [&](int b, int c) -> Mat6& { return pair_blocks_.block(b, c); };
   Mat3 curvature[kNumJoints];
   bool has_curvature[kNumJoints] = {};
   Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
@@ -298,11 +282,7 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
   for (int b = 0; b < num_bones_; ++b)
     if (has_curvature[b])
       block(b, b).bottomRightCorner<3, 3>() += psd ? projectToPSD<3>(curvature[b]) : curvature[b];
-  for (int key : pair_list_) {
-    const int b = key / num_bones_, c = key % num_bones_;
-    addBlock(H, offset + 6 * b, offset + 6 * c, pair_blocks_[key]);
-    pair_touched_[key] = 0;
-  }
+  pair_blocks_.emit(H, offset);
 }
 
 // ---- energies -------------------------------------------------------------------------------

@@ -20,6 +20,7 @@
 #include "flsh/sim/fem_material.h"
 #include "flsh/sim/skeleton_energies.h"
 #include "flsh/volume/soft_avatar.h"
+#include "hessian_blocks.h"
 
 namespace flsh::detail {
 
@@ -117,9 +118,7 @@ class SoftTissue {
   mutable std::vector<Vec12> element_gradients_;
   mutable std::vector<Mat12> element_hessians_;
   mutable std::vector<Mat3> blocks_;
-  mutable std::vector<Mat6> pair_blocks_;
-  mutable std::vector<char> pair_touched_;
-  mutable std::vector<int> pair_list_;
+  mutable BonePairBlocks pair_blocks_;
   // Bones of the prepared state (the simulable's, which outlive every evaluation).
   mutable const std::vector<Mat3>* cur_R_ = nullptr;
   mutable const MatX3* cur_t_ = nullptr;

@@ -69,7 +69,7 @@ TEST(SceneFile, ReadsEveryKey) {
   const SceneSpec scene = parse(R"({
     "time_step": 0.01, "duration": 0.5, "avatar_contact": false,
     "newton": {"max_iterations": 12, "gradient_tolerance": 1e-5, "step_tolerance": 1e-8,
-               "linear_solver": "dense"},
+               "linear_solver": "dense", "soft_tissue_gradient_tolerance": 3e-4},
     "avatars": [{"name": "a-1", "vertices": 800, "betas": [0.5, -1],
                  "motion": "builtin:jumping_jacks", "motion_seconds": 1.5,
                  "offset": [1, 0, -2], "yaw_degrees": 90,
@@ -92,6 +92,7 @@ TEST(SceneFile, ReadsEveryKey) {
   EXPECT_DOUBLE_EQ(scene.newton.gradient_tolerance, 1e-5);
   EXPECT_DOUBLE_EQ(scene.newton.step_tolerance, 1e-8);
   EXPECT_EQ(scene.newton.linear_solver, LinearSolverType::Dense);
+  EXPECT_DOUBLE_EQ(scene.soft_tissue_gradient_tolerance, 3e-4);
   ASSERT_EQ(scene.avatars.size(), 2u);
   const AvatarSpec& a = scene.avatars[0];
   EXPECT_EQ(a.name, "a-1");
@@ -286,6 +287,10 @@ TEST(SceneFile, BadFemSettingsAreNamedWithTheirPath) {
   const Case cases[] = {
       {R"({"avatars": [{"resolution": 0.5}]})",
        "scene.json: avatars[0].resolution: only for \"simulation\": \"fem\""},
+      {R"({"newton": {"soft_tissue_gradient_tolerance": 0}, "avatars": [{}]})",
+       "newton.soft_tissue_gradient_tolerance: expected 0 < value <= 1"},
+      {R"({"newton": {"soft_tissue_gradient_tolerance": "tight"}, "avatars": [{}]})",
+       "newton.soft_tissue_gradient_tolerance: expected a number"},
       {R"({"avatars": [{"simulation": "skeleton", "materials": "m.json"}]})",
        "avatars[0].materials: only for \"simulation\": \"fem\""},
       {R"({"avatars": [{"simulation": "fem", "resolution": 0}]})",
@@ -406,6 +411,11 @@ TEST(SceneFile, ExampleFilesParseAndTheDefaultMatchesTheBuiltIn) {
   const SceneSpec two = loadSceneFile((examples / "two_avatars.json").string());
   EXPECT_EQ(two.avatars.size(), 2u);
   EXPECT_NEAR(two.avatars[1].yaw, M_PI, 1e-12);
+
+  const SceneSpec soft = loadSceneFile((examples / "soft_jumping_jacks.json").string());
+  ASSERT_EQ(soft.avatars.size(), 1u);
+  EXPECT_EQ(soft.avatars[0].simulation, "fem");
+  EXPECT_DOUBLE_EQ(soft.soft_tissue_gradient_tolerance, 1e-5);
 }
 
 TEST(SceneFile, DefaultGroundSitsAtTheSolesAndTheBallMeetsTheWalkerNearOneSecond) {

@@ -22,26 +22,13 @@ namespace {
 
 using test::jacobianMatchesFiniteDifferences;
 using test::randomVector;
+using test::atMovedState;
+
+MatX dense(const std::vector<Triplet>& H, int n) { return test::denseFromTriplets(H, n); }
 using test::messageOf;
 
 // One small synthetic body, avatar and walk for the whole binary (800 vertices).
 const test::SmallScene& shared() { return test::smallScene(800, 1.0); }
-
-MatX dense(const std::vector<Triplet>& H, int n) {
-  MatX D = MatX::Zero(n, n);
-  for (const Triplet& t : H) D(t.row(), t.col()) += t.value();
-  return D;
-}
-
-// Evaluates f at the state moved by increments d, leaving the state as it was.
-template <class F>
-auto atMoved(Simulable& sim, const VecX& d, F&& f) {
-  sim.pushState();
-  sim.updateState(d);
-  auto result = f();
-  sim.popState();
-  return result;
-}
 
 double lowestNodeHeight(const Simulable& sim) { return sim.getNodes().col(1).minCoeff(); }
 
@@ -67,10 +54,10 @@ TEST(Simulable, DynamicEnergyDerivativesMatchFiniteDifferences) {
   std::vector<Triplet> H;
   sim->getDynamicHessianTripletVector(H, 0, false);
   const auto energy = [&](const VecX& d) {
-    return atMoved(*sim, d, [&] { return VecX::Constant(1, sim->getDynamicEnergyScalar()); });
+    return atMovedState(*sim, d, [&] { return VecX::Constant(1, sim->getDynamicEnergyScalar()); });
   };
   const auto gradient = [&](const VecX& d) {
-    return atMoved(*sim, d, [&] {
+    return atMovedState(*sim, d, [&] {
       VecX gd = VecX::Zero(n);
       sim->getDynamicGradientVector(gd);
       return test::pullBackRotationGradient(gd, d);
@@ -93,10 +80,10 @@ TEST(Simulable, PotentialEnergyDerivativesWithGroundContactMatchFiniteDifference
   std::vector<Triplet> H;
   sim->getPotentialHessianTripletVector(H, 0, false);
   const auto energy = [&](const VecX& d) {
-    return atMoved(*sim, d, [&] { return VecX::Constant(1, sim->getPotentialEnergyScalar()); });
+    return atMovedState(*sim, d, [&] { return VecX::Constant(1, sim->getPotentialEnergyScalar()); });
   };
   const auto gradient = [&](const VecX& d) {
-    return atMoved(*sim, d, [&] {
+    return atMovedState(*sim, d, [&] {
       VecX gd = VecX::Zero(n);
       sim->getPotentialGradientVector(gd);
       return test::pullBackRotationGradient(gd, d);
@@ -138,7 +125,7 @@ TEST(Simulable, ContactOnlyDerivativesMatchFiniteDifferences) {
       continue;
     }
     const auto gradient = [&](const VecX& d) {
-      return atMoved(sim, d, [&] {
+      return atMovedState(sim, d, [&] {
         VecX gd = VecX::Zero(n);
         sim.getPotentialGradientVector(gd);
         return test::pullBackRotationGradient(gd, d);
@@ -167,7 +154,7 @@ TEST(Simulable, StateJacobianMatchesFiniteDifferences) {
   ASSERT_EQ(D.rows(), 75);
   ASSERT_EQ(D.cols(), sim->numDofs());
   const auto poseTrans = [&](const VecX& d) {
-    return atMoved(*sim, d, [&] {
+    return atMovedState(*sim, d, [&] {
       VecX out(75);
       out << sim->getPose(), sim->getTrans();
       return out;
@@ -183,7 +170,7 @@ TEST(Simulable, NodesJacobianMatchesFiniteDifferences) {
   const SpMat D = sim->getNodesStateJacobian();
   ASSERT_EQ(D.rows(), 3 * shared().body->numVertices());
   const auto nodes = [&](const VecX& d) {
-    return atMoved(*sim, d, [&] {
+    return atMovedState(*sim, d, [&] {
       const MatX3 x = sim->getNodes();
       return VecX(Eigen::Map<const VecX>(x.data(), x.size()));
     });

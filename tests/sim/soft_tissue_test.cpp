@@ -22,6 +22,9 @@ namespace {
 
 using test::jacobianMatchesFiniteDifferences;
 using test::randomVector;
+using test::atMovedState;
+
+MatX dense(const std::vector<Triplet>& H, int n) { return test::denseFromTriplets(H, n); }
 
 // A soft avatar of the 800-vertex synthetic body (coarse interior), built once per binary.
 std::shared_ptr<const SoftAvatar> softAvatar() {
@@ -39,12 +42,6 @@ std::shared_ptr<const SoftAvatar> softAvatar() {
 }
 
 std::shared_ptr<const Motion> walk() { return test::smallScene(800).walk; }
-
-MatX dense(const std::vector<Triplet>& H, int n) {
-  MatX D = MatX::Zero(n, n);
-  for (const Triplet& t : H) D(t.row(), t.col()) += t.value();
-  return D;
-}
 
 // The gradient at the state moved by d, pulled back to the chart at d = 0 (bones only: the
 // displacements are a vector space).
@@ -141,15 +138,6 @@ VecX expand(const VecX& sub, const std::vector<int>& idx, int n) {
   return d;
 }
 
-template <class F>
-auto atMoved(Simulable& sim, const VecX& d, F&& f) {
-  sim.pushState();
-  sim.updateState(d);
-  auto result = f();
-  sim.popState();
-  return result;
-}
-
 // Energy value/gradient/Hessian of one part (dynamic or potential) against differences.
 void checkPart(Simulable& sim, bool dynamic) {
   const int n = sim.numDofs();
@@ -180,11 +168,11 @@ void checkPart(Simulable& sim, bool dynamic) {
   ASSERT_GT(H_sub.bottomRightCorner(m - nb, m - nb).norm(), 0.0);
   ASSERT_GT(H_sub.topRightCorner(nb, m - nb).norm(), 0.0) << "no bone–tissue coupling";
   const auto energy = [&](const VecX& sub) {
-    return atMoved(sim, expand(sub, idx, n), [&] { return VecX::Constant(1, value()); });
+    return atMovedState(sim, expand(sub, idx, n), [&] { return VecX::Constant(1, value()); });
   };
   const auto gradient = [&](const VecX& sub) {
     const VecX d = expand(sub, idx, n);
-    return atMoved(sim, d, [&] {
+    return atMovedState(sim, d, [&] {
       const VecX gd = pullBack(grad(), d, nb);
       VecX out(m);
       for (int a = 0; a < m; ++a) out[a] = gd[idx[a]];
@@ -323,7 +311,7 @@ TEST(SoftTissueModel, NodesStateJacobianMatchesFiniteDifferences) {
   for (size_t k = 0; k < idx.size(); ++k) D_sub.col(k) = D.col(idx[k]);
   ASSERT_GT(D_sub.rightCols(D_sub.cols() - 144).norm(), 0.0);
   const auto nodes = [&](const VecX& sub) {
-    return atMoved(*sim, expand(sub, idx, n), [&] {
+    return atMovedState(*sim, expand(sub, idx, n), [&] {
       const MatX3 x = sim->getNodes();
       return VecX(Eigen::Map<const VecX>(x.data(), x.size()));
     });

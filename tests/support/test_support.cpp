@@ -139,6 +139,12 @@ const SmallScene& smallScene(int vertices, double walk_seconds) {
   return cache.emplace(std::make_pair(vertices, walk_seconds), scene).first->second;
 }
 
+MatX denseFromTriplets(const std::vector<Triplet>& H, int n) {
+  MatX D = MatX::Zero(n, n);
+  for (const Triplet& t : H) D(t.row(), t.col()) += t.value();
+  return D;
+}
+
 VecX pullBackRotationGradient(const VecX& g, const VecX& d) {
   VecX out = g;
   for (int b = 0; b < d.size() / 6; ++b)

@@ -6,6 +6,7 @@
 
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "flsh/body/body_model.h"
 #include "flsh/io/motion.h"
@@ -26,6 +27,20 @@ MatX finiteDifferenceJacobian(const std::function<VecX(const VecX&)>& f, const V
 
 /// Uniform random vector in [−scale, scale]^n, deterministic in `seed`.
 VecX randomVector(int n, double scale, unsigned seed);
+
+/// The dense n × n sum of Hessian triplets.
+MatX denseFromTriplets(const std::vector<Triplet>& H, int n);
+
+/// f() evaluated at the state of `sim` (a Simulable) moved by increments d; the state is
+/// restored exactly afterwards (pushState / updateState / popState).
+template <class Sim, class F>
+auto atMovedState(Sim& sim, const VecX& d, F&& f) {
+  sim.pushState();
+  sim.updateState(d);
+  auto result = f();
+  sim.popState();
+  return result;
+}
 
 /// A fresh empty directory under $FLSH_TEST_TMP (or the system temp dir), unique to the running
 /// test and `name`.

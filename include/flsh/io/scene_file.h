@@ -48,6 +48,9 @@ struct SceneSpec {
   double time_step = 1.0 / 60.0;  ///< s
   double duration = 2.0;          ///< s
   NewtonOptions newton;
+  /// "newton.soft_tissue_gradient_tolerance": Newton's relative gradient tolerance in scenes
+  /// with a "fem" avatar; ≤ 0 (absent) keeps SceneOptions::soft_tissue_newton's default (1e-5).
+  double soft_tissue_gradient_tolerance = -1.0;
   bool avatar_contact = true;
   OutputSpec outputs;
   /// Avatar cache of the "fem" avatars' volumetric bodies: folder (resolved; empty = the

@@ -5,7 +5,7 @@
 //
 // Usage: fem_benchmark [STEPS=30] [--resolution R] [--tolerance T] [--no-lag] [--threads N]
 //                      [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME]
-//                      [--no-ground]
+//                      [--no-ground] [--contact-stiffness K]
 //   --tolerance: Newton's relative gradient tolerance (default: the scene default);
 //   --no-lag:    factor every Newton iteration (plain Newton on CHOLMOD) for comparison;
 //   --reference: also run a second scene at tolerance T_REF in lockstep (untimed) and print
@@ -47,6 +47,7 @@ int main(int argc, char** argv) {
   int steps = 30;
   double resolution = 1.0, tolerance = -1.0;
   bool lag = true, ground = true;
+  double contact_stiffness = -1.0;
   std::string motion_name = "walk";
   double reference = -1.0;
   double cg_tolerance = -1.0;
@@ -57,6 +58,7 @@ int main(int argc, char** argv) {
     else if (a == "--tolerance" && i + 1 < argc) tolerance = std::atof(argv[++i]);
     else if (a == "--no-lag") lag = false;
     else if (a == "--no-ground") ground = false;
+    else if (a == "--contact-stiffness" && i + 1 < argc) contact_stiffness = std::atof(argv[++i]);
     else if (a == "--motion" && i + 1 < argc) motion_name = argv[++i];
     else if (a == "--cg" && i + 3 < argc) {  // forcing term, refactor-after, max CG iterations
       cg_tolerance = std::atof(argv[++i]);
@@ -69,7 +71,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: fem_benchmark [STEPS] [--resolution R] [--tolerance T] [--no-lag] "
-                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground]\n");
+                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground] [--contact-stiffness K]\n");
       return 2;
     }
   }
@@ -90,6 +92,7 @@ int main(int argc, char** argv) {
     auto walk = std::make_shared<Motion>(makeBuiltinMotion(motion_name, 20.0, 30.0));
     SimulableOptions options;
     options.time_step = h;
+    if (contact_stiffness > 0) options.contact.stiffness = contact_stiffness;
     auto sim = std::make_shared<Simulable>(avatar, walk, options);
     SceneOptions scene_options;
     if (tolerance > 0) scene_options.soft_tissue_newton.gradient_tolerance = tolerance;

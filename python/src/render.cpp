@@ -191,6 +191,14 @@ void bind_render(py::module_& m) {
         "Renders frames (N, V, 3) m of one mesh side by side with a common framing, `columns` "
         "per row (0 = one row); options.width × height is the size of each tile. colors (V, 3) or "
         "(N, V, 3) RGB in [0, 1], or None.");
+  m.def("displacement_colors",
+        [](const py::object& magnitudes, double max_value) {
+          return to_numpy(render::displacementColors(to_vector(magnitudes, "magnitudes"), max_value));
+        },
+        py::arg("magnitudes"), py::arg("max_value"),
+        "Colours (V, 3) in [0, 1] of per-vertex magnitudes (V,) on a viridis map: 0 dark purple, "
+        "max_value and above yellow (e.g. soft-tissue displacements |u| in m). ValueError on NaN "
+        "or a negative max_value.");
   m.def("write_png",
         [](const std::filesystem::path& path, const py::object& image) {
           const Image im = py::isinstance<Image>(image) ? image.cast<Image>()

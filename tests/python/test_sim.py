@@ -410,9 +410,13 @@ def test_scene_files():
     ("own_newton", ["--seconds", "0.1", "--vertices", "600"]),
     ("ball_belly", ["--seconds", "0.25", "--speed", "4", "--vertices", "600",
                     "--sheet-frames", "2"]),
+    ("ball_belly", ["--seconds", "0.25", "--speed", "4", "--vertices", "600",
+                    "--sheet-frames", "2", "--soft", "--resolution", "0.3"]),
 ])
 def test_examples_run(tmp_path, name, args):
     env = dict(os.environ)
+    if "--soft" in args:
+        args = [*args, "--cache", str(tmp_path / "cache")]
     result = subprocess.run([sys.executable, str(EXAMPLES / f"{name}.py"), "--out", str(tmp_path),
                              *args], env=env, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
@@ -421,6 +425,10 @@ def test_examples_run(tmp_path, name, args):
     assert image.width > 0 and image.height > 0
     if name == "ball_belly":
         assert "pushed back" in result.stdout
+    if "--soft" in args:
+        # The ball dents the soft belly: a displacement of at least a millimetre.
+        line = next(l for l in result.stdout.splitlines() if l.startswith("soft tissue"))
+        assert float(line.split("|u|")[1].split("mm")[0]) > 1.0, line
 
 
 def test_newton_options_and_discard_state(avatar, walk):

@@ -138,7 +138,6 @@ struct Simulable::Impl {
   // FEM soft skeleton (null for the articulated skeleton): node data, displacements u.
   std::unique_ptr<detail::SoftTissue> soft;
   std::vector<VecX> u_stack;  // displacements saved with `stack` (same depth)
-  mutable int soft_active_contacts = 0;
 
   void touch() { ++state_version; }
   int boneDofs() const { return kDofsPerBone * num_bones; }
@@ -573,9 +572,8 @@ void Simulable::setVelocity(const VecX& v) {
   }
   if (m.soft) {
     m.soft->u_nm1 = m.soft->u_n - h * v.tail(m.soft->numSoftDofs());
-    m.setSoftPrediction();
+    m.setSoftPrediction();  // the current state (and its caches) is unchanged
   }
-  m.touch();
 }
 
 VecX Simulable::getVelocity() const {
@@ -775,7 +773,7 @@ SpMat Simulable::getNodesStateJacobian() const {
   if (m.soft) {
     m.prepareSoft();
     std::vector<Triplet> triplets;
-    m.soft->surfaceJacobian(triplets, m.boneDofs());
+    m.soft->surfaceJacobian(triplets);
     SpMat D(3 * m.soft->numSurface(), m.dofs());
     D.setFromTriplets(triplets.begin(), triplets.end());
     return D;

@@ -408,7 +408,7 @@ double SoftTissue::contact(const std::vector<Collider>& colliders, double time,
   return E;
 }
 
-void SoftTissue::surfaceJacobian(std::vector<Triplet>& triplets, int bone_dofs) const {
+void SoftTissue::surfaceJacobian(std::vector<Triplet>& triplets) const {
   const std::vector<Mat3>& R = *cur_R_;
   for (int i = 0; i < num_surface_; ++i) {
     const Vec3 Y = Y_.row(i).transpose();
@@ -424,7 +424,7 @@ void SoftTissue::surfaceJacobian(std::vector<Triplet>& triplets, int bone_dofs) 
     if (node_dof_[i] >= 0)
       for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
-          triplets.emplace_back(3 * i + r, bone_dofs + node_dof_[i] + c, node_M_[i](r, c));
+          triplets.emplace_back(3 * i + r, bone_dofs_ + node_dof_[i] + c, node_M_[i](r, c));
   }
 }
 

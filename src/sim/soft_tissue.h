@@ -43,9 +43,6 @@ class SoftTissue {
   const VecXi& softNodes() const { return soft_nodes_; }
   /// Offset of node j's displacement in u (3 values), −1 for a bone node.
   int nodeDof(int j) const { return node_dof_[j]; }
-  const VecX& masses() const { return mass_; }  ///< #N lumped masses, kg
-  double totalMass() const { return mass_.sum(); }
-  int numTets() const { return int(tets_.rows()); }
 
   // ---- state (the bones live in Simulable) ----
   VecX u, u_n, u_nm1;  ///< 3 · #soft nodes each, m
@@ -80,7 +77,7 @@ class SoftTissue {
                  bool psd, int* active = nullptr) const;
 
   /// d(surface nodes)/dq rows (3#V × numDofs) as triplets.
-  void surfaceJacobian(std::vector<Triplet>& triplets, int bone_dofs) const;
+  void surfaceJacobian(std::vector<Triplet>& triplets) const;
 
  private:
   struct Influence {

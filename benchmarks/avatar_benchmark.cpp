@@ -8,6 +8,14 @@
 // Goals on the 2-core machine (issue "Volumetric avatar"): skeleton ≤ 0.2 s, FEM ≤ 8 s cold,
 // any model ≤ 0.3 s from the cache. Usage: avatar_benchmark [RUNS] [BODY.npz]; prints the
 // median over RUNS (default 3) of each figure.
+//
+// ROM mode, avatar_benchmark --rom [RUNS] [BODY.npz]: the ROM avatar (soft tissue, reduced
+// model, both cubatures, default ReducedSettings):
+//   rom cold       empty cache: template, shape and reduced levels, with the stages of each
+//                  (handles, basis, training samples, cubature selection)
+//   rom warm       the same avatar again: all three levels from the cache
+// plus the handle count, the basis bound violation, the cubature sizes and held-out errors.
+// Goals (issue "ROM soft skeleton"): ≤ 12 s cold, ≤ 0.3 s from the cache.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -59,9 +67,109 @@ Timed build(const std::shared_ptr<const BodyModel>& body, const VecX& betas, boo
   return t;
 }
 
+struct RomTimed {
+  double total = 0;
+  VolumetricBuildReport volumetric;
+  ReducedBuildReport reduced;
+  double skeleton = 0;
+  int nodes = 0, tets = 0;
+  ReducedData data;
+};
+
+RomTimed buildRom(const std::shared_ptr<const BodyModel>& body, const VecX& betas,
+                  const std::string& cache_dir) {
+  SoftAvatarSettings settings;
+  settings.volumetric.cache_dir = cache_dir;
+  SoftAvatar avatar(body, betas, settings);
+  avatar.enableSoftTissue();
+  avatar.enableReducedModel();
+  avatar.enableElasticCubature();
+  avatar.enableInertialCubature();
+  const auto t0 = Clock::now();
+  avatar.initVolumetricData();
+  RomTimed t;
+  t.total = std::chrono::duration<double>(Clock::now() - t0).count();
+  t.volumetric = avatar.volumetricBuildReport();
+  t.reduced = avatar.reducedBuildReport();
+  t.skeleton = avatar.skeletonSeconds();
+  t.nodes = avatar.volumetricData().numNodes();
+  t.tets = avatar.volumetricData().numTets();
+  t.data = avatar.reducedData();
+  return t;
+}
+
+int romBenchmark(int runs, const std::string& model_path) {
+  std::map<std::string, std::vector<double>> f;
+  RomTimed last;
+  const auto root =
+      std::filesystem::temp_directory_path() / ("flsh_rom_benchmark_" + std::to_string(::getpid()));
+  for (int run = 0; run < runs; ++run) {
+    const std::string cache = (root / std::to_string(run)).string();
+    const auto body = std::make_shared<const BodyModel>(
+        model_path.empty() ? makeSyntheticBody({}) : loadBodyModel(model_path));
+    const VecX betas = VecX::Zero(body->numBetas());
+    const RomTimed cold = buildRom(body, betas, cache);
+    const VolumetricBuildReport& v = cold.volumetric;
+    const ReducedBuildReport& r = cold.reduced;
+    if (!cold.reduced.warnings.empty())
+      std::fprintf(stderr, "warnings of the cold build:\n%s", cold.reduced.warnings.c_str());
+    f["rom cold total"].push_back(cold.total);
+    f["  skeleton part"].push_back(cold.skeleton);
+    f["  template level (mesh, fields)"].push_back(v.seconds_meshing + v.seconds_harmonic +
+                                                   v.seconds_quality);
+    f["  shape level (bones, materials)"].push_back(v.seconds_bone_nodes + v.seconds_materials);
+    f["  volumetric cache store"].push_back(v.seconds_cache_store);
+    f["  reduced level total"].push_back(r.seconds_total);
+    f["    handles"].push_back(r.seconds_handles);
+    f["    basis (BBW)"].push_back(r.seconds_basis);
+    f["    training samples"].push_back(r.seconds_training);
+    f["    cubature selection"].push_back(r.seconds_cubature);
+    f["    reduced cache store"].push_back(r.seconds_cache_store);
+
+    const RomTimed warm = buildRom(body, betas, cache);
+    if (!warm.volumetric.template_from_cache || !warm.volumetric.data_from_cache ||
+        !warm.reduced.from_cache)
+      std::fprintf(stderr, "warning: the warm run missed the cache\n");
+    f["rom warm total"].push_back(warm.total);
+    f["  volumetric cache load"].push_back(warm.volumetric.seconds_cache_load);
+    f["  reduced cache load"].push_back(warm.reduced.seconds_cache_load);
+    last = cold;
+    std::filesystem::remove_all(cache);
+  }
+  std::filesystem::remove_all(root);
+  const ReducedData& d = last.data;
+  std::printf("ROM avatar generation, %s, %d nodes / %d tets, median of %d runs (s)\n",
+              model_path.empty() ? "synthetic body (6890 vertices)" : model_path.c_str(),
+              last.nodes, last.tets, runs);
+  for (const char* key :
+       {"rom cold total", "  skeleton part", "  template level (mesh, fields)",
+        "  shape level (bones, materials)", "  volumetric cache store", "  reduced level total",
+        "    handles", "    basis (BBW)", "    training samples", "    cubature selection",
+        "    reduced cache store", "rom warm total", "  volumetric cache load",
+        "  reduced cache load"})
+    std::printf("  %-34s %8.3f\n", key, median(f[key]));
+  std::printf(
+      "reduced data (last run): %d handles, basis %ld nonzeros (%.1f per handle), max bound "
+      "violation %.2e, converged %s\n",
+      d.numHandles(), long(d.basis.nonZeros()),
+      double(d.basis.nonZeros()) / std::max(1, d.numHandles()), d.basis_max_bound_violation,
+      d.basis_converged ? "yes" : "no");
+  std::printf(
+      "  elastic cubature:  %4ld tets, training error %.4f, held-out error %.4f, %d rounds\n",
+      long(d.elastic.elements.size()), d.elastic.training_error, d.elastic_test_error,
+      d.elastic.rounds);
+  std::printf(
+      "  inertial cubature: %4ld tets, training error %.4f, held-out error %.4f, %d rounds\n",
+      long(d.inertial.elements.size()), d.inertial.training_error, d.inertial_test_error,
+      d.inertial.rounds);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (argc > 1 && std::string(argv[1]) == "--rom")
+    return romBenchmark(argc > 2 ? std::max(1, std::atoi(argv[2])) : 3, argc > 3 ? argv[3] : "");
   const int runs = argc > 1 ? std::max(1, std::atoi(argv[1])) : 3;
   const std::string model_path = argc > 2 ? argv[2] : "";
   auto load = [&] {

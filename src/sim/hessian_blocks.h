@@ -56,4 +56,42 @@ class BonePairBlocks {
   std::vector<int> list_;
 };
 
+/// 3 × 3 blocks of a (row blocks × column blocks) matrix accumulated over many points and emitted
+/// once, as BonePairBlocks: block(r, c) zeroes a block on first touch; emit() appends the touched
+/// ones at (row0 + 3r, col0 + 3c), with `mirror` also their transposes at (col0 + 3c, row0 + 3r),
+/// and resets them.
+class Block3Accumulator {
+ public:
+  void resize(int row_blocks, int col_blocks) {
+    cols_ = col_blocks;
+    blocks_.assign(size_t(row_blocks) * col_blocks, Mat3::Zero());
+    touched_.assign(size_t(row_blocks) * col_blocks, 0);
+    list_.clear();
+  }
+  Mat3& block(int r, int c) {
+    const int key = r * cols_ + c;
+    if (!touched_[key]) {
+      touched_[key] = 1;
+      blocks_[key].setZero();
+      list_.push_back(key);
+    }
+    return blocks_[key];
+  }
+  void emit(std::vector<Triplet>& H, int row0, int col0, bool mirror) {
+    for (int key : list_) {
+      const int r = row0 + 3 * (key / cols_), c = col0 + 3 * (key % cols_);
+      addBlock(H, r, c, blocks_[key]);
+      if (mirror) addBlock(H, c, r, blocks_[key].transpose());
+      touched_[key] = 0;
+    }
+    list_.clear();
+  }
+
+ private:
+  int cols_ = 0;
+  std::vector<Mat3> blocks_;
+  std::vector<char> touched_;
+  std::vector<int> list_;
+};
+
 }  // namespace flsh::detail

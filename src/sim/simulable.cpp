@@ -155,6 +155,11 @@ struct Simulable::Impl {
   void updateTargets(double t);
   void placeKinematicBones();
   void ensureContact() const;
+  /// Surface vertices that may touch a collider (see ensureContact); `extra_margin`: per bone,
+  /// added to its bound (null: none).
+  void broadPhase(const double* extra_margin, std::vector<int>& candidates) const;
+  // Soft tissue: per bone, the largest blendBound and displacementWeight of its vertices.
+  std::vector<double> soft_blend_bound, soft_weight_bound;
   void buildClusters();
   Vec3 node(int i) const;
   double contactEnergy() const {
@@ -357,6 +362,13 @@ Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar,
                                                   m.options.time_step);
     m.soft->setPoseBlend(m.q.R);
     m.setSoftPrediction();
+    m.soft_blend_bound.assign(m.num_bones, 0.0);
+    m.soft_weight_bound.assign(m.num_bones, 0.0);
+    for (int b = 0; b < m.num_bones; ++b)
+      for (int i : m.dominated[b]) {
+        m.soft_blend_bound[b] = std::max(m.soft_blend_bound[b], m.soft->blendBound(i));
+        m.soft_weight_bound[b] = std::max(m.soft_weight_bound[b], m.soft->displacementWeight(i));
+      }
   }
   m.updateTargets(0.0);
 }
@@ -507,7 +519,8 @@ void Simulable::setState(const VecX& q) {
   if (q.size() != m.dofs())
     throw InputError("Simulable::setState: q has " + std::to_string(q.size()) +
                      " values, expected numDofs() = " + std::to_string(m.dofs()) +
-                     " (6 per bone: t, rotation vector; then 3 per soft-tissue node)");
+                     " (6 per bone: t, rotation vector; then 3 per soft-tissue node, or per handle of the "
+                     "reduced model)");
   if (!q.allFinite()) throw InputError("Simulable::setState: q contains NaN or Inf");
   for (int b = 0; b < m.num_bones; ++b) {
     m.q.t.row(b) = q.segment<3>(6 * b).transpose();
@@ -760,7 +773,9 @@ MatX3 Simulable::getNodes() const {
   const Impl& m = *impl_;
   if (m.soft) {
     m.prepareSoft();
-    return m.soft->currentPositions().topRows(m.soft->numSurface());
+    MatX3 x;
+    m.soft->surface(&x, nullptr);
+    return x;
   }
   MatX3 nodes(m.avatar->restVertices().rows(), 3);
   for (int i = 0; i < nodes.rows(); ++i) nodes.row(i) = m.node(i).transpose();
@@ -819,21 +834,40 @@ MatX3 Simulable::getSoftTissueDisplacements() const {
   const int V = int(m.avatar->restVertices().rows());
   MatX3 u = MatX3::Zero(V, 3);
   if (m.soft)
-    for (int i = 0; i < V; ++i)
-      if (m.soft->nodeDof(i) >= 0) u.row(i) = m.soft->u.segment<3>(m.soft->nodeDof(i)).transpose();
+    for (int i = 0; i < V; ++i) u.row(i) = m.soft->displacementOf(m.soft->u, i).transpose();
   return u;
+}
+bool Simulable::hasReducedModel() const { return impl_->soft && impl_->soft->reduced(); }
+std::vector<std::pair<int, double>> Simulable::nodeDisplacementBasis(int j) const {
+  const Impl& m = *impl_;
+  const int n = m.soft ? m.soft->numNodes() : int(m.avatar->restVertices().rows());
+  if (j < 0 || j >= n)
+    throw InputError("Simulable::nodeDisplacementBasis: node " + std::to_string(j) +
+                     " outside [0, " + std::to_string(n) + ")");
+  std::vector<std::pair<int, double>> basis;
+  if (!m.soft) return basis;
+  m.soft->displacementBasis(j, basis);
+  for (auto& entry : basis) entry.first += m.boneDofs();
+  return basis;
 }
 MatX3 Simulable::getUnposedSurface() const {
   const Impl& m = *impl_;
   if (!m.soft) return m.avatar->restVertices();
   m.prepareSoft();
-  return m.soft->currentUnposed().topRows(m.soft->numSurface());
+  MatX3 Y;
+  m.soft->surface(nullptr, &Y);
+  return Y;
 }
 MatX3 Simulable::getVolumeNodes() const {
   const Impl& m = *impl_;
   if (!m.soft) return getNodes();
-  m.prepareSoft();
-  return m.soft->currentPositions();
+  if (!m.soft->reduced()) {
+    m.prepareSoft();
+    return m.soft->currentPositions();
+  }
+  MatX3 x;  // the ROM skins only the nodes its energies read
+  m.soft->positions(m.frames(m.q), m.soft->u, x);
+  return x;
 }
 
 const std::vector<Mat3>& Simulable::boneRotations() const { return impl_->q.R; }
@@ -846,53 +880,63 @@ const MatX3& Simulable::bonePositions() const { return impl_->q.t; }
 // on b, and x_ic − x_ib = (R_c − R_b)(X_i − J_b) + (R_c(J_b − J_c) + t_c − t_b), so
 // |x_i − x_ib| ≤ Σ_c W_bc (‖R_c − R_b‖₂ e_b + |R_c(J_b − J_c) + t_c − t_b|). Signed distances
 // are 1-Lipschitz, so bone b's vertices can only touch a collider if d(centre) < radius of this
-// bound: the skipped vertices have exactly zero contact energy.
+// bound: the skipped vertices have exactly zero contact energy. With soft tissue the skinned
+// point is Y_i = X_i + D_i (pose blend and displacement) instead of X_i, which moves x_i by
+// ‖Σ_k w_k R_k D_i‖ ≤ ‖D_i‖ more: the bone's margin grows by the largest bound on ‖D_i‖ over its
+// vertices (SoftTissue::blendBound, displacementWeight).
+void Simulable::Impl::broadPhase(const double* extra_margin, std::vector<int>& candidates) const {
+  candidates.clear();
+  if (colliders.empty()) return;
+  for (int b = 0; b < num_bones; ++b) {
+    if (dominated[b].empty()) continue;
+    double margin = extra_margin ? extra_margin[b] : 0.0;
+    for (const Influence& co : co_influence[b]) {
+      const int c = co.bone;
+      const double rotation_gap =
+          std::sqrt(std::max(0.0, 3.0 - (q.R[b].transpose() * q.R[c]).trace()));
+      const Vec3 joint_gap = q.R[c] * (J.row(b) - J.row(c)).transpose() +
+                             q.t.row(c).transpose() - q.t.row(b).transpose();
+      margin += co.weight * (rotation_gap * sphere_extent[b] + joint_gap.norm());
+    }
+    const Vec3 centre = q.R[b] * sphere_center[b] + q.t.row(b).transpose();
+    const double radius = sphere_radius[b] + margin;
+    bool near = false;
+    for (const Collider& collider : colliders)
+      near = near || collider.signedDistance(centre, time) < radius;
+    if (!near) continue;
+    // The same bound per vertex cluster: |x_i − cluster centre| ≤ cluster radius + margin.
+    for (const VertexCluster& cluster : clusters[b]) {
+      const Vec3 cluster_centre = q.R[b] * cluster.center + q.t.row(b).transpose();
+      bool cluster_near = false;
+      for (const Collider& collider : colliders)
+        cluster_near = cluster_near ||
+                       collider.signedDistance(cluster_centre, time) < cluster.radius + margin;
+      if (cluster_near)
+        candidates.insert(candidates.end(), dominated[b].begin() + cluster.begin,
+                          dominated[b].begin() + cluster.end);
+    }
+  }
+}
+
 void Simulable::Impl::ensureContact() const {
   ContactCache& cc = contact;
   if (cc.version == state_version) return;
-  if (soft) {  // every surface node is evaluated: the FEM step costs far more than this
+  if (soft) {
     prepareSoft();
-    cc.candidates.clear();
+    double extra[kNumJoints];
+    const double feature = soft->poseFeatureNorm(), largest = soft->largestSoftState();
+    for (int b = 0; b < num_bones; ++b)
+      extra[b] = soft_blend_bound[b] * feature + soft_weight_bound[b] * largest;
+    broadPhase(extra, cc.candidates);
     cc.energy = soft->contact(colliders, time, options.contact, nullptr, nullptr, 0, true,
-                              &cc.active);
+                              &cc.active, &cc.candidates);
     cc.version = state_version;
     return;
   }
-  cc.candidates.clear();
   cc.points.clear();
   cc.energy = 0.0;
   cc.active = 0;
-  if (!colliders.empty()) {
-    for (int b = 0; b < num_bones; ++b) {
-      if (dominated[b].empty()) continue;
-      double margin = 0.0;
-      for (const Influence& co : co_influence[b]) {
-        const int c = co.bone;
-        const double rotation_gap =
-            std::sqrt(std::max(0.0, 3.0 - (q.R[b].transpose() * q.R[c]).trace()));
-        const Vec3 joint_gap = q.R[c] * (J.row(b) - J.row(c)).transpose() +
-                               q.t.row(c).transpose() - q.t.row(b).transpose();
-        margin += co.weight * (rotation_gap * sphere_extent[b] + joint_gap.norm());
-      }
-      const Vec3 centre = q.R[b] * sphere_center[b] + q.t.row(b).transpose();
-      const double radius = sphere_radius[b] + margin;
-      bool near = false;
-      for (const Collider& collider : colliders)
-        near = near || collider.signedDistance(centre, time) < radius;
-      if (!near) continue;
-      // The same bound per vertex cluster: |x_i − cluster centre| ≤ cluster radius + margin.
-      for (const VertexCluster& cluster : clusters[b]) {
-        const Vec3 cluster_centre = q.R[b] * cluster.center + q.t.row(b).transpose();
-        bool cluster_near = false;
-        for (const Collider& collider : colliders)
-          cluster_near = cluster_near ||
-                         collider.signedDistance(cluster_centre, time) < cluster.radius + margin;
-        if (cluster_near)
-          cc.candidates.insert(cc.candidates.end(), dominated[b].begin() + cluster.begin,
-                               dominated[b].begin() + cluster.end);
-      }
-    }
-  }
+  broadPhase(nullptr, cc.candidates);
   const int n = int(cc.candidates.size());
   cc.nodes.resize(n, 3);
   cc.areas.resize(n);
@@ -1040,6 +1084,7 @@ void Simulable::getDynamicHessianTripletVector(std::vector<Triplet>& H, int offs
   if (m.soft) {
     m.prepareSoft();
     m.soft->inertia(nullptr, &H, offset, psd);
+    m.soft->flushReduced(H, offset);
     return;
   }
   Mat6 Hb;
@@ -1114,7 +1159,9 @@ void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
     m.prepareSoft();
     m.soft->gravity(m.options.gravity, &g, nullptr, offset, true);
     m.soft->elastic(&g, nullptr, offset, true);
-    m.soft->contact(m.colliders, m.time, m.options.contact, &g, nullptr, offset, true);
+    m.ensureContact();
+    m.soft->contact(m.colliders, m.time, m.options.contact, &g, nullptr, offset, true, nullptr,
+                    &m.contact.candidates);
     return;
   }
   m.addContactGradient(g, offset);
@@ -1163,7 +1210,10 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int of
     m.prepareSoft();
     m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd);
     m.soft->elastic(nullptr, &H, offset, psd);
-    m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd);
+    m.ensureContact();
+    m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
+                    &m.contact.candidates);
+    m.soft->flushReduced(H, offset);
     return;
   }
   m.addContactHessian(H, offset, psd);

@@ -11,6 +11,7 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
+#include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
 
 namespace flsh::detail {
@@ -53,8 +54,33 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
       node_dof_[j] = 3 * int(soft.size());
       soft.push_back(j);
     }
-  soft_nodes_ = Eigen::Map<const VecXi>(soft.data(), Eigen::Index(soft.size()));
-  u = u_n = u_nm1 = VecX::Zero(3 * soft_nodes_.size());
+  reduced_ = avatar.reducedModelEnabled();
+  const ReducedData* rom = reduced_ ? &avatar.reducedData() : nullptr;
+  if (!rom) {
+    state_nodes_ = Eigen::Map<const VecXi>(soft.data(), Eigen::Index(soft.size()));
+  } else {
+    num_handles_ = rom->numHandles();
+    if (rom->basis.rows() != n || rom->basis.cols() != num_handles_)
+      throw InputError("Simulable: the avatar's reduced basis is " +
+                       std::to_string(rom->basis.rows()) + " × " +
+                       std::to_string(rom->basis.cols()) + ", expected #nodes × #handles = " +
+                       std::to_string(n) + " × " + std::to_string(num_handles_));
+    state_nodes_ = rom->handles;
+    state_dof_.assign(n, -1);
+    for (int h = 0; h < num_handles_; ++h) state_dof_[rom->handles[h]] = 3 * h;
+    // Rows of φ (the basis is stored by columns); bone nodes never move (u = 0).
+    const SpMat rows = rom->basis.transpose();
+    phi_start_.assign(n + 1, 0);
+    for (int j = 0; j < n; ++j) {
+      if (node_dof_[j] >= 0)
+        for (SpMat::InnerIterator it(rows, j); it; ++it)
+          phi_.emplace_back(int(it.row()), it.value());
+      phi_start_[j + 1] = int(phi_.size());
+    }
+    bz_blocks_.resize(2 * num_bones_, num_handles_);
+    zz_blocks_.resize(num_handles_, num_handles_);
+  }
+  u = u_n = u_nm1 = VecX::Zero(numSoftDofs());
 
   // Skinning influences.
   const MatX& surface_weights = avatar.body().weights;
@@ -85,22 +111,44 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     influence_start_[j + 1] = int(influences_.size());
   }
 
-  // Elements: rest shapes, materials, lumped masses. Tets whose four nodes are bone nodes
-  // never deform (u = 0 there) and are left out of the elastic sums.
+  // Lumped masses, and the elastic elements: every tet with a soft node (tets whose four nodes
+  // are bone nodes never deform, u = 0 there), or the elastic cubature's sample tets.
   const MatX4i& all_tets = templ.mesh.tets;
   mass_ = VecX::Zero(n);
   std::vector<int> kept;
+  std::vector<double> kept_weight;
+  auto hasSoftNode = [&](int e) {
+    for (int a = 0; a < 4; ++a)
+      if (node_dof_[all_tets(e, a)] >= 0) return true;
+    return false;
+  };
   for (int e = 0; e < all_tets.rows(); ++e) {
     Vec3 X[4];
     for (int a = 0; a < 4; ++a) X[a] = rest_.row(all_tets(e, a)).transpose();
     const double volume = std::abs((X[1] - X[0]).cross(X[2] - X[0]).dot(X[3] - X[0])) / 6.0;
     const double node_mass = data.materials.density[e] * volume / 4.0;
     for (int a = 0; a < 4; ++a) mass_[all_tets(e, a)] += node_mass;
-    bool any_soft = false;
-    for (int a = 0; a < 4; ++a) any_soft = any_soft || node_dof_[all_tets(e, a)] >= 0;
-    if (any_soft) kept.push_back(e);
+  }
+  if (rom && rom->elastic.elements.size() > 0) {
+    for (Eigen::Index k = 0; k < rom->elastic.elements.size(); ++k) {
+      const int e = rom->elastic.elements[k];
+      if (e < 0 || e >= all_tets.rows())
+        throw InputError("Simulable: the avatar's elastic cubature names tet " +
+                         std::to_string(e) + ", expected [0, " +
+                         std::to_string(all_tets.rows()) + ")");
+      if (!hasSoftNode(e)) continue;  // zero energy whatever the state
+      kept.push_back(e);
+      kept_weight.push_back(rom->elastic.weights[k]);
+    }
+  } else {
+    for (int e = 0; e < all_tets.rows(); ++e)
+      if (hasSoftNode(e)) {
+        kept.push_back(e);
+        kept_weight.push_back(1.0);
+      }
   }
   tets_.resize(Eigen::Index(kept.size()), 4);
+  element_weight_ = Eigen::Map<const VecX>(kept_weight.data(), Eigen::Index(kept_weight.size()));
   elements_.reserve(kept.size());
   materials_.reserve(kept.size());
   for (size_t k = 0; k < kept.size(); ++k) {
@@ -112,62 +160,138 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     materials_.push_back(femMaterialPoint(data.materials, e));
   }
 
-  // Ordered soft-node pairs of the elastic Hessian.
-  std::vector<std::pair<int, int>> pairs;
-  for (Eigen::Index e = 0; e < tets_.rows(); ++e)
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b < 4; ++b)
-        if (node_dof_[tets_(e, a)] >= 0 && node_dof_[tets_(e, b)] >= 0)
-          pairs.emplace_back(tets_(e, a), tets_(e, b));
-  std::sort(pairs.begin(), pairs.end());
-  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
-  block_pairs_ = pairs;
-  tet_block_.assign(16 * size_t(tets_.rows()), -1);
-  for (Eigen::Index e = 0; e < tets_.rows(); ++e)
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b < 4; ++b) {
-        const std::pair<int, int> key(tets_(e, a), tets_(e, b));
-        if (node_dof_[key.first] < 0 || node_dof_[key.second] < 0) continue;
-        tet_block_[16 * e + 4 * a + b] =
-            int(std::lower_bound(block_pairs_.begin(), block_pairs_.end(), key) -
-                block_pairs_.begin());
-      }
+  // Inertia and gravity: every node with its lumped mass, or the inertial cubature's nodes.
+  inertia_mass_ = rom && rom->inertial.elements.size() > 0
+                      ? inertialNodeMasses(data, rom->inertial)
+                      : mass_;
+  for (int j = 0; j < n; ++j)
+    if (inertia_mass_[j] > 0.0) mass_nodes_.push_back(j);
+
+  // Nodes skinned by prepare(): all in the FEM; in the ROM the mass nodes (the elastic energy
+  // reads u only; contact and output skin the surface nodes they need).
+  if (!reduced_) {
+    eval_nodes_.resize(n);
+    for (int j = 0; j < n; ++j) eval_nodes_[j] = j;
+  } else {
+    eval_nodes_ = mass_nodes_;
+  }
+
+  // Ordered soft-node pairs of the FEM elastic Hessian.
+  if (!reduced_) {
+    std::vector<std::pair<int, int>> pairs;
+    for (Eigen::Index e = 0; e < tets_.rows(); ++e)
+      for (int a = 0; a < 4; ++a)
+        for (int b = 0; b < 4; ++b)
+          if (node_dof_[tets_(e, a)] >= 0 && node_dof_[tets_(e, b)] >= 0)
+            pairs.emplace_back(tets_(e, a), tets_(e, b));
+    std::sort(pairs.begin(), pairs.end());
+    pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+    block_pairs_ = pairs;
+    tet_block_.assign(16 * size_t(tets_.rows()), -1);
+    for (Eigen::Index e = 0; e < tets_.rows(); ++e)
+      for (int a = 0; a < 4; ++a)
+        for (int b = 0; b < 4; ++b) {
+          const std::pair<int, int> key(tets_(e, a), tets_(e, b));
+          if (node_dof_[key.first] < 0 || node_dof_[key.second] < 0) continue;
+          tet_block_[16 * e + 4 * a + b] =
+              int(std::lower_bound(block_pairs_.begin(), block_pairs_.end(), key) -
+                  block_pairs_.begin());
+        }
+  }
 
   areas_ = avatar.vertexAreas();
   x_hat_ = rest_;
   pair_blocks_.resize(num_bones_);
   all_nodes_.resize(n);
   for (int j = 0; j < n; ++j) all_nodes_[j] = j;
+  surface_nodes_.assign(all_nodes_.begin(), all_nodes_.begin() + num_surface_);
+
+  // Pose blend and the broad-phase bounds.
+  const int features = int(posedirs_->cols());
+  feature_ = VecX::Zero(features);
+  blend_bound_.resize(num_surface_);
+  for (int i = 0; i < num_surface_; ++i)
+    blend_bound_[i] = posedirs_->middleRows(3 * i, 3).norm();
+  if (reduced_) {
+    blend_stamp_.assign(n, 0);  // pose_stamp_ 0: the zero feature, whose offsets are zero
+    blend_slot_.assign(n, -1);
+    int slots = 0;
+    for (int j = 0; j < num_surface_; ++j) blend_slot_[j] = slots++;
+    for (int j : mass_nodes_)
+      if (blend_slot_[j] < 0) blend_slot_[j] = slots++;
+    posedirs_T_.resize(features, 3 * slots);
+    for (int j = 0; j < n; ++j)
+      if (blend_slot_[j] >= 0)
+        posedirs_T_.middleCols(3 * blend_slot_[j], 3) = posedirs_->middleRows(3 * j, 3).transpose();
+    phi_sum_ = VecX::Zero(num_surface_);
+    for (int i = 0; i < num_surface_; ++i)
+      for (int k = phi_start_[i]; k < phi_start_[i + 1]; ++k) phi_sum_[i] += phi_[k].second;
+  }
 }
 
 // ---- positions ----------------------------------------------------------------------------
 
 void SoftTissue::setPoseBlend(const std::vector<Mat3>& R) {
-  VecX feature(9 * (num_bones_ - 1));
   for (int b = 1; b < num_bones_; ++b) {
     const Mat3 local = R[parents_[b]].transpose() * R[b];
     for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) feature[9 * (b - 1) + 3 * r + c] = local(r, c) - (r == c);
+      for (int c = 0; c < 3; ++c) feature_[9 * (b - 1) + 3 * r + c] = local(r, c) - (r == c);
   }
-  const VecX offsets = (*posedirs_) * feature;  // row 3j + c
+  if (reduced_) {
+    ++pose_stamp_;
+    return;
+  }
+  const VecX offsets = (*posedirs_) * feature_;  // row 3j + c
   blend_ = Eigen::Map<const MatX3>(offsets.data(), numNodes(), 3);
+}
+
+Vec3 SoftTissue::blendOf(int j) const {
+  if (!reduced_ || blend_stamp_[j] == pose_stamp_) return blend_.row(j).transpose();
+  const int slot = blend_slot_[j];
+  const Vec3 P = slot >= 0 ? Vec3(posedirs_T_.middleCols<3>(3 * slot).transpose() * feature_)
+                           : Vec3(posedirs_->middleRows<3>(3 * j) * feature_);
+  blend_.row(j) = P.transpose();
+  blend_stamp_[j] = pose_stamp_;
+  return P;
+}
+
+const MatX3& SoftTissue::poseBlend() const {
+  if (reduced_)
+    for (int j = 0; j < numNodes(); ++j) blendOf(j);
+  return blend_;
+}
+
+void SoftTissue::setPoseBlendOffsets(const MatX3& offsets) {
+  blend_ = offsets;
+  if (reduced_) std::fill(blend_stamp_.begin(), blend_stamp_.end(), pose_stamp_);
+}
+
+double SoftTissue::displacementWeight(int i) const {
+  if (!reduced_) return node_dof_[i] >= 0 ? 1.0 : 0.0;
+  return phi_sum_[i];
+}
+
+double SoftTissue::largestSoftState() const {
+  double largest = 0.0;
+  for (Eigen::Index k = 0; k + 2 < u.size(); k += 3) largest = std::max(largest, u.segment<3>(k).norm());
+  return largest;
 }
 
 void SoftTissue::unposed(const VecX& displacement, MatX3& Y) const {
   const int n = numNodes();
   Y.resize(n, 3);
   for (int j = 0; j < n; ++j)
-    Y.row(j) = rest_.row(j) + blend_.row(j) + nodeDisplacement(displacement, j).transpose();
+    Y.row(j) = rest_.row(j) + blendOf(j).transpose() + nodeDisplacement(displacement, j).transpose();
 }
 
-void SoftTissue::positions(const BoneFrames& bones, const VecX& displacement, MatX3& x) const {
-  const int n = numNodes();
+void SoftTissue::positionsOf(const std::vector<int>& nodes, const BoneFrames& bones,
+                             const VecX& state, MatX3& x) const {
   Vec3 shift[kNumJoints];
   for (int b = 0; b < num_bones_; ++b)
     shift[b] = bones.t.row(b).transpose() - bones.R[b] * joints_.row(b).transpose();
-  x.resize(n, 3);
-  for (int j = 0; j < n; ++j) {
-    const Vec3 Y = (rest_.row(j) + blend_.row(j)).transpose() + nodeDisplacement(displacement, j);
+  if (x.rows() != numNodes()) x.resize(numNodes(), 3);
+  for (int j : nodes) {
+    const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + nodeDisplacement(state, j);
     Vec3 p = Vec3::Zero();
     for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
       const Influence& inf = influences_[k];
@@ -177,28 +301,111 @@ void SoftTissue::positions(const BoneFrames& bones, const VecX& displacement, Ma
   }
 }
 
+void SoftTissue::positions(const BoneFrames& bones, const VecX& displacement, MatX3& x) const {
+  positionsOf(all_nodes_, bones, displacement, x);
+}
+
 void SoftTissue::setPrediction(const BoneFrames& bones_n, const BoneFrames& bones_nm1) {
+  // Only the mass nodes carry inertia.
   MatX3 x_n, x_nm1;
-  positions(bones_n, u_n, x_n);
-  positions(bones_nm1, u_nm1, x_nm1);
-  x_hat_ = 2.0 * x_n - x_nm1;
+  positionsOf(mass_nodes_, bones_n, u_n, x_n);
+  positionsOf(mass_nodes_, bones_nm1, u_nm1, x_nm1);
+  for (int j : mass_nodes_) x_hat_.row(j) = 2.0 * x_n.row(j) - x_nm1.row(j);
 }
 
 void SoftTissue::prepare(long version, const BoneFrames& bones) const {
   cur_R_ = &bones.R;
   cur_t_ = &bones.t;
   if (version == version_) return;
-  unposed(u, Y_);
-  positions(bones, u, x_);
+  version_ = version;
+  skinNodes(eval_nodes_);
+}
+
+void SoftTissue::skinNodes(const std::vector<int>& nodes) const {
   const int n = numNodes();
+  if (Y_.rows() != n) Y_.setZero(n, 3);
+  if (x_.rows() != n) x_.setZero(n, 3);
   node_M_.resize(n);
-  for (int j = 0; j < n; ++j) {
+  const std::vector<Mat3>& R = *cur_R_;
+  const MatX3& t = *cur_t_;
+  Vec3 shift[kNumJoints];
+  for (int b = 0; b < num_bones_; ++b) shift[b] = t.row(b).transpose() - R[b] * joints_.row(b).transpose();
+  for (int j : nodes) {
+    const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + nodeDisplacement(u, j);
+    Vec3 p = Vec3::Zero();
     Mat3 M = Mat3::Zero();
-    for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k)
-      M += influences_[k].weight * bones.R[influences_[k].bone];
+    for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
+      const Influence& inf = influences_[k];
+      p += inf.weight * (R[inf.bone] * Y + shift[inf.bone]);
+      M += inf.weight * R[inf.bone];
+    }
+    Y_.row(j) = Y.transpose();
+    x_.row(j) = p.transpose();
     node_M_[j] = M;
   }
-  version_ = version;
+}
+
+void SoftTissue::surface(MatX3* x, MatX3* Y) const {
+  if (reduced_) skinNodes(surface_nodes_);
+  if (x) *x = x_.topRows(num_surface_);
+  if (Y) *Y = Y_.topRows(num_surface_);
+}
+
+// ---- the chain rule to the soft state -----------------------------------------------------------
+
+void SoftTissue::displacementBasis(int j, std::vector<std::pair<int, double>>& out) const {
+  out.clear();
+  if (!reduced_) {
+    if (node_dof_[j] >= 0) out.emplace_back(node_dof_[j], 1.0);
+    return;
+  }
+  for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
+    out.emplace_back(3 * phi_[k].first, phi_[k].second);
+}
+
+void SoftTissue::addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const {
+  const int base = offset + bone_dofs_;
+  if (!reduced_) {
+    if (node_dof_[j] >= 0) g.segment<3>(base + node_dof_[j]) += v;
+    return;
+  }
+  for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
+    g.segment<3>(base + 3 * phi_[k].first) += phi_[k].second * v;
+}
+
+template <int Rows>
+void SoftTissue::addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
+                             const Eigen::Matrix<double, Rows, 3>& B) const {
+  if (!reduced_) {
+    if (node_dof_[j] < 0) return;
+    const int u_index = offset + bone_dofs_ + node_dof_[j];
+    addBlock(H, offset + row, u_index, B);
+    addBlock(H, u_index, offset + row, B.transpose());
+    return;
+  }
+  for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
+    for (int r = 0; r < Rows; r += 3)
+      bz_blocks_.block((row + r) / 3, phi_[k].first) +=
+          phi_[k].second * B.template middleRows<3>(r);
+}
+
+void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int i, int j,
+                             const Mat3& B) const {
+  if (!reduced_) {
+    if (node_dof_[i] < 0 || node_dof_[j] < 0) return;
+    const int base = offset + bone_dofs_;
+    addBlock(H, base + node_dof_[i], base + node_dof_[j], B);
+    return;
+  }
+  for (int a = phi_start_[i]; a < phi_start_[i + 1]; ++a)
+    for (int b = phi_start_[j]; b < phi_start_[j + 1]; ++b)
+      zz_blocks_.block(phi_[a].first, phi_[b].first) += (phi_[a].second * phi_[b].second) * B;
+}
+
+void SoftTissue::flushReduced(std::vector<Triplet>& H, int offset) const {
+  if (!reduced_) return;
+  bz_blocks_.emit(H, offset, offset + bone_dofs_, true);
+  zz_blocks_.emit(H, offset + bone_dofs_, offset + bone_dofs_, false);
 }
 
 // ---- mapping node derivatives to the state ----------------------------------------------------
@@ -218,8 +425,7 @@ void SoftTissue::mapForces(const std::vector<int>& nodes, const std::vector<Vec3
       g.segment<3>(offset + 6 * b) += w * f;
       g.segment<3>(offset + 6 * b + 3) += w * r.cross(f);
     }
-    if (node_dof_[j] >= 0)
-      g.segment<3>(offset + bone_dofs_ + node_dof_[j]) += node_M_[j].transpose() * f;
+    if (node_dof_[j] >= 0) addSoftGradient(g, offset, j, node_M_[j].transpose() * f);
   }
 }
 
@@ -236,7 +442,6 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
   for (size_t idx = 0; idx < nodes.size(); ++idx) {
     const int j = nodes[idx];
     const int dof = node_dof_[j];
-    const int u_index = offset + bone_dofs_ + dof;
     const Vec3 Y = Y_.row(j).transpose();
     const int count = influence_start_[j + 1] - influence_start_[j];
     for (int a = 0; a < count; ++a) {
@@ -256,10 +461,9 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         const Mat3 KM = Kj * node_M_[j];
         for (int a = 0; a < count; ++a) {
           const Eigen::Matrix<double, 6, 3> B = Jb[a].transpose() * KM;
-          addBlock(H, offset + 6 * bones[a], u_index, B);
-          addBlock(H, u_index, offset + 6 * bones[a], B.transpose());
+          addBoneSoft<6>(H, offset, 6 * bones[a], j, B);
         }
-        addBlock(H, u_index, u_index, node_M_[j].transpose() * KM);
+        addSoftSoft(H, offset, j, j, node_M_[j].transpose() * KM);
       }
     }
     if (forces) {
@@ -273,8 +477,7 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         curvature[b] += w * rotationCurvature(f, lever[a]);
         if (!psd && dof >= 0) {
           const Mat3 C = -w * skew(f) * R[b];  // ∂²(f·x)/∂δω_b∂δu_j
-          addBlock(H, offset + 6 * b + 3, u_index, C);
-          addBlock(H, u_index, offset + 6 * b + 3, C.transpose());
+          addBoneSoft<3>(H, offset, 6 * b + 3, j, C);
         }
       }
     }
@@ -288,36 +491,39 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
 // ---- energies -------------------------------------------------------------------------------
 
 double SoftTissue::inertia(VecX* g, std::vector<Triplet>* H, int offset, bool psd) const {
-  const int n = numNodes();
   const double k = 1.0 / (h_ * h_);
+  const size_t count = mass_nodes_.size();
   double E = 0.0;
-  node_forces_.resize(n);
-  for (int j = 0; j < n; ++j) {
+  node_forces_.resize(count);
+  for (size_t idx = 0; idx < count; ++idx) {
+    const int j = mass_nodes_[idx];
     const Vec3 d = (x_.row(j) - x_hat_.row(j)).transpose();
-    E += 0.5 * k * mass_[j] * d.squaredNorm();
-    node_forces_[j] = k * mass_[j] * d;
+    E += 0.5 * k * inertia_mass_[j] * d.squaredNorm();
+    node_forces_[idx] = k * inertia_mass_[j] * d;
   }
-  if (g) mapForces(all_nodes_, node_forces_, *g, offset);
+  if (g) mapForces(mass_nodes_, node_forces_, *g, offset);
   if (H) {
-    node_blocks_.resize(n);
-    for (int j = 0; j < n; ++j) node_blocks_[j] = k * mass_[j] * Mat3::Identity();
+    node_blocks_.resize(count);
+    for (size_t idx = 0; idx < count; ++idx)
+      node_blocks_[idx] = k * inertia_mass_[mass_nodes_[idx]] * Mat3::Identity();
     // psd: Gauss–Newton Σ m JᵀJ; exact: plus the curvature of the rotating nodes.
-    mapHessian(all_nodes_, &node_blocks_, psd ? nullptr : &node_forces_, *H, offset, psd);
+    mapHessian(mass_nodes_, &node_blocks_, psd ? nullptr : &node_forces_, *H, offset, psd);
   }
   return E;
 }
 
 double SoftTissue::gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
                            bool psd) const {
-  const int n = numNodes();
+  const size_t count = mass_nodes_.size();
   double E = 0.0;
-  node_forces_.resize(n);
-  for (int j = 0; j < n; ++j) {
-    E -= mass_[j] * gravity.dot(x_.row(j).transpose());
-    node_forces_[j] = -mass_[j] * gravity;
+  node_forces_.resize(count);
+  for (size_t idx = 0; idx < count; ++idx) {
+    const int j = mass_nodes_[idx];
+    E -= inertia_mass_[j] * gravity.dot(x_.row(j).transpose());
+    node_forces_[idx] = -inertia_mass_[j] * gravity;
   }
-  if (g) mapForces(all_nodes_, node_forces_, *g, offset);
-  if (H) mapHessian(all_nodes_, nullptr, &node_forces_, *H, offset, psd);
+  if (g) mapForces(mass_nodes_, node_forces_, *g, offset);
+  if (H) mapHessian(mass_nodes_, nullptr, &node_forces_, *H, offset, psd);
   return E;
 }
 
@@ -337,9 +543,14 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
 #pragma omp parallel for schedule(static) reduction(+ : E) if (T > 2000)
   for (int e = 0; e < T; ++e) {
     try {
-      E += tetElasticEnergy(elements_[e], materials_[e], elementDisplacement(e),
-                            g ? &element_gradients_[e] : nullptr,
-                            H ? &element_hessians_[e] : nullptr, psd);
+      const double w = element_weight_[e];
+      E += w * tetElasticEnergy(elements_[e], materials_[e], elementDisplacement(e),
+                                g ? &element_gradients_[e] : nullptr,
+                                H ? &element_hessians_[e] : nullptr, psd);
+      if (w != 1.0) {
+        if (g) element_gradients_[e] *= w;
+        if (H) element_hessians_[e] *= w;
+      }
     } catch (...) {
 #pragma omp critical(flsh_soft_tissue_failure)
       if (!failure) failure = std::current_exception();
@@ -348,13 +559,16 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
   if (failure) std::rethrow_exception(failure);
   if (g) {
     for (int e = 0; e < T; ++e)
-      for (int a = 0; a < 4; ++a) {
-        const int dof = node_dof_[tets_(e, a)];
-        if (dof >= 0)
-          g->segment<3>(offset + bone_dofs_ + dof) += element_gradients_[e].segment<3>(3 * a);
-      }
+      for (int a = 0; a < 4; ++a)
+        addSoftGradient(*g, offset, tets_(e, a), element_gradients_[e].segment<3>(3 * a));
   }
-  if (H) {
+  if (H && reduced_) {
+    for (int e = 0; e < T; ++e)
+      for (int a = 0; a < 4; ++a)
+        for (int b = 0; b < 4; ++b)
+          addSoftSoft(*H, offset, tets_(e, a), tets_(e, b),
+                      element_hessians_[e].block<3, 3>(3 * a, 3 * b));
+  } else if (H) {
     blocks_.assign(block_pairs_.size(), Mat3::Zero());
     for (int e = 0; e < T; ++e) {
       const int* slots = &tet_block_[16 * size_t(e)];
@@ -373,27 +587,38 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
 
 double SoftTissue::contact(const std::vector<Collider>& colliders, double time,
                            const ContactOptions& options, VecX* g, std::vector<Triplet>* H,
-                           int offset, bool psd, int* active) const {
+                           int offset, bool psd, int* active,
+                           const std::vector<int>* candidates) const {
   if (active) *active = 0;
   if (colliders.empty()) return 0.0;
-  const int V = num_surface_;
+  const std::vector<int>& list = candidates ? *candidates : surface_nodes_;
+  if (list.empty()) return 0.0;
+  if (reduced_) skinNodes(list);  // the ROM skins only the mass nodes in prepare()
+  const int V = int(list.size());
+  contact_x_.resize(V, 3);
+  contact_areas_.resize(V);
+  for (int k = 0; k < V; ++k) {
+    contact_x_.row(k) = x_.row(list[k]);
+    contact_areas_[k] = areas_[list[k]];
+  }
   ContactOptions contact_options = options;
   contact_options.exact_hessian = !psd;
   VecX gradient = VecX::Zero(3 * V);
   std::vector<Triplet> node_hessian;
   std::vector<ContactPoint> points;
-  const double E = colliderContactEnergy(x_.topRows(V), areas_, colliders, time, contact_options,
-                                         &gradient, H ? &node_hessian : nullptr, 0, &points);
+  const double E = colliderContactEnergy(contact_x_, contact_areas_, colliders, time,
+                                         contact_options, &gradient,
+                                         H ? &node_hessian : nullptr, 0, &points);
   if (active) *active = int(points.size());
   if (!g && !H) return E;
-  // The touching vertices, their forces and (for H) their 3 × 3 blocks.
+  // The touching vertices, their forces and (for H) their 3 × 3 blocks (p.vertex indexes list).
   std::vector<int> nodes;
   std::vector<Vec3> forces;
   std::vector<int> slot(V, -1);
   for (const ContactPoint& p : points)
     if (slot[p.vertex] < 0) {
       slot[p.vertex] = int(nodes.size());
-      nodes.push_back(p.vertex);
+      nodes.push_back(list[p.vertex]);
       forces.push_back(gradient.segment<3>(3 * p.vertex));
     }
   if (g) mapForces(nodes, forces, *g, offset);
@@ -409,7 +634,9 @@ double SoftTissue::contact(const std::vector<Collider>& colliders, double time,
 }
 
 void SoftTissue::surfaceJacobian(std::vector<Triplet>& triplets) const {
+  if (reduced_) skinNodes(surface_nodes_);
   const std::vector<Mat3>& R = *cur_R_;
+  std::vector<std::pair<int, double>> basis;
   for (int i = 0; i < num_surface_; ++i) {
     const Vec3 Y = Y_.row(i).transpose();
     for (int k = influence_start_[i]; k < influence_start_[i + 1]; ++k) {
@@ -421,10 +648,11 @@ void SoftTissue::surfaceJacobian(std::vector<Triplet>& triplets) const {
         for (int c = 0; c < 3; ++c) triplets.emplace_back(3 * i + r, 6 * b + 3 + c, dx_dw(r, c));
       }
     }
-    if (node_dof_[i] >= 0)
+    displacementBasis(i, basis);
+    for (const auto& [dof, weight] : basis)
       for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
-          triplets.emplace_back(3 * i + r, bone_dofs_ + node_dof_[i] + c, node_M_[i](r, c));
+          triplets.emplace_back(3 * i + r, bone_dofs_ + dof + c, weight * node_M_[i](r, c));
   }
 }
 

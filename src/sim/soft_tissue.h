@@ -10,6 +10,15 @@
 //   ∂x_j/∂δu_j = M_j = Σ_b w_jb R_b.
 // Second derivatives: ∂²(f·x_j)/∂δω_b² = w_jb (½(f r_jbᵀ + r_jb fᵀ) − (f·r_jb) I) and
 // ∂²(f·x_j)/∂δω_b∂δu_j = −w_jb [f]× R_b.
+//
+// The same class runs the ROM soft skeleton (SoftAvatar::enableReducedModel): the soft state is
+// then z (3 per handle) and u_j = Σ_h φ_h(j) z_h with the avatar's bounded biharmonic basis, so
+// every u-derivative maps to z by the chain rule (∂/∂z_h = Σ_j φ_h(j) ∂/∂u_j; Hessian blocks
+// (i, j) go to (h, k) with φ_h(i) φ_k(j)). With the elastic cubature the elastic sum runs over
+// the sample tets with their weights; with the inertial cubature inertia and gravity use the
+// cubature's node masses (a few nodes instead of all). Only the nodes some term reads are
+// skinned per evaluation: the mass nodes, and the surface nodes contact or output ask for; their
+// pose blend offsets are evaluated when first read.
 #pragma once
 
 #include <vector>
@@ -39,29 +48,40 @@ class SoftTissue {
 
   int numNodes() const { return int(rest_.rows()); }
   int numSurface() const { return num_surface_; }
-  int numSoftDofs() const { return 3 * int(soft_nodes_.size()); }
-  const VecXi& softNodes() const { return soft_nodes_; }
-  /// Offset of node j's displacement in u (3 values), −1 for a bone node.
-  int nodeDof(int j) const { return node_dof_[j]; }
+  bool reduced() const { return reduced_; }
+  int numSoftDofs() const { return 3 * int(state_nodes_.size()); }
+  /// The node of each 3-value block of the soft state: the soft-tissue nodes (FEM) or the handles
+  /// (ROM, where u at a handle is its z_h: φ_h = 1 there and every other φ is 0).
+  const VecXi& softNodes() const { return state_nodes_; }
+  /// Offset in the soft state of the 3 values that are node j's displacement, −1 when u_j is not
+  /// a state entry of its own (bone nodes; in the ROM every node but the handles).
+  int nodeDof(int j) const { return reduced_ ? state_dof_[j] : node_dof_[j]; }
+  /// u_j for a soft state (m, unposed space; zero on bone nodes).
+  Vec3 displacementOf(const VecX& state, int j) const { return nodeDisplacement(state, j); }
+  /// ∂u_j/∂(soft state) as (state offset, weight) pairs: u_j = Σ weight · state.segment<3>(offset).
+  void displacementBasis(int j, std::vector<std::pair<int, double>>& out) const;
 
   // ---- state (the bones live in Simulable) ----
-  VecX u, u_n, u_nm1;  ///< 3 · #soft nodes each, m
+  VecX u, u_n, u_nm1;  ///< the soft state: 3 · #soft nodes (FEM, u, m) or 3 · #handles (ROM, z, m)
 
   /// Held pose blend offsets P (#N × 3, m) from the bones' rotations (relative rotations
-  /// R_pᵀ R_b give the pose feature).
+  /// R_pᵀ R_b give the pose feature). The FEM evaluates every node's; the ROM keeps the feature
+  /// and evaluates a node's offset when first read (blendOf).
   void setPoseBlend(const std::vector<Mat3>& R);
-  const MatX3& poseBlend() const { return blend_; }
-  void setPoseBlendOffsets(const MatX3& offsets) { blend_ = offsets; }
+  const MatX3& poseBlend() const;  ///< every node's (evaluates the missing ones)
+  void setPoseBlendOffsets(const MatX3& offsets);
 
   /// Y = X̄ + P + u of every node (#N × 3) for a displacement vector.
   void unposed(const VecX& displacement, MatX3& Y) const;
-  /// World positions x (#N × 3) of every node for bones and a displacement vector.
+  /// World positions x (#N × 3) of every node for bones and a soft state.
   void positions(const BoneFrames& bones, const VecX& displacement, MatX3& x) const;
   /// x̂ = 2 x(q_n) − x(q_{n−1}) with the held pose blend (it carries no momentum).
   void setPrediction(const BoneFrames& bones_n, const BoneFrames& bones_nm1);
 
   /// Evaluates the node positions of the current state (bones + u); cached by `version`.
   void prepare(long version, const BoneFrames& bones) const;
+  /// Positions and unposed nodes of the prepared state: every node in the FEM; in the ROM only the
+  /// mass nodes (surface() for the surface, positions() for every node).
   const MatX3& currentPositions() const { return x_; }
   const MatX3& currentUnposed() const { return Y_; }
 
@@ -71,10 +91,25 @@ class SoftTissue {
   double gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
                  bool psd) const;
   double elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd) const;
-  /// Penalty contact of the surface nodes against colliders at time t.
+  /// Penalty contact of the surface nodes against colliders at time t: of `candidates` (surface
+  /// node indices; a broad phase's: the others must be out of contact) or, null, every one.
   double contact(const std::vector<Collider>& colliders, double time,
                  const ContactOptions& options, VecX* g, std::vector<Triplet>* H, int offset,
-                 bool psd, int* active = nullptr) const;
+                 bool psd, int* active = nullptr,
+                 const std::vector<int>* candidates = nullptr) const;
+  /// Appends the ROM's accumulated bone–z and z–z Hessian blocks (no-op for the FEM): call once
+  /// after the Hessian terms of one evaluation.
+  void flushReduced(std::vector<Triplet>& H, int offset) const;
+
+  /// Bounds for a contact broad phase: ‖Y_i − X̄_i‖ ≤ blendBound(i) · poseFeatureNorm() +
+  /// displacementWeight(i) · largestSoftState() for surface node i (pose blend plus
+  /// displacement; u_i = Σ w z over nodeDisplacementBasis with Σ w = displacementWeight).
+  double blendBound(int i) const { return blend_bound_[i]; }
+  double displacementWeight(int i) const;
+  double poseFeatureNorm() const { return feature_.norm(); }
+  double largestSoftState() const;  ///< max over the 3-blocks of the soft state of ‖·‖, m
+  /// World positions and unposed nodes of every surface node (#V × 3) at the prepared state.
+  void surface(MatX3* x, MatX3* Y) const;
 
   /// d(surface nodes)/dq rows (3#V × numDofs) as triplets.
   void surfaceJacobian(std::vector<Triplet>& triplets) const;
@@ -85,15 +120,38 @@ class SoftTissue {
     double weight;
   };
   int num_bones_ = 0, num_surface_ = 0, bone_dofs_ = 0;
+  bool reduced_ = false;
   double h_ = 0.0;
   MatX3 rest_;          // #N × 3, X̄(β)
   const MatX* posedirs_ = nullptr;  // 3#N × 207 (owned by the avatar's template)
   std::vector<int> parents_;
   MatX3 joints_;        // 24 × 3
-  MatX3 blend_;         // #N × 3
+  // Pose blend: the feature (9 · 23) of the held pose; FEM: every node's offsets in blend_.
+  // ROM: blend_ row j is current when blend_stamp_[j] == pose_stamp_, else blendOf evaluates it
+  // from posedirs_T_ (each node's 207 × 3 block contiguous, for the nodes with a slot: the
+  // surface and the mass nodes), else from posedirs.
+  VecX feature_;
+  mutable MatX3 blend_;  // #N × 3
+  int pose_stamp_ = 0;
+  mutable std::vector<int> blend_stamp_;
+  MatX posedirs_T_;
+  std::vector<int> blend_slot_;
+  VecX blend_bound_;     // #V: ‖posedirs rows of surface node i‖_F
+  VecX phi_sum_;         // #V (ROM): Σ_h φ_h(i)
   VecX mass_;           // #N
-  VecXi soft_nodes_;
-  std::vector<int> node_dof_;
+  VecXi state_nodes_;
+  std::vector<int> node_dof_;  // FEM layout: 3 · (rank among soft nodes), −1 on bone nodes
+  // ROM: u_j = Σ φ z_h over phi_[phi_start_[j] .. phi_start_[j + 1]) as (handle, φ); the
+  // handle's z offset (3h) at a handle node, −1 elsewhere.
+  std::vector<int> phi_start_;
+  std::vector<std::pair<int, double>> phi_;
+  std::vector<int> state_dof_;
+  int num_handles_ = 0;
+  // Nodes skinned by prepare() (all in the FEM), nodes with inertia mass, their masses (lumped,
+  // or the inertial cubature's) and the elastic tets' weights (1, or the elastic cubature's).
+  std::vector<int> eval_nodes_, mass_nodes_;
+  VecX inertia_mass_;
+  VecX element_weight_;
   std::vector<int> influence_start_;
   std::vector<Influence> influences_;
   MatX3 x_hat_;
@@ -116,14 +174,35 @@ class SoftTissue {
   mutable std::vector<Mat12> element_hessians_;
   mutable std::vector<Mat3> blocks_;
   mutable BonePairBlocks pair_blocks_;
+  // ROM: Hessian blocks bone rows (t, ω of each bone: 2 · 24 row blocks) × handles, and
+  // handles × handles.
+  mutable Block3Accumulator bz_blocks_, zz_blocks_;
   // Bones of the prepared state (the simulable's, which outlive every evaluation).
   mutable const std::vector<Mat3>* cur_R_ = nullptr;
   mutable const MatX3* cur_t_ = nullptr;
 
   Eigen::Matrix<double, 3, 4> elementDisplacement(int e) const;
-  Vec3 nodeDisplacement(const VecX& displacement, int j) const {
-    return node_dof_[j] < 0 ? Vec3::Zero() : Vec3(displacement.segment<3>(node_dof_[j]));
+  Vec3 nodeDisplacement(const VecX& state, int j) const {
+    if (!reduced_)
+      return node_dof_[j] < 0 ? Vec3::Zero() : Vec3(state.segment<3>(node_dof_[j]));
+    Vec3 d = Vec3::Zero();
+    for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
+      d += phi_[k].second * state.segment<3>(3 * phi_[k].first);
+    return d;
   }
+  void positionsOf(const std::vector<int>& nodes, const BoneFrames& bones, const VecX& state,
+                   MatX3& x) const;
+  Vec3 blendOf(int j) const;
+  /// Y_, x_ and node_M_ rows of `nodes` at the prepared state.
+  void skinNodes(const std::vector<int>& nodes) const;
+  // Chain rule to the soft state: g(u_j) += v; H(bone row block at `row` (6b or 6b + 3), u_j) +=
+  // B and its transpose; H(u_i, u_j) += B. FEM: straight to g / triplets; ROM: through φ into
+  // the z entries / bz_blocks_, zz_blocks_ (flushReduced emits them).
+  void addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const;
+  template <int Rows>
+  void addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
+                   const Eigen::Matrix<double, Rows, 3>& B) const;
+  void addSoftSoft(std::vector<Triplet>& H, int offset, int i, int j, const Mat3& B) const;
   /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g.
   void mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces, VecX& g,
                  int offset) const;
@@ -133,7 +212,9 @@ class SoftTissue {
   void mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                   const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset,
                   bool psd) const;
-  mutable std::vector<int> all_nodes_;
+  std::vector<int> all_nodes_, surface_nodes_;
+  mutable MatX3 contact_x_;
+  mutable VecX contact_areas_;
   mutable std::vector<Vec3> node_forces_;
   mutable std::vector<Mat3> node_blocks_;
 };

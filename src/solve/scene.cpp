@@ -39,11 +39,14 @@ Mat3 rotationCurvature(const Vec3& g, const Vec3& p) {
 /// a soft vertex is further off by at most |Σ_b w_ib R_b (Y_i − X_i)| ≤ Σ_b |w_ib| |Y_i − X_i|.
 struct Scene::AvatarContactData {
   int bones = 0;
-  // Soft tissue: the state index (in the simulable) of each vertex's u, −1 for none (bone
-  // nodes), and the unposed surface Y (#V × 3, m) of the cached posed data; with it the
-  // displacement margins of each cluster and bone group (m).
+  // Soft tissue: each vertex's u as state entries of the simulable, u_i = Σ w q.segment<3>(index)
+  // over soft_basis[soft_start[i] .. soft_start[i + 1]) (one entry per soft node in the FEM,
+  // the handles reaching it in the ROM, none on bone nodes), and the unposed surface Y (#V × 3,
+  // m) of the cached posed data; with it the displacement margins of each cluster and bone
+  // group (m).
   bool soft = false;
-  std::vector<int> soft_dof;
+  std::vector<int> soft_start;
+  std::vector<std::pair<int, double>> soft_basis;
   MatX3 surface;
   std::vector<double> cluster_shift, group_shift;
   // Per vertex i, its nonzero skinning weights: bones weight_bone[k], values weight_value[k]
@@ -399,6 +402,13 @@ NewtonOptions softTissueNewtonDefaults() {
   return options;
 }
 
+NewtonOptions reducedNewtonDefaults() {
+  NewtonOptions options;
+  options.exact_hessian = false;
+  options.gradient_tolerance = 1e-5;
+  return options;
+}
+
 Scene::Scene(const SceneOptions& options)
     : options_(options), blocks_(std::make_unique<BlockAccumulator>()) {
   const double k = options.avatar_contact_options.stiffness;
@@ -447,8 +457,15 @@ bool Scene::hasSoftTissue() const {
   return false;
 }
 
+bool Scene::hasFemSoftTissue() const {
+  for (const auto& s : simulables_)
+    if (s->numDofs() > s->numBoneDofs() && !s->hasReducedModel()) return true;
+  return false;
+}
+
 const NewtonOptions& Scene::newtonOptions() const {
-  return hasSoftTissue() ? options_.soft_tissue_newton : options_.newton;
+  if (!hasSoftTissue()) return options_.newton;
+  return hasFemSoftTissue() ? options_.soft_tissue_newton : options_.reduced_newton;
 }
 
 void Scene::ensureSolver() {
@@ -459,9 +476,12 @@ void Scene::ensureSolver() {
   // Auto, soft tissue: CHOLMOD's supernodal factor (thousands of 3 × 3 node blocks).
   if (!solver_) {
     const LinearSolverType requested = newtonOptions().linear_solver;
-    const LinearSolverType type = requested != LinearSolverType::Auto ? requested
-                                  : hasSoftTissue()                   ? LinearSolverType::Cholmod
-                                                                      : LinearSolverType::SparseLLT;
+    // Auto, reduced model only: dense up to 1500 DoFs (the handle blocks are dense).
+    const LinearSolverType type =
+        requested != LinearSolverType::Auto ? requested
+        : hasFemSoftTissue()                ? LinearSolverType::Cholmod
+        : hasSoftTissue()     ? (num_dofs_ <= 1500 ? LinearSolverType::Dense : LinearSolverType::Cholmod)
+                              : LinearSolverType::SparseLLT;
     solver_ = makeLinearSolver(type, num_dofs_);
     last_solver_dofs_ = num_dofs_;
   }
@@ -663,13 +683,14 @@ void Scene::setUpGeneralPattern() {
             pair_seen[size_t(a) * bones + b] = 1;
             blocks.emplace_back(bone0 + a, bone0 + b);
           }
-      const int u = soft ? sim.nodeSoftDof(v) : -1;
-      if (u < 0) continue;
-      // The u group of a soft node: its first DoF's group (groups of 3 after the bones).
-      const int group = bone0 + bones + (u - sim.numBoneDofs()) / 3;
-      for (int b : influencing) {
-        blocks.emplace_back(group, bone0 + b);
-        blocks.emplace_back(bone0 + b, group);
+      if (!soft) continue;
+      // The groups of the state entries u_v is made of (groups of 3 after the bones).
+      for (const auto& entry : sim.nodeDisplacementBasis(v)) {
+        const int group = bone0 + bones + (entry.first - sim.numBoneDofs()) / 3;
+        for (int b : influencing) {
+          blocks.emplace_back(group, bone0 + b);
+          blocks.emplace_back(bone0 + b, group);
+        }
       }
     }
   }
@@ -746,16 +767,18 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
     data->bones = bones;
     data->soft = sim.numDofs() > sim.numBoneDofs();
     if (data->soft) {
-      data->soft_dof.resize(V);
+      data->soft_start.assign(1, 0);
       for (int v = 0; v < V; ++v) {
-        data->soft_dof[v] = sim.nodeSoftDof(v);
-        if (data->soft_dof[v] >= 0 &&
-            (data->soft_dof[v] < sim.numBoneDofs() || data->soft_dof[v] + 3 > sim.numDofs()))
-          throw Error("Scene::avatarContactEnergy: simulable " + std::to_string(i) +
-                      ": nodeSoftDof(" + std::to_string(v) +
-                      ") = " + std::to_string(data->soft_dof[v]) +
-                      " is outside the soft-tissue DoFs [" + std::to_string(sim.numBoneDofs()) +
-                      ", " + std::to_string(sim.numDofs()) + ")");
+        for (const auto& [index, weight] : sim.nodeDisplacementBasis(v)) {
+          if (index < sim.numBoneDofs() || index + 3 > sim.numDofs())
+            throw Error("Scene::avatarContactEnergy: simulable " + std::to_string(i) +
+                        ": nodeDisplacementBasis(" + std::to_string(v) + ") names state index " +
+                        std::to_string(index) + ", outside the soft-tissue DoFs [" +
+                        std::to_string(sim.numBoneDofs()) + ", " + std::to_string(sim.numDofs()) +
+                        ")");
+          data->soft_basis.emplace_back(index, weight);
+        }
+        data->soft_start.push_back(int(data->soft_basis.size()));
       }
     }
     data->weight_start.reserve(V + 1);
@@ -986,6 +1009,7 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
   Mat9 hess9;
   std::vector<Mat36> P;  // ∂x/∂(t_k, δω_k) per weight of the vertex
   std::vector<Mat36> HxxP;
+  std::vector<Mat36> Huk;  // ∂²E/∂u∂(t_k, δω_k) per weight (soft vertices)
   std::vector<Vec3> p_rotated;  // R_k (X − J_k) per weight of the vertex
   for (int ia = 0; ia < n_sim; ++ia) {
     AvatarContactData& A = *contact_data_[ia];
@@ -1042,13 +1066,15 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
         // and a' = R_b (a − J_b) + t_b.
         const int w_begin = A.weight_start[v], w_end = A.weight_start[v + 1];
         const int nw = w_end - w_begin;
-        const int soft_dof = A.soft ? A.soft_dof[v] : -1;
+        const int s_begin = A.soft ? A.soft_start[v] : 0;
+        const int s_end = A.soft ? A.soft_start[v + 1] : 0;
+        const bool has_u = s_end > s_begin;
         p_rotated.resize(nw);
         Mat3 M = Mat3::Zero();
         for (int w = 0; w < nw; ++w) {
           const int bone = A.weight_bone[w_begin + w];
           p_rotated[w] = RA[bone] * (YA.row(v) - JA.row(bone)).transpose();
-          if (soft_dof >= 0) M += A.weight_value[w_begin + w] * RA[bone];
+          if (has_u) M += A.weight_value[w_begin + w] * RA[bone];
         }
         const Vec3 gx = grad9.segment<3>(0), ga = grad9.segment<3>(3), gb = grad9.segment<3>(6);
         if (g) {
@@ -1061,7 +1087,11 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
           const int dof = offsets_[ib] + 6 * cap.bone;
           g->segment<3>(dof) += ga + gb;
           g->segment<3>(dof + 3) += cap.a_rotated.cross(ga) + cap.b_rotated.cross(gb);
-          if (soft_dof >= 0) g->segment<3>(offsets_[ia] + soft_dof) += M.transpose() * gx;
+          if (has_u) {
+            const Vec3 gu = M.transpose() * gx;
+            for (int k = s_begin; k < s_end; ++k)
+              g->segment<3>(offsets_[ia] + A.soft_basis[k].first) += A.soft_basis[k].second * gu;
+          }
         }
         if (!H) continue;
         P.resize(nw);
@@ -1094,23 +1124,35 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
             blocks_->at(bone_k, bone_k).bottomRightCorner<3, 3>() +=
                 A.weight_value[w_begin + w] * rotationCurvature(gx, p_rotated[w]);
         }
-        if (soft_dof >= 0) {
+        if (has_u) {
           // u rows: Mᵀ Hxx M with itself, Mᵀ Hxx P_k with A's bones (plus, exact, the term of
-          // x's change w_k [δω_k]× R_k δu: ∂²E/∂u∂δω_k = w_k R_kᵀ [gx]×), Mᵀ Hxy Q with B's bone.
-          const int du = offsets_[ia] + soft_dof;
+          // x's change w_k [δω_k]× R_k δu: ∂²E/∂u∂δω_k = w_k R_kᵀ [gx]×), Mᵀ Hxy Q with B's bone;
+          // then through u = Σ w q_index to the state entries.
           const Mat3 MtH = M.transpose() * Hxx;
-          appendBlock(*H, du, du, MtH * M);
+          const Mat3 Huu = MtH * M;
+          const Mat36 HuB = M.transpose() * HxyQ;
+          Huk.resize(nw);
           for (int w = 0; w < nw; ++w) {
             const int bone_k = A.weight_bone[w_begin + w];
-            Mat36 Huk = MtH * P[w];
+            Huk[w] = MtH * P[w];
             if (!psd)
-              Huk.rightCols<3>() += A.weight_value[w_begin + w] * RA[bone_k].transpose() * skew(gx);
-            appendBlock(*H, du, offsets_[ia] + 6 * bone_k, Huk);
-            appendBlock(*H, offsets_[ia] + 6 * bone_k, du, Huk.transpose());
+              Huk[w].rightCols<3>() +=
+                  A.weight_value[w_begin + w] * RA[bone_k].transpose() * skew(gx);
           }
-          const Mat36 HuB = M.transpose() * HxyQ;
-          appendBlock(*H, du, offsets_[ib] + 6 * cap.bone, HuB);
-          appendBlock(*H, offsets_[ib] + 6 * cap.bone, du, HuB.transpose());
+          for (int k = s_begin; k < s_end; ++k) {
+            const int du = offsets_[ia] + A.soft_basis[k].first;
+            const double wk = A.soft_basis[k].second;
+            for (int l = s_begin; l < s_end; ++l)
+              appendBlock(*H, du, offsets_[ia] + A.soft_basis[l].first,
+                          (wk * A.soft_basis[l].second) * Huu);
+            for (int w = 0; w < nw; ++w) {
+              const int bone_k = A.weight_bone[w_begin + w];
+              appendBlock(*H, du, offsets_[ia] + 6 * bone_k, wk * Huk[w]);
+              appendBlock(*H, offsets_[ia] + 6 * bone_k, du, wk * Huk[w].transpose());
+            }
+            appendBlock(*H, du, offsets_[ib] + 6 * cap.bone, wk * HuB);
+            appendBlock(*H, offsets_[ib] + 6 * cap.bone, du, wk * HuB.transpose());
+          }
         }
       }
       if (H) {

@@ -3,8 +3,8 @@
 // The skeleton model needs no tetrahedral mesh: its mass properties come from the closed rest
 // surface filled with a uniform density (computeBoneInertia) and its collision proxies are one
 // capsule per bone (fitBoneCapsules). With soft tissue the volumetric body is built on top
-// (volumetric_data.h). The reduced model (ROM) is not part of this version; asking for it is
-// an error rather than a silent fallback.
+// (volumetric_data.h), and for the reduced model (ROM) its handles, basis and cubatures
+// (reduced_data.h).
 #include "flsh/volume/soft_avatar.h"
 
 #include <Eigen/Geometry>
@@ -89,13 +89,14 @@ SoftAvatar::SoftAvatar(std::shared_ptr<const BodyModel> body, const VecX& betas,
 
 void SoftAvatar::initVolumetricData() {
   if (initialized_) return;
-  // The cubatures refine the reduced model; without it they have nothing to act on and are
-  // ignored (as the reduced model is without soft tissue).
-  if (soft_tissue_ && reduced_)
-    throw Error(
-        "SoftAvatar::initVolumetricData: the reduced soft-tissue model (ROM: handle basis and "
-        "cubature) is not available yet in this version of flsh; use the FEM soft skeleton "
-        "(enableReducedModel(false)) or the skeleton (enableSoftTissue(false))");
+  // The reduced model is a soft-tissue model: without soft tissue there is nothing to reduce,
+  // and silently simulating the skeleton instead would hide the mistake. The cubatures refine
+  // the reduced model; without it they have nothing to act on and are ignored.
+  if (reduced_ && !soft_tissue_)
+    throw InputError(
+        "SoftAvatar::initVolumetricData: the reduced model is enabled but soft tissue is off; "
+        "the reduced model (ROM soft skeleton) is a soft-tissue model: call enableSoftTissue() "
+        "too, or enableReducedModel(false) for the skeleton");
   const auto start = std::chrono::steady_clock::now();
   const BodyModel& body = *body_;
   MatX3 vertices = shapedVertices(body, betas_);
@@ -136,10 +137,38 @@ void SoftAvatar::initVolumetricData() {
   volume_ = volume;
   skeleton_seconds_ =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // Built into locals first: a failing reduced build leaves no half-built avatar behind.
+  std::shared_ptr<const VolumetricData> volumetric;
+  VolumetricBuildReport volumetric_report;
+  std::shared_ptr<const ReducedData> reduced_data;
+  ReducedBuildReport reduced_report;
   if (soft_tissue_)
-    volumetric_ = std::make_shared<const VolumetricData>(
-        buildVolumetricData(body, betas_, settings_.volumetric, &build_report_));
+    volumetric = std::make_shared<const VolumetricData>(
+        buildVolumetricData(body, betas_, settings_.volumetric, &volumetric_report));
+  if (soft_tissue_ && reduced_) {
+    std::unique_ptr<AvatarCache> cache;
+    if (settings_.volumetric.use_cache)
+      cache = std::make_unique<AvatarCache>(settings_.volumetric.cache_dir);
+    reduced_data = std::make_shared<const ReducedData>(
+        buildReducedData(*volumetric, body, settings_.reduced, elastic_cubature_,
+                         inertial_cubature_, cache.get(), &reduced_report));
+  }
+  volumetric_ = std::move(volumetric);
+  build_report_ = std::move(volumetric_report);
+  reduced_data_ = std::move(reduced_data);
+  reduced_report_ = std::move(reduced_report);
   initialized_ = true;
+}
+
+const ReducedData& SoftAvatar::reducedData() const {
+  if (!reduced_data_)
+    throw Error(std::string("SoftAvatar::reducedData: ") +
+                (soft_tissue_ && reduced_
+                     ? "call initVolumetricData() first"
+                     : "this avatar has no reduced data (the reduced model is off: "
+                       "enableSoftTissue() and enableReducedModel() before "
+                       "initVolumetricData())"));
+  return *reduced_data_;
 }
 
 const VolumetricData& SoftAvatar::volumetricData() const {

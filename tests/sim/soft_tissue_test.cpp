@@ -1,4 +1,5 @@
-// The FEM soft skeleton through the Simulable API: state layout, the assembled energies against
+// The soft-tissue models through the Simulable API, each test run for the FEM soft skeleton and
+// for the ROM (reduced basis, both cubatures on): state layout, the assembled energies against
 // finite differences, rest equilibrium, static sag, soft-tissue motion after a jump that decays,
 // and the extreme cases of the skeleton, on a small synthetic body with a coarse tet mesh.
 #include <gtest/gtest.h>
@@ -26,20 +27,39 @@ using test::atMovedState;
 
 MatX dense(const std::vector<Triplet>& H, int n) { return test::denseFromTriplets(H, n); }
 
-// A soft avatar of the 800-vertex synthetic body (coarse interior), built once per binary.
-std::shared_ptr<const SoftAvatar> softAvatar() {
-  static std::shared_ptr<const SoftAvatar> avatar = [] {
+enum class Model { Fem, Rom };
+
+// Soft avatars of the 800-vertex synthetic body (coarse interior), built once per binary: the FEM
+// soft skeleton, and the ROM with 16 handles and both cubatures (60 tets each).
+std::shared_ptr<const SoftAvatar> softAvatar(Model model) {
+  static const std::string cache = test::freshTempDir("soft_tissue_cache");
+  auto make = [](bool reduced) {
     SoftAvatarSettings settings;
     settings.voxel_size = 0.02;
-    settings.volumetric.cache_dir = test::freshTempDir("soft_tissue_cache");
+    settings.volumetric.cache_dir = cache;
     settings.volumetric.tet_mesh.resolution = 0.5;
+    settings.reduced.num_handles = 16;
+    settings.reduced.elastic_cubature_points = 60;
+    settings.reduced.inertial_cubature_points = 60;
+    settings.reduced.training_samples = 80;
     auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), settings);
     a->enableSoftTissue();
+    a->enableReducedModel(reduced);
+    a->enableElasticCubature(reduced);
+    a->enableInertialCubature(reduced);
     a->initVolumetricData();
     return a;
-  }();
-  return avatar;
+  };
+  static std::shared_ptr<const SoftAvatar> fem = make(false);
+  if (model == Model::Fem) return fem;
+  static std::shared_ptr<const SoftAvatar> rom = make(true);
+  return rom;
 }
+
+class SoftTissueModel : public ::testing::TestWithParam<Model> {
+ protected:
+  std::shared_ptr<const SoftAvatar> avatar() const { return softAvatar(GetParam()); }
+};
 
 std::shared_ptr<const Motion> walk() { return test::smallScene(800).walk; }
 
@@ -109,8 +129,9 @@ NewtonResult stepOnce(Simulable& sim, LinearSolver* solver, double tolerance = 1
 
 // A walking soft avatar one step in, moved off the prediction (displacements too), on a ground
 // plane 1.5 cm above its lowest vertex.
-std::unique_ptr<Simulable> movedSoftAvatar(unsigned seed) {
-  auto sim = std::make_unique<Simulable>(softAvatar(), walk());
+std::unique_ptr<Simulable> movedSoftAvatar(std::shared_ptr<const SoftAvatar> avatar,
+                                           unsigned seed) {
+  auto sim = std::make_unique<Simulable>(avatar, walk());
   sim->initialize();
   sim->preUpdate();
   sim->updateState(randomIncrement(*sim, 0.03, 0.001, seed));
@@ -186,35 +207,47 @@ void checkPart(Simulable& sim, bool dynamic) {
 
 // ---- layout and rest --------------------------------------------------------------------------
 
-TEST(SoftTissueModel, StateLayoutFollowsTheVolumetricBody) {
-  Simulable sim(softAvatar(), walk());
-  const VolumetricData& data = softAvatar()->volumetricData();
+TEST_P(SoftTissueModel, StateLayoutFollowsTheVolumetricBody) {
+  Simulable sim(avatar(), walk());
+  const VolumetricData& data = avatar()->volumetricData();
   ASSERT_TRUE(sim.hasSoftTissue());
-  const int soft = int(sim.softNodes().size());
-  EXPECT_EQ(soft, data.numNodes() - data.numBoneNodes());
-  EXPECT_GT(soft, 0);
-  EXPECT_EQ(sim.numDofs(), 144 + 3 * soft);
+  const bool rom = GetParam() == Model::Rom;
+  EXPECT_EQ(sim.hasReducedModel(), rom);
+  const int blocks = int(sim.softNodes().size());
+  EXPECT_EQ(blocks, rom ? avatar()->reducedData().numHandles()
+                        : data.numNodes() - data.numBoneNodes());
+  EXPECT_GT(blocks, 0);
+  EXPECT_EQ(sim.numDofs(), 144 + 3 * blocks);
   EXPECT_EQ(sim.numBoneDofs(), 144);
-  for (int k = 0; k < soft; ++k) {
+  for (int k = 0; k < blocks; ++k) {
     const int j = sim.softNodes()[k];
     EXPECT_LT(data.bone_of_node[j], 0);
     EXPECT_EQ(sim.nodeSoftDof(j), 144 + 3 * k);
+    const auto basis = sim.nodeDisplacementBasis(j);  // FEM node or ROM handle: u_j = z
+    ASSERT_EQ(basis.size(), 1u);
+    EXPECT_EQ(basis[0].first, 144 + 3 * k);
+    EXPECT_EQ(basis[0].second, 1.0);
   }
+  int own = 0;
   for (int j = 0; j < data.numNodes(); ++j) {
     if (data.bone_of_node[j] >= 0) {
       EXPECT_EQ(sim.nodeSoftDof(j), -1);
+      EXPECT_TRUE(sim.nodeDisplacementBasis(j).empty());
     }
+    own += sim.nodeSoftDof(j) >= 0;
   }
+  EXPECT_EQ(own, blocks);
   EXPECT_THROW(sim.nodeSoftDof(data.numNodes()), InputError);
+  EXPECT_THROW(sim.nodeDisplacementBasis(-1), InputError);
   EXPECT_EQ(sim.getVolumeNodes().rows(), data.numNodes());
 }
 
-TEST(SoftTissueModel, InitialSurfaceIsTheSmplMeshAndStateRoundTrips) {
-  Simulable sim(softAvatar(), walk());
+TEST_P(SoftTissueModel, InitialSurfaceIsTheSmplMeshAndStateRoundTrips) {
+  Simulable sim(avatar(), walk());
   sim.initialize();
   const VecX pose = walk()->poses.row(0).transpose();
   const MatX3 smpl =
-      poseBody(softAvatar()->body(), softAvatar()->betas(), pose, walk()->trans.row(0).transpose())
+      poseBody(avatar()->body(), avatar()->betas(), pose, walk()->trans.row(0).transpose())
           .vertices;
   EXPECT_LT((sim.getVertices() - smpl).cwiseAbs().maxCoeff(), 1e-10);
   EXPECT_EQ(sim.getSoftTissueDisplacements().cwiseAbs().maxCoeff(), 0.0);
@@ -229,20 +262,24 @@ TEST(SoftTissueModel, InitialSurfaceIsTheSmplMeshAndStateRoundTrips) {
   EXPECT_EQ(sim.getState(), q0);
   sim.setState(q1);
   EXPECT_LT((sim.getState() - q1).cwiseAbs().maxCoeff(), 1e-12);
-  // Surface displacements are the state's entries of the surface soft nodes.
+  // Surface displacements are the combinations of state entries nodeDisplacementBasis says.
   const MatX3 u = sim.getSoftTissueDisplacements();
+  int moved = 0;
   for (int i = 0; i < u.rows(); ++i) {
-    const int dof = sim.nodeSoftDof(i);
-    if (dof >= 0) EXPECT_EQ(u.row(i).transpose(), q1.segment<3>(dof));
-    else EXPECT_TRUE(u.row(i).isZero(0.0));
+    Vec3 expected = Vec3::Zero();
+    for (const auto& [index, weight] : sim.nodeDisplacementBasis(i))
+      expected += weight * q1.segment<3>(index);
+    EXPECT_LT((u.row(i).transpose() - expected).norm(), 1e-15) << "vertex " << i;
+    moved += !expected.isZero(0.0);
   }
+  EXPECT_GT(moved, 0);
   EXPECT_THROW(sim.setState(VecX::Zero(144)), InputError);
 }
 
-TEST(SoftTissueModel, RestIsAnEquilibriumOfTheElasticEnergy) {
+TEST_P(SoftTissueModel, RestIsAnEquilibriumOfTheElasticEnergy) {
   SimulableOptions options;
   options.gravity.setZero();
-  Simulable sim(softAvatar(), nullptr, options);
+  Simulable sim(avatar(), nullptr, options);
   sim.initialize();
   sim.setStatic(true);
   VecX g = VecX::Zero(sim.numDofs());
@@ -259,13 +296,13 @@ TEST(SoftTissueModel, RestIsAnEquilibriumOfTheElasticEnergy) {
 
 // ---- derivatives of the assembled model --------------------------------------------------------
 
-TEST(SoftTissueModel, DynamicEnergyDerivativesMatchFiniteDifferences) {
-  auto sim = movedSoftAvatar(11);
+TEST_P(SoftTissueModel, DynamicEnergyDerivativesMatchFiniteDifferences) {
+  auto sim = movedSoftAvatar(avatar(), 11);
   checkPart(*sim, true);
 }
 
-TEST(SoftTissueModel, PotentialEnergyDerivativesMatchFiniteDifferences) {
-  auto sim = movedSoftAvatar(12);
+TEST_P(SoftTissueModel, PotentialEnergyDerivativesMatchFiniteDifferences) {
+  auto sim = movedSoftAvatar(avatar(), 12);
   ASSERT_GT(sim->stats().active_contacts + [&] {
     sim->getPotentialEnergyScalar();
     return sim->stats().active_contacts;
@@ -273,8 +310,8 @@ TEST(SoftTissueModel, PotentialEnergyDerivativesMatchFiniteDifferences) {
   checkPart(*sim, false);
 }
 
-TEST(SoftTissueModel, PsdHessianIsPositiveSemidefinite) {
-  auto sim = movedSoftAvatar(13);
+TEST_P(SoftTissueModel, PsdHessianIsPositiveSemidefinite) {
+  auto sim = movedSoftAvatar(avatar(), 13);
   // Compress some tets so that the tissue has compressive stress somewhere.
   VecX d = VecX::Zero(sim->numDofs());
   d.tail(sim->numDofs() - 144) = randomVector(sim->numDofs() - 144, 0.01, 9);
@@ -302,8 +339,8 @@ TEST(SoftTissueModel, PsdHessianIsPositiveSemidefinite) {
   EXPECT_GT((He - H).norm(), 0.0);
 }
 
-TEST(SoftTissueModel, NodesStateJacobianMatchesFiniteDifferences) {
-  auto sim = movedSoftAvatar(14);
+TEST_P(SoftTissueModel, NodesStateJacobianMatchesFiniteDifferences) {
+  auto sim = movedSoftAvatar(avatar(), 14);
   const int n = sim->numDofs();
   const MatX D = MatX(sim->getNodesStateJacobian());
   const std::vector<int> idx = checkedCoordinates(*sim, 60, 21);
@@ -319,8 +356,8 @@ TEST(SoftTissueModel, NodesStateJacobianMatchesFiniteDifferences) {
   EXPECT_TRUE(jacobianMatchesFiniteDifferences(nodes, VecX::Zero(idx.size()), D_sub, 1e-6));
 }
 
-TEST(SoftTissueModel, DerivativeCallsDoNotChangeTheState) {
-  auto sim = movedSoftAvatar(15);
+TEST_P(SoftTissueModel, DerivativeCallsDoNotChangeTheState) {
+  auto sim = movedSoftAvatar(avatar(), 15);
   const VecX q = sim->getState();
   const MatX3 x = sim->getVolumeNodes();
   VecX g = VecX::Zero(sim->numDofs());
@@ -334,8 +371,8 @@ TEST(SoftTissueModel, DerivativeCallsDoNotChangeTheState) {
   EXPECT_EQ(sim->getVolumeNodes(), x);
 }
 
-TEST(SoftTissueModel, InvertedElementsGiveFiniteEnergies) {
-  auto sim = movedSoftAvatar(16);
+TEST_P(SoftTissueModel, InvertedElementsGiveFiniteEnergies) {
+  auto sim = movedSoftAvatar(avatar(), 16);
   // Displacements of 10 cm in random directions invert many of the coarse tets.
   VecX d = VecX::Zero(sim->numDofs());
   d.tail(sim->numDofs() - 144) = randomVector(sim->numDofs() - 144, 0.1, 17);
@@ -349,8 +386,8 @@ TEST(SoftTissueModel, InvertedElementsGiveFiniteEnergies) {
   for (const Triplet& t : H) ASSERT_TRUE(std::isfinite(t.value()));
 }
 
-TEST(SoftTissueModel, AdjointCallsSayTheyCoverTheSkeletonOnly) {
-  auto sim = movedSoftAvatar(18);
+TEST_P(SoftTissueModel, AdjointCallsSayTheyCoverTheSkeletonOnly) {
+  auto sim = movedSoftAvatar(avatar(), 18);
   const std::string msg =
       test::messageOf<Error>([&] { sim->getGradientParameterJacobian(SimParameter::PoseTargets); });
   EXPECT_NE(msg.find("skeleton"), std::string::npos) << msg;
@@ -359,10 +396,10 @@ TEST(SoftTissueModel, AdjointCallsSayTheyCoverTheSkeletonOnly) {
 
 // ---- dynamics -----------------------------------------------------------------------------------
 
-TEST(SoftTissueModel, StaticGravitySagConverges) {
+TEST_P(SoftTissueModel, StaticGravitySagConverges) {
   SimulableOptions options;
   for (int b = 0; b < 24; ++b) options.kinematic_bones.push_back(b);  // the skeleton holds still
-  Simulable sim(softAvatar(), nullptr, options);
+  Simulable sim(avatar(), nullptr, options);
   sim.initialize();
   sim.setStatic(true);
   auto solver = makeLinearSolver(LinearSolverType::Cholmod, sim.numDofs());
@@ -389,7 +426,7 @@ TEST(SoftTissueModel, StaticGravitySagConverges) {
 
 // A hop (0.4 s up and down) then standing still: the tissue moves with the landing and its
 // motion dies out once the body stands still (backward Euler damps it, no energy is injected).
-TEST(SoftTissueModel, JumpMakesTheTissueMoveAndTheMotionDecays) {
+TEST_P(SoftTissueModel, JumpMakesTheTissueMoveAndTheMotionDecays) {
   const double fps = 30.0;
   Motion hop;
   const int frames = 45;
@@ -403,7 +440,7 @@ TEST(SoftTissueModel, JumpMakesTheTissueMoveAndTheMotionDecays) {
   auto mocap = std::make_shared<Motion>(hop);
   SimulableOptions options;
   options.time_step = 1.0 / 30.0;
-  Simulable sim(softAvatar(), mocap, options);
+  Simulable sim(avatar(), mocap, options);
   sim.initialize();
   auto solver = makeLinearSolver(LinearSolverType::Cholmod, sim.numDofs());
   std::vector<double> speed;  // max ‖u̇‖ over the soft nodes, m/s
@@ -422,7 +459,7 @@ TEST(SoftTissueModel, JumpMakesTheTissueMoveAndTheMotionDecays) {
   EXPECT_LT(late, 0.25 * peak) << "tissue motion decays once the body stands still";
 }
 
-TEST(SoftTissueModel, ExtremeCasesStayFinite) {
+TEST_P(SoftTissueModel, ExtremeCasesStayFinite) {
   struct Case {
     const char* name;
     double h, tracking;
@@ -439,7 +476,7 @@ TEST(SoftTissueModel, ExtremeCasesStayFinite) {
     SimulableOptions options;
     options.time_step = c.h;
     options.tracking_stiffness = c.tracking;
-    Simulable sim(softAvatar(), walk(), options);
+    Simulable sim(avatar(), walk(), options);
     sim.initialize();
     if (c.spin != 0.0) {
       VecX d = VecX::Zero(sim.numDofs());
@@ -459,6 +496,11 @@ TEST(SoftTissueModel, ExtremeCasesStayFinite) {
     }
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(Models, SoftTissueModel, ::testing::Values(Model::Fem, Model::Rom),
+                         [](const ::testing::TestParamInfo<Model>& info) {
+                           return info.param == Model::Fem ? "Fem" : "Rom";
+                         });
 
 }  // namespace
 }  // namespace flsh

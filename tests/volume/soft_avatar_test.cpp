@@ -1,7 +1,6 @@
-// SoftAvatar: constructor checks and β padding, the FEM volumetric body with its cache, the ROM
-// error, the
-// rest data it builds (shape, joints, vertex areas, volume, masses, capsules), idempotence,
-// determinism and the effect of β.
+// SoftAvatar: constructor checks and β padding, the FEM volumetric body with its cache, the
+// reduced model's need for soft tissue, the rest data it builds (shape, joints, vertex areas,
+// volume, masses, capsules), idempotence, determinism and the effect of β.
 #include "flsh/volume/soft_avatar.h"
 
 #include <gtest/gtest.h>
@@ -72,19 +71,21 @@ SoftAvatarSettings cachedSettings(const std::string& cache_dir) {
   return settings;
 }
 
-TEST(SoftAvatar, ReducedModelIsNotAvailableYet) {
+// The reduced model is a soft-tissue model: without soft tissue it is an input error, and the
+// avatar stays buildable once the settings are fixed (the ROM itself: reduced_data_test.cpp).
+TEST(SoftAvatar, ReducedModelNeedsSoftTissue) {
   SoftAvatar avatar(smallSyntheticBody(), VecX::Zero(10),
-                    cachedSettings(test::freshTempDir("rom_not_available")));
-  avatar.enableSoftTissue(true);
+                    cachedSettings(test::freshTempDir("rom_needs_soft_tissue")));
   avatar.enableReducedModel(true);
-  const std::string msg = messageOf<Error>([&] { avatar.initVolumetricData(); });
-  EXPECT_NE(msg.find("ROM"), std::string::npos) << msg;
-  EXPECT_NE(msg.find("not available"), std::string::npos) << msg;
+  const std::string msg = messageOf<InputError>([&] { avatar.initVolumetricData(); });
+  EXPECT_NE(msg.find("soft tissue is off"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("enableSoftTissue()"), std::string::npos) << msg;
   EXPECT_FALSE(avatar.initialized());
   avatar.enableReducedModel(false);
   avatar.initVolumetricData();
   EXPECT_TRUE(avatar.initialized());
-  EXPECT_TRUE(avatar.hasVolumetricData());
+  EXPECT_FALSE(avatar.hasVolumetricData());
+  EXPECT_FALSE(avatar.hasReducedData());
 }
 
 TEST(SoftAvatar, SkeletonAvatarBuildsNoTetMesh) {

@@ -18,6 +18,7 @@
 
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "flsh/contact/collider.h"
@@ -171,14 +172,25 @@ class Simulable {
   //   x_j = Σ_b w_jb (R_b (Y_j − J_b) + t_b),  Y_j = X̄_j(β) + P_j(θ_n) + u_j,
   // with P_j the pose blend offsets at the pose of the last converged state (held during a
   // step) and u_j = 0 on bone nodes. The surface vertices are tet nodes 0..V−1.
+  // With SoftAvatar::enableReducedModel() too (the ROM, docs/rom.md) the bones are followed by
+  // one z_h (3 values, m) per handle of the avatar's reduced basis instead, and
+  // u_j = Σ_h φ_h(j) z_h (bounded biharmonic weights φ; at a handle u = z_h).
   bool hasSoftTissue() const;
+  bool hasReducedModel() const;  ///< the ROM (a soft-tissue model with the reduced basis)
   int numBoneDofs() const;  ///< 6 · 24
-  /// Tet-node index of each soft-tissue node, in state order ((numDofs − numBoneDofs) / 3
-  /// entries; empty for the skeleton model).
+  /// The tet node of each 3-value block of the soft state, in state order ((numDofs −
+  /// numBoneDofs) / 3 entries): every soft-tissue node (FEM) or the handles (ROM); empty for the
+  /// skeleton model.
   const VecXi& softNodes() const;
-  /// State index of tet node j's first displacement value, −1 for a bone node (and for every
-  /// vertex of the skeleton model). Throws InputError for j outside the nodes.
+  /// State index of tet node j's first displacement value when u_j is a state entry of its own,
+  /// else −1: bone nodes, every vertex of the skeleton model, and in the ROM every node but the
+  /// handles (use nodeDisplacementBasis). Throws InputError for j outside the nodes.
   int nodeSoftDof(int j) const;
+  /// u_j as a combination of state entries: u_j = Σ weight · q.segment<3>(index) over the
+  /// returned (index, weight) pairs; empty for bone nodes and the skeleton model. FEM: one pair
+  /// (nodeSoftDof(j), 1); ROM: (index of z_h, φ_h(j)) for the handles whose φ reaches j. Throws
+  /// InputError for j outside the nodes.
+  std::vector<std::pair<int, double>> nodeDisplacementBasis(int j) const;
   /// Soft-tissue displacements u of the surface vertices (#V × 3, m, unposed space); zero on
   /// bone nodes and for the skeleton model.
   MatX3 getSoftTissueDisplacements() const;

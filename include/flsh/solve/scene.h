@@ -64,6 +64,8 @@ class HessianAssembler {
 
 /// The Newton settings SceneOptions::soft_tissue_newton starts from (see there).
 NewtonOptions softTissueNewtonDefaults();
+/// The Newton settings SceneOptions::reduced_newton starts from (see there).
+NewtonOptions reducedNewtonDefaults();
 
 struct SceneOptions {
   /// Newton of skeleton-only scenes. newton.linear_solver = Auto gives the scene the simplicial
@@ -81,6 +83,11 @@ struct SceneOptions {
   /// soft-tissue displacement) of a 1e-8 solve over 15 steps at 1.9 steps/s, where 1e-6 runs
   /// at 1.3 steps/s and 1e-4 at 2.1 steps/s with 1.1 mm (docs/benchmarks.md).
   NewtonOptions soft_tissue_newton = softTissueNewtonDefaults();
+  /// Newton of scenes whose soft-tissue simulables all use the reduced model (ROM), used
+  /// instead of `newton` and `soft_tissue_newton`. Defaults (reducedNewtonDefaults()): the PSD
+  /// Hessian, gradient_tolerance 1e-5, linear_solver = Auto, which here means the dense LLT up
+  /// to 1500 DoFs (the handle block is dense: a few hundred DoFs per avatar) and CHOLMOD above.
+  NewtonOptions reduced_newton = reducedNewtonDefaults();
   /// Assemble the Hessian on the general pattern (HessianAssembler) even when no simulable has
   /// soft tissue. The skeleton then gets bitwise the same Hessians and states (its general
   /// pattern equals the block pattern) at some cost in speed: for tests and comparisons.
@@ -114,12 +121,15 @@ class Scene : public Objective {
   void addCollider(const Collider& collider);
   /// Calls initialize() on every simulable.
   void initialize();
-  /// One backward-Euler step of every simulable: preUpdate, Newton (options().newton, or
-  /// options().soft_tissue_newton when hasSoftTissue()), postUpdate.
+  /// One backward-Euler step of every simulable: preUpdate, Newton (newtonOptions()),
+  /// postUpdate.
   StepStats step();
   /// True when some simulable has soft-tissue DoFs (numDofs() > numBoneDofs()).
   bool hasSoftTissue() const;
-  /// The Newton settings step() uses (see step()).
+  /// True when some simulable has FEM soft tissue (soft-tissue DoFs, not the reduced model).
+  bool hasFemSoftTissue() const;
+  /// The Newton settings step() uses: options().newton for skeletons only, else
+  /// options().soft_tissue_newton with FEM soft tissue, else options().reduced_newton.
   const NewtonOptions& newtonOptions() const;
   double time() const;
   void setStatic(bool on);

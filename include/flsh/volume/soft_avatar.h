@@ -25,6 +25,7 @@
 
 #include "flsh/body/body_model.h"
 #include "flsh/core/types.h"
+#include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
 
 namespace flsh {
@@ -52,6 +53,9 @@ struct SoftAvatarSettings {
   double voxel_size = 0.01;   ///< voxel edge used to integrate mass properties, m
   /// The volumetric body of the soft-tissue models: tet-mesh resolution, material file, cache.
   VolumetricSettings volumetric;
+  /// The reduced model's handles, basis and cubatures (used with enableReducedModel(); cached
+  /// in the same directory as the volumetric body, under volumetric.use_cache).
+  ReducedSettings reduced;
 };
 
 class SoftAvatar {
@@ -62,9 +66,11 @@ class SoftAvatar {
 
   // Settings of the FLSH paper. Soft tissue off: the articulated skeleton (no tet mesh is
   // built). On: the FEM soft skeleton, whose volumetric body (tet mesh, interior fields, bone
-  // nodes, materials) initVolumetricData() builds or loads from the cache. The reduced model
-  // (ROM: handle basis and cubatures) is not available yet in this version: asking for it makes
-  // initVolumetricData() throw an Error that says so.
+  // nodes, materials) initVolumetricData() builds or loads from the cache. Soft tissue and the
+  // reduced model on: the ROM soft skeleton, which adds the reduced data (handles, basis and the
+  // cubatures switched on here) on top of the volumetric body. The reduced model is a
+  // soft-tissue model: enabling it without soft tissue makes initVolumetricData() throw
+  // InputError. The cubature flags only act on the reduced model and are ignored without it.
   void enableSoftTissue(bool on = true) { soft_tissue_ = on; }
   void enableReducedModel(bool on = true) { reduced_ = on; }
   void enableInertialCubature(bool on = true) { inertial_cubature_ = on; }
@@ -98,6 +104,12 @@ class SoftAvatar {
   /// avatar.
   const VolumetricData& volumetricData() const;
   bool hasVolumetricData() const { return volumetric_ != nullptr; }
+  /// The reduced data (soft tissue and reduced model on); throws Error for another model or an
+  /// uninitialized avatar.
+  const ReducedData& reducedData() const;
+  bool hasReducedData() const { return reduced_data_ != nullptr; }
+  /// Cache hit, warnings and seconds per stage of the reduced build (all zero without it).
+  const ReducedBuildReport& reducedBuildReport() const { return reduced_report_; }
   /// Cache hits, warnings and seconds per stage of the volumetric build (all zero without it);
   /// `skeletonSeconds()` is the time of the skeleton part (inertia, capsules).
   const VolumetricBuildReport& volumetricBuildReport() const { return build_report_; }
@@ -137,6 +149,8 @@ class SoftAvatar {
   VecX volume_shape_gradient_;
   std::shared_ptr<const VolumetricData> volumetric_;
   VolumetricBuildReport build_report_;
+  std::shared_ptr<const ReducedData> reduced_data_;
+  ReducedBuildReport reduced_report_;
   double skeleton_seconds_ = 0.0;
 };
 

@@ -1,0 +1,84 @@
+// The precomputed data of the ROM soft skeleton (ARCHITECTURE.md §4), the third level of the
+// avatar build after the template (tet mesh, fields) and the shape (X̄(β), bone nodes,
+// materials):
+//  - handles: surface soft-tissue nodes chosen by geodesic farthest-point sampling;
+//  - basis: bounded biharmonic weights φ_h on the tet mesh at X̄(β), so that the soft-tissue
+//    displacement of node j is u_j = Σ_h φ_h(j) z_h (z_h ∈ R³, m, unposed space);
+//  - elastic cubature: sample tets and weights w_e ≥ 0 with Σ_{e∈S} w_e Ψ_e ≈ Σ_e Ψ_e for the
+//    elastic energy of subspace deformations;
+//  - inertial cubature: sample tets and weights for the lumped-mass kinetic energy of the nodes,
+//    Σ_{e∈S} w_e Σ_{a∈e} (m_e/4) ‖v_a‖² ≈ Σ_e Σ_{a∈e} (m_e/4) ‖v_a‖², for velocities made of
+//    skinned rigid bone motions plus subspace motions. Equivalently a sparse set of node masses
+//    (inertialNodeMasses).
+// Both cubatures are trained without simulation data (random subspace deformations and
+// velocities) by Optimized Cubature (cubature.h) and checked on held-out samples. Everything is
+// cached on disk under a key that hashes the shape level's key and these settings.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "flsh/core/types.h"
+#include "flsh/volume/avatar_cache.h"
+#include "flsh/volume/cubature.h"
+#include "flsh/volume/reduced_basis.h"
+#include "flsh/volume/volumetric_data.h"
+
+namespace flsh {
+
+struct ReducedSettings {
+  int num_handles = 87;                 ///< point handles on the surface (≥ 1)
+  /// Sample tets of each cubature (≥ 1); a cubature that is switched off is not built.
+  int elastic_cubature_points = 500;
+  int inertial_cubature_points = 500;
+  /// Random training samples per cubature; as many again, from another seed, measure the
+  /// held-out error.
+  int training_samples = 400;
+  /// Largest handle displacement of an elastic training sample, m (samples spread their
+  /// amplitudes from small to this, so that the Fung stiffening is represented).
+  double training_amplitude = 0.03;
+  std::uint64_t seed = 1;               ///< of the training samples (deterministic)
+  BoundedBiharmonicOptions basis;       ///< the QP solver of the weights
+};
+
+struct ReducedData {
+  VecXi handles;   ///< H tet-node (= surface vertex) indices, farthest-point order
+  /// #N × H (compressed columns), entry (j, h) = φ_h at node j in [0, 1]; bone-node rows are
+  /// empty, handle rows are unit vectors. Entries below 1e-12 are dropped.
+  SpMat basis;
+  double basis_max_bound_violation = 0;   ///< BoundedBiharmonicReport figures of the solve
+  double basis_max_constraint_error = 0;
+  bool basis_converged = true;
+  /// Elastic cubature (tet indices into the template mesh, ascending, weights > 0); empty when
+  /// not built. Held-out relative error of the elastic energy, 0 when not built.
+  Cubature elastic;
+  double elastic_test_error = 0;
+  /// Inertial cubature, same conventions (kinetic energy).
+  Cubature inertial;
+  double inertial_test_error = 0;
+  std::string key;  ///< cache key of this level
+  int numHandles() const { return int(handles.size()); }
+};
+
+/// How the build went; seconds are 0 for stages skipped because the level came from the cache.
+struct ReducedBuildReport {
+  bool from_cache = false;
+  std::string warnings;  ///< one line per problem (e.g. a corrupted cache file rebuilt)
+  double seconds_handles = 0, seconds_basis = 0, seconds_training = 0, seconds_cubature = 0;
+  double seconds_cache_load = 0, seconds_cache_store = 0, seconds_total = 0;
+};
+
+/// Builds (or loads from `cache`, when not null) the reduced data of the volumetric body `data`.
+/// The elastic / inertial cubature is built only when the corresponding flag is on (the key
+/// includes the flags). Throws InputError for settings out of range (naming the field and the
+/// allowed range) or more handles than soft-tissue surface nodes; cache problems only warn.
+ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
+                             const ReducedSettings& settings, bool elastic_cubature,
+                             bool inertial_cubature, const AvatarCache* cache,
+                             ReducedBuildReport* report = nullptr);
+
+/// The inertial cubature as node masses (#N, kg): m̃_j = Σ_{e∈S, j∈e} w_e ρ_e vol_e / 4 at X̄(β).
+/// Zero outside the sample tets' nodes.
+VecX inertialNodeMasses(const VolumetricData& data, const Cubature& inertial);
+
+}  // namespace flsh

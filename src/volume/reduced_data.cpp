@@ -1,0 +1,616 @@
+// The third avatar level: ROM handles, bounded biharmonic basis and the two cubatures, with the
+// on-disk cache (reduced_data.h).
+#include "flsh/volume/reduced_data.h"
+
+#include <omp.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "flsh/core/error.h"
+#include "flsh/core/sha256.h"
+#include "flsh/sim/fem_material.h"
+
+namespace flsh {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Revision of the rules of this level (handle choice, sample distributions, basis drop
+// threshold): bump it when they change so that data cached under older rules are rebuilt.
+constexpr int kReducedRules = 1;  // 1: first version
+// Basis entries below this are dropped (they only cost memory and time in the simulation).
+constexpr double kBasisDropThreshold = 1e-12;
+// Smallest handle displacement amplitude of an elastic training sample, m (the samples spread
+// log-uniformly from here to training_amplitude: nearly linear to Fung-stiffened strains).
+constexpr double kSmallestTrainingAmplitude = 1e-3;
+// Largest handle displacement of an elastic training sample relative to the soft-tissue
+// thickness under the handle (bone nodes below it do not move): a handle on a thin layer (shin,
+// skull) moved by the full training_amplitude would shear its tets far beyond any motion the
+// simulation sees, and those few tets' Fung energies would dominate every sample (measured on
+// the default body: held-out elastic error 0.31 uncapped, 0.055 with this cap).
+constexpr double kMaxTrainingShear = 0.5;
+// The greedy selection stops once the training error is this small: the inertial energy, a
+// quadratic form, is then fitted about as well as the held-out samples can tell (measured on the
+// default body: 1e-3 → 172 tets, held-out 0.0024, 1.4 s; 0 → 386 tets, held-out 0.0012, 3.4 s).
+constexpr double kCubatureTrainingTolerance = 1e-3;
+constexpr double kPi = 3.14159265358979323846;
+// RMS scales of the random inertial training velocities: bone translation (m/s), bone rotation
+// (rad/s) and handle velocity (m/s), about those of brisk human motion.
+constexpr double kBoneSpeed = 1.0, kBoneAngularSpeed = 3.0, kHandleSpeed = 0.3;
+
+std::string str(double v) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%g", v);
+  return buffer;
+}
+
+void checkSettings(const ReducedSettings& s) {
+  const std::string fn = "buildReducedData: ReducedSettings::";
+  auto atLeastOne = [&](const char* name, int value) {
+    if (value < 1) throw InputError(fn + name + " = " + std::to_string(value) + ", expected ≥ 1");
+  };
+  atLeastOne("num_handles", s.num_handles);
+  atLeastOne("elastic_cubature_points", s.elastic_cubature_points);
+  atLeastOne("inertial_cubature_points", s.inertial_cubature_points);
+  atLeastOne("training_samples", s.training_samples);
+  if (!(s.training_amplitude > 0) || !std::isfinite(s.training_amplitude))
+    throw InputError(fn + "training_amplitude = " + str(s.training_amplitude) +
+                     ", expected finite and > 0 m");
+  const BoundedBiharmonicOptions& b = s.basis;
+  if (!(b.kkt_tolerance > 0) || !std::isfinite(b.kkt_tolerance))
+    throw InputError(fn + "basis.kkt_tolerance = " + str(b.kkt_tolerance) +
+                     ", expected finite and > 0");
+  atLeastOne("basis.max_iterations", b.max_iterations);
+  if (!(b.initial_radius_factor > 0) || !std::isfinite(b.initial_radius_factor))
+    throw InputError(fn + "basis.initial_radius_factor = " + str(b.initial_radius_factor) +
+                     ", expected finite and > 0");
+  if (b.threads < 0)
+    throw InputError(fn + "basis.threads = " + std::to_string(b.threads) + ", expected ≥ 0");
+}
+
+// Everything the level depends on. basis.threads is left out: the weights do not depend on the
+// thread count (computeBoundedBiharmonicWeights is deterministic across schedules).
+std::string reducedKey(const VolumetricData& data, const ReducedSettings& s, bool elastic,
+                       bool inertial) {
+  Sha256 h;
+  h.update("flsh reduced data");
+  const int version = AvatarCache::kFormatVersion;
+  h.updateField("version", &version, sizeof(version));
+  const int rules = kReducedRules;
+  h.updateField("reduced rules", &rules, sizeof(rules));
+  h.updateField("data key", data.key.data(), data.key.size());
+  h.updateField("num_handles", &s.num_handles, sizeof(s.num_handles));
+  h.updateField("elastic_cubature_points", &s.elastic_cubature_points,
+                sizeof(s.elastic_cubature_points));
+  h.updateField("inertial_cubature_points", &s.inertial_cubature_points,
+                sizeof(s.inertial_cubature_points));
+  h.updateField("training_samples", &s.training_samples, sizeof(s.training_samples));
+  h.updateField("training_amplitude", &s.training_amplitude, sizeof(s.training_amplitude));
+  h.updateField("seed", &s.seed, sizeof(s.seed));
+  h.updateField("basis.kkt_tolerance", &s.basis.kkt_tolerance, sizeof(s.basis.kkt_tolerance));
+  h.updateField("basis.max_iterations", &s.basis.max_iterations, sizeof(s.basis.max_iterations));
+  h.updateField("basis.initial_radius_factor", &s.basis.initial_radius_factor,
+                sizeof(s.basis.initial_radius_factor));
+  const char flags[2] = {char(elastic ? 1 : 0), char(inertial ? 1 : 0)};
+  h.updateField("cubature flags", flags, sizeof(flags));
+  return h.hexDigest();
+}
+
+// Random numbers from the 64-bit Mersenne twister with explicit transforms (the standard
+// library's distributions differ between implementations; the cached data should not).
+class SampleRandom {
+ public:
+  explicit SampleRandom(std::uint64_t seed) : engine_(seed) {}
+  double uniform() { return double(engine_() >> 11) * 0x1.0p-53; }  // [0, 1)
+  double normal() {                                                 // Box–Muller
+    const double u1 = 1.0 - uniform(), u2 = uniform();
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * kPi * u2);
+  }
+  Vec3 normal3() {
+    const double x = normal(), y = normal(), z = normal();
+    return Vec3(x, y, z);
+  }
+  Vec3 unitDirection() {
+    for (;;) {
+      const Vec3 v = normal3();
+      const double n = v.norm();
+      if (n > 1e-12) return v / n;
+    }
+  }
+
+ private:
+  std::mt19937_64 engine_;
+};
+
+// Runs body(i) for i in [0, n) on OpenMP threads; the first exception is rethrown afterwards
+// (an exception must not leave an OpenMP region).
+template <class Body>
+void parallelFor(int n, Body&& body) {
+  std::string failure;
+  bool failed = false, input_error = false;
+#pragma omp parallel for schedule(dynamic, 4)
+  for (int i = 0; i < n; ++i) {
+    try {
+      body(i);
+    } catch (const std::exception& e) {
+#pragma omp critical(flsh_reduced_data_failure)
+      if (!failed) {
+        failed = true;
+        input_error = dynamic_cast<const InputError*>(&e) != nullptr;
+        failure = e.what();
+      }
+    }
+  }
+  if (failed) {
+    if (input_error) throw InputError(failure);
+    throw Error(failure);
+  }
+}
+
+Mat34 tetNodes(const MatX3& nodes, const MatX4i& tets, int t) {
+  Mat34 X;
+  for (int a = 0; a < 4; ++a) X.col(a) = nodes.row(tets(t, a)).transpose();
+  return X;
+}
+
+// Handles: geodesic farthest-point sampling over the soft surface vertices, starting at the
+// lowest-index soft surface vertex (deterministic, and independent of β).
+VecXi chooseHandles(const VolumetricData& data, const BodyModel& body, int count) {
+  const int V = body.numVertices();
+  if (data.templ->mesh.num_surface_nodes != V || data.numNodes() < V)
+    throw InputError("buildReducedData: the volumetric data has " +
+                     std::to_string(data.templ->mesh.num_surface_nodes) +
+                     " surface nodes, expected the body model's " + std::to_string(V) +
+                     " vertices");
+  const VecXi bone_of_vertex = data.bone_of_node.head(V);
+  int first = -1, eligible = 0;
+  for (int i = 0; i < V; ++i)
+    if (bone_of_vertex[i] < 0) {
+      if (first < 0) first = i;
+      ++eligible;
+    }
+  if (count > eligible)
+    throw InputError("buildReducedData: ReducedSettings::num_handles = " + std::to_string(count) +
+                     ", expected at most the " + std::to_string(eligible) +
+                     " soft-tissue surface nodes of this body");
+  return farthestPointSurfaceHandles(data.rest_nodes.topRows(V), body.faces, count, first,
+                                     bone_of_vertex);
+}
+
+// #N × H compressed basis from the dense weights, without the negligible entries.
+SpMat sparseBasis(const MatX& weights) {
+  std::vector<Triplet> entries;
+  for (Eigen::Index h = 0; h < weights.cols(); ++h)
+    for (Eigen::Index j = 0; j < weights.rows(); ++j)
+      if (std::abs(weights(j, h)) >= kBasisDropThreshold)
+        entries.emplace_back(int(j), int(h), weights(j, h));
+  SpMat basis(weights.rows(), weights.cols());
+  basis.setFromTriplets(entries.begin(), entries.end());
+  basis.makeCompressed();
+  return basis;
+}
+
+// Elastic training data: the tets that can deform (at least one soft node), with their rest
+// geometry and material, built once for every sample.
+struct ElasticElements {
+  std::vector<int> tets;  // template tet indices, ascending
+  std::vector<TetElementRest> rest;
+  std::vector<FemMaterialPoint> materials;
+};
+
+ElasticElements elasticElements(const VolumetricData& data) {
+  const MatX4i& tets = data.templ->mesh.tets;
+  ElasticElements out;
+  for (int t = 0; t < tets.rows(); ++t) {
+    bool soft = false;
+    for (int a = 0; a < 4; ++a) soft = soft || data.bone_of_node[tets(t, a)] < 0;
+    if (soft) out.tets.push_back(t);
+  }
+  const int E = int(out.tets.size());
+  out.rest.resize(size_t(E));
+  out.materials.resize(size_t(E));
+  parallelFor(E, [&](int c) {
+    const int t = out.tets[size_t(c)];
+    out.rest[size_t(c)] = tetElementRest(tetNodes(data.rest_nodes, tets, t), t);
+    out.materials[size_t(c)] = femMaterialPoint(data.materials, t);
+  });
+  return out;
+}
+
+// samples × #elastic elements: the elastic energy (J) of each tet under u = Φ z for random z:
+// every handle moves in a random direction by a random fraction of the sample's amplitude
+// (log-uniform in [1 mm, training_amplitude]), at most its reach (handle_reach, H, m).
+MatX elasticSamples(const VolumetricData& data, const SpMat& basis, const ElasticElements& elements,
+                    const VecX& handle_reach, int samples, double amplitude, std::uint64_t seed) {
+  const int H = int(basis.cols()), E = int(elements.tets.size());
+  const double smallest = std::min(kSmallestTrainingAmplitude, amplitude);
+  SampleRandom random(seed);
+  std::vector<MatX> handle_displacements{size_t(samples)};  // each H × 3, m
+  for (int s = 0; s < samples; ++s) {
+    const double a = smallest * std::exp(random.uniform() * std::log(amplitude / smallest));
+    MatX& z = handle_displacements[size_t(s)];
+    z.resize(H, 3);
+    for (int h = 0; h < H; ++h)
+      z.row(h) = (std::min(a, handle_reach[h]) * random.uniform()) * random.unitDirection();
+  }
+  const MatX4i& tets = data.templ->mesh.tets;
+  MatX A(samples, E);
+  parallelFor(samples, [&](int s) {
+    const MatX u = basis * handle_displacements[size_t(s)];  // #N × 3
+    for (int c = 0; c < E; ++c) {
+      const int t = elements.tets[size_t(c)];
+      Mat34 ue;
+      for (int a = 0; a < 4; ++a) ue.col(a) = u.row(tets(t, a)).transpose();
+      A(s, c) = tetElasticEnergy(elements.rest[size_t(c)], elements.materials[size_t(c)], ue);
+    }
+  });
+  return A;
+}
+
+// samples × #T: Σ_{a∈e} (m_e/4)‖v_a‖² (twice the lumped kinetic energy, J) of each tet for random
+// skinned bone twists plus random subspace velocities.
+MatX inertialSamples(const VolumetricData& data, const SpMat& basis, const VecX& tet_masses,
+                     int samples, std::uint64_t seed) {
+  const MatX& W = data.templ->fields.weights;  // #N × bones
+  const int B = int(W.cols()), H = int(basis.cols()), N = data.numNodes();
+  const MatX4i& tets = data.templ->mesh.tets;
+  const int T = int(tets.rows());
+  const MatX X = data.rest_nodes;
+  const MatX J = data.rest_joints;
+  SampleRandom random(seed);
+  struct Velocities {
+    MatX bone_linear, bone_angular, handles;  // B × 3, B × 3, H × 3
+  };
+  std::vector<Velocities> draws{size_t(samples)};
+  const double sv = kBoneSpeed / std::sqrt(3.0), sw = kBoneAngularSpeed / std::sqrt(3.0),
+               sz = kHandleSpeed / std::sqrt(3.0);
+  for (int s = 0; s < samples; ++s) {
+    Velocities& d = draws[size_t(s)];
+    d.bone_linear.resize(B, 3);
+    d.bone_angular.resize(B, 3);
+    d.handles.resize(H, 3);
+    for (int b = 0; b < B; ++b) d.bone_linear.row(b) = sv * random.normal3();
+    for (int b = 0; b < B; ++b) d.bone_angular.row(b) = sw * random.normal3();
+    for (int h = 0; h < H; ++h) d.handles.row(h) = sz * random.normal3();
+  }
+  MatX A(samples, T);
+  parallelFor(samples, [&](int s) {
+    const Velocities& d = draws[size_t(s)];
+    // v_j = Σ_b w_jb (v_b + ω_b × (X̄_j − J_b)) + Σ_h φ_h(j) ż_h
+    //     = (W v)_j + (W ω)_j × X̄_j − (W (ω × J))_j + (Φ ż)_j.
+    MatX omega_cross_joint(B, 3);
+    for (int b = 0; b < B; ++b)
+      omega_cross_joint.row(b) = Vec3(d.bone_angular.row(b)).cross(Vec3(J.row(b))).transpose();
+    const MatX skinned_angular = W * d.bone_angular;
+    MatX v = W * (d.bone_linear - omega_cross_joint) + basis * d.handles;
+    VecX speed_squared(N);
+    for (int j = 0; j < N; ++j) {
+      const Vec3 vj = Vec3(v.row(j)) + Vec3(skinned_angular.row(j)).cross(Vec3(X.row(j)));
+      speed_squared[j] = vj.squaredNorm();
+    }
+    for (int t = 0; t < T; ++t) {
+      double sum = 0;
+      for (int a = 0; a < 4; ++a) sum += speed_squared[tets(t, a)];
+      A(s, t) = tet_masses[t] / 4 * sum;
+    }
+  });
+  return A;
+}
+
+// Each sample (row) divided by its total, so that every sample counts as much in the fit and in
+// the error: the energies of the elastic samples span orders of magnitude (amplitudes from 1 mm
+// to training_amplitude), and unscaled the largest few would decide the whole selection. A
+// cubature exact on the scaled rows is exact on the unscaled ones.
+MatX perSampleRelative(MatX A) {
+  for (Eigen::Index s = 0; s < A.rows(); ++s) {
+    const double total = A.row(s).sum();
+    if (total > 0) A.row(s) /= total;
+  }
+  return A;
+}
+
+// Selection on the training samples (seed), held-out error on as many samples from seed + 1;
+// columns mapped to template tet indices by `column_tets` (ascending, so the order is kept).
+template <class SampleFn>
+Cubature trainCubature(SampleFn&& sample_matrix, int count, std::uint64_t seed,
+                       const std::vector<int>& column_tets, double* test_error,
+                       double* seconds_training, double* seconds_cubature) {
+  auto t0 = Clock::now();
+  Cubature cubature;
+  {
+    const MatX training = perSampleRelative(sample_matrix(seed));
+    *seconds_training += secondsSince(t0);
+    t0 = Clock::now();
+    CubatureOptions options;
+    options.count = count;
+    options.tolerance = kCubatureTrainingTolerance;
+    cubature = selectCubature(training, options);
+    *seconds_cubature += secondsSince(t0);
+  }
+  t0 = Clock::now();
+  {
+    const MatX held_out = perSampleRelative(sample_matrix(seed + 1));
+    *seconds_training += secondsSince(t0);
+    t0 = Clock::now();
+    *test_error = cubatureRelativeError(held_out, cubature.elements, cubature.weights);
+    *seconds_cubature += secondsSince(t0);
+  }
+  for (int k = 0; k < cubature.elements.size(); ++k)
+    cubature.elements[k] = column_tets[size_t(cubature.elements[k])];
+  return cubature;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cache
+
+void addIntegers(io::NpzWriter& w, const std::string& key, const std::vector<int64_t>& values) {
+  w.add(key, values.data(), {long(values.size())});
+}
+
+std::vector<int64_t> toInt64(const VecXi& v) {
+  return std::vector<int64_t>(v.data(), v.data() + v.size());
+}
+
+void storeCubature(io::NpzWriter& w, const std::string& name, const Cubature& c,
+                   double test_error) {
+  addIntegers(w, name + "_elements", toInt64(c.elements));
+  w.add(name + "_weights", c.weights);
+  w.add(name + "_figures",
+        VecX((VecX(3) << c.training_error, double(c.rounds), test_error).finished()));
+}
+
+io::NpzWriter cacheArrays(const ReducedData& d) {
+  io::NpzWriter w;
+  addIntegers(w, "handles", toInt64(d.handles));
+  std::vector<int64_t> rows, cols;
+  std::vector<double> values;
+  for (int h = 0; h < d.basis.outerSize(); ++h)
+    for (SpMat::InnerIterator it(d.basis, h); it; ++it) {
+      rows.push_back(it.row());
+      cols.push_back(h);
+      values.push_back(it.value());
+    }
+  addIntegers(w, "basis_rows", rows);
+  addIntegers(w, "basis_cols", cols);
+  w.add("basis_values", values.data(), {long(values.size())});
+  w.add("basis_report", VecX((VecX(3) << d.basis_max_bound_violation, d.basis_max_constraint_error,
+                              d.basis_converged ? 1.0 : 0.0)
+                                 .finished()));
+  storeCubature(w, "elastic", d.elastic, d.elastic_test_error);
+  storeCubature(w, "inertial", d.inertial, d.inertial_test_error);
+  return w;
+}
+
+// Reads and checks one cubature: ascending element indices in [0, T), finite weights > 0, at
+// most `count` points, empty when the cubature is off.
+Cubature loadCubature(const io::NpzFile& f, const std::string& name, bool built, int count, int T,
+                      double* test_error) {
+  const std::string where = f.path() + ": key '" + name;
+  const std::vector<int64_t> elements = f.integers(name + "_elements", {-1});
+  const long n = long(elements.size());
+  Cubature c;
+  c.weights = f.vector(name + "_weights", n);
+  const VecX figures = f.vector(name + "_figures", 3);
+  if (!built && n != 0)
+    throw InputError(where + "_elements': " + std::to_string(n) +
+                     " elements for a cubature that is switched off, expected none");
+  if (built && (n < 1 || n > count))
+    throw InputError(where + "_elements': " + std::to_string(n) + " elements, expected 1.." +
+                     std::to_string(count));
+  c.elements.resize(n);
+  for (long k = 0; k < n; ++k) {
+    if (elements[size_t(k)] < 0 || elements[size_t(k)] >= T ||
+        (k > 0 && elements[size_t(k)] <= elements[size_t(k - 1)]))
+      throw InputError(where + "_elements': entry " + std::to_string(k) + " = " +
+                       std::to_string(elements[size_t(k)]) +
+                       ", expected ascending tet indices in [0, " + std::to_string(T) + ")");
+    c.elements[k] = int(elements[size_t(k)]);
+    if (!(c.weights[k] > 0))
+      throw InputError(where + "_weights': entry " + std::to_string(k) + " = " + str(c.weights[k]) +
+                       ", expected > 0");
+  }
+  if (!(figures.array() >= 0).all())
+    throw InputError(where + "_figures': expected errors and rounds ≥ 0");
+  c.training_error = figures[0];
+  c.rounds = int(figures[1]);
+  *test_error = figures[2];
+  return c;
+}
+
+ReducedData loadReducedData(const io::NpzFile& f, const VolumetricData& data, const BodyModel& body,
+                            const ReducedSettings& settings, bool elastic, bool inertial) {
+  const int N = data.numNodes(), V = body.numVertices(), T = data.numTets();
+  const int H = settings.num_handles;
+  ReducedData d;
+  const std::vector<int64_t> handles = f.integers("handles", {H});
+  d.handles.resize(H);
+  std::vector<char> seen(size_t(V), 0);
+  for (int h = 0; h < H; ++h) {
+    const int64_t i = handles[size_t(h)];
+    if (i < 0 || i >= V || seen[size_t(i)] || data.bone_of_node[int(i)] >= 0)
+      throw InputError(f.path() + ": key 'handles': entry " + std::to_string(h) + " = " +
+                       std::to_string(i) + ", expected distinct soft-tissue surface nodes in [0, " +
+                       std::to_string(V) + ")");
+    seen[size_t(i)] = 1;
+    d.handles[h] = int(i);
+  }
+  const std::vector<int64_t> rows = f.integers("basis_rows", {-1});
+  const long nnz = long(rows.size());
+  const std::vector<int64_t> cols = f.integers("basis_cols", {nnz});
+  const VecX values = f.vector("basis_values", nnz);
+  std::vector<Triplet> entries;
+  entries.reserve(size_t(nnz));
+  for (long k = 0; k < nnz; ++k) {
+    const int64_t r = rows[size_t(k)], c = cols[size_t(k)];
+    // Column-major order without repeats: the compressed matrix is rebuilt exactly as stored.
+    const bool ordered =
+        k == 0 || c > cols[size_t(k - 1)] || (c == cols[size_t(k - 1)] && r > rows[size_t(k - 1)]);
+    if (r < 0 || r >= N || c < 0 || c >= H || !ordered)
+      throw InputError(f.path() + ": keys 'basis_rows'/'basis_cols': entry " + std::to_string(k) +
+                       " = (" + std::to_string(r) + ", " + std::to_string(c) +
+                       "), expected column-major ordered indices in [0, " + std::to_string(N) +
+                       ") × [0, " + std::to_string(H) + ")");
+    if (!(values[k] >= kBasisDropThreshold && values[k] <= 1 + 1e-6) ||
+        data.bone_of_node[int(r)] >= 0)
+      throw InputError(f.path() + ": key 'basis_values': entry " + std::to_string(k) + " = " +
+                       str(values[k]) + " at node " + std::to_string(r) +
+                       ", expected a weight in [0, 1] on a soft-tissue node");
+    entries.emplace_back(int(r), int(c), values[k]);
+  }
+  d.basis.resize(N, H);
+  d.basis.setFromTriplets(entries.begin(), entries.end());
+  d.basis.makeCompressed();
+  const VecX report = f.vector("basis_report", 3);
+  d.basis_max_bound_violation = report[0];
+  d.basis_max_constraint_error = report[1];
+  d.basis_converged = report[2] != 0;
+  d.elastic = loadCubature(f, "elastic", elastic, settings.elastic_cubature_points, T,
+                           &d.elastic_test_error);
+  d.inertial = loadCubature(f, "inertial", inertial, settings.inertial_cubature_points, T,
+                            &d.inertial_test_error);
+  return d;
+}
+
+}  // namespace
+
+ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
+                             const ReducedSettings& settings, bool elastic_cubature,
+                             bool inertial_cubature, const AvatarCache* cache,
+                             ReducedBuildReport* report) {
+  ReducedBuildReport local;
+  ReducedBuildReport& r = report ? *report : local;
+  const auto start = Clock::now();
+  checkSettings(settings);
+  if (!data.templ || data.bone_of_node.size() != data.numNodes() ||
+      data.materials.density.size() != data.numTets())
+    throw InputError(
+        "buildReducedData: the volumetric data is incomplete (no template, or "
+        "bone_of_node / materials of the wrong size), expected buildVolumetricData's "
+        "output");
+  const std::string key = reducedKey(data, settings, elastic_cubature, inertial_cubature);
+
+  if (cache) {
+    const auto t0 = Clock::now();
+    std::string problem;
+    if (auto f = cache->load(key, &problem)) {
+      try {
+        ReducedData d =
+            loadReducedData(*f, data, body, settings, elastic_cubature, inertial_cubature);
+        d.key = key;
+        r.from_cache = true;
+        r.seconds_cache_load += secondsSince(t0);
+        r.seconds_total = secondsSince(start);
+        return d;
+      } catch (const Error& e) {
+        problem = std::string("avatar cache file ") + cache->pathFor(key) +
+                  " does not hold reduced data (" + e.what() + "); rebuilding it";
+      }
+    }
+    if (!problem.empty()) r.warnings += problem + "\n";
+    r.seconds_cache_load += secondsSince(t0);
+  }
+
+  ReducedData d;
+  d.key = key;
+  auto t0 = Clock::now();
+  d.handles = chooseHandles(data, body, settings.num_handles);
+  r.seconds_handles = secondsSince(t0);
+
+  t0 = Clock::now();
+  const BoundedBiharmonicWeights bbw = computeBoundedBiharmonicWeights(
+      data.templ->mesh, data.rest_nodes, d.handles, data.bone_of_node, settings.basis);
+  d.basis = sparseBasis(bbw.weights);
+  d.basis_max_bound_violation = bbw.report.max_bound_violation;
+  d.basis_max_constraint_error = bbw.report.max_constraint_error;
+  d.basis_converged = bbw.report.converged;
+  if (!bbw.report.converged)
+    r.warnings +=
+        "buildReducedData: the bounded biharmonic weights did not converge for every "
+        "handle (largest KKT residual " +
+        str(bbw.report.max_kkt_residual) +
+        " of the tolerance, max_iterations = " + std::to_string(settings.basis.max_iterations) +
+        "); using them as they are\n";
+  r.seconds_basis = secondsSince(t0);
+
+  const int samples = settings.training_samples;
+  if (elastic_cubature) {
+    t0 = Clock::now();
+    const ElasticElements elements = elasticElements(data);
+    VecX handle_reach(d.numHandles());
+    for (int h = 0; h < d.numHandles(); ++h)
+      handle_reach[h] = std::max(kMaxTrainingShear * data.tissue_thickness[d.handles[h]],
+                                 kSmallestTrainingAmplitude);
+    r.seconds_training += secondsSince(t0);
+    d.elastic = trainCubature(
+        [&](std::uint64_t seed) {
+          return elasticSamples(data, d.basis, elements, handle_reach, samples,
+                                settings.training_amplitude, seed);
+        },
+        settings.elastic_cubature_points, settings.seed, elements.tets, &d.elastic_test_error,
+        &r.seconds_training, &r.seconds_cubature);
+  }
+  if (inertial_cubature) {
+    t0 = Clock::now();
+    TetMesh shaped = data.templ->mesh;
+    shaped.nodes = data.rest_nodes;
+    const VecX tet_masses = tetVolumes(shaped).cwiseProduct(data.materials.density);
+    std::vector<int> all_tets(size_t(data.numTets()));
+    for (int t = 0; t < data.numTets(); ++t) all_tets[size_t(t)] = t;
+    r.seconds_training += secondsSince(t0);
+    d.inertial = trainCubature(
+        [&](std::uint64_t seed) {
+          return inertialSamples(data, d.basis, tet_masses, samples, seed);
+        },
+        settings.inertial_cubature_points, settings.seed, all_tets, &d.inertial_test_error,
+        &r.seconds_training, &r.seconds_cubature);
+  }
+
+  if (cache) {
+    t0 = Clock::now();
+    cache->store(key, cacheArrays(d));
+    r.seconds_cache_store += secondsSince(t0);
+  }
+  r.seconds_total = secondsSince(start);
+  return d;
+}
+
+VecX inertialNodeMasses(const VolumetricData& data, const Cubature& inertial) {
+  const std::string fn = "inertialNodeMasses: ";
+  if (!data.templ) throw InputError(fn + "the volumetric data has no template mesh");
+  const int T = data.numTets();
+  if (inertial.elements.size() != inertial.weights.size())
+    throw InputError(fn + "the cubature has " + std::to_string(inertial.elements.size()) +
+                     " elements and " + std::to_string(inertial.weights.size()) +
+                     " weights, expected as many");
+  if (data.materials.density.size() != T)
+    throw InputError(fn + "materials.density has " + std::to_string(data.materials.density.size()) +
+                     " entries, expected #T = " + std::to_string(T));
+  const MatX4i& tets = data.templ->mesh.tets;
+  VecX masses = VecX::Zero(data.numNodes());
+  for (int k = 0; k < inertial.elements.size(); ++k) {
+    const int t = inertial.elements[k];
+    if (t < 0 || t >= T)
+      throw InputError(fn + "cubature element " + std::to_string(k) + " = " + std::to_string(t) +
+                       ", expected a tet index in [0, " + std::to_string(T) + ")");
+    const Mat34 X = tetNodes(data.rest_nodes, tets, t);
+    const double volume =
+        (X.col(1) - X.col(0)).cross(X.col(2) - X.col(0)).dot(X.col(3) - X.col(0)) / 6;
+    const double quarter = inertial.weights[k] * data.materials.density[t] * volume / 4;
+    for (int a = 0; a < 4; ++a) masses[tets(t, a)] += quarter;
+  }
+  return masses;
+}
+
+}  // namespace flsh

@@ -1,0 +1,166 @@
+// The ROM soft skeleton against the FEM one it reduces: without cubature its energies, gradients
+// and Hessians are the FEM's at u = Φz, pulled back through the basis (the chain rule, exactly);
+// with the cubatures they approximate them within the held-out cubature error.
+#include <gtest/gtest.h>
+
+#include <memory>
+
+#include "flsh/core/error.h"
+#include "flsh/sim/simulable.h"
+#include "support/test_support.h"
+
+namespace flsh {
+namespace {
+
+using test::randomVector;
+
+SoftAvatarSettings settings() {
+  static const std::string cache = test::freshTempDir("rom_test_cache");
+  SoftAvatarSettings s;
+  s.voxel_size = 0.02;
+  s.volumetric.cache_dir = cache;
+  s.volumetric.tet_mesh.resolution = 0.5;
+  s.reduced.num_handles = 16;
+  s.reduced.elastic_cubature_points = 60;
+  s.reduced.inertial_cubature_points = 60;
+  s.reduced.training_samples = 80;
+  return s;
+}
+
+// kind 0: FEM; 1: ROM with exact integration; 2: ROM with both cubatures.
+std::shared_ptr<const SoftAvatar> avatar(int kind) {
+  static std::shared_ptr<const SoftAvatar> avatars[3];
+  if (!avatars[kind]) {
+    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), settings());
+    a->enableSoftTissue();
+    a->enableReducedModel(kind > 0);
+    a->enableElasticCubature(kind == 2);
+    a->enableInertialCubature(kind == 2);
+    a->initVolumetricData();
+    avatars[kind] = a;
+  }
+  return avatars[kind];
+}
+
+// P = ∂(FEM state)/∂(ROM state): identity on the bones, φ_h(j) I₃ from z_h to u_j.
+SpMat reductionMatrix(const Simulable& fem, const Simulable& rom) {
+  std::vector<Triplet> T;
+  for (int i = 0; i < fem.numBoneDofs(); ++i) T.emplace_back(i, i, 1.0);
+  for (int k = 0; k < fem.softNodes().size(); ++k) {
+    const int j = fem.softNodes()[k];
+    for (const auto& [index, weight] : rom.nodeDisplacementBasis(j))
+      for (int c = 0; c < 3; ++c) T.emplace_back(fem.nodeSoftDof(j) + c, index + c, weight);
+  }
+  SpMat P(fem.numDofs(), rom.numDofs());
+  P.setFromTriplets(T.begin(), T.end());
+  return P;
+}
+
+struct Pair {
+  std::unique_ptr<Simulable> fem, rom;
+  SpMat P;
+};
+
+// A FEM and an exact ROM simulable at the same walking state one step in: bones moved, z random,
+// u = Φz; a ground plane 1.5 cm above the lowest vertex.
+Pair samePair(unsigned seed) {
+  Pair p;
+  p.fem = std::make_unique<Simulable>(avatar(0), test::smallScene(800).walk);
+  p.rom = std::make_unique<Simulable>(avatar(1), test::smallScene(800).walk);
+  for (Simulable* s : {p.fem.get(), p.rom.get()}) {
+    s->initialize();
+    s->preUpdate();
+  }
+  p.P = reductionMatrix(*p.fem, *p.rom);
+  VecX d = randomVector(p.rom->numDofs(), 0.03, seed);
+  d.tail(p.rom->numDofs() - 144) = randomVector(p.rom->numDofs() - 144, 0.01, seed + 1);
+  p.rom->updateState(d);
+  VecX q = VecX(p.P * p.rom->getState());
+  p.fem->setState(q);
+  const Collider ground =
+      Collider::plane(Vec3(0, p.fem->getNodes().col(1).minCoeff() + 0.015, 0), Vec3::UnitY());
+  p.fem->setColliders({ground});
+  p.rom->setColliders({ground});
+  return p;
+}
+
+TEST(ReducedModel, ExactIntegrationIsTheFemThroughTheBasis) {
+  Pair p = samePair(3);
+  const int nf = p.fem->numDofs(), nr = p.rom->numDofs();
+  ASSERT_GT(p.rom->getSoftTissueDisplacements().norm(), 0.0);
+  EXPECT_LT((p.rom->getVertices() - p.fem->getVertices()).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT((p.rom->getVolumeNodes() - p.fem->getVolumeNodes()).cwiseAbs().maxCoeff(), 1e-12);
+
+  const double Ef = p.fem->getPotentialEnergyScalar(), Er = p.rom->getPotentialEnergyScalar();
+  ASSERT_GT(std::abs(Ef), 0.0);
+  EXPECT_NEAR(Er, Ef, 1e-10 * std::abs(Ef));
+  const double Df = p.fem->getDynamicEnergyScalar(), Dr = p.rom->getDynamicEnergyScalar();
+  ASSERT_GT(Df, 0.0);
+  EXPECT_NEAR(Dr, Df, 1e-10 * Df);
+
+  for (bool dynamic : {false, true}) {
+    VecX gf = VecX::Zero(nf), gr = VecX::Zero(nr);
+    if (dynamic) {
+      p.fem->getDynamicGradientVector(gf);
+      p.rom->getDynamicGradientVector(gr);
+    } else {
+      p.fem->getPotentialGradientVector(gf);
+      p.rom->getPotentialGradientVector(gr);
+    }
+    const VecX expected = p.P.transpose() * gf;
+    ASSERT_GT(gr.tail(nr - 144).norm(), 0.0);
+    EXPECT_LT((gr - expected).cwiseAbs().maxCoeff(), 1e-9 * expected.cwiseAbs().maxCoeff())
+        << (dynamic ? "dynamic" : "potential");
+    for (bool psd : {false, true}) {
+      std::vector<Triplet> Tf, Tr;
+      if (dynamic) {
+        p.fem->getDynamicHessianTripletVector(Tf, 0, psd);
+        p.rom->getDynamicHessianTripletVector(Tr, 0, psd);
+      } else {
+        p.fem->getPotentialHessianTripletVector(Tf, 0, psd);
+        p.rom->getPotentialHessianTripletVector(Tr, 0, psd);
+      }
+      SpMat Hf(nf, nf), Hr(nr, nr);
+      Hf.setFromTriplets(Tf.begin(), Tf.end());
+      Hr.setFromTriplets(Tr.begin(), Tr.end());
+      const MatX reduced = MatX(p.P.transpose() * Hf * p.P);
+      const MatX H = MatX(Hr);
+      ASSERT_GT(H.bottomRightCorner(nr - 144, nr - 144).norm(), 0.0);
+      EXPECT_LT((H - reduced).cwiseAbs().maxCoeff(), 1e-9 * reduced.cwiseAbs().maxCoeff())
+          << (dynamic ? "dynamic" : "potential") << (psd ? " psd" : " exact");
+    }
+  }
+}
+
+TEST(ReducedModel, CubatureApproximatesExactIntegration) {
+  const ReducedData& data = avatar(2)->reducedData();
+  ASSERT_GT(data.elastic.elements.size(), 0);
+  ASSERT_GT(data.inertial.elements.size(), 0);
+  // Same state in the exact ROM and the cubature ROM (same basis: the cubature does not change it).
+  ASSERT_TRUE(avatar(1)->reducedData().basis.isApprox(data.basis));
+  SimulableOptions options;
+  options.gravity.setZero();  // the potential is then elastic (the springs are at rest)
+  const auto walk = test::smallScene(800).walk;
+  Simulable exact(avatar(1), walk, options), cubature(avatar(2), walk, options);
+  for (Simulable* s : {&exact, &cubature}) {
+    s->initialize();
+    s->preUpdate();
+  }
+  VecX d = VecX::Zero(exact.numDofs());
+  d.tail(exact.numDofs() - 144) = randomVector(exact.numDofs() - 144, 0.01, 8);
+  exact.updateState(d);
+  cubature.updateState(d);
+  const double elastic_exact = exact.getPotentialEnergyScalar();
+  const double elastic_cub = cubature.getPotentialEnergyScalar();
+  ASSERT_TRUE(std::isfinite(elastic_cub));
+  // Within a few times the held-out errors (which are relative to the whole sum).
+  const double tolerance = 5.0 * std::max(data.elastic_test_error, data.inertial_test_error) + 0.02;
+  EXPECT_NEAR(elastic_cub, elastic_exact, tolerance * std::abs(elastic_exact));
+  const double kinetic_exact = exact.getDynamicEnergyScalar();
+  const double kinetic_cub = cubature.getDynamicEnergyScalar();
+  ASSERT_GT(kinetic_exact, 0.0);
+  EXPECT_NEAR(kinetic_cub, kinetic_exact, tolerance * kinetic_exact);
+}
+
+}  // namespace
+}  // namespace flsh

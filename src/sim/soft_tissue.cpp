@@ -159,6 +159,40 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     elements_.push_back(tetElementRest(X, e));
     materials_.push_back(femMaterialPoint(data.materials, e));
   }
+  if (rom && rom->elastic_rest_correction.size() > 0) {
+    correction_ = rom->elastic_rest_correction;
+    if (correction_.rows() != 3 * num_handles_ || correction_.cols() != 3 * num_handles_)
+      throw InputError("Simulable: the avatar's elastic rest correction is " +
+                       std::to_string(correction_.rows()) + " × " +
+                       std::to_string(correction_.cols()) + ", expected 3·#handles square (" +
+                       std::to_string(3 * num_handles_) + ")");
+    for (int a = 0; a < num_handles_; ++a)
+      for (int b = 0; b < num_handles_; ++b)
+        if (!correction_.block<3, 3>(3 * a, 3 * b).isZero(0.0)) correction_blocks_.emplace_back(a, b);
+  }
+  if (reduced_) {  // each elastic tet's handles and basis rows
+    tet_handle_start_.assign(1, 0);
+    std::vector<double> columns;
+    for (Eigen::Index e = 0; e < tets_.rows(); ++e) {
+      std::vector<int> handles;
+      for (int a = 0; a < 4; ++a)
+        for (int k = phi_start_[tets_(e, a)]; k < phi_start_[tets_(e, a) + 1]; ++k)
+          handles.push_back(phi_[k].first);
+      std::sort(handles.begin(), handles.end());
+      handles.erase(std::unique(handles.begin(), handles.end()), handles.end());
+      for (int h : handles) {
+        tet_handles_.push_back(h);
+        for (int a = 0; a < 4; ++a) {
+          double w = 0.0;
+          for (int k = phi_start_[tets_(e, a)]; k < phi_start_[tets_(e, a) + 1]; ++k)
+            if (phi_[k].first == h) w = phi_[k].second;
+          columns.push_back(w);
+        }
+      }
+      tet_handle_start_.push_back(int(tet_handles_.size()));
+    }
+    tet_phi_ = Eigen::Map<const MatX>(columns.data(), 4, Eigen::Index(tet_handles_.size()));
+  }
 
   // Inertia and gravity: every node with its lumped mass, or the inertial cubature's nodes.
   inertia_mass_ = rom && rom->inertial.elements.size() > 0
@@ -557,17 +591,43 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
     }
   }
   if (failure) std::rethrow_exception(failure);
+  if (correction_.size() > 0) {  // ½ zᵀ C z
+    const VecX Cz = correction_ * u;
+    E += 0.5 * u.dot(Cz);
+    if (g) g->segment(offset + bone_dofs_, Cz.size()) += Cz;
+    // C is positive semi-definite (ReducedData): the same in the PSD and exact forms.
+    if (H)
+      for (const auto& [a, b] : correction_blocks_)
+        zz_blocks_.block(a, b) += correction_.block<3, 3>(3 * a, 3 * b);
+  }
   if (g) {
     for (int e = 0; e < T; ++e)
       for (int a = 0; a < 4; ++a)
         addSoftGradient(*g, offset, tets_(e, a), element_gradients_[e].segment<3>(3 * a));
   }
   if (H && reduced_) {
-    for (int e = 0; e < T; ++e)
-      for (int a = 0; a < 4; ++a)
-        for (int b = 0; b < 4; ++b)
-          addSoftSoft(*H, offset, tets_(e, a), tets_(e, b),
-                      element_hessians_[e].block<3, 3>(3 * a, 3 * b));
+    // Per tet K = (Φ_e ⊗ I₃)ᵀ H_e (Φ_e ⊗ I₃) on the tet's handles S_e (Φ_e: 4 × |S_e|, the
+    // basis rows of its nodes), then one block per handle pair: |S_e|² block updates instead
+    // of 16 k² (k handles per node) through addSoftSoft.
+    MatX A, K;
+    for (int e = 0; e < T; ++e) {
+      const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
+      if (count == 0) continue;
+      const auto Phi = tet_phi_.middleCols(begin, count);  // 4 × count
+      const Mat12& He = element_hessians_[e];
+      A.setZero(12, 3 * count);  // H_e (Φ_e ⊗ I₃)
+      for (int s = 0; s < count; ++s)
+        for (int a = 0; a < 4; ++a)
+          if (Phi(a, s) != 0.0) A.middleCols<3>(3 * s) += Phi(a, s) * He.middleCols<3>(3 * a);
+      K.setZero(3 * count, 3 * count);
+      for (int s = 0; s < count; ++s)
+        for (int a = 0; a < 4; ++a)
+          if (Phi(a, s) != 0.0) K.middleRows<3>(3 * s) += Phi(a, s) * A.middleRows<3>(3 * a);
+      for (int s = 0; s < count; ++s)
+        for (int r = 0; r < count; ++r)
+          zz_blocks_.block(tet_handles_[begin + s], tet_handles_[begin + r]) +=
+              K.block<3, 3>(3 * s, 3 * r);
+    }
   } else if (H) {
     blocks_.assign(block_pairs_.size(), Mat3::Zero());
     for (int e = 0; e < T; ++e) {

@@ -152,6 +152,14 @@ class SoftTissue {
   std::vector<int> eval_nodes_, mass_nodes_;
   VecX inertia_mass_;
   VecX element_weight_;
+  // ROM: elastic tet e's handles tet_handles_[tet_handle_start_[e] ..) and their basis rows at
+  // its 4 nodes (columns of tet_phi_, 4 × Σ|S_e|).
+  std::vector<int> tet_handle_start_, tet_handles_;
+  MatX tet_phi_;
+  // ROM with the elastic cubature: the rest-stiffness correction ½ zᵀ C z (ReducedData) and the
+  // handle pairs whose 3 × 3 block is nonzero.
+  MatX correction_;
+  std::vector<std::pair<int, int>> correction_blocks_;
   std::vector<int> influence_start_;
   std::vector<Influence> influences_;
   MatX3 x_hat_;

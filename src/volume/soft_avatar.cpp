@@ -160,6 +160,57 @@ void SoftAvatar::initVolumetricData() {
   initialized_ = true;
 }
 
+void SoftAvatar::setReducedData(std::shared_ptr<const ReducedData> data) {
+  const std::string fn = "SoftAvatar::setReducedData: ";
+  if (!initialized_ || !soft_tissue_ || !reduced_)
+    throw Error(fn + "call it after initVolumetricData() on an avatar with enableSoftTissue() "
+                     "and enableReducedModel()");
+  if (!data) throw InputError(fn + "data is null");
+  const VolumetricData& vol = *volumetric_;
+  const int n = vol.numNodes(), T = vol.numTets(), H = data->numHandles();
+  if (H < 1) throw InputError(fn + "handles is empty, expected at least one handle");
+  if (data->basis.rows() != n || data->basis.cols() != H)
+    throw InputError(fn + "basis is " + std::to_string(data->basis.rows()) + " × " +
+                     std::to_string(data->basis.cols()) + ", expected #nodes × #handles = " +
+                     std::to_string(n) + " × " + std::to_string(H));
+  std::vector<char> seen(n, 0);
+  for (int h = 0; h < H; ++h) {
+    const int j = data->handles[h];
+    if (j < 0 || j >= n || vol.bone_of_node[j] >= 0 || seen[j])
+      throw InputError(fn + "handles[" + std::to_string(h) + "] = " + std::to_string(j) +
+                       " is out of [0, " + std::to_string(n) +
+                       "), a bone node or repeated; expected distinct soft-tissue nodes");
+    seen[j] = 1;
+  }
+  for (int h = 0; h < H; ++h)
+    for (SpMat::InnerIterator it(data->basis, h); it; ++it)
+      if (!(it.value() >= 0.0 && it.value() <= 1.0) || vol.bone_of_node[it.row()] >= 0)
+        throw InputError(fn + "basis(" + std::to_string(it.row()) + ", " + std::to_string(h) +
+                         ") = " + std::to_string(it.value()) +
+                         ": expected a value in [0, 1], and none on bone nodes");
+  auto checkCubature = [&](const Cubature& c, const char* name) {
+    if (c.elements.size() != c.weights.size())
+      throw InputError(fn + name + ": " + std::to_string(c.elements.size()) + " elements but " +
+                       std::to_string(c.weights.size()) + " weights");
+    for (Eigen::Index k = 0; k < c.elements.size(); ++k)
+      if (c.elements[k] < 0 || c.elements[k] >= T || !(c.weights[k] > 0.0) ||
+          !std::isfinite(c.weights[k]))
+        throw InputError(fn + name + ": element " + std::to_string(k) + " (tet " +
+                         std::to_string(c.elements[k]) + ", weight " +
+                         std::to_string(c.weights[k]) + "): expected a tet in [0, " +
+                         std::to_string(T) + ") and a finite weight > 0");
+  };
+  checkCubature(data->elastic, "elastic");
+  checkCubature(data->inertial, "inertial");
+  const MatX& C = data->elastic_rest_correction;
+  if (C.size() > 0 && (C.rows() != 3 * H || C.cols() != 3 * H || !C.allFinite()))
+    throw InputError(fn + "elastic_rest_correction is " + std::to_string(C.rows()) + " × " +
+                     std::to_string(C.cols()) + (C.allFinite() ? "" : " with NaN or Inf") +
+                     ", expected empty or 3·#handles × 3·#handles = " + std::to_string(3 * H) +
+                     " × " + std::to_string(3 * H) + " finite");
+  reduced_data_ = std::move(data);
+}
+
 const ReducedData& SoftAvatar::reducedData() const {
   if (!reduced_data_)
     throw Error(std::string("SoftAvatar::reducedData: ") +

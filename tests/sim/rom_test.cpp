@@ -162,5 +162,77 @@ TEST(ReducedModel, CubatureApproximatesExactIntegration) {
   EXPECT_NEAR(kinetic_cub, kinetic_exact, tolerance * kinetic_exact);
 }
 
+// A "cubature" of every tet with weight 1 is exact integration: the same energies, gradients and
+// Hessians as the ROM without cubature, to rounding.
+TEST(ReducedModel, CubatureOfEveryTetWithUnitWeightsIsExactIntegration) {
+  auto custom = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), settings());
+  custom->enableSoftTissue();
+  custom->enableReducedModel();
+  custom->initVolumetricData();
+  auto data = std::make_shared<ReducedData>(avatar(1)->reducedData());
+  const int T = custom->volumetricData().numTets();
+  for (Cubature* c : {&data->elastic, &data->inertial}) {
+    c->elements = VecXi::LinSpaced(T, 0, T - 1);
+    c->weights = VecX::Ones(T);
+  }
+  custom->setReducedData(data);
+  const auto walk = test::smallScene(800).walk;
+  Simulable exact(avatar(1), walk), cubature(custom, walk);
+  const VecX d = randomVector(exact.numDofs(), 0.01, 5);
+  for (Simulable* s : {&exact, &cubature}) {
+    s->initialize();
+    s->preUpdate();
+    s->updateState(d);
+    s->setColliders(
+        {Collider::plane(Vec3(0, exact.getNodes().col(1).minCoeff() + 0.015, 0), Vec3::UnitY())});
+  }
+  const int n = exact.numDofs();
+  const double Ee = exact.getPotentialEnergyScalar() + exact.getDynamicEnergyScalar();
+  const double Ec = cubature.getPotentialEnergyScalar() + cubature.getDynamicEnergyScalar();
+  ASSERT_GT(std::abs(Ee), 0.0);
+  EXPECT_NEAR(Ec, Ee, 1e-11 * std::abs(Ee));
+  VecX ge = VecX::Zero(n), gc = VecX::Zero(n);
+  exact.getPotentialGradientVector(ge);
+  exact.getDynamicGradientVector(ge);
+  cubature.getPotentialGradientVector(gc);
+  cubature.getDynamicGradientVector(gc);
+  ASSERT_GT(ge.tail(n - 144).norm(), 0.0);
+  EXPECT_LT((gc - ge).cwiseAbs().maxCoeff(), 1e-10 * ge.cwiseAbs().maxCoeff());
+  std::vector<Triplet> Te, Tc;
+  exact.getPotentialHessianTripletVector(Te, 0, false);
+  exact.getDynamicHessianTripletVector(Te, 0, false);
+  cubature.getPotentialHessianTripletVector(Tc, 0, false);
+  cubature.getDynamicHessianTripletVector(Tc, 0, false);
+  const MatX He = test::denseFromTriplets(Te, n), Hc = test::denseFromTriplets(Tc, n);
+  ASSERT_GT(He.bottomRightCorner(n - 144, n - 144).norm(), 0.0);
+  EXPECT_LT((Hc - He).cwiseAbs().maxCoeff(), 1e-10 * He.cwiseAbs().maxCoeff());
+}
+
+TEST(ReducedModel, SetReducedDataChecksItsInput) {
+  auto custom = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), settings());
+  custom->enableSoftTissue();
+  custom->enableReducedModel();
+  EXPECT_THROW(custom->setReducedData(std::make_shared<ReducedData>()), Error);  // not built yet
+  custom->initVolumetricData();
+  const ReducedData& good = avatar(1)->reducedData();
+  auto bad = std::make_shared<ReducedData>(good);
+  bad->handles[1] = bad->handles[0];
+  EXPECT_NE(test::messageOf<InputError>([&] { custom->setReducedData(bad); }).find("handles[1]"),
+            std::string::npos);
+  bad = std::make_shared<ReducedData>(good);
+  bad->basis = SpMat(3, good.numHandles());
+  EXPECT_NE(test::messageOf<InputError>([&] { custom->setReducedData(bad); }).find("basis is 3"),
+            std::string::npos);
+  bad = std::make_shared<ReducedData>(good);
+  bad->elastic.elements = VecXi::Constant(1, custom->volumetricData().numTets());
+  bad->elastic.weights = VecX::Ones(1);
+  EXPECT_NE(test::messageOf<InputError>([&] { custom->setReducedData(bad); }).find("elastic"),
+            std::string::npos);
+  bad->elastic.elements[0] = 0;
+  bad->elastic.weights[0] = -1.0;
+  EXPECT_THROW(custom->setReducedData(bad), InputError);
+  EXPECT_NO_THROW(custom->setReducedData(std::make_shared<ReducedData>(good)));
+}
+
 }  // namespace
 }  // namespace flsh

@@ -16,6 +16,7 @@
 #include "flsh/io/motion.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/newton.h"
+#include "flsh/solve/scene.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -119,7 +120,9 @@ NewtonResult stepOnce(Simulable& sim, LinearSolver* solver, double tolerance = 1
   sim.preUpdate();
   StepObjective objective(sim);
   NewtonOptions options;
-  options.exact_hessian = false;
+  // As a Scene would: the PSD form for the FEM, the exact one (PSD fallback) for the ROM.
+  options.exact_hessian = (sim.hasReducedModel() ? reducedNewtonDefaults()
+                                                 : softTissueNewtonDefaults()).exact_hessian;
   options.gradient_tolerance = tolerance;
   options.max_iterations = 50;
   const NewtonResult r = newtonSolve(objective, options, solver);

@@ -84,9 +84,12 @@ struct SceneOptions {
   /// at 1.3 steps/s and 1e-4 at 2.1 steps/s with 1.1 mm (docs/benchmarks.md).
   NewtonOptions soft_tissue_newton = softTissueNewtonDefaults();
   /// Newton of scenes whose soft-tissue simulables all use the reduced model (ROM), used
-  /// instead of `newton` and `soft_tissue_newton`. Defaults (reducedNewtonDefaults()): the PSD
-  /// Hessian, gradient_tolerance 1e-5, linear_solver = Auto, which here means the dense LLT up
-  /// to 1500 DoFs (the handle block is dense: a few hundred DoFs per avatar) and CHOLMOD above.
+  /// instead of `newton` and `soft_tissue_newton`. Defaults (reducedNewtonDefaults()): the exact
+  /// Hessian (PSD fallback), gradient_tolerance 1e-6, the lagged-factor PCG, linear_solver =
+  /// Auto, which here means the dense LLT up to 1500 DoFs (the handle block is dense: a few
+  /// hundred DoFs per avatar) and CHOLMOD above. On the walking full body the PSD form at 1e-5
+  /// ends 1.2 mm (10 % of the displacement) from a 1e-9 solve at the same speed where this ends
+  /// 0.025 mm from it (docs/benchmarks.md).
   NewtonOptions reduced_newton = reducedNewtonDefaults();
   /// Assemble the Hessian on the general pattern (HessianAssembler) even when no simulable has
   /// soft tissue. The skeleton then gets bitwise the same Hessians and states (its general

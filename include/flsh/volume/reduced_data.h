@@ -5,7 +5,8 @@
 //  - basis: bounded biharmonic weights φ_h on the tet mesh at X̄(β), so that the soft-tissue
 //    displacement of node j is u_j = Σ_h φ_h(j) z_h (z_h ∈ R³, m, unposed space);
 //  - elastic cubature: sample tets and weights w_e ≥ 0 with Σ_{e∈S} w_e Ψ_e ≈ Σ_e Ψ_e for the
-//    elastic energy of subspace deformations;
+//    elastic energy of subspace deformations, plus a constant positive quadratic correction for
+//    the rest stiffness the samples miss;
 //  - inertial cubature: sample tets and weights for the lumped-mass kinetic energy of the nodes,
 //    Σ_{e∈S} w_e Σ_{a∈e} (m_e/4) ‖v_a‖² ≈ Σ_e Σ_{a∈e} (m_e/4) ‖v_a‖², for velocities made of
 //    skinned rigid bone motions plus subspace motions. Equivalently a sparse set of node masses
@@ -53,6 +54,14 @@ struct ReducedData {
   /// not built. Held-out relative error of the elastic energy, 0 when not built.
   Cubature elastic;
   double elastic_test_error = 0;
+  /// With the elastic cubature, the rest-stiffness correction C = [Φ̂ᵀ (K − K_S) Φ̂]₊ (3H × 3H,
+  /// symmetric positive semi-definite, N/m; Φ̂ = Φ ⊗ I₃, K the exact elastic Hessian at rest,
+  /// K_S the cubature's, [·]₊ the positive part): the reduced elastic energy is
+  /// E_S(z) + ½ zᵀ C z, so that no subspace direction the sample tets miss is left without
+  /// stiffness (at rest the stiffness is at least the exact one in every direction), and the
+  /// energy stays bounded below. Empty without the elastic cubature (or for data without a
+  /// correction).
+  MatX elastic_rest_correction;
   /// Inertial cubature, same conventions (kinetic energy).
   Cubature inertial;
   double inertial_test_error = 0;

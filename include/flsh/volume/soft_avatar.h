@@ -108,6 +108,13 @@ class SoftAvatar {
   /// uninitialized avatar.
   const ReducedData& reducedData() const;
   bool hasReducedData() const { return reduced_data_ != nullptr; }
+  /// Replaces the reduced data by the caller's (a basis or cubature of one's own; e.g. every tet
+  /// with weight 1 for exact integration), after initVolumetricData() with the reduced model on
+  /// and before any Simulable reads this avatar. Checked against the volumetric body: InputError
+  /// (naming the field) for a basis that is not #nodes × #handles, with entries outside [0, 1]
+  /// or on bone nodes, handles out of range, repeated, or on bone nodes, or cubature tets out of
+  /// range / weights not finite and > 0 / lengths that differ.
+  void setReducedData(std::shared_ptr<const ReducedData> data);
   /// Cache hit, warnings and seconds per stage of the reduced build (all zero without it).
   const ReducedBuildReport& reducedBuildReport() const { return reduced_report_; }
   /// Cache hits, warnings and seconds per stage of the volumetric build (all zero without it);

@@ -8,6 +8,7 @@
 //                 [--no-cache]
 //   flsh avatar --model BODY.npz [--betas b0,b1,…] [--soft fem|rom] [--cache DIR]
 //               [--resolution R] [--materials FILE] [--no-cache]
+//               [--handles H] [--elastic-cubature N] [--inertial-cubature N]
 //
 // Every command prints a one-line summary on success, and on bad input exits non-zero with a
 // message naming the input, leaving no partial output file (all writes are atomic).
@@ -150,6 +151,11 @@ struct AvatarArgs {
   std::string model, betas, soft = "none", cache, materials;
   double resolution = 1.0;
   bool no_cache = false;
+  // --soft rom only (as the scene keys handles / elastic_cubature / inertial_cubature):
+  int handles = ReducedSettings().num_handles;
+  int elastic_cubature = ReducedSettings().elastic_cubature_points;   ///< 0 = off
+  int inertial_cubature = ReducedSettings().inertial_cubature_points; ///< 0 = off
+  bool reduced_options_given = false;
 };
 
 // Builds (or loads) an avatar and prints its statistics as JSON on stdout.
@@ -181,21 +187,40 @@ int cmdAvatar(const AvatarArgs& args) {
     throw InputError("--soft: expected fem or rom (or none: the skeleton), got '" + args.soft + "'");
   if (!(args.resolution > 0) || !std::isfinite(args.resolution))
     throw InputError("--resolution: expected a number > 0, got " + std::to_string(args.resolution));
+  if (args.reduced_options_given && args.soft != "rom")
+    throw InputError("--handles, --elastic-cubature and --inertial-cubature are only for --soft "
+                     "rom, got --soft " + args.soft);
+  if (args.handles < 1)
+    throw InputError("--handles: expected an integer >= 1, got " + std::to_string(args.handles));
+  if (args.elastic_cubature < 0)
+    throw InputError("--elastic-cubature: expected a number of sample tets >= 0 (0 = off), got " +
+                     std::to_string(args.elastic_cubature));
+  if (args.inertial_cubature < 0)
+    throw InputError("--inertial-cubature: expected a number of sample tets >= 0 (0 = off), got " +
+                     std::to_string(args.inertial_cubature));
 
   SoftAvatarSettings settings;
   settings.volumetric.tet_mesh.resolution = args.resolution;
   settings.volumetric.material_file = args.materials;
   settings.volumetric.cache_dir = args.cache;
   settings.volumetric.use_cache = !args.no_cache;
+  settings.reduced.num_handles = args.handles;
+  if (args.elastic_cubature > 0) settings.reduced.elastic_cubature_points = args.elastic_cubature;
+  if (args.inertial_cubature > 0)
+    settings.reduced.inertial_cubature_points = args.inertial_cubature;
   SoftAvatar avatar(body, betas, settings);
   avatar.enableSoftTissue(args.soft != "none");
   avatar.enableReducedModel(args.soft == "rom");
+  avatar.enableElasticCubature(args.soft == "rom" && args.elastic_cubature > 0);
+  avatar.enableInertialCubature(args.soft == "rom" && args.inertial_cubature > 0);
   const auto build_start = Clock::now();
   avatar.initVolumetricData();
   const double build_seconds = secondsSince(build_start);
 
   const VolumetricBuildReport& r = avatar.volumetricBuildReport();
   if (!r.warnings.empty()) std::cerr << "flsh avatar: warning: " << r.warnings;
+  const ReducedBuildReport& rr = avatar.reducedBuildReport();
+  if (!rr.warnings.empty()) std::cerr << "flsh avatar: warning: " << rr.warnings;
   nlohmann::ordered_json out;
   out["model"] = body->source.empty() ? args.model : body->source;
   out["soft"] = args.soft;
@@ -234,6 +259,41 @@ int cmdAvatar(const AvatarArgs& args) {
         {"template", !used ? "off" : r.template_from_cache ? "hit" : "miss"},
         {"shape", !used ? "off" : r.data_from_cache ? "hit" : "miss"},
         {"warnings", r.warnings}};
+  }
+  if (avatar.hasReducedData()) {
+    const ReducedData& d = avatar.reducedData();
+    auto cubature = [](const Cubature& c, double test_error, bool on) {
+      nlohmann::ordered_json j;
+      j["enabled"] = on;
+      j["tets"] = on ? int(c.elements.size()) : 0;
+      j["weight_sum"] = on ? c.weights.sum() : 0.0;
+      j["training_error"] = on ? c.training_error : 0.0;
+      j["held_out_error"] = on ? test_error : 0.0;
+      return j;
+    };
+    nlohmann::ordered_json reduced;
+    reduced["handles"] = d.numHandles();
+    reduced["dofs"] = 6 * kNumJoints + 3 * d.numHandles();
+    reduced["basis_nonzeros"] = long(d.basis.nonZeros());
+    reduced["basis_max_bound_violation"] = d.basis_max_bound_violation;
+    reduced["basis_max_constraint_error"] = d.basis_max_constraint_error;
+    reduced["basis_converged"] = d.basis_converged;
+    reduced["elastic_cubature"] =
+        cubature(d.elastic, d.elastic_test_error, avatar.elasticCubatureEnabled());
+    reduced["inertial_cubature"] =
+        cubature(d.inertial, d.inertial_test_error, avatar.inertialCubatureEnabled());
+    out["reduced"] = reduced;
+    out["cache"]["reduced"] = !settings.volumetric.use_cache ? "off"
+                              : rr.from_cache                ? "hit"
+                                                             : "miss";
+    out["cache"]["reduced_warnings"] = rr.warnings;
+    seconds["handles"] = rr.seconds_handles;
+    seconds["basis"] = rr.seconds_basis;
+    seconds["cubature_training"] = rr.seconds_training;
+    seconds["cubature"] = rr.seconds_cubature;
+    seconds["reduced_cache_load"] = rr.seconds_cache_load;
+    seconds["reduced_cache_store"] = rr.seconds_cache_store;
+    seconds["reduced_total"] = rr.seconds_total;
   }
   seconds["avatar_total"] = build_seconds;
   out["seconds"] = seconds;
@@ -386,7 +446,8 @@ struct AvatarRun {
   std::shared_ptr<SoftAvatar> avatar;
   std::shared_ptr<const Motion> motion;
   std::shared_ptr<Simulable> simulable;
-  bool soft = false;  ///< "simulation": "fem"
+  bool soft = false;  ///< "simulation": "fem" or "rom" (soft-tissue displacements)
+  bool rom = false;   ///< "simulation": "rom"
   // Per saved frame:
   std::vector<VecX> states, poses;
   std::vector<VecX> displacement_norms;  ///< soft only: ‖u_i‖ of the surface vertices, #V, m
@@ -406,6 +467,47 @@ std::shared_ptr<Motion> placedMotion(Motion motion, const AvatarSpec& spec) {
     motion.poses.row(k).head<3>() = logSO3(Ry * rodrigues(root)).transpose();
   }
   return std::make_shared<Motion>(std::move(motion));
+}
+
+/// "500 tets, held-out error 0.84 %" or "off (exact)" for one cubature of the reduced data.
+std::string cubatureSummary(const Cubature& cubature, double test_error, bool enabled) {
+  if (!enabled) return "off (exact)";
+  char text[96];
+  std::snprintf(text, sizeof(text), "%d tets, held-out error %.2f %%",
+                int(cubature.elements.size()), 100.0 * test_error);
+  return text;
+}
+
+/// One stderr line about a ROM avatar's reduced data: basis, cubatures, cache and build time.
+void printReducedReport(const std::string& name, const SoftAvatar& avatar, bool use_cache) {
+  const ReducedData& data = avatar.reducedData();
+  const ReducedBuildReport& report = avatar.reducedBuildReport();
+  if (!report.warnings.empty())
+    std::fprintf(stderr, "simulate: warning: avatar '%s': %s", name.c_str(),
+                 report.warnings.c_str());
+  if (!data.basis_converged)
+    std::fprintf(stderr,
+                 "simulate: warning: avatar '%s': the bounded biharmonic solve of some handle "
+                 "did not converge (max bound violation %.2g)\n",
+                 name.c_str(), data.basis_max_bound_violation);
+  char cache[64];
+  if (!use_cache)
+    std::snprintf(cache, sizeof(cache), "off, built in %.1f s", report.seconds_total);
+  else if (report.from_cache)
+    std::snprintf(cache, sizeof(cache), "hit (%.2f s)", report.seconds_total);
+  else
+    std::snprintf(cache, sizeof(cache), "miss (built and stored in %.1f s)", report.seconds_total);
+  std::fprintf(stderr,
+               "simulate: avatar '%s' (rom): %d handles, basis %ld nonzeros; elastic cubature "
+               "%s; inertial cubature %s; reduced data cache: %s\n",
+               name.c_str(), data.numHandles(), long(data.basis.nonZeros()),
+               cubatureSummary(data.elastic, data.elastic_test_error,
+                               avatar.elasticCubatureEnabled())
+                   .c_str(),
+               cubatureSummary(data.inertial, data.inertial_test_error,
+                               avatar.inertialCubatureEnabled())
+                   .c_str(),
+               cache);
 }
 
 /// Loads every body model, motion and avatar of the scene (nothing is written).
@@ -458,20 +560,40 @@ std::vector<AvatarRun> buildAvatars(const SceneSpec& scene) {
       betas = fitBetas(motion->betas, *body, motion->source);
     if (betas.size() == 0) betas = VecX::Zero(body->numBetas());
     SoftAvatarSettings settings;
-    run.soft = spec.simulation == "fem";
+    run.rom = spec.simulation == "rom";
+    run.soft = spec.simulation == "fem" || run.rom;
     if (run.soft) {
       settings.volumetric.tet_mesh.resolution = spec.resolution;
       settings.volumetric.material_file = spec.material_file;
       settings.volumetric.cache_dir = scene.cache_dir;
       settings.volumetric.use_cache = scene.use_cache;
     }
+    if (run.rom) {
+      // 0 sample tets switches a cubature off; its point count then keeps the (unused) default.
+      settings.reduced.num_handles = spec.handles;
+      if (spec.elastic_cubature > 0)
+        settings.reduced.elastic_cubature_points = spec.elastic_cubature;
+      if (spec.inertial_cubature > 0)
+        settings.reduced.inertial_cubature_points = spec.inertial_cubature;
+    }
     run.avatar = std::make_shared<SoftAvatar>(body, betas, settings);
     if (run.soft) {
-      std::fprintf(stderr, "simulate: building the volumetric body of avatar '%s'...\n",
-                   spec.name.c_str());
+      std::fprintf(stderr, "simulate: building the volumetric body%s of avatar '%s'...\n",
+                   run.rom ? " and the reduced basis" : "", spec.name.c_str());
       run.avatar->enableSoftTissue();
     }
-    run.avatar->initVolumetricData();
+    if (run.rom) {
+      run.avatar->enableReducedModel();
+      run.avatar->enableElasticCubature(spec.elastic_cubature > 0);
+      run.avatar->enableInertialCubature(spec.inertial_cubature > 0);
+    }
+    try {
+      run.avatar->initVolumetricData();
+    } catch (const InputError& e) {
+      // E.g. more handles than the body has soft-tissue surface nodes: name the avatar.
+      throw InputError(run.where + " ('" + spec.name + "', \"" + spec.simulation +
+                       "\"): " + e.what());
+    }
     if (run.soft) {
       const VolumetricBuildReport& report = run.avatar->volumetricBuildReport();
       const VolumetricData& data = run.avatar->volumetricData();
@@ -487,6 +609,7 @@ std::vector<AvatarRun> buildAvatars(const SceneSpec& scene) {
                    : report.template_from_cache    ? "template hit, shape built"
                                                    : "miss (built and stored)");
     }
+    if (run.rom) printReducedReport(spec.name, *run.avatar, scene.use_cache);
     SimulableOptions options = spec.options;
     options.time_step = scene.time_step;
     run.simulable = std::make_shared<Simulable>(run.avatar, run.motion, options);
@@ -542,13 +665,19 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
 
   SceneOptions scene_options;
   scene_options.newton = scene.newton;
-  // Soft-tissue scenes keep their own solver choices (PSD Hessian, CHOLMOD, lagged factor,
-  // tolerance 1e-5) and take the scene's iteration limit and step tolerance; their gradient
-  // tolerance comes from the scene file's "soft_tissue_gradient_tolerance".
+  // Soft-tissue scenes keep their own solver choices (SceneOptions::soft_tissue_newton with an
+  // FEM avatar, else reduced_newton for ROM avatars: Hessian form, linear solver, lagged factor,
+  // tolerance) and take the scene's iteration limit and step tolerance; their gradient
+  // tolerance comes from the scene file's "soft_tissue_gradient_tolerance" (FEM).
   scene_options.soft_tissue_newton.max_iterations = scene.newton.max_iterations;
   scene_options.soft_tissue_newton.step_tolerance = scene.newton.step_tolerance;
   if (scene.soft_tissue_gradient_tolerance > 0)
     scene_options.soft_tissue_newton.gradient_tolerance = scene.soft_tissue_gradient_tolerance;
+  // Scenes whose soft avatars are all "rom": the same, with "reduced_gradient_tolerance".
+  scene_options.reduced_newton.max_iterations = scene.newton.max_iterations;
+  scene_options.reduced_newton.step_tolerance = scene.newton.step_tolerance;
+  if (scene.reduced_gradient_tolerance > 0)
+    scene_options.reduced_newton.gradient_tolerance = scene.reduced_gradient_tolerance;
   scene_options.avatar_contact = scene.avatar_contact;
   Scene sim_scene(scene_options);
   for (auto& run : runs) sim_scene.addSimulable(run.simulable);
@@ -760,9 +889,9 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
     double run_max_mm = 0.0;
     for (const VecX& norms : run.displacement_norms)
       run_max_mm = std::max(run_max_mm, maxDisplacementMm(norms));
-    std::printf("simulate: avatar '%s' (fem): max soft-tissue displacement |u| %.3f mm over the "
+    std::printf("simulate: avatar '%s' (%s): max soft-tissue displacement |u| %.3f mm over the "
                 "saved frames\n",
-                run.spec->name.c_str(), run_max_mm);
+                run.spec->name.c_str(), run.spec->simulation.c_str(), run_max_mm);
   }
   const bool any_soft =
       std::any_of(runs.begin(), runs.end(), [](const AvatarRun& r) { return r.soft; });
@@ -835,7 +964,7 @@ int main(int argc, char** argv) {
   bool sim_no_cache = false;
   auto* sim_cache_option = simulate->add_option(
       "--cache", sim_cache,
-      "avatar cache directory of \"fem\" avatars (overrides cache_dir; default: "
+      "avatar cache directory of \"fem\" and \"rom\" avatars (overrides cache_dir; default: "
       "$FLSH_CACHE_DIR, else ~/.cache/flsh)");
   simulate->add_flag("--no-cache", sim_no_cache, "neither read nor write the avatar cache")
       ->excludes(sim_cache_option);
@@ -858,6 +987,17 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   avatar->add_option("--materials", avatar_args.materials,
                      "material file (JSON, docs/materials.md; default: built-in coefficients)");
+  auto* handles_option = avatar->add_option("--handles", avatar_args.handles,
+                                            "--soft rom: point handles of the reduced basis")
+                             ->capture_default_str();
+  auto* elastic_option =
+      avatar->add_option("--elastic-cubature", avatar_args.elastic_cubature,
+                         "--soft rom: sample tets of the elastic cubature (0 = off, exact)")
+          ->capture_default_str();
+  auto* inertial_option =
+      avatar->add_option("--inertial-cubature", avatar_args.inertial_cubature,
+                         "--soft rom: sample tets of the inertial cubature (0 = off, exact)")
+          ->capture_default_str();
 
   CLI11_PARSE(app, argc, argv);
   const std::string command = app.get_subcommands().front()->get_name();
@@ -866,7 +1006,11 @@ int main(int argc, char** argv) {
     if (command == "motion") return cmdMotion(name, out, seconds, fps);
     if (command == "pose") return cmdPose(model, motion_spec, out, betas);
     if (command == "demo") return cmdDemo(demo_out, vertices, name, seconds);
-    if (command == "avatar") return cmdAvatar(avatar_args);
+    if (command == "avatar") {
+      avatar_args.reduced_options_given =
+          handles_option->count() + elastic_option->count() + inertial_option->count() > 0;
+      return cmdAvatar(avatar_args);
+    }
     if (command == "simulate") {
       SceneOverrides overrides;
       overrides.duration = duration;

@@ -1,15 +1,17 @@
 """A ball hits the belly of a standing avatar: a sphere collider moves along −z at belly height
 into the front of the body and back, which tracks the built-in "stand" motion on the ground.
 Writes a PNG sheet (body and ball) and prints how far the body is pushed. With --soft the avatar
-is the FEM soft skeleton (docs/fem.md): the belly gives way, the sheet colours the body by the
-soft-tissue displacement |u| and the largest displacement is printed.
+is the FEM soft skeleton (docs/fem.md), with --rom the ROM soft skeleton (docs/rom.md: a reduced
+basis over --handles surface handles, elastic and inertial cubature): the belly gives way, the
+sheet colours the body by the soft-tissue displacement |u| and the largest displacement is
+printed.
 
 The synthetic body's pelvis joint is at the origin, its belly front at z ≈ +0.11 m, y ≈ 0.05 m.
 
 Usage:
     PYTHONPATH=build/python /usr/bin/python3 examples/python/ball_belly.py \
         [--speed 3.0] [--radius 0.12] [--seconds 0.6] [--vertices 2000] [--out ball_belly_out]
-        [--soft [--resolution 1.0] [--cache DIR]]
+        [--soft | --rom [--handles 87]] [--resolution 1.0] [--cache DIR]
 """
 import argparse
 import os
@@ -46,21 +48,43 @@ def main():
     parser.add_argument("--vertices", type=int, default=2000, help="synthetic body vertices")
     parser.add_argument("--sheet-frames", type=int, default=5, help="frames shown in sheet.png")
     parser.add_argument("--out", default="ball_belly_out", help="output folder")
-    parser.add_argument("--soft", action="store_true", help="FEM soft tissue instead of the skeleton")
-    parser.add_argument("--resolution", type=float, default=1.0, help="tet-mesh resolution (--soft)")
-    parser.add_argument("--cache", default="", help="avatar cache folder (--soft; default ~/.cache/flsh)")
+    model_group = parser.add_mutually_exclusive_group()
+    model_group.add_argument("--soft", action="store_true",
+                             help="FEM soft tissue instead of the skeleton")
+    model_group.add_argument("--rom", action="store_true",
+                             help="ROM soft tissue (reduced basis, cubatures) instead of the skeleton")
+    parser.add_argument("--handles", type=int, default=87, help="ROM handles (--rom)")
+    parser.add_argument("--resolution", type=float, default=1.0,
+                        help="tet-mesh resolution (--soft, --rom)")
+    parser.add_argument("--cache", default="",
+                        help="avatar cache folder (--soft, --rom; default ~/.cache/flsh)")
     args = parser.parse_args()
+    soft = args.soft or args.rom
     os.makedirs(args.out, exist_ok=True)
 
     model = flsh.make_synthetic_body(vertices=args.vertices)
     if args.soft:
         avatar = flsh.SoftAvatar(model, resolution=args.resolution, cache_dir=args.cache)
         avatar.enable_soft_tissue()
+    elif args.rom:
+        avatar = flsh.SoftAvatar(model, resolution=args.resolution, cache_dir=args.cache,
+                                 handles=args.handles)
+        avatar.enable_soft_tissue()
+        avatar.enable_reduced_model()
+        avatar.enable_elastic_cubature()
+        avatar.enable_inertial_cubature()
     else:
         avatar = flsh.SoftAvatar(model)
     avatar.init_volumetric_data()
+    if args.rom:
+        reduced = avatar.reduced_data
+        print(f"ROM: {reduced.num_handles} handles; elastic cubature "
+              f"{len(reduced.elastic_cubature)} tets (held-out error "
+              f"{100 * reduced.elastic_test_error:.2f} %), inertial cubature "
+              f"{len(reduced.inertial_cubature)} tets ({100 * reduced.inertial_test_error:.2f} %); "
+              f"reduced data {'from the cache' if avatar.reduced_build_report['from_cache'] else 'built'}")
     motion = flsh.make_builtin_motion("stand", seconds=args.seconds, fps=30.0)
-    time_step = 1.0 / 30.0 if args.soft else 1.0 / 60.0
+    time_step = 1.0 / 30.0 if soft else 1.0 / 60.0
     simulable = flsh.Simulable(avatar, motion, flsh.SimulableOptions(time_step=time_step))
 
     belly = np.array([0.0, 0.05, 0.11])  # front of the belly, m
@@ -110,7 +134,7 @@ def main():
 
     options = flsh.RenderOptions(width=240, height=280, view_direction=[-1.0, 0.0, -0.3])
     largest = max(m.max() for m in magnitudes)
-    if args.soft:  # body coloured by |u| on one scale for the sheet, the ball stays red
+    if soft:  # body coloured by |u| on one scale for the sheet, the ball stays red
         color = np.stack([np.vstack([flsh.displacement_colors(m, largest), color[model.num_vertices:]])
                           for m in magnitudes])
     sheet = flsh.render_sheet(np.stack(frames), faces, options, colors=color)
@@ -119,7 +143,7 @@ def main():
     print(f"ball r = {args.radius} m at {args.speed} m/s: {steps} steps, up to {max_contacts} "
           f"contacts; pelvis pushed back by up to {100 * max_push:.1f} cm; deepest ball "
           f"penetration {1000 * -deepest:.1f} mm")
-    if args.soft:
+    if soft:
         print(f"soft tissue: largest displacement |u| {1000 * largest:.1f} mm in the sheet "
               f"(viridis: dark purple 0, yellow {1000 * largest:.1f} mm)")
     print(f"wrote {sheet_path} ({sheet.width} × {sheet.height})")

@@ -112,7 +112,15 @@ void bind_io(py::module_& m) {
       .def_readonly("synthetic_vertices", &AvatarSpec::synthetic_vertices)
       .def_property_readonly("betas", [](const AvatarSpec& a) { return to_numpy(a.betas); },
                              "(K,) shape; empty = zeros")
-      .def_readonly("simulation", &AvatarSpec::simulation, "'skeleton'")
+      .def_readonly("simulation", &AvatarSpec::simulation, "'skeleton', 'fem' or 'rom'")
+      .def_readonly("resolution", &AvatarSpec::resolution, "tet-mesh resolution ('fem', 'rom')")
+      .def_readonly("material_file", &AvatarSpec::material_file,
+                    "material file, resolved ('fem', 'rom'); '' = built-in")
+      .def_readonly("handles", &AvatarSpec::handles, "reduced-basis handles ('rom')")
+      .def_readonly("elastic_cubature", &AvatarSpec::elastic_cubature,
+                    "elastic cubature tets ('rom'); 0 = off")
+      .def_readonly("inertial_cubature", &AvatarSpec::inertial_cubature,
+                    "inertial cubature tets ('rom'); 0 = off")
       .def_readonly("motion", &AvatarSpec::motion, "AMASS .npz path or builtin:NAME; '' = none")
       .def_readonly("motion_seconds", &AvatarSpec::motion_seconds, "s; 0 = the duration")
       .def_property_readonly("offset", [](const AvatarSpec& a) { return to_numpy(VecX(a.offset)); },
@@ -138,6 +146,10 @@ void bind_io(py::module_& m) {
       .def_readonly("time_step", &SceneSpec::time_step, "s")
       .def_readonly("duration", &SceneSpec::duration, "s")
       .def_readonly("newton", &SceneSpec::newton, "NewtonOptions")
+      .def_readonly("soft_tissue_gradient_tolerance", &SceneSpec::soft_tissue_gradient_tolerance,
+                    "Newton tolerance of scenes with FEM avatars; <= 0 = the default")
+      .def_readonly("reduced_gradient_tolerance", &SceneSpec::reduced_gradient_tolerance,
+                    "Newton tolerance of scenes whose soft avatars are all ROM; <= 0 = the default")
       .def_readonly("avatar_contact", &SceneSpec::avatar_contact)
       .def_readonly("outputs", &SceneSpec::outputs, "OutputSpec")
       .def("__repr__", [](const SceneSpec& s) {

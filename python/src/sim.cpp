@@ -298,11 +298,16 @@ void bind_sim(py::module_& m) {
                             [](const S& s) { return to_numpy(s.bonePositions()); },
                             "(24, 3) joint centres t_b, m.");
 
-  // ---- soft tissue (FEM soft skeleton)
+  // ---- soft tissue (FEM and ROM soft skeletons)
   sim.def("hasSoftTissue", &S::hasSoftTissue,
-          "True for the FEM soft skeleton (an avatar with enable_soft_tissue()): the state then "
-          "holds a displacement per soft-tissue node after the 144 bone values.");
+          "True for the soft-tissue models (an avatar with enable_soft_tissue()): the state then "
+          "holds, after the 144 bone values, a displacement per soft-tissue node (FEM) or a "
+          "z_h per handle of the reduced basis (ROM, enable_reduced_model()).");
   alias("hasSoftTissue", "has_soft_tissue");
+  sim.def("hasReducedModel", &S::hasReducedModel,
+          "True for the ROM soft skeleton: u_j = Σ_h φ_h(j) z_h with the avatar's reduced basis "
+          "(docs/rom.md).");
+  alias("hasReducedModel", "has_reduced_model");
   sim.def("numBoneDofs", &S::numBoneDofs, "Number of bone DoFs, 6 · 24 = 144 (the state's head).");
   sim.def_property_readonly("num_bone_dofs", &S::numBoneDofs,
                             "Number of bone DoFs, 6 · 24 = 144 (the state's head).");
@@ -313,13 +318,22 @@ void bind_sim(py::module_& m) {
             std::copy(nodes.data(), nodes.data() + nodes.size(), a.mutable_data());
             return a;
           },
-          "(S,) int32 tet-node index of each soft-tissue node in state order: node softNodes()[k] "
-          "has its displacement at state[numBoneDofs() + 3k : … + 3]; empty for the skeleton.");
+          "(S,) int32 tet node of each 3-value block of the soft state, in state order: block k "
+          "is state[numBoneDofs() + 3k : … + 3], the displacement u (m) of node softNodes()[k] "
+          "(FEM: every soft-tissue node; ROM: the handles, whose u equals their z_h); empty for "
+          "the skeleton.");
   alias("softNodes", "soft_nodes");
   sim.def("nodeSoftDof", &S::nodeSoftDof, py::arg("j"),
-          "State index of tet node j's first displacement value, −1 for a bone node (and every "
-          "vertex of the skeleton model); ValueError for j outside the nodes.");
+          "State index of tet node j's first displacement value when u_j is a state entry of its "
+          "own, else −1: bone nodes, every vertex of the skeleton model, and in the ROM every "
+          "node but the handles (see nodeDisplacementBasis); ValueError for j outside the nodes.");
   alias("nodeSoftDof", "node_soft_dof");
+  sim.def("nodeDisplacementBasis", &S::nodeDisplacementBasis, py::arg("j"),
+          "u_j (m) as a combination of state entries: list of (index, weight) pairs with "
+          "u_j = Σ weight · state[index : index + 3]. FEM: [(nodeSoftDof(j), 1.0)]; ROM: "
+          "(index of z_h, φ_h(j)) for the handles whose φ reaches j; [] for bone nodes and the "
+          "skeleton model. ValueError for j outside the nodes.");
+  alias("nodeDisplacementBasis", "node_displacement_basis");
   sim.def("getSoftTissueDisplacements",
           [](const S& s) { return to_numpy(s.getSoftTissueDisplacements()); },
           "(V, 3) float64 soft-tissue displacements u of the surface vertices, m, in the unposed "

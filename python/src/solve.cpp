@@ -97,9 +97,13 @@ void bind_solve(py::module_& m) {
   const SceneOptions sd;
   py::class_<SceneOptions>(m, "SceneOptions", "Options of a Scene.")
       .def(py::init([](const py::object& newton, bool avatar_contact,
-                       const py::object& avatar_contact_options) {
+                       const py::object& avatar_contact_options,
+                       const py::object& soft_tissue_newton, const py::object& reduced_newton) {
              SceneOptions o;
              if (!newton.is_none()) o.newton = newton.cast<NewtonOptions>();
+             if (!soft_tissue_newton.is_none())
+               o.soft_tissue_newton = soft_tissue_newton.cast<NewtonOptions>();
+             if (!reduced_newton.is_none()) o.reduced_newton = reduced_newton.cast<NewtonOptions>();
              o.avatar_contact = avatar_contact;
              if (!avatar_contact_options.is_none())
                o.avatar_contact_options = avatar_contact_options.cast<ContactOptions>();
@@ -108,9 +112,21 @@ void bind_solve(py::module_& m) {
            py::kw_only(), py::arg("newton") = py::none(),
            py::arg("avatar_contact") = sd.avatar_contact,
            py::arg("avatar_contact_options") = py::none(),
+           py::arg("soft_tissue_newton") = py::none(), py::arg("reduced_newton") = py::none(),
            "newton: NewtonOptions or None; avatar_contact: vertices against the other avatars' "
-           "bone capsules; avatar_contact_options: ContactOptions or None.")
-      .def_readwrite("newton", &SceneOptions::newton, "NewtonOptions (a copy on read)")
+           "bone capsules; avatar_contact_options: ContactOptions or None; soft_tissue_newton / "
+           "reduced_newton: NewtonOptions of scenes with FEM soft tissue / with ROM soft tissue "
+           "only, or None (their defaults).")
+      .def_readwrite("newton", &SceneOptions::newton,
+                     "NewtonOptions of skeleton-only scenes (a copy on read)")
+      .def_readwrite("soft_tissue_newton", &SceneOptions::soft_tissue_newton,
+                     "NewtonOptions of scenes with an FEM soft-tissue simulable (a copy on read; "
+                     "default: PSD Hessian, CHOLMOD with a lagged factor, gradient_tolerance 1e-5)")
+      .def_readwrite("reduced_newton", &SceneOptions::reduced_newton,
+                     "NewtonOptions of scenes whose soft-tissue simulables all use the reduced "
+                     "model (a copy on read; default: exact Hessian with PSD fallback, lagged "
+                     "factor, gradient_tolerance 1e-6, linear_solver Auto = dense up to 1500 "
+                     "DoFs, CHOLMOD above)")
       .def_readwrite("avatar_contact", &SceneOptions::avatar_contact)
       .def_readwrite("avatar_contact_options", &SceneOptions::avatar_contact_options,
                      "ContactOptions (a copy on read)");
@@ -144,6 +160,15 @@ void bind_solve(py::module_& m) {
            "One backward-Euler step of every simulable (preUpdate, Newton, postUpdate); "
            "returns StepStats. Releases the GIL.")
       .def_property_readonly("time", &Scene::time, "s")
+      .def("has_soft_tissue", &Scene::hasSoftTissue,
+           "True when some simulable has soft-tissue DoFs (FEM or ROM).")
+      .def("has_fem_soft_tissue", &Scene::hasFemSoftTissue,
+           "True when some simulable has FEM soft tissue (not the reduced model).")
+      .def_property_readonly("newton_options",
+                             [](const Scene& s) { return NewtonOptions(s.newtonOptions()); },
+                             "The NewtonOptions step() uses (a copy): options.newton for "
+                             "skeletons only, else soft_tissue_newton with FEM soft tissue, else "
+                             "reduced_newton.")
       .def("set_static", &Scene::setStatic, py::arg("on") = true,
            "True: drops the dynamic terms (static equilibrium).")
       .def_property_readonly("simulables", &Scene::simulables, "list of Simulable")

@@ -1,10 +1,14 @@
 // Bindings of include/flsh/volume: SoftAvatar (rest shape, bone inertias, capsules) with the
-// FLSH paper's camelCase settings as aliases of the snake_case names.
+// FLSH paper's camelCase settings as aliases of the snake_case names, the volumetric body of the
+// soft-tissue models and the reduced data (handles, basis, cubatures) of the ROM.
 #include <pybind11/stl.h>
 
+#include <cmath>
+#include <cstdint>
 #include <memory>
 
 #include "bindings.h"
+#include "flsh/volume/reduced_data.h"
 #include "flsh/volume/soft_avatar.h"
 #include "flsh/volume/tet_mesh.h"
 
@@ -29,6 +33,18 @@ py::array_t<double> to_numpy_col(const MatX& M) { return to_numpy(RowMatX(M)); }
 
 py::array_t<int> ints_numpy(const MatX4i& tets) {
   return take_numpy(MatX4i(tets), {py::ssize_t(tets.rows()), 4});
+}
+
+py::array_t<int> indices_numpy(const VecXi& v) {
+  return take_numpy(VecXi(v), {py::ssize_t(v.size())});
+}
+
+// A ReducedSettings count from a keyword argument: ValueError naming it when below `lo`.
+int checked_count(int value, const char* name, int lo, const char* meaning) {
+  if (value < lo)
+    throw py::value_error(std::string(name) + ": expected an integer ≥ " + std::to_string(lo) +
+                          " (" + meaning + "), got " + std::to_string(value));
+  return value;
 }
 
 py::dict quality_dict(const TetMeshQuality& q) {
@@ -125,6 +141,63 @@ void bind_volume(py::module_& m) {
                              "dict: min/max dihedral angle (deg), max/mean radius–edge ratio, min volume (m³)")
       .def_property_readonly("total_mass", &VolumetricData::totalMass, "Σ ρ · volume over tets at X̄(β), kg");
 
+  py::class_<Cubature>(
+      m, "Cubature",
+      "Sample tets and non-negative weights replacing a sum over all tets (read-only copies).")
+      .def_property_readonly("elements",
+                             [](const Cubature& c) { return indices_numpy(c.elements); },
+                             "(S,) int32 tet indices into the template mesh, ascending")
+      .def_property_readonly("weights", [](const Cubature& c) { return to_numpy(c.weights); },
+                             "(S,) float64 weights > 0 (dimensionless: 1 = the tet itself)")
+      .def_property_readonly("training_error", [](const Cubature& c) { return c.training_error; },
+                             "relative error ‖A_S w − A·1‖ / ‖A·1‖ on the training samples")
+      .def_property_readonly("rounds", [](const Cubature& c) { return c.rounds; },
+                             "greedy rounds of the selection")
+      .def("__len__", [](const Cubature& c) { return c.elements.size(); })
+      .def("__repr__", [](const Cubature& c) {
+        return "Cubature(tets=" + std::to_string(c.elements.size()) + ", training_error=" +
+               py::repr(py::float_(c.training_error)).cast<std::string>() + ")";
+      });
+
+  py::class_<ReducedData>(
+      m, "ReducedData",
+      "The reduced data of a ROM avatar (read-only; arrays are copies): surface handles, the "
+      "bounded biharmonic basis φ (u_j = Σ_h φ_h(j) z_h) and the elastic / inertial cubatures "
+      "with their held-out errors (docs/rom.md).")
+      .def_property_readonly("num_handles", &ReducedData::numHandles, "H")
+      .def_property_readonly("handles",
+                             [](const ReducedData& d) { return indices_numpy(d.handles); },
+                             "(H,) int32 tet-node (= surface vertex) indices, farthest-point order")
+      .def_property_readonly("basis", [](const ReducedData& d) { return to_scipy_csc(d.basis); },
+                             "scipy.sparse.csc_matrix (N, H): entry (j, h) = φ_h at tet node j, "
+                             "in [0, 1]; bone-node rows empty, handle rows unit vectors")
+      .def_property_readonly("basis_max_bound_violation",
+                             [](const ReducedData& d) { return d.basis_max_bound_violation; },
+                             "max over free nodes of max(−φ, φ − 1, 0) of the QP solve")
+      .def_property_readonly("basis_max_constraint_error",
+                             [](const ReducedData& d) { return d.basis_max_constraint_error; },
+                             "max |φ_h − δ| at the handles and |φ_h| on bone nodes")
+      .def_property_readonly("basis_converged",
+                             [](const ReducedData& d) { return d.basis_converged; },
+                             "every handle's QP met its KKT tolerance")
+      .def_property_readonly("elastic_cubature", [](const ReducedData& d) { return d.elastic; },
+                             "Cubature of the elastic energy (empty when switched off)")
+      .def_property_readonly("elastic_test_error",
+                             [](const ReducedData& d) { return d.elastic_test_error; },
+                             "held-out relative error of the elastic energy (0 when off)")
+      .def_property_readonly("inertial_cubature", [](const ReducedData& d) { return d.inertial; },
+                             "Cubature of the kinetic energy (empty when switched off)")
+      .def_property_readonly("inertial_test_error",
+                             [](const ReducedData& d) { return d.inertial_test_error; },
+                             "held-out relative error of the kinetic energy (0 when off)")
+      .def_property_readonly("key", [](const ReducedData& d) { return d.key; },
+                             "cache key of this level")
+      .def("__repr__", [](const ReducedData& d) {
+        return "ReducedData(handles=" + std::to_string(d.numHandles()) +
+               ", elastic_tets=" + std::to_string(d.elastic.elements.size()) +
+               ", inertial_tets=" + std::to_string(d.inertial.elements.size()) + ")";
+      });
+
   py::class_<BoneInertia>(m, "BoneInertia",
                           "Mass properties of one bone about its joint centre J_b (rest pose, "
                           "world axes).")
@@ -157,6 +230,7 @@ void bind_volume(py::module_& m) {
       });
 
   const SoftAvatarSettings defaults;
+  const ReducedSettings& rd = defaults.reduced;
   py::class_<SoftAvatar, std::shared_ptr<SoftAvatar>> avatar(
       m, "SoftAvatar",
       "The immutable data of one body shape for simulation. Configure, then call "
@@ -164,7 +238,10 @@ void bind_volume(py::module_& m) {
   avatar
       .def(py::init([](std::shared_ptr<BodyModel> body, const py::object& betas, double density,
                        double voxel_size, double resolution, const std::string& material_file,
-                       const py::object& cache_dir, bool use_cache) {
+                       const py::object& cache_dir, bool use_cache, int handles,
+                       int elastic_cubature_points, int inertial_cubature_points,
+                       int cubature_training_samples, double cubature_training_amplitude,
+                       std::uint64_t cubature_seed) {
              if (!body) throw py::value_error("body: expected a BodyModel, got None");
              const VecX b = betas.is_none() ? VecX(VecX::Zero(body->numBetas()))
                                             : to_vector(betas, "betas", -1, "(K,)");
@@ -177,29 +254,83 @@ void bind_volume(py::module_& m) {
                settings.volumetric.cache_dir =
                    py::module_::import("os").attr("fspath")(cache_dir).cast<std::string>();
              settings.volumetric.use_cache = use_cache;
+             ReducedSettings& r = settings.reduced;
+             r.num_handles = checked_count(handles, "handles", 1, "point handles of the ROM");
+             r.elastic_cubature_points =
+                 checked_count(elastic_cubature_points, "elastic_cubature_points", 1,
+                               "sample tets; enable_elastic_cubature(False) switches it off");
+             r.inertial_cubature_points =
+                 checked_count(inertial_cubature_points, "inertial_cubature_points", 1,
+                               "sample tets; enable_inertial_cubature(False) switches it off");
+             r.training_samples = checked_count(cubature_training_samples,
+                                                "cubature_training_samples", 1,
+                                                "random training samples per cubature");
+             if (!(cubature_training_amplitude > 0) || !std::isfinite(cubature_training_amplitude))
+               throw py::value_error(
+                   "cubature_training_amplitude: expected a finite value > 0 (m), got " +
+                   std::to_string(cubature_training_amplitude));
+             r.training_amplitude = cubature_training_amplitude;
+             r.seed = cubature_seed;
              return std::make_shared<SoftAvatar>(std::move(body), b, settings);
            }),
            py::arg("body"), py::arg("betas") = py::none(), py::kw_only(),
            py::arg("density") = defaults.density, py::arg("voxel_size") = defaults.voxel_size,
            py::arg("resolution") = 1.0, py::arg("material_file") = std::string(),
            py::arg("cache_dir") = py::none(), py::arg("use_cache") = true,
+           py::arg("handles") = rd.num_handles,
+           py::arg("elastic_cubature_points") = rd.elastic_cubature_points,
+           py::arg("inertial_cubature_points") = rd.inertial_cubature_points,
+           py::arg("cubature_training_samples") = rd.training_samples,
+           py::arg("cubature_training_amplitude") = rd.training_amplitude,
+           py::arg("cubature_seed") = rd.seed,
            "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³ and voxel_size "
            "m (the skeleton's bone inertias). Soft tissue: resolution (interior node density of the "
            "tet mesh, 1 ≈ 10 000 nodes for SMPL), material_file (JSON, '' = built-in defaults), "
-           "cache_dir (None = $FLSH_CACHE_DIR or ~/.cache/flsh), use_cache.")
+           "cache_dir (None = $FLSH_CACHE_DIR or ~/.cache/flsh), use_cache. Reduced model (ROM, "
+           "enable_reduced_model(); docs/rom.md): handles (point handles on the surface, ≥ 1), "
+           "elastic_cubature_points / inertial_cubature_points (sample tets of each cubature when "
+           "enabled, ≥ 1), cubature_training_samples (random training samples per cubature), "
+           "cubature_training_amplitude (largest handle displacement of a training sample, m), "
+           "cubature_seed.")
       .def("init_volumetric_data",
            [](SoftAvatar& a) {
              py::gil_scoped_release release;
              a.initVolumetricData();
            },
            "Builds what the configured model needs (every model: rest shape, joints, bone "
-           "inertias, capsules; soft tissue: the volumetric body, from the cache when there). "
-           "Idempotent; RuntimeError for the reduced model (ROM, not yet available).")
+           "inertias, capsules; soft tissue: the volumetric body; the reduced model also its "
+           "handles, basis and the enabled cubatures; each level from the cache when there). "
+           "Idempotent; ValueError for the reduced model without soft tissue or for more handles "
+           "than soft-tissue surface nodes.")
       .def_property_readonly("volumetric_data",
                              [](const SoftAvatar& a) -> const VolumetricData& { return a.volumetricData(); },
                              py::return_value_policy::reference_internal,
                              "VolumetricData of a soft avatar (RuntimeError for the skeleton model).")
       .def_property_readonly("has_volumetric_data", &SoftAvatar::hasVolumetricData)
+      .def_property_readonly("reduced_data",
+                             [](const SoftAvatar& a) -> const ReducedData& {
+                               return a.reducedData();
+                             },
+                             py::return_value_policy::reference_internal,
+                             "ReducedData of a ROM avatar (RuntimeError for the other models).")
+      .def_property_readonly("has_reduced_data", &SoftAvatar::hasReducedData)
+      .def_property_readonly("reduced_build_report",
+                             [](const SoftAvatar& a) {
+                               const ReducedBuildReport& r = a.reducedBuildReport();
+                               py::dict d;
+                               d["from_cache"] = r.from_cache;
+                               d["warnings"] = r.warnings;
+                               d["seconds_handles"] = r.seconds_handles;
+                               d["seconds_basis"] = r.seconds_basis;
+                               d["seconds_training"] = r.seconds_training;
+                               d["seconds_cubature"] = r.seconds_cubature;
+                               d["seconds_cache_load"] = r.seconds_cache_load;
+                               d["seconds_cache_store"] = r.seconds_cache_store;
+                               d["seconds_total"] = r.seconds_total;
+                               return d;
+                             },
+                             "dict: cache hit, warnings and seconds per stage of the reduced "
+                             "build (all zero without the reduced model).")
       .def_property_readonly("build_report",
                              [](const SoftAvatar& a) {
                                const VolumetricBuildReport& r = a.volumetricBuildReport();
@@ -221,6 +352,19 @@ void bind_volume(py::module_& m) {
       .def_property_readonly("initialized", &SoftAvatar::initialized)
       .def_property_readonly("soft_tissue_enabled", &SoftAvatar::softTissueEnabled)
       .def_property_readonly("reduced_model_enabled", &SoftAvatar::reducedModelEnabled)
+      .def_property_readonly("elastic_cubature_enabled", &SoftAvatar::elasticCubatureEnabled)
+      .def_property_readonly("inertial_cubature_enabled", &SoftAvatar::inertialCubatureEnabled)
+      .def_property_readonly("handles",
+                             [](const SoftAvatar& a) { return a.settings().reduced.num_handles; },
+                             "point handles the reduced model asks for (setting)")
+      .def_property_readonly(
+          "elastic_cubature_points",
+          [](const SoftAvatar& a) { return a.settings().reduced.elastic_cubature_points; },
+          "sample tets of the elastic cubature when enabled (setting)")
+      .def_property_readonly(
+          "inertial_cubature_points",
+          [](const SoftAvatar& a) { return a.settings().reduced.inertial_cubature_points; },
+          "sample tets of the inertial cubature when enabled (setting)")
       .def_property_readonly("body",
                              [](const SoftAvatar& a) {
                                return std::const_pointer_cast<BodyModel>(a.bodyPtr());
@@ -269,7 +413,8 @@ void bind_volume(py::module_& m) {
       .def("__repr__", [](const SoftAvatar& a) {
         return "SoftAvatar(vertices=" + std::to_string(a.body().numVertices()) +
                ", initialized=" + (a.initialized() ? "True" : "False") +
-               ", soft_tissue=" + (a.softTissueEnabled() ? "True" : "False") + ")";
+               ", soft_tissue=" + (a.softTissueEnabled() ? "True" : "False") +
+               ", reduced=" + (a.reducedModelEnabled() ? "True" : "False") + ")";
       });
 
   // The settings under both spellings: snake_case (Python) and the paper's camelCase.
@@ -282,13 +427,15 @@ void bind_volume(py::module_& m) {
        "Soft-tissue model (FEM or ROM) instead of the skeleton; on = True.",
        &SoftAvatar::enableSoftTissue},
       {"enable_reduced_model", "enableReducedModel",
-       "Reduced (ROM) soft-tissue model instead of full FEM; on = True.",
+       "Reduced (ROM) soft-tissue model instead of full FEM (with enable_soft_tissue()); "
+       "on = True.",
        &SoftAvatar::enableReducedModel},
       {"enable_inertial_cubature", "enableInertialCubature",
-       "Cubature for the inertia of the reduced model; on = True.",
+       "Cubature for the inertia of the reduced model (off: exact over all nodes); on = True.",
        &SoftAvatar::enableInertialCubature},
       {"enable_elastic_cubature", "enableElasticCubature",
-       "Cubature for the elastic energy of the reduced model; on = True.",
+       "Cubature for the elastic energy of the reduced model (off: exact over all tets); "
+       "on = True.",
        &SoftAvatar::enableElasticCubature},
   };
   for (const Setting& s : settings) {

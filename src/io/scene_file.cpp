@@ -224,6 +224,10 @@ class SceneReader {
         scene.soft_tissue_gradient_tolerance =
             toRange(root["newton"]["soft_tissue_gradient_tolerance"],
                     "newton.soft_tissue_gradient_tolerance", 0.0, 1.0, true);
+      if (root["newton"].contains("reduced_gradient_tolerance"))
+        scene.reduced_gradient_tolerance =
+            toRange(root["newton"]["reduced_gradient_tolerance"],
+                    "newton.reduced_gradient_tolerance", 0.0, 1.0, true);
     }
 
     if (!root.contains("avatars")) fail("avatars", "missing (a scene needs at least one avatar)");
@@ -280,7 +284,7 @@ class SceneReader {
     requireObject(node, path);
     checkKeys(node, path,
               {"max_iterations", "gradient_tolerance", "step_tolerance", "linear_solver",
-               "soft_tissue_gradient_tolerance"});
+               "soft_tissue_gradient_tolerance", "reduced_gradient_tolerance"});
     NewtonOptions newton;
     if (node.contains("max_iterations"))
       newton.max_iterations =
@@ -311,7 +315,8 @@ class SceneReader {
     requireObject(node, path);
     checkKeys(node, path,
               {"name", "model", "vertices", "betas", "simulation", "resolution", "materials",
-               "motion", "motion_seconds", "offset", "yaw_degrees", "options"});
+               "handles", "elastic_cubature", "inertial_cubature", "motion", "motion_seconds",
+               "offset", "yaw_degrees", "options"});
     AvatarSpec avatar;
     avatar.name = node.contains("name") ? toName(node["name"], child(path, "name"))
                                         : "avatar" + std::to_string(index);
@@ -338,25 +343,43 @@ class SceneReader {
     if (node.contains("simulation")) {
       const std::string p = child(path, "simulation");
       const std::string simulation = toString(node["simulation"], p);
-      if (simulation == "rom")
-        fail(p, "\"rom\" is not available yet: the ROM soft-tissue model is not implemented in "
-                "this version (use \"skeleton\" or \"fem\")");
-      if (simulation != "skeleton" && simulation != "fem")
-        fail(p, "expected \"skeleton\" or \"fem\" (later: \"rom\"), got \"" + simulation + "\"");
+      if (simulation != "skeleton" && simulation != "fem" && simulation != "rom")
+        fail(p, "expected \"skeleton\", \"fem\" or \"rom\", got \"" + simulation + "\"");
       avatar.simulation = simulation;
     }
-    // Settings of the volumetric body, which only the soft-tissue model builds.
-    const char* only_fem = "only for \"simulation\": \"fem\" (the skeleton builds no tet mesh)";
+    // Settings of the volumetric body, which only the soft-tissue models build.
+    const bool soft = avatar.simulation == "fem" || avatar.simulation == "rom";
+    const char* only_soft =
+        "only for \"simulation\": \"fem\" or \"rom\" (the skeleton builds no tet mesh)";
     if (node.contains("resolution")) {
       const std::string p = child(path, "resolution");
-      if (avatar.simulation != "fem") fail(p, only_fem);
+      if (!soft) fail(p, only_soft);
       avatar.resolution = toRange(node["resolution"], p, 0.01, 100.0, false,
                                   "interior node density relative to the default");
     }
     if (node.contains("materials")) {
       const std::string p = child(path, "materials");
-      if (avatar.simulation != "fem") fail(p, only_fem);
+      if (!soft) fail(p, only_soft);
       avatar.material_file = existingFile(toString(node["materials"], p), p, "material");
+    }
+    // Settings of the reduced basis and its cubatures, which only the ROM builds.
+    const std::string only_rom = "only for \"simulation\": \"rom\" (this avatar is \"" +
+                                 avatar.simulation + "\", which has no reduced basis)";
+    if (node.contains("handles")) {
+      const std::string p = child(path, "handles");
+      if (avatar.simulation != "rom") fail(p, only_rom);
+      avatar.handles = toIntRange(node["handles"], p, 1, 100000);
+    }
+    for (const char* key : {"elastic_cubature", "inertial_cubature"}) {
+      if (!node.contains(key)) continue;
+      const std::string p = child(path, key);
+      if (avatar.simulation != "rom") fail(p, only_rom);
+      const int points = toInt(node[key], p);
+      if (points < 0 || points > 10000000)
+        fail(p, "expected a number of sample tets in [0, 10000000] (0 = off: exact "
+                "integration), got " + std::to_string(points));
+      (std::string(key) == "elastic_cubature" ? avatar.elastic_cubature
+                                               : avatar.inertial_cubature) = points;
     }
     bool builtin_motion = false;
     if (node.contains("motion")) {

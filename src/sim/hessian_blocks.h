@@ -19,56 +19,21 @@ void addBlock(std::vector<Triplet>& H, int row0, int col0, const Eigen::MatrixBa
     for (int r = 0; r < block.rows(); ++r) *out++ = Triplet(row0 + r, col0 + c, block(r, c));
 }
 
-/// 6 × 6 Hessian blocks per ordered bone pair, accumulated over many points and emitted once:
-/// block(b, c) zeroes a pair on first touch; emit() appends the touched ones and resets them.
-/// Storage stays allocated between evaluations.
-class BonePairBlocks {
+/// N × N blocks of a (row blocks × column blocks) matrix accumulated over many points and
+/// emitted once: block(r, c) zeroes a block on first touch; emit() appends the touched ones at
+/// (row0 + N r, col0 + N c), with `mirror` also their transposes at (col0 + N c, row0 + N r),
+/// and forgets them. Storage stays allocated between evaluations.
+template <int N>
+class TouchedBlocks {
  public:
-  explicit BonePairBlocks(int num_bones = 0) { resize(num_bones); }
-  void resize(int num_bones) {
-    num_bones_ = num_bones;
-    blocks_.assign(size_t(num_bones) * num_bones, Mat6::Zero());
-    touched_.assign(size_t(num_bones) * num_bones, 0);
-    list_.clear();
-  }
-  Mat6& block(int b, int c) {
-    const int key = b * num_bones_ + c;
-    if (!touched_[key]) {
-      touched_[key] = 1;
-      blocks_[key].setZero();
-      list_.push_back(key);
-    }
-    return blocks_[key];
-  }
-  /// Appends every touched block at (offset + 6b, offset + 6c) and forgets them.
-  void emit(std::vector<Triplet>& H, int offset) {
-    for (int key : list_) {
-      addBlock(H, offset + 6 * (key / num_bones_), offset + 6 * (key % num_bones_), blocks_[key]);
-      touched_[key] = 0;
-    }
-    list_.clear();
-  }
-
- private:
-  int num_bones_ = 0;
-  std::vector<Mat6> blocks_;
-  std::vector<char> touched_;
-  std::vector<int> list_;
-};
-
-/// 3 × 3 blocks of a (row blocks × column blocks) matrix accumulated over many points and emitted
-/// once, as BonePairBlocks: block(r, c) zeroes a block on first touch; emit() appends the touched
-/// ones at (row0 + 3r, col0 + 3c), with `mirror` also their transposes at (col0 + 3c, row0 + 3r),
-/// and resets them.
-class Block3Accumulator {
- public:
+  using Block = Eigen::Matrix<double, N, N>;
   void resize(int row_blocks, int col_blocks) {
     cols_ = col_blocks;
-    blocks_.assign(size_t(row_blocks) * col_blocks, Mat3::Zero());
+    blocks_.assign(size_t(row_blocks) * col_blocks, Block::Zero());
     touched_.assign(size_t(row_blocks) * col_blocks, 0);
     list_.clear();
   }
-  Mat3& block(int r, int c) {
+  Block& block(int r, int c) {
     const int key = r * cols_ + c;
     if (!touched_[key]) {
       touched_[key] = 1;
@@ -77,9 +42,9 @@ class Block3Accumulator {
     }
     return blocks_[key];
   }
-  void emit(std::vector<Triplet>& H, int row0, int col0, bool mirror) {
+  void emit(std::vector<Triplet>& H, int row0, int col0, bool mirror = false) {
     for (int key : list_) {
-      const int r = row0 + 3 * (key / cols_), c = col0 + 3 * (key % cols_);
+      const int r = row0 + N * (key / cols_), c = col0 + N * (key % cols_);
       addBlock(H, r, c, blocks_[key]);
       if (mirror) addBlock(H, c, r, blocks_[key].transpose());
       touched_[key] = 0;
@@ -89,9 +54,19 @@ class Block3Accumulator {
 
  private:
   int cols_ = 0;
-  std::vector<Mat3> blocks_;
+  std::vector<Block, Eigen::aligned_allocator<Block>> blocks_;
   std::vector<char> touched_;
   std::vector<int> list_;
 };
+
+/// 6 × 6 Hessian blocks per ordered bone pair (b, c), emitted at (offset + 6b, offset + 6c).
+class BonePairBlocks : public TouchedBlocks<6> {
+ public:
+  explicit BonePairBlocks(int num_bones = 0) { resize(num_bones); }
+  void resize(int num_bones) { TouchedBlocks<6>::resize(num_bones, num_bones); }
+  void emit(std::vector<Triplet>& H, int offset) { TouchedBlocks<6>::emit(H, offset, offset); }
+};
+
+using Block3Accumulator = TouchedBlocks<3>;
 
 }  // namespace flsh::detail

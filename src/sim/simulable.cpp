@@ -675,7 +675,7 @@ void Simulable::getInitialStateRestJointsJacobian(MatX* state_jacobian,
   if (m.soft)
     throw Error(
         "Simulable::getInitialStateRestJointsJacobian: available for the articulated skeleton "
-        "only (the adjoint layer does not cover the FEM soft tissue)");
+        "only (the adjoint layer does not cover the soft-tissue models, FEM or ROM)");
   const int nb = m.num_bones;
   auto translationJacobian = [&](const std::vector<Mat3>& R) {
     MatX T = MatX::Zero(3 * nb, 3 * nb);
@@ -1275,7 +1275,7 @@ detail::SimulableParameterView parameterView(const Simulable::Impl& m) {
   if (m.soft)
     throw Error(
         "Simulable: parameter derivatives (the adjoint layer) are available for the articulated "
-        "skeleton only; this avatar has soft tissue (FEM)");
+        "skeleton only; this avatar has soft tissue (the FEM or ROM soft skeleton)");
   m.ensureContact();
   return {m.num_bones, m.parents, m.J, m.inertia, m.options, m.mocap && m.options.track_mocap,
           m.is_static, m.q.R, m.q.t, m.q_n.R, m.q_n.t, m.q_nm1.R, m.q_nm1.t, m.target_R,

@@ -142,9 +142,9 @@ expect_error "bad.json: malformed JSON at byte" \
   '{"avatars": [{"vertices": 600}],, }'
 expect_error "avatars[0].motion: motion file not found: $here/data/missing.npz" \
   '{"avatars": [{"vertices": 600, "motion": "data/missing.npz"}]}'
-expect_error "avatars[0].simulation: \"rom\" is not available yet: the ROM soft-tissue model is not implemented in this version" \
-  '{"avatars": [{"vertices": 600, "simulation": "rom"}]}'
-expect_error "avatars[0].resolution: only for \"simulation\": \"fem\"" \
+expect_error "avatars[0].simulation: expected \"skeleton\", \"fem\" or \"rom\", got \"cloth\"" \
+  '{"avatars": [{"vertices": 600, "simulation": "cloth"}]}'
+expect_error "avatars[0].resolution: only for \"simulation\": \"fem\" or \"rom\"" \
   '{"avatars": [{"vertices": 600, "resolution": 0.5}]}'
 expect_error "avatars[0].materials: material file not found: $here/data/soft.json" \
   '{"avatars": [{"vertices": 600, "simulation": "fem", "materials": "data/soft.json"}]}'

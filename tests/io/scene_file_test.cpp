@@ -11,6 +11,7 @@
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
 #include "flsh/io/motion.h"
+#include "flsh/solve/scene.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -180,11 +181,9 @@ TEST(SceneFile, WrongTypesAndValuesAreNamedWithTheirPath) {
        "avatars[0].offset: expected 3 numbers [x, y, z], got array [1,2]"},
       {R"({"avatars": [{"options": {"gravity": [0, "down", 0]}}]})",
        "avatars[0].options.gravity[1]: expected a number"},
-      {R"({"avatars": [{"simulation": "rom"}]})",
-       "avatars[0].simulation: \"rom\" is not available yet: the ROM soft-tissue model is not "
-       "implemented in this version (use \"skeleton\" or \"fem\")"},
       {R"({"avatars": [{"simulation": "cloth"}]})",
-       "avatars[0].simulation: expected \"skeleton\" or \"fem\" (later: \"rom\"), got \"cloth\""},
+       "avatars[0].simulation: expected \"skeleton\", \"fem\" or \"rom\", got \"cloth\""},
+      {R"({"avatars": [{"simulation": "ROM"}]})", "avatars[0].simulation: expected \"skeleton\""},
       {R"({"avatars": [{"simulation": "FEM"}]})", "avatars[0].simulation: expected \"skeleton\""},
       {R"({"avatars": [{"vertices": 50}]})",
        "avatars[0].vertices: expected an integer in [200, 100000], got 50"},
@@ -277,6 +276,96 @@ TEST(SceneFile, FemAvatarsReadTheirVolumetricSettings) {
   EXPECT_THAT(messageOf<FileError>([&] { loadSceneFile(scene_path); }),
               HasSubstr(scene_path + ": cache_dir: expected a directory, but " +
                         (fs::path(dir) / "data" / "soft.json").string() + " is a file"));
+}
+
+TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
+  const SceneSpec plain = parse(R"({"avatars": [{"simulation": "rom"}]})");
+  const AvatarSpec& a = plain.avatars[0];
+  EXPECT_EQ(a.simulation, "rom");
+  EXPECT_DOUBLE_EQ(a.resolution, TetMeshOptions().resolution);
+  EXPECT_TRUE(a.material_file.empty());
+  // The documented defaults: 87 handles, 500 sample tets per cubature (both on).
+  EXPECT_EQ(a.handles, 87);
+  EXPECT_EQ(a.elastic_cubature, 500);
+  EXPECT_EQ(a.inertial_cubature, 500);
+  EXPECT_EQ(a.handles, ReducedSettings().num_handles);
+  EXPECT_EQ(a.elastic_cubature, ReducedSettings().elastic_cubature_points);
+  EXPECT_EQ(a.inertial_cubature, ReducedSettings().inertial_cubature_points);
+  EXPECT_LT(plain.reduced_gradient_tolerance, 0.0);  // absent: the scene's default
+
+  const std::string dir = test::freshTempDir("scene_rom");
+  writeText((fs::path(dir) / "soft.json").string(), "{}");
+  const SceneSpec scene = parse(R"({
+    "newton": {"soft_tissue_gradient_tolerance": 2e-4, "reduced_gradient_tolerance": 3e-6},
+    "avatars": [{"name": "r", "vertices": 600, "simulation": "rom", "resolution": 0.3,
+                 "materials": "soft.json", "handles": 12, "elastic_cubature": 40,
+                 "inertial_cubature": 0},
+                {"name": "f", "simulation": "fem", "resolution": 0.5}]})",
+                                dir);
+  ASSERT_EQ(scene.avatars.size(), 2u);
+  const AvatarSpec& r = scene.avatars[0];
+  EXPECT_EQ(r.simulation, "rom");
+  EXPECT_DOUBLE_EQ(r.resolution, 0.3);
+  EXPECT_EQ(fs::path(r.material_file), (fs::path(dir) / "soft.json").lexically_normal());
+  EXPECT_EQ(r.handles, 12);
+  EXPECT_EQ(r.elastic_cubature, 40);
+  EXPECT_EQ(r.inertial_cubature, 0);  // off
+  EXPECT_DOUBLE_EQ(scene.reduced_gradient_tolerance, 3e-6);
+  EXPECT_DOUBLE_EQ(scene.soft_tissue_gradient_tolerance, 2e-4);
+  // The FEM avatar keeps the (unused) reduced defaults.
+  EXPECT_EQ(scene.avatars[1].simulation, "fem");
+  EXPECT_EQ(scene.avatars[1].handles, 87);
+}
+
+TEST(SceneFile, BadRomSettingsAreNamedWithTheirPath) {
+  struct Case {
+    const char* json;
+    const char* expected;
+  };
+  const Case cases[] = {
+      // ROM-only keys on the other models.
+      {R"({"avatars": [{"handles": 10}]})",
+       "scene.json: avatars[0].handles: only for \"simulation\": \"rom\" (this avatar is "
+       "\"skeleton\", which has no reduced basis)"},
+      {R"({"avatars": [{"simulation": "fem", "handles": 10}]})",
+       "avatars[0].handles: only for \"simulation\": \"rom\" (this avatar is \"fem\""},
+      {R"({"avatars": [{"simulation": "fem", "elastic_cubature": 100}]})",
+       "avatars[0].elastic_cubature: only for \"simulation\": \"rom\""},
+      {R"({"avatars": [{"simulation": "skeleton", "inertial_cubature": 0}]})",
+       "avatars[0].inertial_cubature: only for \"simulation\": \"rom\""},
+      // Volumetric keys are for both soft-tissue models, not the skeleton.
+      {R"({"avatars": [{"resolution": 0.5}]})",
+       "avatars[0].resolution: only for \"simulation\": \"fem\" or \"rom\" (the skeleton "
+       "builds no tet mesh)"},
+      // Types and ranges.
+      {R"({"avatars": [{"simulation": "rom", "handles": 0}]})",
+       "avatars[0].handles: expected an integer in [1, 100000], got 0"},
+      {R"({"avatars": [{"simulation": "rom", "handles": 2.5}]})",
+       "avatars[0].handles: expected an integer, got number 2.5"},
+      {R"({"avatars": [{"simulation": "rom", "handles": "many"}]})",
+       "avatars[0].handles: expected a number, got string \"many\""},
+      {R"({"avatars": [{"simulation": "rom", "elastic_cubature": -1}]})",
+       "avatars[0].elastic_cubature: expected a number of sample tets in [0, 10000000] (0 = off: "
+       "exact integration), got -1"},
+      {R"({"avatars": [{"simulation": "rom", "inertial_cubature": true}]})",
+       "avatars[0].inertial_cubature: expected a number, got boolean true"},
+      {R"({"avatars": [{"simulation": "rom", "inertial_cubature": 10.5}]})",
+       "avatars[0].inertial_cubature: expected an integer"},
+      {R"({"avatars": [{"simulation": "rom", "resolution": 0}]})",
+       "avatars[0].resolution: expected 0.01 <= value <= 100"},
+      {R"({"newton": {"reduced_gradient_tolerance": 0}, "avatars": [{}]})",
+       "newton.reduced_gradient_tolerance: expected 0 < value <= 1, got 0"},
+      {R"({"newton": {"reduced_gradient_tolerance": 2}, "avatars": [{}]})",
+       "newton.reduced_gradient_tolerance: expected 0 < value <= 1, got 2"},
+      {R"({"newton": {"reduced_gradient_tolerance": "loose"}, "avatars": [{}]})",
+       "newton.reduced_gradient_tolerance: expected a number, got string \"loose\""},
+      {R"({"avatars": [{"simulation": "rom", "handle": 5}]})",
+       "avatars[0].handle: unknown key (known: "},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.json);
+    EXPECT_THAT(inputError(c.json), HasSubstr(c.expected));
+  }
 }
 
 TEST(SceneFile, BadFemSettingsAreNamedWithTheirPath) {
@@ -416,6 +505,17 @@ TEST(SceneFile, ExampleFilesParseAndTheDefaultMatchesTheBuiltIn) {
   ASSERT_EQ(soft.avatars.size(), 1u);
   EXPECT_EQ(soft.avatars[0].simulation, "fem");
   EXPECT_DOUBLE_EQ(soft.soft_tissue_gradient_tolerance, 1e-5);
+
+  // The ROM example: full-body defaults (87 handles, both cubatures with 500 tets).
+  const SceneSpec rom = loadSceneFile((examples / "soft_rom_jumping_jacks.json").string());
+  ASSERT_EQ(rom.avatars.size(), 1u);
+  EXPECT_EQ(rom.avatars[0].simulation, "rom");
+  EXPECT_EQ(rom.avatars[0].synthetic_vertices, 6890);
+  EXPECT_EQ(rom.avatars[0].handles, 87);
+  EXPECT_EQ(rom.avatars[0].elastic_cubature, 500);
+  EXPECT_EQ(rom.avatars[0].inertial_cubature, 500);
+  EXPECT_EQ(rom.avatars[0].motion, "builtin:jumping_jacks");
+  EXPECT_DOUBLE_EQ(rom.reduced_gradient_tolerance, reducedNewtonDefaults().gradient_tolerance);
 }
 
 TEST(SceneFile, DefaultGroundSitsAtTheSolesAndTheBallMeetsTheWalkerNearOneSecond) {

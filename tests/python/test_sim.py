@@ -100,9 +100,10 @@ def test_avatar_settings_have_paper_aliases(avatar):
     fresh.enableSoftTissue()
     fresh.enableReducedModel()
     assert fresh.soft_tissue_enabled and fresh.reduced_model_enabled
-    with pytest.raises(RuntimeError, match="ROM"):
-        fresh.initVolumetricData()
     fresh.enable_soft_tissue(False)
+    with pytest.raises(ValueError, match="soft tissue is off"):
+        fresh.initVolumetricData()  # the reduced model is a soft-tissue model
+    fresh.enable_reduced_model(False)
     fresh.initVolumetricData()
     assert not fresh.has_volumetric_data
     with pytest.raises(RuntimeError, match="soft tissue is off"):
@@ -400,6 +401,11 @@ def test_scene_files():
     assert default.duration == 1.0 and default.avatars[0].name
     with pytest.raises(FileNotFoundError):
         flsh.load_scene_file(ROOT / "no_such_scene.json")
+    rom = flsh.load_scene_file(ROOT / "examples" / "scenes" / "soft_rom_jumping_jacks.json")
+    assert rom.avatars[0].simulation == "rom"
+    assert rom.avatars[0].handles == 87 and rom.avatars[0].elastic_cubature == 500
+    assert rom.avatars[0].inertial_cubature == 500 and rom.avatars[0].resolution > 0
+    assert rom.reduced_gradient_tolerance > 0
 
 
 # --- examples -------------------------------------------------------------------------------

@@ -91,8 +91,9 @@ def test_avatar_cli_prints_json_statistics(tmp_path):
     assert again["cache"]["template"] == "hit" and again["cache"]["shape"] == "hit"
     assert again["nodes"] == stats["nodes"] and again["tets"] == stats["tets"]
     bad = subprocess.run([os.environ["FLSH_BIN"], "avatar", "--model", "synthetic:700", "--soft",
-                          "rom", "--cache", str(tmp_path)], capture_output=True, text=True)
-    assert bad.returncode == 2 and "not available" in bad.stderr
+                          "fem", "--handles", "12", "--cache", str(tmp_path)],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "only for --soft rom" in bad.stderr
     bad = subprocess.run([os.environ["FLSH_BIN"], "avatar", "--model", "synthetic:700", "--soft",
                           "xfem"], capture_output=True, text=True)
     assert bad.returncode == 2 and "--soft" in bad.stderr

@@ -16,15 +16,7 @@ using test::randomVector;
 
 SoftAvatarSettings settings() {
   static const std::string cache = test::freshTempDir("rom_test_cache");
-  SoftAvatarSettings s;
-  s.voxel_size = 0.02;
-  s.volumetric.cache_dir = cache;
-  s.volumetric.tet_mesh.resolution = 0.5;
-  s.reduced.num_handles = 16;
-  s.reduced.elastic_cubature_points = 60;
-  s.reduced.inertial_cubature_points = 60;
-  s.reduced.training_samples = 80;
-  return s;
+  return test::smallSoftAvatarSettings(cache);
 }
 
 // kind 0: FEM; 1: ROM with exact integration; 2: ROM with both cubatures.

@@ -35,15 +35,8 @@ enum class Model { Fem, Rom };
 std::shared_ptr<const SoftAvatar> softAvatar(Model model) {
   static const std::string cache = test::freshTempDir("soft_tissue_cache");
   auto make = [](bool reduced) {
-    SoftAvatarSettings settings;
-    settings.voxel_size = 0.02;
-    settings.volumetric.cache_dir = cache;
-    settings.volumetric.tet_mesh.resolution = 0.5;
-    settings.reduced.num_handles = 16;
-    settings.reduced.elastic_cubature_points = 60;
-    settings.reduced.inertial_cubature_points = 60;
-    settings.reduced.training_samples = 80;
-    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), settings);
+    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(),
+                                          test::smallSoftAvatarSettings(cache));
     a->enableSoftTissue();
     a->enableReducedModel(reduced);
     a->enableElasticCubature(reduced);

@@ -120,6 +120,18 @@ BodyModel makeRandomModel(int vertices, int betas, unsigned seed) {
   return m;
 }
 
+SoftAvatarSettings smallSoftAvatarSettings(const std::string& cache_dir) {
+  SoftAvatarSettings s;
+  s.voxel_size = 0.02;
+  s.volumetric.cache_dir = cache_dir;
+  s.volumetric.tet_mesh.resolution = 0.5;
+  s.reduced.num_handles = 16;
+  s.reduced.elastic_cubature_points = 60;
+  s.reduced.inertial_cubature_points = 60;
+  s.reduced.training_samples = 80;
+  return s;
+}
+
 const SmallScene& smallScene(int vertices, double walk_seconds) {
   static std::mutex mutex;
   static std::map<std::pair<int, double>, SmallScene> cache;

@@ -71,6 +71,11 @@ struct SmallScene {
 };
 const SmallScene& smallScene(int vertices, double walk_seconds = 1.0);
 
+/// Settings of the small soft avatars of the simulation tests (on smallScene(800).body): 2 cm
+/// voxels, a coarse interior (resolution 0.5), cache in `cache_dir`, and a small ROM (16
+/// handles, 60 tets per cubature, 80 training samples) for avatars that enable it.
+SoftAvatarSettings smallSoftAvatarSettings(const std::string& cache_dir);
+
 /// Increment-chart helper for finite differences of gradients: the gradient g at the state
 /// moved by increments d (6 per bone, [δt, δω]) pulled back to the chart at d = 0, i.e. the
 /// rotation entries multiplied by J_l(δω)ᵀ. Its finite-difference Jacobian at d = 0 is the

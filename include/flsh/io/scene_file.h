@@ -9,6 +9,7 @@
 #include "flsh/contact/collider.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/newton.h"
+#include "flsh/volume/reduced_data.h"
 
 namespace flsh {
 
@@ -17,13 +18,21 @@ struct AvatarSpec {
   std::string model = "synthetic";      ///< SMPL .npz path, or "synthetic"
   int synthetic_vertices = 6890;        ///< for model = "synthetic"
   VecX betas;                           ///< shape; empty = zeros (or the motion's)
-  /// "skeleton" (articulated rigid bones) or "fem" (FEM soft skeleton: the avatar is built with
-  /// enableSoftTissue() and its volumetric body); "rom" is not available yet.
+  /// "skeleton" (articulated rigid bones), "fem" (FEM soft skeleton: the avatar is built with
+  /// enableSoftTissue() and its volumetric body) or "rom" (ROM soft skeleton: also
+  /// enableReducedModel(), the reduced basis and the cubatures below; docs/rom.md).
   std::string simulation = "skeleton";
-  /// "fem" only: interior node density of the tet mesh relative to the default (TetMeshOptions).
+  /// "fem" / "rom" only: interior node density of the tet mesh relative to the default
+  /// (TetMeshOptions).
   double resolution = TetMeshOptions().resolution;
-  /// "fem" only: material file (JSON, docs/materials.md), resolved; empty = built-in materials.
+  /// "fem" / "rom" only: material file (JSON, docs/materials.md), resolved; empty = built-in.
   std::string material_file;
+  /// "rom" only: point handles of the reduced basis (ReducedSettings::num_handles, ≥ 1).
+  int handles = ReducedSettings().num_handles;
+  /// "rom" only: sample tets of the elastic / inertial cubature; 0 = that cubature off (the
+  /// elastic energy / the inertia integrated exactly over every tet / node).
+  int elastic_cubature = ReducedSettings().elastic_cubature_points;
+  int inertial_cubature = ReducedSettings().inertial_cubature_points;
   std::string motion;                   ///< AMASS .npz path or builtin:NAME; empty = none
   double motion_seconds = 0.0;          ///< length of a built-in motion, s; 0 = the duration
   Vec3 offset = Vec3::Zero();           ///< added to the motion's root translation, m
@@ -51,10 +60,14 @@ struct SceneSpec {
   /// "newton.soft_tissue_gradient_tolerance": Newton's relative gradient tolerance in scenes
   /// with a "fem" avatar; ≤ 0 (absent) keeps SceneOptions::soft_tissue_newton's default (1e-5).
   double soft_tissue_gradient_tolerance = -1.0;
+  /// "newton.reduced_gradient_tolerance": the same for scenes whose soft avatars are all "rom";
+  /// ≤ 0 (absent) keeps SceneOptions::reduced_newton's default (reducedNewtonDefaults()).
+  double reduced_gradient_tolerance = -1.0;
   bool avatar_contact = true;
   OutputSpec outputs;
-  /// Avatar cache of the "fem" avatars' volumetric bodies: folder (resolved; empty = the
-  /// default, $FLSH_CACHE_DIR or ~/.cache/flsh) and whether it is read and written.
+  /// Avatar cache of the "fem" / "rom" avatars' volumetric bodies and reduced data: folder
+  /// (resolved; empty = the default, $FLSH_CACHE_DIR or ~/.cache/flsh) and whether it is read
+  /// and written.
   std::string cache_dir;
   bool use_cache = true;
 };

@@ -1,0 +1,432 @@
+// ROM soft skeleton at the default resolution (synthetic SMPL-size body: 6890 surface vertices,
+// ~10 000 nodes, ~39 000 tets; 87 handles, 500 + 500 cubature tets) tracking a built-in motion on
+// a ground plane at h = 1/30 s, the way `flsh simulate` runs it (Scene with
+// SceneOptions::reduced_newton). Goal on the 2-core machine (issue "ROM soft skeleton"):
+// ≥ 500 steps/s; the FLSH paper reports 20 fps on 4 cores.
+//
+// Usage: rom_benchmark [STEPS=300] [--handles H] [--elastic N] [--inertial N] [--exact]
+//                      [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME]
+//                      [--no-ground] [--threads N] [--reference T_REF]
+//        rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]
+//   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
+//   --exact: no cubature (every tet and node integrated);
+//   --tolerance: Newton's gradient tolerance (default: the scene default);
+//   --reference: also run the scene at tolerance T_REF in lockstep (untimed) and print the
+//                largest surface vertex distance from it (the cost of the tolerance);
+//   --no-lag: factor every Newton iteration (no lagged-factor PCG) for comparison.
+// Prints generation time, steps/s over the timed steps (after 3 warm-up steps) and the per-step
+// breakdown (Newton iterations; seconds in energy / gradient / Hessian / factorization / solves).
+//
+// --compare: the speed–accuracy trade. The FEM soft skeleton is the reference; on each scenario
+// (walk, jumping jacks: F frames each, tracking the motion on the ground; ball: a standing body
+// whose belly a ball presses 6 cm in and releases) the skeleton, ROMs of several handle and
+// cubature counts and the FEM run the same frames. Per frame, a model's displacement error is
+// the RMS over the surface vertices of ‖u_model − u_FEM‖ (soft-tissue displacements, unposed
+// space) divided by the RMS of ‖u_FEM‖ (frames where that RMS is below 0.5 mm are skipped): 0 is
+// the FEM, 1 is the skeleton (u = 0). Also printed: the RMS distance of the posed surfaces
+// ‖x_model − x_FEM‖ (mm), which adds the differences of the bones' motion (each model's bones
+// carry its own inertia). Prints a table (mean and largest error over frames, steps/s and
+// speed-up over the FEM, per scenario) and plots the mean displacement error against steps/s
+// into a PNG. For each ROM also the basis best fit: the least-squares fit of the FEM's u in the
+// span of its basis (surface rows), relative to ‖u_FEM‖: what no dynamics in that basis can beat.
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/SparseCholesky>
+
+#include "flsh/body/synthetic_body.h"
+#include "flsh/io/motion.h"
+#include "flsh/render/plot.h"
+#include "flsh/render/render.h"
+#include "flsh/solve/scene.h"
+
+namespace {
+
+using namespace flsh;
+using Clock = std::chrono::steady_clock;
+
+double seconds(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
+
+enum class Kind { Skeleton, Rom, Fem };
+
+struct ModelSpec {
+  Kind kind = Kind::Rom;
+  int handles = 87, elastic = 500, inertial = 500;  // 0 cubature tets: exact integration
+  std::string name() const {
+    if (kind == Kind::Skeleton) return "skeleton";
+    if (kind == Kind::Fem) return "FEM";
+    char buf[64];
+    if (elastic == 0) std::snprintf(buf, sizeof(buf), "ROM %d exact", handles);
+    else std::snprintf(buf, sizeof(buf), "ROM %d/%d/%d", handles, elastic, inertial);
+    return buf;
+  }
+};
+
+std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, const ModelSpec& m,
+                                       double* build_seconds) {
+  const auto t0 = Clock::now();
+  SoftAvatarSettings settings;
+  if (m.kind == Kind::Rom) {
+    settings.reduced.num_handles = m.handles;
+    if (m.elastic > 0) settings.reduced.elastic_cubature_points = m.elastic;
+    if (m.inertial > 0) settings.reduced.inertial_cubature_points = m.inertial;
+  }
+  auto avatar = std::make_shared<SoftAvatar>(body, VecX(), settings);
+  if (m.kind != Kind::Skeleton) avatar->enableSoftTissue();
+  if (m.kind == Kind::Rom) {
+    avatar->enableReducedModel();
+    avatar->enableElasticCubature(m.elastic > 0);
+    avatar->enableInertialCubature(m.inertial > 0);
+  }
+  avatar->initVolumetricData();
+  if (build_seconds) *build_seconds = seconds(t0, Clock::now());
+  return avatar;
+}
+
+// ---- one scenario ---------------------------------------------------------------------------------
+
+struct Scenario {
+  std::string name;
+  std::shared_ptr<const Motion> motion;
+  bool ball = false;
+};
+
+// A scene of one avatar following the scenario, ground 2 mm below the lowest vertex; with the
+// ball (radius 12 cm at 3 m/s) pressing the belly 6 cm past the rest surface and back.
+struct Run {
+  std::shared_ptr<Simulable> sim;
+  std::unique_ptr<Scene> scene;
+};
+
+Run makeRun(std::shared_ptr<SoftAvatar> avatar, const Scenario& sc, const SceneOptions& options,
+            bool ground = true) {
+  Run r;
+  SimulableOptions sim_options;
+  sim_options.time_step = 1.0 / 30.0;
+  r.sim = std::make_shared<Simulable>(avatar, sc.motion, sim_options);
+  r.scene = std::make_unique<Scene>(options);
+  r.scene->addSimulable(r.sim);
+  r.scene->initialize();
+  if (ground)
+    r.scene->addCollider(
+        Collider::plane(Vec3(0, r.sim->getNodes().col(1).minCoeff() - 0.002, 0), Vec3::UnitY()));
+  if (sc.ball) {
+    const double radius = 0.12, speed = 3.0;
+    const Vec3 belly(0.0, 0.05, 0.11);
+    const Vec3 start = belly + Vec3(0.0, 0.0, radius + 0.15 * speed);
+    const double turn = 0.15 + 0.06 / speed;
+    Collider ball = Collider::sphere(start, radius);
+    ball.path = ColliderPath{{0.0, turn, 2 * turn},
+                             {Vec3::Zero(), Vec3(0.0, 0.0, -speed * turn), Vec3::Zero()}};
+    r.scene->addCollider(ball);
+  }
+  return r;
+}
+
+struct Trajectory {
+  std::vector<MatX3> surface;        // per frame, #V × 3 posed surface, m
+  std::vector<MatX3> u;              // per frame, #V × 3 soft-tissue displacements, m
+  std::vector<double> displacement;  // per frame, RMS ‖u‖ over the surface, m
+  double steps_per_second = 0.0;
+  int unconverged = 0;
+};
+
+Trajectory simulate(std::shared_ptr<SoftAvatar> avatar, const Scenario& sc, int frames) {
+  Run r = makeRun(avatar, sc, SceneOptions());
+  Trajectory t;
+  double stepping = 0.0;
+  for (int f = 0; f < frames; ++f) {
+    const auto a = Clock::now();
+    const StepStats s = r.scene->step();
+    stepping += seconds(a, Clock::now());
+    t.unconverged += s.newton.converged ? 0 : 1;
+    t.surface.push_back(r.sim->getVertices());
+    t.u.push_back(r.sim->getSoftTissueDisplacements());
+    t.displacement.push_back(std::sqrt(t.u.back().rowwise().squaredNorm().mean()));
+  }
+  t.steps_per_second = frames / stepping;
+  return t;
+}
+
+// How well the basis can hold the FEM's displacements at all: per frame, the least-squares fit
+// min_z ‖Φ_S z − u_FEM‖ over the surface rows Φ_S of the basis, relative to ‖u_FEM‖, averaged
+// over the frames the error counts (RMS ‖u_FEM‖ ≥ 0.5 mm).
+double basisBestFit(const SoftAvatar& avatar, const Trajectory& fem) {
+  const SpMat& basis = avatar.reducedData().basis;
+  const int V = int(fem.u.front().rows());
+  const SpMat surface = basis.topRows(V);
+  Eigen::SimplicialLDLT<SpMat> normal(SpMat(surface.transpose() * surface));
+  double sum = 0.0;
+  int counted = 0;
+  for (size_t f = 0; f < fem.u.size(); ++f) {
+    if (fem.displacement[f] < 5e-4) continue;
+    const MatX z = normal.solve(MatX(surface.transpose() * fem.u[f]));
+    const MatX residual = surface * z - fem.u[f];
+    sum += std::sqrt(residual.rowwise().squaredNorm().mean()) / fem.displacement[f];
+    ++counted;
+  }
+  return counted ? sum / counted : 0.0;
+}
+
+struct Row {
+  std::string model, scenario;
+  double mean_error = 0, max_error = 0, steps_per_second = 0, speedup = 0;
+  double best_fit = -1;   // ROM: mean relative error of the FEM's u projected on the basis
+  double surface_mm = 0;  // mean over frames of the RMS posed-surface distance, mm
+  int unconverged = 0;
+};
+
+int compare(int frames, const std::string& png, const std::string& csv) {
+  auto body = std::make_shared<BodyModel>(makeSyntheticBody({}));
+  std::vector<ModelSpec> models = {{Kind::Skeleton}};
+  for (int h : {43, 87, 150}) models.push_back({Kind::Rom, h, 500, 500});
+  models.push_back({Kind::Rom, 87, 250, 250});
+  models.push_back({Kind::Rom, 87, 1000, 1000});
+  models.push_back({Kind::Rom, 87, 0, 0});
+  models.push_back({Kind::Fem});
+  std::vector<Scenario> scenarios = {
+      {"walk", std::make_shared<Motion>(makeBuiltinMotion("walk", 20.0, 30.0)), false},
+      {"jumping jacks", std::make_shared<Motion>(makeBuiltinMotion("jumping_jacks", 20.0, 30.0)),
+       false},
+      {"ball", std::make_shared<Motion>(makeBuiltinMotion("stand", 20.0, 30.0)), true}};
+
+  std::map<std::string, std::shared_ptr<SoftAvatar>> avatars;
+  for (const ModelSpec& m : models) {
+    double build = 0.0;
+    avatars[m.name()] = makeAvatar(body, m, &build);
+    std::printf("built %-18s in %6.2f s\n", m.name().c_str(), build);
+  }
+  std::vector<Row> rows;
+  for (const Scenario& sc : scenarios) {
+    std::printf("scenario %s: FEM reference (%d frames)...\n", sc.name.c_str(), frames);
+    std::fflush(stdout);
+    const Trajectory fem = simulate(avatars["FEM"], sc, frames);
+    for (const ModelSpec& m : models) {
+      const Trajectory t =
+          m.kind == Kind::Fem ? fem : simulate(avatars[m.name()], sc, frames);
+      Row row;
+      row.model = m.name();
+      row.scenario = sc.name;
+      row.steps_per_second = t.steps_per_second;
+      row.speedup = t.steps_per_second / fem.steps_per_second;
+      row.unconverged = t.unconverged;
+      int counted = 0;
+      for (int f = 0; f < frames; ++f) {
+        row.surface_mm +=
+            1000.0 * std::sqrt((t.surface[f] - fem.surface[f]).rowwise().squaredNorm().mean()) /
+            frames;
+        if (fem.displacement[f] < 5e-4) continue;
+        const double rms = std::sqrt((t.u[f] - fem.u[f]).rowwise().squaredNorm().mean());
+        const double e = rms / fem.displacement[f];
+        row.mean_error += e;
+        row.max_error = std::max(row.max_error, e);
+        ++counted;
+      }
+      row.mean_error = counted ? row.mean_error / counted : 0.0;
+      if (m.kind == Kind::Rom) row.best_fit = basisBestFit(*avatars[m.name()], fem);
+      rows.push_back(row);
+      std::printf("  %-18s displacement error mean %6.1f %% max %6.1f %% (basis best fit %5.1f %%), "
+                  "surface %5.1f mm, %8.1f steps/s (%7.1f x FEM)%s\n",
+                  row.model.c_str(), 100 * row.mean_error, 100 * row.max_error,
+                  100 * row.best_fit, row.surface_mm, row.steps_per_second, row.speedup,
+                  row.unconverged ? " (some steps not converged)" : "");
+      std::fflush(stdout);
+    }
+  }
+
+  std::printf("\n| model | scenario | displacement error, mean (max) | basis best fit | posed "
+              "surface, mm | steps/s | × FEM |\n");
+  std::printf("|---|---|---|---|---|---|---|\n");
+  for (const Row& r : rows) {
+    char fit[32] = "—";
+    if (r.best_fit >= 0) std::snprintf(fit, sizeof(fit), "%.1f %%", 100 * r.best_fit);
+    std::printf("| %s | %s | %.1f %% (%.1f %%) | %s | %.1f | %.1f | %.1f |\n", r.model.c_str(),
+                r.scenario.c_str(), 100 * r.mean_error, 100 * r.max_error, fit, r.surface_mm,
+                r.steps_per_second, r.speedup);
+  }
+  if (!csv.empty()) {
+    std::ofstream out(csv);
+    out << "model,scenario,mean_error,max_error,basis_best_fit,surface_mm,steps_per_second,"
+           "speedup\n";
+    for (const Row& r : rows)
+      out << r.model << "," << r.scenario << "," << r.mean_error << "," << r.max_error << ","
+          << r.best_fit << "," << r.surface_mm << "," << r.steps_per_second << "," << r.speedup
+          << "\n";
+  }
+  if (!png.empty()) {
+    // One series per scenario: each model's mean error (%) against its steps/s.
+    std::vector<render::PlotSeries> series;
+    const Vec3 colors[] = {Vec3(0.12, 0.47, 0.71), Vec3(1.0, 0.5, 0.05), Vec3(0.17, 0.63, 0.17)};
+    double fem_speed = 0.0;
+    for (size_t s = 0; s < scenarios.size(); ++s) {
+      render::PlotSeries ps;
+      ps.label = scenarios[s].name;
+      ps.color = colors[s % 3];
+      for (const Row& r : rows)
+        if (r.scenario == scenarios[s].name) {
+          ps.x.push_back(r.steps_per_second);
+          ps.y.push_back(100 * r.mean_error);
+          ps.point_labels.push_back(s == 0 ? r.model : "");
+          if (r.model == "FEM") fem_speed = std::max(fem_speed, r.steps_per_second);
+        }
+      series.push_back(ps);
+    }
+    render::PlotOptions options;
+    options.title = "Soft-tissue displacement error against FEM vs speed (synthetic body, h = 1/30 s)";
+    options.x_label = "steps per second (log)";
+    options.y_label = "RMS |u - u_FEM| / RMS |u_FEM|, %";
+    options.log_x = true;
+    options.h_lines.push_back({10.0, "goal: 10 %"});
+    if (fem_speed > 0) options.v_lines.push_back({100 * fem_speed, "100x FEM"});
+    render::writePng(png, render::renderPlot(series, options));
+    std::printf("plot written to %s\n", png.c_str());
+  }
+  return 0;
+}
+
+// ---- steps/s of one ROM --------------------------------------------------------------------------
+
+int speed(int steps, const ModelSpec& m, double tolerance, const std::string& motion_name,
+          bool ground, int hessian, bool lag, double reference) {
+  auto body = std::make_shared<BodyModel>(makeSyntheticBody({}));
+  double build = 0.0;
+  auto avatar = makeAvatar(body, m, &build);
+  const VolumetricData& data = avatar->volumetricData();
+  const ReducedData& rom = avatar->reducedData();
+  const ReducedBuildReport& rep = avatar->reducedBuildReport();
+  std::printf("avatar: %d nodes (%d bone nodes), %d tets; %d handles, cubature %d elastic / %d "
+              "inertial tets (held-out errors %.2f %% / %.2f %%); built/loaded in %.2f s "
+              "(reduced level %s, %.2f s)\n",
+              data.numNodes(), data.numBoneNodes(), data.numTets(), rom.numHandles(),
+              int(rom.elastic.elements.size()), int(rom.inertial.elements.size()),
+              100 * rom.elastic_test_error, 100 * rom.inertial_test_error, build,
+              rep.from_cache ? "from the cache" : "built", rep.seconds_total);
+
+  SceneOptions scene_options;
+  if (tolerance > 0) scene_options.reduced_newton.gradient_tolerance = tolerance;
+  if (hessian >= 0) scene_options.reduced_newton.exact_hessian = hessian == 1;
+  if (!lag) scene_options.reduced_newton.lagged.enabled = false;
+  Scenario sc{motion_name, std::make_shared<Motion>(makeBuiltinMotion(motion_name, 60.0, 30.0)),
+              false};
+  Run r = makeRun(avatar, sc, scene_options, ground);
+  std::printf("state: %d DoFs; Newton tolerance %.1e\n", r.sim->numDofs(),
+              scene_options.reduced_newton.gradient_tolerance);
+  // The reference: the same scene solved to `reference`, stepped after each timed step.
+  std::unique_ptr<Run> ref;
+  if (reference > 0) {
+    SceneOptions ref_options = scene_options;
+    ref_options.reduced_newton.gradient_tolerance = reference;
+    ref_options.reduced_newton.max_iterations = 200;
+    ref = std::make_unique<Run>(makeRun(avatar, sc, ref_options, ground));
+    for (int k = 0; k < 3; ++k) ref->scene->step();
+  }
+  double largest_difference = 0.0;
+  auto untimed = std::chrono::duration<double>::zero();
+  for (int k = 0; k < 3; ++k) r.scene->step();
+  NewtonResult sum;
+  int unconverged = 0;
+  double largest_u = 0.0;
+  const auto start = Clock::now();
+  for (int k = 0; k < steps; ++k) {
+    const StepStats s = r.scene->step();
+    const NewtonResult& n = s.newton;
+    unconverged += n.converged ? 0 : 1;
+    sum.iterations += n.iterations;
+    sum.factorizations += n.factorizations;
+    sum.seconds_energy += n.seconds_energy;
+    sum.seconds_gradient += n.seconds_gradient;
+    sum.seconds_hessian += n.seconds_hessian;
+    sum.seconds_factorization += n.seconds_factorization;
+    sum.seconds_solve += n.seconds_solve;
+    const auto pause = Clock::now();
+    if (k % 10 == 0)
+      largest_u =
+          std::max(largest_u, r.sim->getSoftTissueDisplacements().rowwise().norm().maxCoeff());
+    if (ref) {
+      ref->scene->step();
+      largest_difference = std::max(
+          largest_difference,
+          (r.sim->getVertices() - ref->sim->getVertices()).rowwise().norm().maxCoeff());
+    }
+    untimed += Clock::now() - pause;
+  }
+  const double total = seconds(start, Clock::now()) - untimed.count();
+  const double n = steps;
+  std::printf("steps: %d in %.3f s -> %.1f steps/s (%d not converged)\n", steps, total,
+              steps / total, unconverged);
+  std::printf("per step: %.2f Newton iterations, %.2f factorizations\n", sum.iterations / n,
+              sum.factorizations / n);
+  std::printf("per step ms: energy %.3f, gradient %.3f, Hessian %.3f, factorization %.3f, "
+              "solves %.3f, other %.3f\n",
+              1e3 * sum.seconds_energy / n, 1e3 * sum.seconds_gradient / n,
+              1e3 * sum.seconds_hessian / n, 1e3 * sum.seconds_factorization / n,
+              1e3 * sum.seconds_solve / n,
+              1e3 * (total - sum.seconds_energy - sum.seconds_gradient - sum.seconds_hessian -
+                     sum.seconds_factorization - sum.seconds_solve) / n);
+  std::printf("largest soft-tissue displacement (every 10th step): %.1f mm\n", 1000.0 * largest_u);
+  if (ref)
+    std::printf("largest surface vertex distance from the run at tolerance %.0e: %.4f mm\n",
+                reference, 1000.0 * largest_difference);
+  return unconverged == 0 ? 0 : 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int steps = 300, frames = 45;
+  ModelSpec m;
+  double tolerance = -1.0;
+  bool ground = true, comparison = false;
+  int hessian = -1;  // −1: the scene default, 0: PSD, 1: exact
+  bool lag = true;
+  double reference = -1.0;
+  std::string motion = "walk", png = "rom_tradeoff.png", csv;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--handles" && i + 1 < argc) m.handles = std::atoi(argv[++i]);
+    else if (a == "--elastic" && i + 1 < argc) m.elastic = std::atoi(argv[++i]);
+    else if (a == "--inertial" && i + 1 < argc) m.inertial = std::atoi(argv[++i]);
+    else if (a == "--exact") m.elastic = m.inertial = 0;
+    else if (a == "--tolerance" && i + 1 < argc) tolerance = std::atof(argv[++i]);
+    else if (a == "--motion" && i + 1 < argc) motion = argv[++i];
+    else if (a == "--no-ground") ground = false;
+    else if (a == "--exact-hessian") hessian = 1;
+    else if (a == "--psd-hessian") hessian = 0;
+    else if (a == "--no-lag") lag = false;
+    else if (a == "--reference" && i + 1 < argc) reference = std::atof(argv[++i]);
+    else if (a == "--threads" && i + 1 < argc) omp_set_num_threads(std::atoi(argv[++i]));
+    else if (a == "--compare") comparison = true;
+    else if (a == "--frames" && i + 1 < argc) frames = std::max(1, std::atoi(argv[++i]));
+    else if (a == "--png" && i + 1 < argc) png = argv[++i];
+    else if (a == "--csv" && i + 1 < argc) csv = argv[++i];
+    else if (!a.empty() && a[0] != '-') steps = std::max(1, std::atoi(a.c_str()));
+    else {
+      std::fprintf(stderr,
+                   "usage: rom_benchmark [STEPS] [--handles H] [--elastic N] [--inertial N] "
+                   "[--exact] [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME] "
+                   "[--no-ground] [--threads N] [--reference T_REF]\n"
+                   "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]\n");
+      return 2;
+    }
+  }
+  try {
+    if (comparison) return compare(frames, png, csv);
+    return speed(steps, m, tolerance, motion, ground, hessian, lag, reference);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "rom_benchmark: %s\n", e.what());
+    return 1;
+  }
+}

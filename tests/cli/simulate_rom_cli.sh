@@ -1,0 +1,170 @@
+#!/usr/bin/env bash
+# End-to-end test of `flsh simulate` with a ROM avatar: a tiny soft walker (600 vertices, a
+# coarse tet mesh, 12 handles, a small elastic cubature, exact inertia) next to a skeleton
+# walker, a few steps. Checks the stderr report of the reduced data (handles, cubatures, cache),
+# the reduced state (144 + 3·handles values) and the per-frame maximum displacement in
+# states.npz, a sheet.png where the ROM avatar is coloured by displacement, the cache hit of a
+# second run, `flsh avatar --soft rom`, and clear errors (exit code 2, nothing written) for bad
+# ROM keys.
+# Usage: simulate_rom_cli.sh FLSH_BINARY WORK_DIR
+set -euo pipefail
+flsh=$1
+work=$2
+rm -rf "$work" && mkdir -p "$work" && cd "$work"
+py=/usr/bin/python3
+fail() { echo "FAIL: $*" >&2; exit 1; }
+
+# 0.1 s at h = 1/30: 3 steps, 4 saved frames, the first and the last on the sheet.
+cat > rom.json <<'JSON'
+{
+  "time_step": 0.03333333333333333,
+  "duration": 0.1,
+  "newton": {"reduced_gradient_tolerance": 1e-6},
+  "avatars": [
+    {"name": "rigid", "vertices": 600, "motion": "builtin:walk", "motion_seconds": 0.5},
+    {"name": "soft", "vertices": 600, "simulation": "rom", "resolution": 0.3, "handles": 12,
+     "elastic_cubature": 40, "inertial_cubature": 0,
+     "motion": "builtin:walk", "motion_seconds": 0.5, "offset": [1.2, 0, 0]}
+  ],
+  "colliders": [{"name": "ground", "type": "plane", "point": [0, -0.955, 0]}],
+  "outputs": {"dir": "out", "ply": false, "gltf": false, "png_frames": 2}
+}
+JSON
+"$flsh" simulate rom.json --cache cache >run.log 2>run.err || { cat run.err; fail "rom scene"; }
+grep -q "building the volumetric body and the reduced basis of avatar 'soft'" run.err ||
+  { cat run.err; fail "stderr should say the reduced basis is built"; }
+grep -Eq "avatar 'soft' \(rom\): 12 handles, basis [0-9]+ nonzeros; elastic cubature [0-9]+ tets, held-out error [0-9.]+ %; inertial cubature off \(exact\); reduced data cache: miss" run.err ||
+  { cat run.err; fail "stderr should report the reduced data (12 handles, cubatures, cache miss)"; }
+grep -q "'rigid' (rom)" run.err && fail "the skeleton avatar has no reduced data line"
+[ -n "$(ls -A cache)" ] || fail "--cache: nothing stored in cache/"
+grep -q "3 steps" run.log || { cat run.log; fail "summary should count 3 steps"; }
+grep -q "0 unconverged" run.log || { cat run.log; fail "every step should converge"; }
+grep -q "avatar 'soft' (rom): max soft-tissue displacement |u| " run.log ||
+  { cat run.log; fail "per-avatar maximum displacement line"; }
+grep -q "'rigid' (rom)\|'rigid' (fem)" run.log && fail "the skeleton avatar has no displacement line"
+scale=$(sed -n 's/.*sheet.png colours soft avatars by |u| (viridis): 0 mm dark purple to \([0-9.]*\) mm yellow.*/\1/p' run.log)
+[ -n "$scale" ] || { cat run.log; fail "the sheet's colour scale should be printed"; }
+
+$py - "$scale" <<'PY'
+import struct, sys, zlib
+import numpy as np
+scale_mm = float(sys.argv[1])
+d = np.load("out/states.npz")
+T, H = 4, 12
+assert d["rigid_states"].shape == (T, 144), d["rigid_states"].shape
+assert "rigid_max_displacement_mm" not in d.files
+states = d["soft_states"]
+assert states.shape == (T, 144 + 3 * H), states.shape  # bones, then z_h per handle
+z = states[:, 144:].reshape(T, H, 3)  # m
+m = d["soft_max_displacement_mm"]
+assert m.shape == (T,) and np.isfinite(m).all() and (m >= 0).all(), m
+assert m.max() > 0, "the soft tissue should move while walking: max displacement %s mm" % m
+# Every handle is a surface vertex whose u is its z_h: the surface maximum is at least max |z|.
+assert (m >= 1000 * np.linalg.norm(z, axis=2).max(axis=1) - 1e-9).all(), (m, z)
+assert abs(scale_mm - max(m[0], m[-1])) < 1e-3 + 1e-9, (scale_mm, m)
+assert d["soft_vertices"].shape == (T, 600, 3) and np.isfinite(d["soft_vertices"]).all()
+# The ROM surface differs from pure skinning: same motion, offset by 1.2 m along x.
+moved = np.abs(d["soft_vertices"][-1] - d["rigid_vertices"][-1] - [1.2, 0, 0]).max()
+assert moved > 1e-4, moved
+
+# Decode the 8-bit RGB PNG (non-interlaced; PNG filters undone per row).
+b = open("out/sheet.png", "rb").read()
+assert b[:8] == b"\x89PNG\r\n\x1a\n"
+pos, idat = 8, b""
+while pos < len(b):
+    n, kind = struct.unpack(">I4s", b[pos:pos + 8])
+    body = b[pos + 8:pos + 8 + n]
+    if kind == b"IHDR":
+        w, h, depth, ctype, _, _, interlace = struct.unpack(">IIBBBBB", body)
+        assert depth == 8 and ctype == 2 and interlace == 0, (depth, ctype, interlace)
+    elif kind == b"IDAT":
+        idat += body
+    pos += 12 + n
+raw = zlib.decompress(idat)
+stride = 3 * w
+rows, prev = [], bytearray(stride)
+for y in range(h):
+    f = raw[y * (stride + 1)]
+    out = bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
+    if f == 1:
+        for x in range(3, stride): out[x] = (out[x] + out[x - 3]) & 255
+    elif f == 2:
+        for x in range(stride): out[x] = (out[x] + prev[x]) & 255
+    elif f == 3:
+        for x in range(stride):
+            out[x] = (out[x] + ((out[x - 3] if x >= 3 else 0) + prev[x]) // 2) & 255
+    elif f == 4:
+        for x in range(stride):
+            a, up, c = (out[x - 3], prev[x], prev[x - 3]) if x >= 3 else (0, prev[x], 0)
+            pa, pb, pc = abs(up - c), abs(a - c), abs(a + up - 2 * c)
+            out[x] = (out[x] + (a if pa <= pb and pa <= pc else (up if pb <= pc else c))) & 255
+    rows.append(bytes(out))
+    prev = out
+rgb = np.frombuffer(b"".join(rows), np.uint8).astype(np.int32).reshape(h, w, 3)
+r, g, bl = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+# Skin never has blue or green above red; viridis below yellow always has.
+coloured = ((bl > r + 8) | (g > r + 8)).sum()
+skin = ((r > g + 10) & (g > bl + 10) & (r < 250)).sum()
+assert coloured > 500, "only %d displacement-coloured pixels" % coloured
+assert skin > 500, "only %d skin-coloured pixels" % skin
+print("rom sheet: %d x %d, %d coloured and %d skin pixels, max |u| %.3f mm"
+      % (w, h, coloured, skin, m.max()))
+PY
+
+# A second run reads the volumetric body and the reduced data from the cache.
+"$flsh" simulate rom.json --cache cache --out out_hit --duration 0.04 >hit.log 2>hit.err ||
+  { cat hit.err; fail "second run"; }
+grep -q "avatar 'soft': .* cache: hit" hit.err || { cat hit.err; fail "volumetric body: cache hit"; }
+grep -q "avatar 'soft' (rom): .* reduced data cache: hit" hit.err ||
+  { cat hit.err; fail "reduced data: cache hit"; }
+"$flsh" simulate rom.json --no-cache --out out_off --duration 0.04 >off.log 2>off.err ||
+  { cat off.err; fail "--no-cache run"; }
+grep -q "reduced data cache: off" off.err || { cat off.err; fail "--no-cache should be reported"; }
+
+# `flsh avatar --soft rom`: JSON statistics of the reduced data (the volumetric body cached).
+"$flsh" avatar --model synthetic:600 --soft rom --resolution 0.3 --handles 12 \
+  --elastic-cubature 40 --inertial-cubature 30 --cache cache >avatar.json 2>avatar.err ||
+  { cat avatar.err; fail "flsh avatar --soft rom"; }
+$py - <<'PY'
+import json
+s = json.load(open("avatar.json"))
+r = s["reduced"]
+assert s["soft"] == "rom" and r["handles"] == 12 and r["dofs"] == 144 + 36, r
+assert r["basis_nonzeros"] >= 12 and r["basis_converged"], r
+for name in ("elastic_cubature", "inertial_cubature"):
+    c = r[name]
+    assert c["enabled"] and 1 <= c["tets"] <= (40 if name.startswith("e") else 30), (name, c)
+    assert 0 <= c["held_out_error"] < 1 and c["weight_sum"] > 0, (name, c)
+assert s["cache"]["shape"] == "hit" and s["cache"]["reduced"] == "miss", s["cache"]
+assert s["seconds"]["reduced_total"] > 0, s["seconds"]
+PY
+if "$flsh" avatar --model synthetic:600 --soft fem --handles 5 >/dev/null 2>bad.err; then
+  fail "--handles accepted with --soft fem"
+fi
+grep -q "only for --soft rom" bad.err || { cat bad.err; fail "--handles with fem: message"; }
+
+# Bad ROM settings: exit code 2, a message naming file, key and expectation, nothing written.
+expect_error() {  # expect_error MESSAGE JSON
+  printf '%s\n' "$2" > bad.json
+  rm -rf out_bad
+  set +e
+  "$flsh" simulate bad.json --out out_bad --cache cache >bad.log 2>bad.err
+  local rc=$?
+  set -e
+  [ "$rc" -eq 2 ] || { cat bad.err; fail "exit code $rc (expected 2) for: $2"; }
+  grep -qF "$1" bad.err || { cat bad.err; fail "message should contain: $1"; }
+  [ ! -e out_bad ] || fail "output written for a bad scene: $2"
+}
+expect_error 'bad.json: avatars[0].handles: only for "simulation": "rom" (this avatar is "fem"' \
+  '{"avatars": [{"vertices": 600, "simulation": "fem", "handles": 12}]}'
+expect_error 'bad.json: avatars[0].elastic_cubature: expected a number of sample tets in [0, 10000000]' \
+  '{"avatars": [{"vertices": 600, "simulation": "rom", "elastic_cubature": -5}]}'
+expect_error 'bad.json: avatars[0].handles: expected a number, got string "12"' \
+  '{"avatars": [{"vertices": 600, "simulation": "rom", "handles": "12"}]}'
+expect_error 'bad.json: newton.reduced_gradient_tolerance: expected 0 < value <= 1' \
+  '{"newton": {"reduced_gradient_tolerance": -1}, "avatars": [{"vertices": 600}]}'
+# More handles than the body's soft-tissue surface vertices: found when the avatar is built.
+expect_error "bad.json: avatars[0] ('big', \"rom\"): buildReducedData: ReducedSettings::num_handles = 5000, expected at most the" \
+  '{"avatars": [{"name": "big", "vertices": 600, "simulation": "rom", "resolution": 0.3, "handles": 5000}]}'
+
+echo "simulate_rom_cli: all checks passed"

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
 
 namespace flsh {
 
@@ -213,11 +214,38 @@ FemMaterialPoint femMaterialPoint(const TetMaterials& materials, int t) {
   }
 }
 
+// Inversion guard (fem_material.h): ∂J/∂F = cof(F), columns f1 × f2, f2 × f0, f0 × f1;
+// ∂²J/∂F_ki∂F_lj = ε_klm ε_ijn F_mn.
+Mat3 cofactor(const Mat3& F) {
+  Mat3 C;
+  C.col(0) = F.col(1).cross(F.col(2));
+  C.col(1) = F.col(2).cross(F.col(0));
+  C.col(2) = F.col(0).cross(F.col(1));
+  return C;
+}
+
+// (κ, depth) of the guard at F: κ = kInversionStiffness · μ, depth = kInversionOnset − det F
+// (> 0 when active).
+struct InversionGuard {
+  double kappa = 0.0, depth = 0.0;
+  bool active() const { return depth > 0.0; }
+  double energy() const { return active() ? 0.5 * kappa * depth * depth : 0.0; }
+};
+
+InversionGuard inversionGuard(const Mat3& F, const FemMaterialPoint& material) {
+  return {kInversionStiffness * material.modulus, kInversionOnset - F.determinant()};
+}
+
 double fungEnergyDensity(const Mat3& F, const FemMaterialPoint& material, Mat3* P, Mat9* dPdF,
                          bool psd) {
   requireFinite(F, "fungEnergyDensity");
   const FungState state = fungState(F, material);
-  if (P) P->noalias() = F * state.S;
+  const InversionGuard guard = inversionGuard(F, material);
+  const Mat3 cof = guard.active() ? cofactor(F) : Mat3::Zero();
+  if (P) {
+    P->noalias() = F * state.S;
+    if (guard.active()) *P -= guard.kappa * guard.depth * cof;
+  }
   if (dPdF) {
     // ∂ε/∂vec(F): column k + 3i is the strain of δF = e_k e_iᵀ.
     Mat6x9 B;
@@ -231,8 +259,23 @@ double fungEnergyDensity(const Mat3& F, const FemMaterialPoint& material, Mat3* 
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j)
         for (int k = 0; k < 3; ++k) (*dPdF)(k + 3 * i, k + 3 * j) += S(i, j);
+    if (guard.active()) {
+      const Eigen::Map<const Eigen::Matrix<double, 9, 1>> c(cof.data());
+      dPdF->noalias() += guard.kappa * c * c.transpose();
+      if (!psd) {  // −κ (J₀ − J) ∂²J/∂F²: block (i, j) = Σ_n ε_ijn [F.col(n)]×ᵀ… (see cofactor)
+        const double scale = -guard.kappa * guard.depth;
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) {
+            if (i == j) continue;
+            const int n = 3 - i - j;
+            const double sign = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;  // ε_ijn
+            // ε_klm ε_ijn F_mn summed over m: −sign · [F.col(n)]×_kl.
+            dPdF->block<3, 3>(3 * i, 3 * j) += scale * (-sign) * skew(Vec3(F.col(n)));
+          }
+      }
+    }
   }
-  return state.map.psi;
+  return state.map.psi + guard.energy();
 }
 
 TetElementRest tetElementRest(const Mat34& X, int tet_index) {
@@ -271,7 +314,9 @@ double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& mate
   G.col(0) = -G.rightCols<3>().rowwise().sum();
   const Mat3 F = Mat3::Identity() + u * G.transpose();
   const FungState state = fungState(F, material);
-  if (!gradient && !hessian) return rest.volume * state.map.psi;
+  const InversionGuard guard = inversionGuard(F, material);
+  const double psi = state.map.psi + guard.energy();
+  if (!gradient && !hessian) return rest.volume * psi;
   // ∂ε/∂u (6 × 12): column 3a + k is the strain of δF = e_k g_aᵀ.
   Mat6x12 B;
   for (int a = 0; a < 4; ++a)
@@ -289,7 +334,23 @@ double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& mate
       for (int b = 0; b < 4; ++b)
         for (int k = 0; k < 3; ++k) (*hessian)(3 * a + k, 3 * b + k) += GSG(a, b);
   }
-  return rest.volume * state.map.psi;
+  if (guard.active()) {
+    // ∂J/∂u_a = cof g_a; ∂²J/∂u_a∂u_b = −[F (g_a × g_b)]×.
+    const Mat3 cof = cofactor(F);
+    Vec12 c;
+    for (int a = 0; a < 4; ++a) c.segment<3>(3 * a) = cof * G.col(a);
+    const double V = rest.volume;
+    if (gradient) *gradient -= (V * guard.kappa * guard.depth) * c;
+    if (hessian) {
+      hessian->noalias() += (V * guard.kappa) * c * c.transpose();
+      if (!psd)
+        for (int a = 0; a < 4; ++a)
+          for (int b = 0; b < 4; ++b)
+            hessian->block<3, 3>(3 * a, 3 * b) +=
+                (V * guard.kappa * guard.depth) * skew(Vec3(F * G.col(a).cross(G.col(b))));
+    }
+  }
+  return rest.volume * psi;
 }
 
 }  // namespace flsh

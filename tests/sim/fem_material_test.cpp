@@ -312,6 +312,7 @@ TEST(FungEnergyDensity, IsotropicModuliGiveTextbookStVK) {
   const FemMaterialPoint m = makeFemMaterialPoint(Vec3::Constant(E), Vec3::Constant(nu),
                                                   Vec3::Constant(G), random.rotation(), 0.0);
   for (const NamedF& d : testDeformations(random)) {
+    if (d.F.determinant() < kInversionOnset) continue;  // the guard adds to StVK there
     const Mat3 Eg = 0.5 * (d.F.transpose() * d.F - Mat3::Identity());
     const double expected = mu * (Eg * Eg).trace() + 0.5 * lambda * Eg.trace() * Eg.trace();
     const Mat3 expected_P = d.F * (lambda * Eg.trace() * Mat3::Identity() + 2 * mu * Eg);
@@ -328,6 +329,7 @@ TEST(FungEnergyDensity, FungMapAndItsZeroExponentLimit) {
   Random random(10);
   const Mat3 frame = random.rotation();
   for (const NamedF& d : testDeformations(random)) {
+    if (d.F.determinant() < kInversionOnset) continue;  // the guard adds to the Fung law there
     const double psi_s = frameStVK(d.F, skin(frame, 0.0));
     ASSERT_GT(psi_s, 0.0);
     // γ = 0 is StVK exactly; tiny γ differs from it only at order γΨ_S/μ.
@@ -354,7 +356,7 @@ TEST(FungEnergyDensity, ProjectedTangentIsPSDAndExactWhereStressIsPSD) {
     const Mat3 frame = random.rotation();
     const FemMaterialPoint m = skin(frame, gamma);
     std::vector<NamedF> cases = testDeformations(random);
-    cases.push_back({"compressed", random.rotation() * Vec3(0.6, 0.7, 0.8).asDiagonal()});
+    cases.push_back({"compressed", random.rotation() * Vec3(0.8, 0.85, 0.9).asDiagonal()});
     cases.push_back({"random 2", Mat3::Identity() + random.mat(0.4)});
     // Stretch along the frame axes: Ŝ = C_normal ε̂ > 0 entrywise, so S ⪰ 0.
     cases.push_back(
@@ -366,6 +368,7 @@ TEST(FungEnergyDensity, ProjectedTangentIsPSDAndExactWhereStressIsPSD) {
       ASSERT_GT(scale, 0.0);
       EXPECT_GE(minEigenvalue(psd), -1e-10 * scale);
       EXPECT_LT((psd - psd.transpose()).cwiseAbs().maxCoeff(), 1e-12 * scale);
+      if (d.F.determinant() < kInversionOnset) continue;  // guarded: InversionGuard tests
       const Mat3 S = d.F.inverse() * stressOf(d.F, m);
       const Vec3 s_eigen =
           Eigen::SelfAdjointEigenSolver<Mat3>(0.5 * (S + S.transpose())).eigenvalues();
@@ -393,6 +396,49 @@ TEST(FungEnergyDensity, ProjectedTangentIsPSDAndExactWhereStressIsPSD) {
   EXPECT_GE(exact_cases, 4);
   EXPECT_GE(projected_cases, 4);
   EXPECT_GE(negative_definite_cases, 1);
+}
+
+// The inversion guard: nothing above the onset, (κ/2)(J₀ − J)² below it, so that a reflected
+// tet (zero StVK energy) costs energy; its derivatives are in the finite-difference tests above
+// (the near-flat and inverted cases).
+TEST(FungEnergyDensity, InversionGuardMakesReflectionsCostEnergy) {
+  Random random(21);
+  const Mat3 frame = random.rotation();
+  const FemMaterialPoint m = skin(frame, 0.0);
+  const double kappa = kInversionStiffness * m.modulus;
+  const Mat3 Q = random.rotation(), R = random.rotation();
+  // A reflection: StVK is exactly zero there, the guard is not.
+  const Mat3 reflection = Q * Vec3(1.0, 1.0, -1.0).asDiagonal() * R;
+  EXPECT_NEAR(frameStVK(reflection, m), 0.0, 1e-9 * m.modulus);
+  const double depth = kInversionOnset + 1.0;
+  EXPECT_NEAR(psiOf(reflection, m), 0.5 * kappa * depth * depth, 1e-9 * kappa);
+  // Pushing a flat tet further through costs more: the guard grows as J falls.
+  double previous = -1.0;
+  for (double z : {0.4, 0.1, -0.2, -0.5}) {
+    const double psi = psiOf(Q * Vec3(1.0, 1.0, z).asDiagonal() * R, m);
+    EXPECT_GT(psi, previous) << "J = " << z;
+    previous = psi;
+  }
+  // Above the onset the law is StVK exactly (γ = 0), at the onset the guard starts from 0.
+  for (double z : {kInversionOnset, 0.7, 1.0, 1.3}) {
+    const Mat3 F = Q * Vec3(1.0, 1.0, z).asDiagonal() * R;
+    EXPECT_NEAR(psiOf(F, m), frameStVK(F, m), 1e-12 * std::max(1.0, frameStVK(F, m))) << z;
+  }
+  // Element level: an inverted tet's energy and the PSD Hessian stay PSD.
+  Mat34 X;
+  X << 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1;
+  const TetElementRest rest = tetElementRest(X, 0);
+  Mat34 u = Mat34::Zero();
+  u(2, 3) = -1.5;  // node 3 through the opposite face: J = −0.5
+  Mat12 H;
+  Vec12 g;
+  const double E = tetElasticEnergy(rest, m, u, &g, &H, true);
+  EXPECT_GT(E, rest.volume * 0.5 * kappa * std::pow(kInversionOnset + 0.5, 2) * 0.999);
+  EXPECT_GT(g.norm(), 0.0);
+  EXPECT_GE(Eigen::SelfAdjointEigenSolver<Mat12>(H).eigenvalues().minCoeff(),
+            -1e-9 * H.cwiseAbs().maxCoeff());
+  // The gradient pushes node 3 back up (towards a positive volume).
+  EXPECT_LT(g[11], 0.0);
 }
 
 TEST(FungEnergyDensity, FiniteAtVeryLargeStrain) {

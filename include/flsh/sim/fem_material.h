@@ -43,6 +43,16 @@ using Mat34 = Eigen::Matrix<double, 3, 4>;
 /// Exponent x = γΨ_S/μ beyond which the Fung exponential is continued quadratically.
 constexpr double kFungExponentCap = 50.0;
 
+/// Inversion guard. StVK (and its Fung map) is zero at every reflection (FᵀF = I with det F = −1),
+/// so a tet pushed through flat (a ball at 3 m/s into the belly) can stay inverted at no cost,
+/// and inverted tets spread until the body crumples. Below the volume ratio J = det F =
+/// kInversionOnset the energy density gets Ψ_J = (κ/2)(kInversionOnset − J)², κ =
+/// kInversionStiffness · μ (μ the tet's mean Young's modulus): C¹ at the onset, zero for every
+/// deformation of soft tissue short of halving a tet's volume, so the StVK–Fung law is unchanged
+/// there. PSD tangents keep its Gauss–Newton part κ cof(F) ⊗ cof(F).
+constexpr double kInversionOnset = 0.5;
+constexpr double kInversionStiffness = 100.0;
+
 /// Orthotropic stiffness (6 × 6, Pa, Voigt order above) as the inverse of the compliance of
 /// docs/materials.md: normal block [[1/E1, −ν12/E1, −ν13/E1], [−ν12/E1, 1/E2, −ν23/E2],
 /// [−ν13/E1, −ν23/E2, 1/E3]], shear diag(1/G23, 1/G13, 1/G12) (in Voigt order 23, 13, 12).
@@ -83,8 +93,8 @@ FemMaterialPoint femMaterialPoint(const TetMaterials& materials, int t);
 /// C_world ε) is positive definite and S⁺ is S with its negative eigenvalues set to 0 (a 3 × 3
 /// eigensolve, skipped when S ⪰ 0). The result is PSD (the first term is Bᵀ·PD·B, the second
 /// has the eigenvalues of S⁺, each three times) and equals the exact dPdF where S ⪰ 0.
-/// Any finite F is valid (flat, inverted): the StVK energy has no barrier. InputError on a
-/// non-finite F.
+/// Plus the inversion guard Ψ_J (see kInversionOnset) when det F < kInversionOnset. Any finite F
+/// is valid (flat, inverted). InputError on a non-finite F.
 double fungEnergyDensity(const Mat3& F, const FemMaterialPoint& material, Mat3* P = nullptr,
                          Mat9* dPdF = nullptr, bool psd = false);
 

@@ -8,6 +8,7 @@
 set -euo pipefail
 flsh=$1
 work=$2
+here=$(cd "$(dirname "$0")" && pwd)  # for sheet_colours.py
 rm -rf "$work" && mkdir -p "$work" && cd "$work"
 py=/usr/bin/python3
 fail() { echo "FAIL: $*" >&2; exit 1; }
@@ -38,9 +39,11 @@ scale=$(sed -n 's/.*sheet.png colours soft avatars by |u| (viridis): 0 mm dark p
 [ -n "$scale" ] || { cat run.log; fail "the sheet's colour scale should be printed"; }
 grep -q "'rigid' (fem)" run.log && fail "the skeleton avatar has no displacement line"
 
-$py - "$scale" <<'PY'
-import struct, sys, zlib
+$py - "$scale" "$here" <<'PY'
+import sys
 import numpy as np
+sys.path.insert(0, sys.argv[2])
+from sheet_colours import count_sheet_pixels
 scale_mm = float(sys.argv[1])
 d = np.load("out/states.npz")
 T = 4
@@ -58,46 +61,8 @@ assert m.max() > 0, "the soft tissue should move while walking: max displacement
 assert abs(scale_mm - max(m[0], m[-1])) < 1e-3 + 1e-9, (scale_mm, m)
 assert d["soft_vertices"].shape == (T, 600, 3) and np.isfinite(d["soft_vertices"]).all()
 
-# Decode the 8-bit RGB PNG (non-interlaced; PNG filters undone per row).
-b = open("out/sheet.png", "rb").read()
-assert b[:8] == b"\x89PNG\r\n\x1a\n"
-pos, idat, w = 8, b"", 0
-while pos < len(b):
-    n, kind = struct.unpack(">I4s", b[pos:pos + 8])
-    body = b[pos + 8:pos + 8 + n]
-    if kind == b"IHDR":
-        w, h, depth, ctype, _, _, interlace = struct.unpack(">IIBBBBB", body)
-        assert depth == 8 and ctype == 2 and interlace == 0, (depth, ctype, interlace)
-    elif kind == b"IDAT":
-        idat += body
-    pos += 12 + n
-raw = zlib.decompress(idat)
-stride = 3 * w
-rows, prev = [], bytearray(stride)
-for y in range(h):
-    f = raw[y * (stride + 1)]
-    out = bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
-    if f == 1:
-        for x in range(3, stride): out[x] = (out[x] + out[x - 3]) & 255
-    elif f == 2:
-        for x in range(stride): out[x] = (out[x] + prev[x]) & 255
-    elif f == 3:
-        for x in range(stride):
-            out[x] = (out[x] + ((out[x - 3] if x >= 3 else 0) + prev[x]) // 2) & 255
-    elif f == 4:
-        for x in range(stride):
-            a, up, c = (out[x - 3], prev[x], prev[x - 3]) if x >= 3 else (0, prev[x], 0)
-            pa, pb, pc = abs(up - c), abs(a - c), abs(a + up - 2 * c)
-            out[x] = (out[x] + (a if pa <= pb and pa <= pc else (up if pb <= pc else c))) & 255
-    rows.append(bytes(out))
-    prev = out
-img = np.frombuffer(b"".join(rows), np.uint8).astype(np.int32)
-rgb = img.reshape(h, w, 3)
-r, g, bl = rgb[..., 0], rgb[..., 1], rgb[..., 2]
-# Skin (and the grey floor, the white background) never has blue or green above red; the
-# viridis map below yellow always has: the FEM avatar is coloured, the skeleton one is not.
-coloured = ((bl > r + 8) | (g > r + 8)).sum()
-skin = ((r > g + 10) & (g > bl + 10) & (r < 250)).sum()
+rgb, coloured, skin = count_sheet_pixels("out/sheet.png")
+h, w = rgb.shape[:2]
 assert coloured > 500, "only %d displacement-coloured pixels" % coloured
 assert skin > 500, "only %d skin-coloured pixels" % skin
 print("fem sheet: %d x %d, %d coloured and %d skin pixels, max |u| %.3f mm"

@@ -11,6 +11,7 @@
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
 //   --exact: no cubature (every tet and node integrated);
+//   --surface-pou: ReducedSettings::surface_partition_of_unity (experimental basis);
 //   --tolerance: Newton's gradient tolerance (default: the scene default);
 //   --reference: also run the scene at tolerance T_REF in lockstep (untimed) and print the
 //                largest surface vertex distance from it (the cost of the tolerance);
@@ -67,13 +68,14 @@ enum class Kind { Skeleton, Rom, Fem };
 struct ModelSpec {
   Kind kind = Kind::Rom;
   int handles = 87, elastic = 500, inertial = 500;  // 0 cubature tets: exact integration
+  bool pou = false;  // ReducedSettings::surface_partition_of_unity
   std::string name() const {
     if (kind == Kind::Skeleton) return "skeleton";
     if (kind == Kind::Fem) return "FEM";
     char buf[64];
     if (elastic == 0) std::snprintf(buf, sizeof(buf), "ROM %d exact", handles);
     else std::snprintf(buf, sizeof(buf), "ROM %d/%d/%d", handles, elastic, inertial);
-    return buf;
+    return std::string(buf) + (pou ? " PoU" : "");
   }
 };
 
@@ -83,6 +85,7 @@ std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, co
   SoftAvatarSettings settings;
   if (m.kind == Kind::Rom) {
     settings.reduced.num_handles = m.handles;
+    settings.reduced.surface_partition_of_unity = m.pou;
     if (m.elastic > 0) settings.reduced.elastic_cubature_points = m.elastic;
     if (m.inertial > 0) settings.reduced.inertial_cubature_points = m.inertial;
   }
@@ -267,6 +270,7 @@ int compare(int frames, const std::string& png, const std::string& csv) {
   models.push_back({Kind::Rom, 87, 250, 250});
   models.push_back({Kind::Rom, 87, 1000, 1000});
   models.push_back({Kind::Rom, 87, 0, 0});
+  for (int h : {87, 150}) models.push_back({Kind::Rom, h, 500, 500, true});
   models.push_back({Kind::Fem});
   std::vector<Scenario> scenarios = {
       {"walk", std::make_shared<Motion>(makeBuiltinMotion("walk", 20.0, 30.0)), false},
@@ -450,6 +454,7 @@ int main(int argc, char** argv) {
     else if (a == "--elastic" && i + 1 < argc) m.elastic = std::atoi(argv[++i]);
     else if (a == "--inertial" && i + 1 < argc) m.inertial = std::atoi(argv[++i]);
     else if (a == "--exact") m.elastic = m.inertial = 0;
+    else if (a == "--surface-pou") m.pou = true;
     else if (a == "--tolerance" && i + 1 < argc) tolerance = std::atof(argv[++i]);
     else if (a == "--motion" && i + 1 < argc) motion = argv[++i];
     else if (a == "--no-ground") ground = false;
@@ -467,7 +472,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: rom_benchmark [STEPS] [--handles H] [--elastic N] [--inertial N] "
-                   "[--exact] [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME] "
+                   "[--exact] [--surface-pou] [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME] "
                    "[--no-ground] [--threads N] [--reference T_REF]\n"
                    "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]\n"
                    "       rom_benchmark --plot-csv CSV [--png PATH]\n");

@@ -5,6 +5,7 @@
 #include <omp.h>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/SparseCholesky>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <chrono>
@@ -19,6 +20,7 @@
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
 #include "flsh/sim/fem_material.h"
+#include "flsh/volume/volume_fields.h"
 
 namespace flsh {
 
@@ -109,6 +111,8 @@ std::string reducedKey(const VolumetricData& data, const ReducedSettings& s, boo
   h.updateField("basis.max_iterations", &s.basis.max_iterations, sizeof(s.basis.max_iterations));
   h.updateField("basis.initial_radius_factor", &s.basis.initial_radius_factor,
                 sizeof(s.basis.initial_radius_factor));
+  const char pou = s.surface_partition_of_unity ? 1 : 0;
+  h.updateField("surface_partition_of_unity", &pou, 1);
   const char flags[2] = {char(elastic ? 1 : 0), char(inertial ? 1 : 0)};
   h.updateField("cubature flags", flags, sizeof(flags));
   return h.hexDigest();
@@ -206,6 +210,54 @@ SpMat sparseBasis(const MatX& weights) {
   basis.setFromTriplets(entries.begin(), entries.end());
   basis.makeCompressed();
   return basis;
+}
+
+// ReducedSettings::surface_partition_of_unity: φ̃_h = f φ_h / Σ_k φ_k with f harmonic (P1
+// Laplacian), 1 on the soft surface nodes and 0 on the bone nodes. Nodes no handle reaches
+// (Σ φ below 1e-9) keep φ = 0.
+MatX surfacePartitionOfUnity(const VolumetricData& data, const MatX& weights) {
+  const int N = data.numNodes(), V = data.templ->mesh.num_surface_nodes;
+  TetMesh shaped = data.templ->mesh;
+  shaped.nodes = data.rest_nodes;
+  const SpMat K = cotangentLaplacian(shaped);
+  // Free nodes: interior soft nodes; fixed: the surface (1 where soft) and the bone nodes (0).
+  std::vector<int> free_index(size_t(N), -1);
+  int free_count = 0;
+  VecX fixed = VecX::Zero(N);
+  for (int j = 0; j < N; ++j) {
+    if (data.bone_of_node[j] >= 0) continue;
+    if (j < V) fixed[j] = 1.0;
+    else free_index[size_t(j)] = free_count++;
+  }
+  VecX f = fixed;
+  if (free_count > 0) {
+    std::vector<Triplet> entries;
+    VecX rhs = VecX::Zero(free_count);
+    for (int c = 0; c < K.outerSize(); ++c)
+      for (SpMat::InnerIterator it(K, c); it; ++it) {
+        const int r = free_index[size_t(it.row())];
+        if (r < 0) continue;
+        const int cc = free_index[size_t(c)];
+        if (cc >= 0) entries.emplace_back(r, cc, it.value());
+        else rhs[r] -= it.value() * fixed[c];
+      }
+    SpMat Kff(free_count, free_count);
+    Kff.setFromTriplets(entries.begin(), entries.end());
+    Eigen::SimplicialLDLT<SpMat> solver(Kff);
+    if (solver.info() != Eigen::Success)
+      throw Error("buildReducedData: the harmonic fade of the surface partition of unity could "
+                  "not be factored");
+    const VecX interior = solver.solve(rhs);
+    for (int j = 0; j < N; ++j)
+      if (free_index[size_t(j)] >= 0) f[j] = std::clamp(interior[free_index[size_t(j)]], 0.0, 1.0);
+  }
+  MatX out = MatX::Zero(weights.rows(), weights.cols());
+  for (int j = 0; j < N; ++j) {
+    if (data.bone_of_node[j] >= 0) continue;
+    const double sum = weights.row(j).sum();
+    if (sum > 1e-9) out.row(j) = (f[j] / sum) * weights.row(j);
+  }
+  return out;
 }
 
 // Elastic training data: the tets that can deform (at least one soft node), with their rest
@@ -603,7 +655,9 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
   t0 = Clock::now();
   const BoundedBiharmonicWeights bbw = computeBoundedBiharmonicWeights(
       data.templ->mesh, data.rest_nodes, d.handles, data.bone_of_node, settings.basis);
-  d.basis = sparseBasis(bbw.weights);
+  d.basis = sparseBasis(settings.surface_partition_of_unity
+                            ? surfacePartitionOfUnity(data, bbw.weights)
+                            : bbw.weights);
   d.basis_max_bound_violation = bbw.report.max_bound_violation;
   d.basis_max_constraint_error = bbw.report.max_constraint_error;
   d.basis_converged = bbw.report.converged;

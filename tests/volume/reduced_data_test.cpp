@@ -414,5 +414,42 @@ TEST(ReducedData, SoftAvatarBuildsItWithTheReducedModel) {
   EXPECT_FALSE(without_soft_tissue.initialized());
 }
 
+// The experimental surface partition of unity: the soft surface rows sum to 1 (where a handle
+// reaches), handles stay unit rows, bone rows empty, entries within [0, 1], a different key.
+TEST(ReducedData, SurfacePartitionOfUnityOption) {
+  ReducedSettings settings = smallSettings();
+  settings.surface_partition_of_unity = true;
+  const ReducedData pou = buildReducedData(volume(), body(), settings, false, false, nullptr);
+  const ReducedData plain = buildReducedData(volume(), body(), smallSettings(), false, false,
+                                             nullptr);
+  EXPECT_NE(pou.key, plain.key);
+  const MatX B = MatX(pou.basis), P = MatX(plain.basis);
+  const VolumetricData& v = volume();
+  const int V = v.templ->mesh.num_surface_nodes;
+  ASSERT_EQ(B.rows(), v.numNodes());
+  EXPECT_GE(B.minCoeff(), 0.0);
+  EXPECT_LE(B.maxCoeff(), 1.0 + 1e-12);
+  int reached = 0;
+  double plain_sum = 0.0;
+  for (int j = 0; j < V; ++j) {
+    if (v.bone_of_node[j] >= 0) {
+      EXPECT_EQ(B.row(j).norm(), 0.0);
+      continue;
+    }
+    if (P.row(j).sum() <= 1e-9) continue;
+    ++reached;
+    plain_sum += P.row(j).sum();
+    EXPECT_NEAR(B.row(j).sum(), 1.0, 1e-9) << "surface node " << j;
+  }
+  ASSERT_GT(reached, 0);
+  EXPECT_LT(plain_sum / reached, 0.99) << "the plain weights are not a partition of unity";
+  for (int h = 0; h < pou.numHandles(); ++h) {
+    EXPECT_NEAR(B(pou.handles[h], h), 1.0, 1e-12);
+    EXPECT_NEAR(B.row(pou.handles[h]).sum(), 1.0, 1e-12);
+  }
+  for (int j = V; j < v.numNodes(); ++j)
+    if (v.bone_of_node[j] >= 0) EXPECT_EQ(B.row(j).norm(), 0.0);
+}
+
 }  // namespace
 }  // namespace flsh

@@ -40,6 +40,12 @@ struct ReducedSettings {
   double training_amplitude = 0.03;
   std::uint64_t seed = 1;               ///< of the training samples (deterministic)
   BoundedBiharmonicOptions basis;       ///< the QP solver of the weights
+  /// Experimental (off: the bounded biharmonic weights as ARCHITECTURE.md §4 defines them).
+  /// On: φ̃_h(j) = f_j φ_h(j) / Σ_k φ_k(j), with f harmonic, 1 on the soft surface and 0 on bone
+  /// nodes: a partition of unity on the soft surface (the weights as given fade to 0 towards the
+  /// bones between handles: Σ_h φ_h has median 0.27 on the default body's surface), still 0 on
+  /// bone nodes, 1 at the own handle, 0 at the others, within [0, 1]. See docs/rom.md.
+  bool surface_partition_of_unity = false;
 };
 
 struct ReducedData {

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -803,6 +804,10 @@ void NpzWriter::save(const std::string& path, bool compress) const {
     if (zip_set_file_compression(archive, zip_uint64_t(index),
                                  compress ? ZIP_CM_DEFLATE : ZIP_CM_STORE, 0) != 0)
       fail("key '" + key + "': compression");
+    // A fixed entry time (1980-01-02, the DOS epoch plus a day, whatever the time zone) instead
+    // of the clock: the same arrays always give the same bytes (saves 2 s apart differed).
+    if (zip_file_set_mtime(archive, zip_uint64_t(index), time_t(315619200), 0) != 0)
+      fail("key '" + key + "': entry time");
   }
   if (zip_close(archive) != 0) fail("finishing the archive");
   target.commit();

@@ -67,6 +67,4 @@ class BonePairBlocks : public TouchedBlocks<6> {
   void emit(std::vector<Triplet>& H, int offset) { TouchedBlocks<6>::emit(H, offset, offset); }
 };
 
-using Block3Accumulator = TouchedBlocks<3>;
-
 }  // namespace flsh::detail

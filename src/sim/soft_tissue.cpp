@@ -311,13 +311,6 @@ double SoftTissue::largestSoftState() const {
   return largest;
 }
 
-void SoftTissue::unposed(const VecX& displacement, MatX3& Y) const {
-  const int n = numNodes();
-  Y.resize(n, 3);
-  for (int j = 0; j < n; ++j)
-    Y.row(j) = rest_.row(j) + blendOf(j).transpose() + nodeDisplacement(displacement, j).transpose();
-}
-
 void SoftTissue::positionsOf(const std::vector<int>& nodes, const BoneFrames& bones,
                              const VecX& state, MatX3& x) const {
   Vec3 shift[kNumJoints];

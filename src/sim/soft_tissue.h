@@ -71,8 +71,6 @@ class SoftTissue {
   const MatX3& poseBlend() const;  ///< every node's (evaluates the missing ones)
   void setPoseBlendOffsets(const MatX3& offsets);
 
-  /// Y = X̄ + P + u of every node (#N × 3) for a displacement vector.
-  void unposed(const VecX& displacement, MatX3& Y) const;
   /// World positions x (#N × 3) of every node for bones and a soft state.
   void positions(const BoneFrames& bones, const VecX& displacement, MatX3& x) const;
   /// x̂ = 2 x(q_n) − x(q_{n−1}) with the held pose blend (it carries no momentum).
@@ -80,10 +78,9 @@ class SoftTissue {
 
   /// Evaluates the node positions of the current state (bones + u); cached by `version`.
   void prepare(long version, const BoneFrames& bones) const;
-  /// Positions and unposed nodes of the prepared state: every node in the FEM; in the ROM only the
-  /// mass nodes (surface() for the surface, positions() for every node).
+  /// Node positions of the prepared state: every node in the FEM; in the ROM only the mass
+  /// nodes (surface() for the surface, positions() for every node).
   const MatX3& currentPositions() const { return x_; }
-  const MatX3& currentUnposed() const { return Y_; }
 
   // ---- energies at the prepared state; gradients ADDED at offset (bones at offset, u at
   // offset + bone_dofs), Hessian triplets APPENDED (both triangles) ----
@@ -184,7 +181,7 @@ class SoftTissue {
   mutable BonePairBlocks pair_blocks_;
   // ROM: Hessian blocks bone rows (t, ω of each bone: 2 · 24 row blocks) × handles, and
   // handles × handles.
-  mutable Block3Accumulator bz_blocks_, zz_blocks_;
+  mutable TouchedBlocks<3> bz_blocks_, zz_blocks_;
   // Bones of the prepared state (the simulable's, which outlive every evaluation).
   mutable const std::vector<Mat3>* cur_R_ = nullptr;
   mutable const MatX3* cur_t_ = nullptr;

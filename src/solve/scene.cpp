@@ -224,19 +224,29 @@ void HessianAssembler::assemble(const std::vector<Triplet>& triplets,
 // is recognized; a longer one costs one lookup per later slot).
 constexpr long kResyncWindow = 48;
 
-// Sums the triplets into H on pattern_; false (and the missing blocks in pending_blocks_) if
-// some triplet falls outside it.
-bool HessianAssembler::fill(const std::vector<Triplet>& triplets,
-                            const std::vector<size_t>& segment_end, SpMat& H) {
-  const SpMat& P = pattern_;
+namespace {
+
+// H takes P's pattern (kept, with its storage, when it already has it) with zero values.
+void resetToPattern(const SpMat& P, SpMat& H) {
   const int n = int(P.rows());
   const Eigen::Index nnz = P.nonZeros();
   const bool same = H.rows() == n && H.cols() == n && H.isCompressed() && H.nonZeros() == nnz &&
                     std::equal(P.outerIndexPtr(), P.outerIndexPtr() + n + 1, H.outerIndexPtr()) &&
                     std::equal(P.innerIndexPtr(), P.innerIndexPtr() + nnz, H.innerIndexPtr());
   if (!same) H = P;
+  std::fill(H.valuePtr(), H.valuePtr() + nnz, 0.0);
+}
+
+}  // namespace
+
+// Sums the triplets into H on pattern_; false (and the missing blocks in pending_blocks_) if
+// some triplet falls outside it.
+bool HessianAssembler::fill(const std::vector<Triplet>& triplets,
+                            const std::vector<size_t>& segment_end, SpMat& H) {
+  const SpMat& P = pattern_;
+  const int n = int(P.rows());
+  resetToPattern(P, H);
   double* values = H.valuePtr();
-  std::fill(values, values + nnz, 0.0);
   const int* outer = P.outerIndexPtr();
   const int* inner = P.innerIndexPtr();
   if (slot_key_.size() < segment_end.size()) {
@@ -572,13 +582,8 @@ bool Scene::fillHessian(SpMat& H) const {
   const int n = num_dofs_, bones = n / 6;
   if (hessian_pattern_.rows() != n) return false;
   const SpMat& P = hessian_pattern_;
-  const Eigen::Index nnz = P.nonZeros();
-  const bool same = H.rows() == n && H.cols() == n && H.isCompressed() && H.nonZeros() == nnz &&
-                    std::equal(P.outerIndexPtr(), P.outerIndexPtr() + n + 1, H.outerIndexPtr()) &&
-                    std::equal(P.innerIndexPtr(), P.innerIndexPtr() + nnz, H.innerIndexPtr());
-  if (!same) H = P;
+  resetToPattern(P, H);
   double* values = H.valuePtr();
-  std::fill(values, values + nnz, 0.0);
   const int* outer = H.outerIndexPtr();
   const size_t count = triplets_.size();
   if (fill_key_.size() < count) {

@@ -510,12 +510,15 @@ TEST(TetElement, GradientAndHessianMatchFiniteDifferences) {
     Mat34 moderate = Mat34::Zero(), inverting = Mat34::Zero();
     for (int a = 0; a < 4; ++a) moderate.col(a) = random.vec(0.004);
     inverting.col(3) = Vec3(0.002, 0.001, -0.03);
-    for (const Mat34& u : {moderate, inverting}) {
+    for (const bool inverts : {false, true}) {
+      const Mat34& u = inverts ? inverting : moderate;
       SCOPED_TRACE("gamma " + std::to_string(gamma));
       Vec12 gradient;
       Mat12 hessian;
       const double energy = tetElasticEnergy(rest, m, u, &gradient, &hessian, false);
       const Mat3 F = tetDeformationGradient(rest, u);
+      // The inverting case must exercise the inversion guard's derivatives too.
+      if (inverts) ASSERT_LT(F.determinant(), kInversionOnset);
       EXPECT_NEAR(energy, rest.volume * psiOf(F, m), 1e-12 * energy);
       // Quantities of a 2 cm tet are small in J: tighten the absolute tolerance accordingly.
       EXPECT_TRUE(jacobianMatchesFiniteDifferences(

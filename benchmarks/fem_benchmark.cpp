@@ -5,9 +5,10 @@
 //
 // Usage: fem_benchmark [STEPS=30] [--resolution R] [--tolerance T] [--no-lag] [--threads N]
 //                      [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME]
-//                      [--no-ground] [--contact-stiffness K]
+//                      [--no-ground] [--contact-stiffness K] [--psd-hessian]
 //   --tolerance: Newton's relative gradient tolerance (default: the scene default);
 //   --no-lag:    factor every Newton iteration (plain Newton on CHOLMOD) for comparison;
+//   --psd-hessian: the PSD Hessian form only (exact_hessian = false), for comparison;
 //   --reference: also run a second scene at tolerance T_REF in lockstep (untimed) and print
 //                the largest difference of the nodes' positions from it (the cost of the
 //                tolerance in accuracy);
@@ -46,7 +47,7 @@ double seconds(Clock::time_point a, Clock::time_point b) {
 int main(int argc, char** argv) {
   int steps = 30;
   double resolution = 1.0, tolerance = -1.0;
-  bool lag = true, ground = true;
+  bool lag = true, ground = true, psd_only = false;
   double contact_stiffness = -1.0;
   std::string motion_name = "walk";
   double reference = -1.0;
@@ -58,6 +59,7 @@ int main(int argc, char** argv) {
     else if (a == "--tolerance" && i + 1 < argc) tolerance = std::atof(argv[++i]);
     else if (a == "--no-lag") lag = false;
     else if (a == "--no-ground") ground = false;
+    else if (a == "--psd-hessian") psd_only = true;
     else if (a == "--contact-stiffness" && i + 1 < argc) contact_stiffness = std::atof(argv[++i]);
     else if (a == "--motion" && i + 1 < argc) motion_name = argv[++i];
     else if (a == "--cg" && i + 3 < argc) {  // forcing term, refactor-after, max CG iterations
@@ -71,7 +73,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: fem_benchmark [STEPS] [--resolution R] [--tolerance T] [--no-lag] "
-                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground] [--contact-stiffness K]\n");
+                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground] [--contact-stiffness K] [--psd-hessian]\n");
       return 2;
     }
   }
@@ -97,6 +99,7 @@ int main(int argc, char** argv) {
     SceneOptions scene_options;
     if (tolerance > 0) scene_options.soft_tissue_newton.gradient_tolerance = tolerance;
     if (!lag) scene_options.soft_tissue_newton.lagged.enabled = false;
+    if (psd_only) scene_options.soft_tissue_newton.exact_hessian = false;
     if (cg_tolerance > 0) {
       scene_options.soft_tissue_newton.lagged.cg_relative_tolerance = cg_tolerance;
       scene_options.soft_tissue_newton.lagged.refactor_after_cg_iterations = refactor_after;
@@ -146,6 +149,8 @@ int main(int argc, char** argv) {
       sum.iterations += r.iterations;
       sum.factorizations += r.factorizations;
       sum.cg_iterations += r.cg_iterations;
+      sum.psd_fallbacks += r.psd_fallbacks;
+      sum.hessian_evaluations += r.hessian_evaluations;
       sum.seconds_energy += r.seconds_energy;
       sum.seconds_gradient += r.seconds_gradient;
       sum.seconds_hessian += r.seconds_hessian;
@@ -165,8 +170,10 @@ int main(int argc, char** argv) {
     const double n = steps;
     std::printf("steps: %d in %.2f s -> %.2f steps/s (%d not converged)\n", steps, total,
                 steps / total, unconverged);
-    std::printf("per step: %.2f Newton iterations, %.2f factorizations, %.1f PCG iterations\n",
-                sum.iterations / n, sum.factorizations / n, sum.cg_iterations / n);
+    std::printf("per step: %.2f Newton iterations, %.2f Hessian assemblies (%.2f iterations "
+                "fell back to the PSD form), %.2f factorizations, %.1f PCG iterations\n",
+                sum.iterations / n, sum.hessian_evaluations / n, sum.psd_fallbacks / n,
+                sum.factorizations / n, sum.cg_iterations / n);
     std::printf("per step seconds: energy %.3f, gradient %.3f, Hessian %.3f, factorization "
                 "%.3f, solves %.3f, other %.3f\n",
                 sum.seconds_energy / n, sum.seconds_gradient / n, sum.seconds_hessian / n,

@@ -478,6 +478,10 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
       Jb[a].leftCols<3>() = inf.weight * Mat3::Identity();
       Jb[a].rightCols<3>() = -inf.weight * skew(lever[a]);
     }
+    // Bone–soft coupling per influence, one 6 × 3 block: Jbᵀ K M from K and, in the exact
+    // form, ∂²(f·x)/∂δω_b∂δu_j = −w [f]× R_b from the force (rows 3..5).
+    Eigen::Matrix<double, 6, 3> coupling[kNumJoints];
+    bool has_coupling = false;
     if (K) {
       const Mat3& Kj = (*K)[idx];
       for (int a = 0; a < count; ++a) {
@@ -486,16 +490,13 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
       }
       if (dof >= 0) {
         const Mat3 KM = Kj * node_M_[j];
-        for (int a = 0; a < count; ++a) {
-          const Eigen::Matrix<double, 6, 3> B = Jb[a].transpose() * KM;
-          addBoneSoft<6>(H, offset, 6 * bones[a], j, B);
-        }
+        for (int a = 0; a < count; ++a) coupling[a].noalias() = Jb[a].transpose() * KM;
+        has_coupling = true;
         addSoftSoft(H, offset, j, j, node_M_[j].transpose() * KM);
       }
     }
-    if (forces) {
+    if (forces && !(*forces)[idx].isZero(0.0)) {
       const Vec3& f = (*forces)[idx];
-      if (f.isZero(0.0)) continue;
       for (int a = 0; a < count; ++a) {
         const int b = bones[a];
         const double w = influences_[influence_start_[j] + a].weight;
@@ -503,11 +504,19 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         has_curvature[b] = true;
         curvature[b] += w * rotationCurvature(f, lever[a]);
         if (!psd && dof >= 0) {
-          const Mat3 C = -w * skew(f) * R[b];  // ∂²(f·x)/∂δω_b∂δu_j
-          addBoneSoft<3>(H, offset, 6 * b + 3, j, C);
+          if (!has_coupling) coupling[a].setZero();
+          coupling[a].bottomRows<3>() -= w * skew(f) * R[b];
         }
       }
+      if (!psd && dof >= 0) has_coupling = true;
     }
+    if (has_coupling)  // without K only the rotation rows are nonzero
+      for (int a = 0; a < count; ++a) {
+        if (K)
+          addBoneSoft<6>(H, offset, 6 * bones[a], j, coupling[a]);
+        else
+          addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval());
+      }
   }
   for (int b = 0; b < num_bones_; ++b)
     if (has_curvature[b])

@@ -177,12 +177,11 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
   // The Hessian form held in H, unshifted (−1: none or shifted), so that a failed PCG solve
   // factors the matrix it already assembled.
   int assembled_form = -1;
-  // Lagged mode: once this call finds the exact Hessian indefinite, PCG uses the PSD form.
-  bool exact_found_indefinite = !options.exact_hessian;
 
   const auto evaluateHessian = [&](bool psd) {
     {
       ScopedSeconds timer(result.seconds_hessian);
+      ++result.hessian_evaluations;
       objective.hessian(H, psd);
       objective.fixKinematic(g, &H);
     }
@@ -257,32 +256,37 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
       // ---- Lagged factor: PCG on the current Hessian, preconditioned by an earlier factor.
       if (attempt == 0 && lag.enabled && !solver->factorStale() && solver->hasFactor() &&
           solver->factorRows() == n) {
-        const bool psd = exact_found_indefinite;
-        if (psd && options.exact_hessian && !counted_psd_fallback) {
-          ++result.psd_fallbacks;
-          counted_psd_fallback = true;
-        }
-        evaluateHessian(psd);
-        scaleOfDiagonal();
-        double forcing = lag.cg_relative_tolerance;
-        if (lag.adaptive_forcing && iteration > 0)
-          forcing = std::min(forcing, gradient_norm2 / previous_gradient_norm2);
-        // No oversolving: a linear residual 10× below the gradient target cannot matter.
-        const double residual_tolerance = std::max(forcing * gradient_norm2, 0.1 * gradient_target);
-        rhs = -g;
-        int iterations = 0;
-        CgOutcome outcome;
-        {
-          ScopedSeconds timer(result.seconds_solve);
-          outcome = preconditionedCg(H, rhs, residual_tolerance, lag.max_cg_iterations, *solver, dq,
-                                     cg, iterations);
-        }
-        result.cg_iterations += iterations;
-        if (iterations > lag.refactor_after_cg_iterations) solver->setFactorStale(true);
-        if (outcome == CgOutcome::NonPositiveCurvature && !psd) exact_found_indefinite = true;
-        if (outcome == CgOutcome::Converged && dq.allFinite() && g.dot(dq) < 0.0) {
-          have_direction = true;
-          direction_from_cg = true;
+        // The exact form first; if PCG meets non-positive curvature on it, the PSD form.
+        for (bool psd = !options.exact_hessian;; psd = true) {
+          if (psd && options.exact_hessian && !counted_psd_fallback) {
+            ++result.psd_fallbacks;
+            counted_psd_fallback = true;
+          }
+          evaluateHessian(psd);
+          scaleOfDiagonal();
+          double forcing = lag.cg_relative_tolerance;
+          if (lag.adaptive_forcing && iteration > 0)
+            forcing = std::min(forcing, gradient_norm2 / previous_gradient_norm2);
+          // No oversolving: a linear residual 10× below the gradient target cannot matter.
+          const double residual_tolerance =
+              std::max(forcing * gradient_norm2, 0.1 * gradient_target);
+          rhs = -g;
+          int iterations = 0;
+          CgOutcome outcome;
+          {
+            ScopedSeconds timer(result.seconds_solve);
+            outcome = preconditionedCg(H, rhs, residual_tolerance, lag.max_cg_iterations, *solver,
+                                       dq, cg, iterations);
+          }
+          result.cg_iterations += iterations;
+          if (iterations > lag.refactor_after_cg_iterations) solver->setFactorStale(true);
+          if (outcome == CgOutcome::Converged && dq.allFinite() && g.dot(dq) < 0.0) {
+            have_direction = true;
+            direction_from_cg = true;
+            break;
+          }
+          const bool indefinite = outcome == CgOutcome::NonPositiveCurvature && !psd;
+          if (!indefinite || solver->factorStale()) break;
         }
       }
 
@@ -290,8 +294,10 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
       // convergence); if it is not positive definite, the objective's PSD form; then diagonal
       // shifts until it is.
       if (!have_direction) {
-        const int first_form =
-            options.exact_hessian && !(lag.enabled && exact_found_indefinite) ? 0 : 1;
+        // With the lag the factor is first of all the preconditioner of later iterations: the
+        // PSD form, which cannot fail for want of definiteness (a failed Cholesky of the exact
+        // form costs as much as a successful one); PCG tries the exact form again next time.
+        const int first_form = options.exact_hessian && !lag.enabled ? 0 : 1;
         for (int form = first_form; form < 2 && !have_direction; ++form) {
           const bool psd = form == 1;
           if (psd && options.exact_hessian && !counted_psd_fallback) {
@@ -301,7 +307,6 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
           if (assembled_form != form) evaluateHessian(psd);
           scaleOfDiagonal();
           have_direction = factorize();
-          if (!have_direction && !psd) exact_found_indefinite = true;
         }
         if (!have_direction) {
           diagonal_values.resize(n);

@@ -405,7 +405,7 @@ void HessianAssembler::grow(int n) {
 
 NewtonOptions softTissueNewtonDefaults() {
   NewtonOptions options;
-  options.exact_hessian = false;
+  options.exact_hessian = true;
   options.linear_solver = LinearSolverType::Cholmod;
   options.lagged.enabled = true;  // one 25k-DoF factorization costs ~20 preconditioned CG steps
   options.gradient_tolerance = 1e-5;  // measured trade-off: see scene.h

@@ -43,12 +43,17 @@ class Objective {
 /// current Hessian. If PCG does not reach the forcing term within max_cg_iterations, meets
 /// pᵀHp ≤ 0, or its direction is not a descent direction or fails the line search, the
 /// iteration factors the Hessian it assembled and solves directly (the usual PSD fallback and
-/// regularization apply), and that factor becomes the lagged one. Once a call finds the exact
-/// Hessian indefinite it runs PCG on the PSD form for the rest of that call.
-/// Measured on the 1536-DoF spring network of tests/solve/newton_lagged_test.cpp over 10
-/// twisting steps at tolerance 1e-9: plain Newton 40 iterations / 40 factorizations; lagged 42
-/// iterations / 2 factorizations / 219 PCG iterations (~5 per direction), 3.5× less time.
-/// Note for the adjoint: the factor left in the solver may be of an earlier Hessian.
+/// regularization apply), and that factor becomes the lagged one. Factors are always of the PSD
+/// form here: the factor is first of all the preconditioner of later iterations, and a failed
+/// Cholesky of an indefinite exact form costs as much as a successful one. With exact_hessian,
+/// PCG runs on the exact Hessian at every iteration; where it meets non-positive curvature,
+/// that iteration runs PCG on the PSD form instead. Trying the exact form at every iteration
+/// keeps quadratic convergence where the PSD form overestimates the curvature (compressed FEM
+/// tissue). Measured on the walking full body (fem_benchmark 30): PCG on the PSD form alone, 7.1
+/// Newton iterations and 1.0 factorizations per step (up to 24 iterations at heel strikes, the
+/// gradient shrinking by ~0.8 per iteration); exact first at every iteration with refreshes of
+/// the exact form where positive definite, 5.1 and 1.4 (failed exact factorizations included);
+/// as described (PSD refreshes), 5.2 and 1.1.
 struct LaggedFactorOptions {
   /// false: every iteration factors its Hessian (plain Newton).
   bool enabled = false;
@@ -102,7 +107,11 @@ struct NewtonResult {
   double gradient_norm = 0.0;  ///< ‖g‖∞ at the end
   int line_search_steps = 0;   ///< backtracking halvings in total
   int regularizations = 0;     ///< Hessian shifts needed
-  int psd_fallbacks = 0;       ///< iterations whose exact Hessian was not positive definite
+  /// Iterations whose direction came from the PSD form although exact_hessian was asked: the
+  /// exact form was not positive definite, or (lagged factor) the iteration refreshed the
+  /// factor, which is then always of the PSD form.
+  int psd_fallbacks = 0;
+  int hessian_evaluations = 0;  ///< Objective::hessian calls (either form)
   /// Numeric factorizations in this call (regularization retries included).
   int factorizations = 0;
   int cg_iterations = 0;  ///< PCG iterations in total (lagged factor only)

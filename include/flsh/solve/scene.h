@@ -73,15 +73,18 @@ struct SceneOptions {
   /// Scene::hessian).
   NewtonOptions newton;
   /// Newton of scenes in which any simulable has soft tissue (hasSoftTissue()), used instead
-  /// of `newton`. Defaults (softTissueNewtonDefaults()): the PSD Hessian (exact_hessian = false:
-  /// the exact FEM Hessian is rarely positive definite, and a failed Cholesky of a 25 000-DoF
-  /// system costs ~0.4 s before the PSD retry), CHOLMOD's supernodal Cholesky
+  /// of `newton`. Defaults (softTissueNewtonDefaults()): the exact Hessian tried first at every
+  /// iteration with the PSD form as fallback (exact_hessian = true; with the lag, negative
+  /// curvature met by PCG switches that iteration to the PSD form, so an indefinite exact
+  /// Hessian costs an assembly, not a failed 25 000-DoF factorization; the PSD form alone
+  /// converges only linearly where it overestimates the curvature of compressed tissue: 7.1
+  /// against 5.1 iterations per walking step), CHOLMOD's supernodal Cholesky
   /// (linear_solver = Cholmod; Auto also means Cholmod here) and the lagged-factor PCG
   /// (lagged.enabled = true: the factor of an earlier Hessian, kept by the scene's solver across
   /// steps, preconditions CG; see LaggedFactorOptions), and gradient_tolerance = 1e-5: on the
   /// full-size walking body at h = 1/30 s it stays within 0.3 mm (3.6 % of the largest
-  /// soft-tissue displacement) of a 1e-8 solve over 15 steps at 1.9 steps/s, where 1e-6 runs
-  /// at 1.3 steps/s and 1e-4 at 2.1 steps/s with 1.1 mm (docs/benchmarks.md).
+  /// soft-tissue displacement) of a 1e-8 solve over 15 steps, where 1e-4 ends 1.1 mm off
+  /// (docs/benchmarks.md).
   NewtonOptions soft_tissue_newton = softTissueNewtonDefaults();
   /// Newton of scenes whose soft-tissue simulables all use the reduced model (ROM), used
   /// instead of `newton` and `soft_tissue_newton`. Defaults (reducedNewtonDefaults()): the exact

@@ -81,10 +81,12 @@ struct SceneOptions {
   /// against 5.1 iterations per walking step), CHOLMOD's supernodal Cholesky
   /// (linear_solver = Cholmod; Auto also means Cholmod here) and the lagged-factor PCG
   /// (lagged.enabled = true: the factor of an earlier Hessian, kept by the scene's solver across
-  /// steps, preconditions CG; see LaggedFactorOptions), and gradient_tolerance = 1e-5: on the
-  /// full-size walking body at h = 1/30 s it stays within 0.3 mm (3.6 % of the largest
-  /// soft-tissue displacement) of a 1e-8 solve over 15 steps, where 1e-4 ends 1.1 mm off
-  /// (docs/benchmarks.md).
+  /// steps, preconditions CG; see LaggedFactorOptions) with the forcing term
+  /// lagged.cg_relative_tolerance = 5e-2 (walk: 0.80 factorizations and 36 PCG iterations per
+  /// step against 1.13 and 39 at 1e-2, for the same Newton iterations, ~10 % faster), and
+  /// gradient_tolerance = 1e-5: on the full-size walking body at h = 1/30 s it stays within
+  /// 0.03 mm of a 1e-8 solve over 30 steps (displacements up to 29 mm), where 1e-4 ends 0.9 mm
+  /// off for 8 % fewer iterations (docs/benchmarks.md).
   NewtonOptions soft_tissue_newton = softTissueNewtonDefaults();
   /// Newton of scenes whose soft-tissue simulables all use the reduced model (ROM), used
   /// instead of `newton` and `soft_tissue_newton`. Defaults (reducedNewtonDefaults()): the exact

@@ -54,6 +54,12 @@ class Objective {
 /// gradient shrinking by ~0.8 per iteration); exact first at every iteration with refreshes of
 /// the exact form where positive definite, 5.1 and 1.4 (failed exact factorizations included);
 /// as described (PSD refreshes), 5.2 and 1.1.
+/// Measured on the 1536-DoF spring network of tests/solve/newton_lagged_test.cpp over 10
+/// twisting steps at tolerance 1e-9 (before the exact-first rule): plain Newton 40 iterations /
+/// 40 factorizations; lagged 42 iterations / 2 factorizations / 219 PCG iterations (~5 per
+/// direction), 3.5× less time.
+/// Note for the adjoint: the factor left in the solver may be of an earlier Hessian, and with
+/// exact_hessian it is of the PSD form.
 struct LaggedFactorOptions {
   /// false: every iteration factors its Hessian (plain Newton).
   bool enabled = false;

@@ -7,6 +7,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/sim/simulable.h"
+#include "flsh/solve/scene.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -198,6 +199,36 @@ TEST(ReducedModel, CubatureOfEveryTetWithUnitWeightsIsExactIntegration) {
   const MatX He = test::denseFromTriplets(Te, n), Hc = test::denseFromTriplets(Tc, n);
   ASSERT_GT(He.bottomRightCorner(n - 144, n - 144).norm(), 0.0);
   EXPECT_LT((Hc - He).cwiseAbs().maxCoeff(), 1e-10 * He.cwiseAbs().maxCoeff());
+}
+
+TEST(ReducedModel, SceneOnTheDenseSolverStoresItsHessianDense) {
+  // A reduced-model scene (a few hundred DoFs) gets the dense solver, and its Hessian full n × n
+  // storage: the same sums as the simulable's triplets, and steps that converge.
+  auto sim = std::make_shared<Simulable>(avatar(2), test::smallScene(800).walk);
+  Scene scene;
+  scene.addSimulable(sim);
+  scene.initialize();
+  scene.addCollider(
+      Collider::plane(Vec3(0, sim->getNodes().col(1).minCoeff() + 0.01, 0), Vec3::UnitY()));
+  for (int step = 0; step < 3; ++step) {
+    const StepStats stats = scene.step();
+    EXPECT_TRUE(stats.newton.converged) << "step " << step << ": " << stats.newton.message;
+  }
+  EXPECT_EQ(scene.linearSolver()->name(), makeLinearSolver(LinearSolverType::Dense, 1)->name());
+  const int n = scene.numDofs();
+  for (bool psd : {false, true}) {
+    SpMat H;
+    scene.hessian(H, psd);
+    EXPECT_EQ(H.nonZeros(), Eigen::Index(n) * n);
+    std::vector<Triplet> triplets;
+    sim->getDynamicHessianTripletVector(triplets, 0, psd);
+    sim->getPotentialHessianTripletVector(triplets, 0, psd);
+    SpMat S(n, n);
+    S.setFromTriplets(triplets.begin(), triplets.end());
+    const double scale = MatX(S).cwiseAbs().maxCoeff();
+    ASSERT_GT(scale, 0.0);
+    EXPECT_LE((MatX(H) - MatX(S)).cwiseAbs().maxCoeff(), 1e-12 * scale) << "psd = " << psd;
+  }
 }
 
 TEST(ReducedModel, SetReducedDataChecksItsInput) {

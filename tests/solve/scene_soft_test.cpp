@@ -116,6 +116,44 @@ TEST(HessianAssembler, SumsLikeSetFromTripletsAndGrowsByGroupBlocks) {
   EXPECT_EQ(H.coeff(0, 4), 2.0);
 }
 
+TEST(HessianAssembler, DenseStorageSumsLikeSetFromTriplets) {
+  const std::vector<int> group_start{0, 6, 12, 15, 18, 21, 24, 27};
+  const int n = 27;
+  HessianAssembler assembler;
+  assembler.setGroups(group_start);
+  assembler.setDense(true);
+  EXPECT_TRUE(assembler.dense());
+  std::vector<Triplet> triplets = randomBlockTriplets(group_start, 12, 4);
+  triplets.emplace_back(3, 20, 0.5);  // outside any block the sparse pattern would start with
+  SpMat H;
+  assembler.assemble(triplets, {triplets.size() / 3, triplets.size()}, n, H);
+  ASSERT_GT(maxAbs(H), 0.0);
+  EXPECT_LE(maxAbs(H - summed(triplets, n)), 1e-12 * maxAbs(H));
+  EXPECT_EQ(H.nonZeros(), Eigen::Index(n) * n);  // every entry stored, column-major
+  for (int c = 0; c < n; ++c) EXPECT_EQ(H.outerIndexPtr()[c], c * n);
+  EXPECT_EQ(assembler.numPatternBuilds(), 1);
+  // Other positions and counts next time: no rebuild, no lookups.
+  const std::vector<Triplet> other = randomBlockTriplets(group_start, 5, 5);
+  assembler.assemble(other, {}, n, H);
+  EXPECT_LE(maxAbs(H - summed(other, n)), 1e-12 * maxAbs(H));
+  EXPECT_EQ(assembler.numPatternBuilds(), 1);
+  EXPECT_EQ(assembler.lastLookups(), 0u);
+  // Bad input is still named; too many DoFs for dense storage are refused.
+  std::string message =
+      test::messageOf<InputError>([&] { assembler.assemble({Triplet(0, 27, 1.0)}, {}, n, H); });
+  EXPECT_NE(message.find("(0, 27)"), std::string::npos) << message;
+  HessianAssembler large;
+  large.setDense(true);
+  const int too_many = HessianAssembler::kMaxDenseDofs + 1;
+  message = test::messageOf<InputError>([&] { large.assemble({}, {}, too_many, H); });
+  EXPECT_NE(message.find(std::to_string(too_many)), std::string::npos) << message;
+  // Back to the sparse pattern.
+  assembler.setDense(false);
+  assembler.assemble(triplets, {}, n, H);
+  EXPECT_LT(H.nonZeros(), Eigen::Index(n) * n);
+  EXPECT_LE(maxAbs(H - summed(triplets, n)), 1e-12 * maxAbs(H));
+}
+
 TEST(HessianAssembler, RejectsBadInput) {
   HessianAssembler assembler;
   SpMat H;

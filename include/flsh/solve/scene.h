@@ -41,6 +41,13 @@ class HessianAssembler {
   /// one segment). Throws InputError for a triplet outside n × n or bad segment ends.
   void assemble(const std::vector<Triplet>& triplets, const std::vector<size_t>& segment_end, int n,
                 SpMat& H);
+  /// Full n × n storage (for small systems that are dense anyway, e.g. reduced-model scenes on
+  /// the dense solver): every entry is in the pattern, a triplet's value slot is col·n + row and
+  /// no slot cache is kept; segments, groups and added blocks then make no difference. Resets
+  /// the pattern. n is limited to kMaxDenseDofs.
+  void setDense(bool dense);
+  bool dense() const { return dense_; }
+  static constexpr int kMaxDenseDofs = 8192;
   const SpMat& pattern() const { return pattern_; }
   int numPatternBuilds() const { return pattern_builds_; }  ///< first build and growths
   /// Triplets of the last assemble() whose value slot had to be looked up (not cached).
@@ -49,6 +56,7 @@ class HessianAssembler {
  private:
   void grow(int n);
   bool fill(const std::vector<Triplet>& triplets, const std::vector<size_t>& segment_end, SpMat& H);
+  void fillDense(const std::vector<Triplet>& triplets, int n, SpMat& H);
   SpMat pattern_;                 // values unused (zero)
   std::vector<int> group_start_;  // as set by setGroups (empty: one DoF per group)
   std::vector<int> group_of_;     // group of each DoF
@@ -60,6 +68,7 @@ class HessianAssembler {
   std::vector<int> old_index_;
   int pattern_builds_ = 0;
   size_t last_lookups_ = 0;
+  bool dense_ = false;
 };
 
 /// The Newton settings SceneOptions::soft_tissue_newton starts from (see there).
@@ -186,6 +195,7 @@ class Scene : public Objective {
   std::unique_ptr<LinearSolver> solver_;
   int num_dofs_ = 0;
   int last_solver_dofs_ = -1;
+  LinearSolverType solver_type_ = LinearSolverType::Auto;  // of solver_ (resolved)
   int stack_depth_ = 0;            // push() levels not yet popped
   std::vector<Triplet> triplets_;  // Hessian assembly buffer, reused
   // Fixed Hessian pattern of whole 6 × 6 bone blocks, a superset of every evaluation's

@@ -86,11 +86,18 @@ CgOutcome preconditionedCg(const SpMat& H, const VecX& b, double residual_tolera
   w.direction = w.preconditioned;
   double rz = w.residual.dot(w.preconditioned);
   if (!std::isfinite(rz) || !(rz > 0.0)) return CgOutcome::NotFinite;
+  // H in full n × n storage (HessianAssembler::setDense) is a column-major dense matrix.
+  const Eigen::Index n = H.rows();
+  const bool dense = H.isCompressed() && H.nonZeros() == n * n;
+  const Eigen::Map<const MatX> H_dense(H.valuePtr(), dense ? n : 0, dense ? n : 0);
   for (int k = 0; k < max_iterations; ++k) {
     // Serial on purpose: Eigen's OpenMP row-major product (Hᵀp) was 15× slower per iteration
     // on the shared 2-core machine (threads waiting at barriers), and Hp costs ~1/10 of the
     // preconditioner's triangular solves anyway.
-    w.product.noalias() = H * w.direction;
+    if (dense)
+      w.product.noalias() = H_dense * w.direction;
+    else
+      w.product.noalias() = H * w.direction;
     ++iterations;
     const double curvature = w.direction.dot(w.product);
     if (!std::isfinite(curvature)) return CgOutcome::NotFinite;

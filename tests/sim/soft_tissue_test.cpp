@@ -493,6 +493,55 @@ TEST_P(SoftTissueModel, ExtremeCasesStayFinite) {
   }
 }
 
+TEST_P(SoftTissueModel, FastBallIntoTheBellyConvergesEveryStep) {
+  // A 6 cm ball hits the front of the body at 3 m/s: 4.5 cm deep at the end of the first step
+  // (h = 1/30 s), out again at the end of the second. Through a scene with its default
+  // soft-tissue Newton settings (30 iterations at most) every step converges, the tissue under
+  // the ball gives way, and nothing crumples. (With the PSD Hessian alone, exact_hessian =
+  // false, step 7 of the FEM case stops at the cap; on the full-size body such an unconverged
+  // impact step made the body crumple a few steps later.)
+  SimulableOptions options;
+  options.time_step = 1.0 / 30.0;
+  auto sim = std::make_shared<Simulable>(avatar(), walk(), options);
+  Scene scene;
+  scene.addSimulable(sim);
+  scene.initialize();
+  const MatX3 x = sim->getNodes();
+  const int V = int(sim->getSoftTissueDisplacements().rows());
+  const double radius = 0.06, h = options.time_step;
+  const Vec3 centre = x.topRows(V).colwise().mean().transpose();
+  // The surface vertex in front at the centre's height: where the ball aims.
+  int target = 0;
+  for (int i = 0; i < V; ++i)
+    if (std::abs(x(i, 1) - centre.y()) < 0.05 && std::abs(x(i, 0) - centre.x()) < 0.05 &&
+        x(i, 2) > x(target, 2))
+      target = i;
+  const Vec3 rest(x(target, 0), x(target, 1), x(target, 2) + radius + 0.005);  // 5 mm in front
+  Collider ball = Collider::sphere(rest, radius);
+  ball.path.times = {0.0, h, 2.0 * h};
+  ball.path.offsets = {Vec3(0, 0, 0.05), Vec3(0, 0, -0.05), Vec3(0, 0, 0.05)};  // ±3 m/s
+  scene.addCollider(ball);
+  scene.addCollider(Collider::plane(Vec3(0, x.col(1).minCoeff() - 0.002, 0), Vec3::UnitY()));
+  for (int step = 0; step < 8; ++step) {
+    const StepStats stats = scene.step();
+    ASSERT_TRUE(stats.newton.converged) << "step " << step << ": " << stats.newton.message;
+    ASSERT_TRUE(sim->getState().allFinite()) << "step " << step;
+    const MatX3 u = sim->getSoftTissueDisplacements();
+    if (step == 0) {  // the ball is in: the tissue around its aim gives way (mm to cm)
+      double pushed = 0.0;
+      for (int i = 0; i < V; ++i)
+        if ((x.row(i) - x.row(target)).norm() < 0.08) pushed = std::max(pushed, u.row(i).norm());
+      EXPECT_GT(stats.active_contacts, 0);
+      // FEM: 2.3 cm. The ROM of this coarse test body dents by 0.45 mm only: its few handles'
+      // weights barely reach a 6 cm dent (the basis limit of docs/benchmarks.md); it moves.
+      EXPECT_GT(pushed, GetParam() == Model::Fem ? 0.01 : 1e-4);
+    }
+    // Centimetres at most (walking alone moves this coarse body's tissue up to ~6 cm), not the
+    // tens of centimetres of a crumpling body.
+    EXPECT_LT(u.rowwise().norm().maxCoeff(), 0.12) << "step " << step;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Models, SoftTissueModel, ::testing::Values(Model::Fem, Model::Rom),
                          [](const ::testing::TestParamInfo<Model>& info) {
                            return info.param == Model::Fem ? "Fem" : "Rom";

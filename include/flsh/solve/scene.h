@@ -87,7 +87,7 @@ struct SceneOptions {
   /// curvature met by PCG switches that iteration to the PSD form, so an indefinite exact
   /// Hessian costs an assembly, not a failed 25 000-DoF factorization; the PSD form alone
   /// converges only linearly where it overestimates the curvature of compressed tissue: 7.1
-  /// against 5.1 iterations per walking step), CHOLMOD's supernodal Cholesky
+  /// against 5.3 iterations per walking step), CHOLMOD's supernodal Cholesky
   /// (linear_solver = Cholmod; Auto also means Cholmod here) and the lagged-factor PCG
   /// (lagged.enabled = true: the factor of an earlier Hessian, kept by the scene's solver across
   /// steps, preconditions CG; see LaggedFactorOptions) with the forcing term

@@ -87,7 +87,14 @@ void bind_solve(py::module_& m) {
                     "backtracking halvings in total")
       .def_readonly("regularizations", &NewtonResult::regularizations, "Hessian shifts needed")
       .def_readonly("psd_fallbacks", &NewtonResult::psd_fallbacks,
-                    "iterations whose exact Hessian was not positive definite")
+                    "iterations whose direction came from the PSD form although the exact one was "
+                    "asked (not positive definite, or a refresh of the lagged factor)")
+      .def_readonly("hessian_evaluations", &NewtonResult::hessian_evaluations,
+                    "Hessian assemblies (either form)")
+      .def_readonly("factorizations", &NewtonResult::factorizations,
+                    "numeric factorizations (regularization retries included)")
+      .def_readonly("cg_iterations", &NewtonResult::cg_iterations,
+                    "preconditioned CG iterations (lagged factor only)")
       .def_readonly("message", &NewtonResult::message)
       .def("__repr__", [](const NewtonResult& r) {
         return "NewtonResult(converged=" + std::string(r.converged ? "True" : "False") +

@@ -447,6 +447,10 @@ def test_newton_options_and_discard_state(avatar, walk):
     scene.initialize()
     stats = scene.step()
     assert stats.newton.converged and stats.newton.psd_fallbacks == 0
+    # Plain Newton on the PSD form: one assembly and one factorization per iteration, no CG.
+    assert stats.newton.hessian_evaluations == stats.newton.iterations
+    assert stats.newton.factorizations >= stats.newton.iterations
+    assert stats.newton.cg_iterations == 0
     before = sim.getState()
     sim.pushState()
     sim.updateState(np.full(sim.num_dofs, 1e-3))

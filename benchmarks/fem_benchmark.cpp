@@ -146,16 +146,7 @@ int main(int argc, char** argv) {
                     "|g| %.2e, %s\n", k, r.iterations, r.line_search_steps, r.factorizations,
                     r.cg_iterations, r.gradient_norm, r.message.c_str());
       unconverged += r.converged ? 0 : 1;
-      sum.iterations += r.iterations;
-      sum.factorizations += r.factorizations;
-      sum.cg_iterations += r.cg_iterations;
-      sum.psd_fallbacks += r.psd_fallbacks;
-      sum.hessian_evaluations += r.hessian_evaluations;
-      sum.seconds_energy += r.seconds_energy;
-      sum.seconds_gradient += r.seconds_gradient;
-      sum.seconds_hessian += r.seconds_hessian;
-      sum.seconds_factorization += r.seconds_factorization;
-      sum.seconds_solve += r.seconds_solve;
+      sum.addCounts(r);
       const auto pause = Clock::now();
       largest_u = std::max(largest_u, sim->getSoftTissueDisplacements().rowwise().norm().maxCoeff());
       if (ref_scene) {

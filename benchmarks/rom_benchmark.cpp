@@ -398,13 +398,7 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
     const StepStats s = r.scene->step();
     const NewtonResult& n = s.newton;
     unconverged += n.converged ? 0 : 1;
-    sum.iterations += n.iterations;
-    sum.factorizations += n.factorizations;
-    sum.seconds_energy += n.seconds_energy;
-    sum.seconds_gradient += n.seconds_gradient;
-    sum.seconds_hessian += n.seconds_hessian;
-    sum.seconds_factorization += n.seconds_factorization;
-    sum.seconds_solve += n.seconds_solve;
+    sum.addCounts(n);
     const auto pause = Clock::now();
     if (k % 10 == 0)
       largest_u =

@@ -146,6 +146,21 @@ void diagonalPointers(SpMat& H, std::vector<double*>& diagonal) {
 
 }  // namespace
 
+void NewtonResult::addCounts(const NewtonResult& other) {
+  iterations += other.iterations;
+  line_search_steps += other.line_search_steps;
+  regularizations += other.regularizations;
+  psd_fallbacks += other.psd_fallbacks;
+  hessian_evaluations += other.hessian_evaluations;
+  factorizations += other.factorizations;
+  cg_iterations += other.cg_iterations;
+  seconds_energy += other.seconds_energy;
+  seconds_gradient += other.seconds_gradient;
+  seconds_hessian += other.seconds_hessian;
+  seconds_factorization += other.seconds_factorization;
+  seconds_solve += other.seconds_solve;
+}
+
 NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, LinearSolver* solver) {
   validate(options);
   NewtonResult result;
@@ -263,6 +278,12 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
       // ---- Lagged factor: PCG on the current Hessian, preconditioned by an earlier factor.
       if (attempt == 0 && lag.enabled && !solver->factorStale() && solver->hasFactor() &&
           solver->factorRows() == n) {
+        double forcing = lag.cg_relative_tolerance;
+        if (lag.adaptive_forcing && iteration > 0)
+          forcing = std::min(forcing, gradient_norm2 / previous_gradient_norm2);
+        // No oversolving: a linear residual 10× below the gradient target cannot matter.
+        const double residual_tolerance = std::max(forcing * gradient_norm2, 0.1 * gradient_target);
+        rhs = -g;
         // The exact form first; if PCG meets non-positive curvature on it, the PSD form.
         for (bool psd = !options.exact_hessian;; psd = true) {
           if (psd && options.exact_hessian && !counted_psd_fallback) {
@@ -271,13 +292,6 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
           }
           evaluateHessian(psd);
           scaleOfDiagonal();
-          double forcing = lag.cg_relative_tolerance;
-          if (lag.adaptive_forcing && iteration > 0)
-            forcing = std::min(forcing, gradient_norm2 / previous_gradient_norm2);
-          // No oversolving: a linear residual 10× below the gradient target cannot matter.
-          const double residual_tolerance =
-              std::max(forcing * gradient_norm2, 0.1 * gradient_target);
-          rhs = -g;
           int iterations = 0;
           CgOutcome outcome;
           {

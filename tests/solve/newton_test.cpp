@@ -294,5 +294,48 @@ TEST(Newton, ReusesTheSolversAnalysisAcrossSolves) {
   EXPECT_EQ(solver->numAnalyses(), 1);
 }
 
+TEST(Newton, AddCountsSumsCountersAndTimingsOnly) {
+  NewtonResult total;
+  total.converged = true;
+  total.energy = 7.0;
+  total.message = "first";
+  NewtonResult r;
+  r.converged = false;
+  r.energy = -1.0;
+  r.gradient_norm = 3.0;
+  r.message = "second";
+  r.iterations = 1;
+  r.line_search_steps = 2;
+  r.regularizations = 3;
+  r.psd_fallbacks = 4;
+  r.hessian_evaluations = 5;
+  r.factorizations = 6;
+  r.cg_iterations = 7;
+  r.seconds_energy = 0.5;
+  r.seconds_gradient = 0.25;
+  r.seconds_hessian = 0.125;
+  r.seconds_factorization = 1.5;
+  r.seconds_solve = 2.5;
+  total.addCounts(r);
+  total.addCounts(r);
+  EXPECT_EQ(total.iterations, 2);
+  EXPECT_EQ(total.line_search_steps, 4);
+  EXPECT_EQ(total.regularizations, 6);
+  EXPECT_EQ(total.psd_fallbacks, 8);
+  EXPECT_EQ(total.hessian_evaluations, 10);
+  EXPECT_EQ(total.factorizations, 12);
+  EXPECT_EQ(total.cg_iterations, 14);
+  EXPECT_EQ(total.seconds_energy, 1.0);
+  EXPECT_EQ(total.seconds_gradient, 0.5);
+  EXPECT_EQ(total.seconds_hessian, 0.25);
+  EXPECT_EQ(total.seconds_factorization, 3.0);
+  EXPECT_EQ(total.seconds_solve, 5.0);
+  // The outcome of a solve is not a count: left as it was.
+  EXPECT_TRUE(total.converged);
+  EXPECT_EQ(total.energy, 7.0);
+  EXPECT_EQ(total.gradient_norm, 0.0);
+  EXPECT_EQ(total.message, "first");
+}
+
 }  // namespace
 }  // namespace flsh

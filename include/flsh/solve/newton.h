@@ -130,6 +130,10 @@ struct NewtonResult {
   double seconds_factorization = 0.0;
   double seconds_solve = 0.0;
   std::string message;
+
+  /// Adds `other`'s counters and timings (iterations through seconds_solve) to this one's, for
+  /// totals over many solves; converged, energy, gradient_norm and message stay as they are.
+  void addCounts(const NewtonResult& other);
 };
 
 /// Minimizes `objective` from its current state. `solver` (may be null: one is made) is reused

@@ -173,6 +173,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
   if (reduced_) {  // each elastic tet's handles and basis rows
     tet_handle_start_.assign(1, 0);
     std::vector<double> columns;
+    int max_tet_handles = 0;
     for (Eigen::Index e = 0; e < tets_.rows(); ++e) {
       std::vector<int> handles;
       for (int a = 0; a < 4; ++a)
@@ -190,8 +191,11 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
         }
       }
       tet_handle_start_.push_back(int(tet_handles_.size()));
+      max_tet_handles = std::max(max_tet_handles, int(handles.size()));
     }
     tet_phi_ = Eigen::Map<const MatX>(columns.data(), 4, Eigen::Index(tet_handles_.size()));
+    tet_projection_.resize(12, 3 * max_tet_handles);
+    tet_reduced_.resize(3 * max_tet_handles, 3 * max_tet_handles);
   }
 
   // Inertia and gravity: every node with its lumped mass, or the inertial cubature's nodes.
@@ -480,22 +484,23 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
     }
     // Bone–soft coupling per influence, one 6 × 3 block: Jbᵀ K M from K and, in the exact
     // form, ∂²(f·x)/∂δω_b∂δu_j = −w [f]× R_b from the force (rows 3..5).
+    const bool force = forces && !(*forces)[idx].isZero(0.0);
+    const bool k_coupling = K && dof >= 0, f_coupling = force && !psd && dof >= 0;
     Eigen::Matrix<double, 6, 3> coupling[kNumJoints];
-    bool has_coupling = false;
+    for (int a = 0; a < count && (k_coupling || f_coupling); ++a) coupling[a].setZero();
     if (K) {
       const Mat3& Kj = (*K)[idx];
       for (int a = 0; a < count; ++a) {
         const Eigen::Matrix<double, 6, 3> JaT_K = Jb[a].transpose() * Kj;
         for (int c = 0; c < count; ++c) block(bones[a], bones[c]).noalias() += JaT_K * Jb[c];
       }
-      if (dof >= 0) {
+      if (k_coupling) {
         const Mat3 KM = Kj * node_M_[j];
-        for (int a = 0; a < count; ++a) coupling[a].noalias() = Jb[a].transpose() * KM;
-        has_coupling = true;
+        for (int a = 0; a < count; ++a) coupling[a].noalias() += Jb[a].transpose() * KM;
         addSoftSoft(H, offset, j, j, node_M_[j].transpose() * KM);
       }
     }
-    if (forces && !(*forces)[idx].isZero(0.0)) {
+    if (force) {
       const Vec3& f = (*forces)[idx];
       for (int a = 0; a < count; ++a) {
         const int b = bones[a];
@@ -503,20 +508,15 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         if (!has_curvature[b]) curvature[b].setZero();
         has_curvature[b] = true;
         curvature[b] += w * rotationCurvature(f, lever[a]);
-        if (!psd && dof >= 0) {
-          if (!has_coupling) coupling[a].setZero();
-          coupling[a].bottomRows<3>() -= w * skew(f) * R[b];
-        }
+        if (f_coupling) coupling[a].bottomRows<3>() -= w * skew(f) * R[b];
       }
-      if (!psd && dof >= 0) has_coupling = true;
     }
-    if (has_coupling)  // without K only the rotation rows are nonzero
-      for (int a = 0; a < count; ++a) {
-        if (K)
-          addBoneSoft<6>(H, offset, 6 * bones[a], j, coupling[a]);
-        else
-          addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval());
-      }
+    for (int a = 0; a < count; ++a) {  // without K only the rotation rows are nonzero
+      if (k_coupling)
+        addBoneSoft<6>(H, offset, 6 * bones[a], j, coupling[a]);
+      else if (f_coupling)
+        addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval());
+    }
   }
   for (int b = 0; b < num_bones_; ++b)
     if (has_curvature[b])
@@ -611,17 +611,18 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
     // Per tet K = (Φ_e ⊗ I₃)ᵀ H_e (Φ_e ⊗ I₃) on the tet's handles S_e (Φ_e: 4 × |S_e|, the
     // basis rows of its nodes), then one block per handle pair: |S_e|² block updates instead
     // of 16 k² (k handles per node) through addSoftSoft.
-    MatX A, K;
     for (int e = 0; e < T; ++e) {
       const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
       if (count == 0) continue;
       const auto Phi = tet_phi_.middleCols(begin, count);  // 4 × count
       const Mat12& He = element_hessians_[e];
-      A.setZero(12, 3 * count);  // H_e (Φ_e ⊗ I₃)
+      auto A = tet_projection_.leftCols(3 * count);  // H_e (Φ_e ⊗ I₃)
+      A.setZero();
       for (int s = 0; s < count; ++s)
         for (int a = 0; a < 4; ++a)
           if (Phi(a, s) != 0.0) A.middleCols<3>(3 * s) += Phi(a, s) * He.middleCols<3>(3 * a);
-      K.setZero(3 * count, 3 * count);
+      auto K = tet_reduced_.topLeftCorner(3 * count, 3 * count);
+      K.setZero();
       for (int s = 0; s < count; ++s)
         for (int a = 0; a < 4; ++a)
           if (Phi(a, s) != 0.0) K.middleRows<3>(3 * s) += Phi(a, s) * A.middleRows<3>(3 * a);

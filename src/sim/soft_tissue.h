@@ -153,6 +153,9 @@ class SoftTissue {
   // its 4 nodes (columns of tet_phi_, 4 × Σ|S_e|).
   std::vector<int> tet_handle_start_, tet_handles_;
   MatX tet_phi_;
+  // Scratch of the reduced elastic Hessian, sized for the tet with the most handles:
+  // H_e (Φ_e ⊗ I₃) (12 × 3|S_e|) and its projection (3|S_e| square).
+  mutable MatX tet_projection_, tet_reduced_;
   // ROM with the elastic cubature: the rest-stiffness correction ½ zᵀ C z (ReducedData) and the
   // handle pairs whose 3 × 3 block is nonzero.
   MatX correction_;

@@ -158,6 +158,23 @@ struct AvatarArgs {
   bool reduced_options_given = false;
 };
 
+// The ROM's sizes as the scene keys handles / elastic_cubature / inertial_cubature and the
+// `flsh avatar` flags give them: 0 sample tets switches that cubature off (exact integration),
+// and its count then keeps the (unused) default.
+void setReducedSizes(ReducedSettings& reduced, int handles, int elastic, int inertial) {
+  reduced.num_handles = handles;
+  if (elastic > 0) reduced.elastic_cubature_points = elastic;
+  if (inertial > 0) reduced.inertial_cubature_points = inertial;
+}
+
+// Soft tissue, the reduced model and the cubatures that are on (as setReducedSizes).
+void enableReducedModel(SoftAvatar& avatar, int elastic, int inertial) {
+  avatar.enableSoftTissue();
+  avatar.enableReducedModel();
+  avatar.enableElasticCubature(elastic > 0);
+  avatar.enableInertialCubature(inertial > 0);
+}
+
 // Builds (or loads) an avatar and prints its statistics as JSON on stdout.
 int cmdAvatar(const AvatarArgs& args) {
   const auto t0 = Clock::now();
@@ -204,15 +221,10 @@ int cmdAvatar(const AvatarArgs& args) {
   settings.volumetric.material_file = args.materials;
   settings.volumetric.cache_dir = args.cache;
   settings.volumetric.use_cache = !args.no_cache;
-  settings.reduced.num_handles = args.handles;
-  if (args.elastic_cubature > 0) settings.reduced.elastic_cubature_points = args.elastic_cubature;
-  if (args.inertial_cubature > 0)
-    settings.reduced.inertial_cubature_points = args.inertial_cubature;
+  setReducedSizes(settings.reduced, args.handles, args.elastic_cubature, args.inertial_cubature);
   SoftAvatar avatar(body, betas, settings);
   avatar.enableSoftTissue(args.soft != "none");
-  avatar.enableReducedModel(args.soft == "rom");
-  avatar.enableElasticCubature(args.soft == "rom" && args.elastic_cubature > 0);
-  avatar.enableInertialCubature(args.soft == "rom" && args.inertial_cubature > 0);
+  if (args.soft == "rom") enableReducedModel(avatar, args.elastic_cubature, args.inertial_cubature);
   const auto build_start = Clock::now();
   avatar.initVolumetricData();
   const double build_seconds = secondsSince(build_start);
@@ -568,25 +580,16 @@ std::vector<AvatarRun> buildAvatars(const SceneSpec& scene) {
       settings.volumetric.cache_dir = scene.cache_dir;
       settings.volumetric.use_cache = scene.use_cache;
     }
-    if (run.rom) {
-      // 0 sample tets switches a cubature off; its point count then keeps the (unused) default.
-      settings.reduced.num_handles = spec.handles;
-      if (spec.elastic_cubature > 0)
-        settings.reduced.elastic_cubature_points = spec.elastic_cubature;
-      if (spec.inertial_cubature > 0)
-        settings.reduced.inertial_cubature_points = spec.inertial_cubature;
-    }
+    if (run.rom)
+      setReducedSizes(settings.reduced, spec.handles, spec.elastic_cubature,
+                      spec.inertial_cubature);
     run.avatar = std::make_shared<SoftAvatar>(body, betas, settings);
     if (run.soft) {
       std::fprintf(stderr, "simulate: building the volumetric body%s of avatar '%s'...\n",
                    run.rom ? " and the reduced basis" : "", spec.name.c_str());
       run.avatar->enableSoftTissue();
     }
-    if (run.rom) {
-      run.avatar->enableReducedModel();
-      run.avatar->enableElasticCubature(spec.elastic_cubature > 0);
-      run.avatar->enableInertialCubature(spec.inertial_cubature > 0);
-    }
+    if (run.rom) enableReducedModel(*run.avatar, spec.elastic_cubature, spec.inertial_cubature);
     try {
       run.avatar->initVolumetricData();
     } catch (const InputError& e) {

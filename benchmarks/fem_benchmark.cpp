@@ -6,9 +6,12 @@
 // Usage: fem_benchmark [STEPS=30] [--resolution R] [--tolerance T] [--no-lag] [--threads N]
 //                      [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME]
 //                      [--no-ground] [--contact-stiffness K] [--psd-hessian]
+//                      [--exact-preconditioner]
 //   --tolerance: Newton's relative gradient tolerance (default: the scene default);
 //   --no-lag:    factor every Newton iteration (plain Newton on CHOLMOD) for comparison;
 //   --psd-hessian: the PSD Hessian form only (exact_hessian = false), for comparison;
+//   --exact-preconditioner: PCG applies the lagged factor with CHOLMOD's double-precision solve
+//                (lagged.fast_preconditioner = false), for comparison;
 //   --reference: also run a second scene at tolerance T_REF in lockstep (untimed) and print
 //                the largest difference of the nodes' positions from it (the cost of the
 //                tolerance in accuracy);
@@ -47,7 +50,7 @@ double seconds(Clock::time_point a, Clock::time_point b) {
 int main(int argc, char** argv) {
   int steps = 30;
   double resolution = 1.0, tolerance = -1.0;
-  bool lag = true, ground = true, psd_only = false;
+  bool lag = true, ground = true, psd_only = false, exact_preconditioner = false;
   double contact_stiffness = -1.0;
   std::string motion_name = "walk";
   double reference = -1.0;
@@ -60,6 +63,7 @@ int main(int argc, char** argv) {
     else if (a == "--no-lag") lag = false;
     else if (a == "--no-ground") ground = false;
     else if (a == "--psd-hessian") psd_only = true;
+    else if (a == "--exact-preconditioner") exact_preconditioner = true;
     else if (a == "--contact-stiffness" && i + 1 < argc) contact_stiffness = std::atof(argv[++i]);
     else if (a == "--motion" && i + 1 < argc) motion_name = argv[++i];
     else if (a == "--cg" && i + 3 < argc) {  // forcing term, refactor-after, max CG iterations
@@ -73,7 +77,8 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: fem_benchmark [STEPS] [--resolution R] [--tolerance T] [--no-lag] "
-                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground] [--contact-stiffness K] [--psd-hessian]\n");
+                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground] [--contact-stiffness K] [--psd-hessian] "
+                   "[--exact-preconditioner]\n");
       return 2;
     }
   }
@@ -100,6 +105,7 @@ int main(int argc, char** argv) {
     if (tolerance > 0) scene_options.soft_tissue_newton.gradient_tolerance = tolerance;
     if (!lag) scene_options.soft_tissue_newton.lagged.enabled = false;
     if (psd_only) scene_options.soft_tissue_newton.exact_hessian = false;
+    if (exact_preconditioner) scene_options.soft_tissue_newton.lagged.fast_preconditioner = false;
     if (cg_tolerance > 0) {
       scene_options.soft_tissue_newton.lagged.cg_relative_tolerance = cg_tolerance;
       scene_options.soft_tissue_newton.lagged.refactor_after_cg_iterations = refactor_after;

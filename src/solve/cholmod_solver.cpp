@@ -3,6 +3,7 @@
 // lower triangle is used). The symbolic analysis (fill-reducing ordering, supernodes) is kept
 // while the pattern stays the same, which is the common case across Newton iterations.
 #include <cholmod.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <cstring>
@@ -11,10 +12,13 @@
 
 #include "flsh/core/error.h"
 #include "solve/linear_solver_detail.h"
+#include "solve/supernodal_preconditioner.h"
 
 namespace flsh {
 
 namespace {
+
+using detail::PreconditionerSplit;
 
 class CholmodSolver final : public LinearSolver {
  public:
@@ -47,6 +51,7 @@ class CholmodSolver final : public LinearSolver {
   bool factorize(const SpMat& A_in) override {
     detail::checkSquare(A_in, "CholmodSolver::factorize");
     has_factor_ = false;
+    preconditioner_current_ = false;
     const SpMat* A = &A_in;
     if (!A_in.isCompressed()) {  // CHOLMOD needs packed columns
       compressed_ = A_in;
@@ -84,6 +89,29 @@ class CholmodSolver final : public LinearSolver {
   void solveInPlace(VecX& b) const override {
     solveIntoWorkspace(b, "CholmodSolver::solveInPlace");
     b = Eigen::Map<const VecX>(static_cast<const double*>(x_->x), b.size());
+  }
+
+  void preconditionInPlace(VecX& b) const override {
+    if (!has_factor_)
+      throw Error("CholmodSolver::preconditionInPlace: no factor (the last factorize() failed "
+                  "or was never called)");
+    if (b.size() != Eigen::Index(factor_->n))
+      throw InputError("CholmodSolver::preconditionInPlace: b must have " +
+                       std::to_string(factor_->n) + " entries, got " + std::to_string(b.size()));
+    if (!factor_->is_super) {  // CHOLMOD chose a simplicial factor: no float copy
+      solveInPlace(b);
+      return;
+    }
+    if (!preconditioner_current_) {  // first use of this factor as a preconditioner
+      preconditioner_.build(*factor_, omp_get_max_threads());
+      preconditioner_current_ = true;
+    }
+    preconditioner_.solveInPlace(b);
+  }
+
+  PreconditionerSplit split() const {
+    if (!preconditioner_current_) return {};
+    return {preconditioner_.threads(), preconditioner_.serialShare()};
   }
 
   bool hasFactor() const override { return has_factor_; }
@@ -150,12 +178,21 @@ class CholmodSolver final : public LinearSolver {
   Eigen::Index rows_ = -1;
   std::vector<int> outer_, inner_;
   bool has_factor_ = false;
+  // The single-precision copy of factor_ (built on the first preconditionInPlace after each
+  // factorization, so that exact solves alone never pay for it).
+  mutable detail::SupernodalPreconditioner preconditioner_;
+  mutable bool preconditioner_current_ = false;
 };
 
 }  // namespace
 
 namespace detail {
 std::unique_ptr<LinearSolver> makeCholmodSolver() { return std::make_unique<CholmodSolver>(); }
+
+PreconditionerSplit preconditionerSplit(const LinearSolver& solver) {
+  const auto* cholmod = dynamic_cast<const CholmodSolver*>(&solver);
+  return cholmod ? cholmod->split() : PreconditionerSplit{};
+}
 }  // namespace detail
 
 }  // namespace flsh

@@ -73,16 +73,22 @@ struct CgWorkspace {
 };
 
 /// Preconditioned conjugate gradients on H x = b from x = 0 with M⁻¹ = preconditioner's held
-/// factor; stops when ‖b − H x‖₂ ≤ residual_tolerance. H is symmetric in full storage and need
+/// factor (`fast`: through preconditionInPlace, else the exact solveInPlace); stops when ‖b − H x‖₂ ≤ residual_tolerance. H is symmetric in full storage and need
 /// not be positive definite: a direction with pᵀHp ≤ 0 stops it (NonPositiveCurvature). Every
 /// iterate is a descent direction of ½xᵀHx − bᵀx as long as the curvatures met were positive.
 CgOutcome preconditionedCg(const SpMat& H, const VecX& b, double residual_tolerance,
-                           int max_iterations, const LinearSolver& preconditioner, VecX& x,
-                           CgWorkspace& w, int& iterations) {
+                           int max_iterations, const LinearSolver& preconditioner, bool fast,
+                           VecX& x, CgWorkspace& w, int& iterations) {
+  auto precondition = [&](VecX& v) {
+    if (fast)
+      preconditioner.preconditionInPlace(v);
+    else
+      preconditioner.solveInPlace(v);
+  };
   x.setZero(b.size());
   w.residual = b;
   w.preconditioned = w.residual;
-  preconditioner.solveInPlace(w.preconditioned);
+  precondition(w.preconditioned);
   w.direction = w.preconditioned;
   double rz = w.residual.dot(w.preconditioned);
   if (!std::isfinite(rz) || !(rz > 0.0)) return CgOutcome::NotFinite;
@@ -109,7 +115,7 @@ CgOutcome preconditionedCg(const SpMat& H, const VecX& b, double residual_tolera
     if (!std::isfinite(residual_norm)) return CgOutcome::NotFinite;
     if (residual_norm <= residual_tolerance) return CgOutcome::Converged;
     w.preconditioned = w.residual;
-    preconditioner.solveInPlace(w.preconditioned);
+    precondition(w.preconditioned);
     const double rz_next = w.residual.dot(w.preconditioned);
     if (!std::isfinite(rz_next) || !(rz_next > 0.0)) return CgOutcome::NotFinite;
     w.direction = w.preconditioned + (rz_next / rz) * w.direction;
@@ -297,7 +303,7 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
           {
             ScopedSeconds timer(result.seconds_solve);
             outcome = preconditionedCg(H, rhs, residual_tolerance, lag.max_cg_iterations, *solver,
-                                       dq, cg, iterations);
+                                       lag.fast_preconditioner, dq, cg, iterations);
           }
           result.cg_iterations += iterations;
           if (iterations > lag.refactor_after_cg_iterations) solver->setFactorStale(true);

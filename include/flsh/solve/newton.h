@@ -80,6 +80,12 @@ struct LaggedFactorOptions {
   /// iterations / 20) on the test problem for refactor_after / max_cg = 8/15, 10/25, 20/40,
   /// 30/60: 9.1, 9.5, 13.8, 13.8 (moderate steps) and 51.5, 51.9, 67.7, 77.2 (large steps).
   int refactor_after_cg_iterations = 10;
+  /// PCG applies the factor through LinearSolver::preconditionInPlace (CHOLMOD: a float copy of
+  /// the factor, triangular solves split over the threads) instead of the exact double-precision
+  /// solve. The preconditioner is an approximation anyway (a lagged factor); the float copy
+  /// only moves it by ~1e-7 relative. FEM walk (27 k DoFs): the same Newton and PCG iteration
+  /// counts, a PCG iteration ~9 → ~4 ms (docs/benchmarks.md).
+  bool fast_preconditioner = true;
 };
 
 struct NewtonOptions {

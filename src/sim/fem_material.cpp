@@ -326,7 +326,9 @@ double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& mate
     gradient->noalias() = (rest.volume * state.map.d1) * (B.transpose() * state.sigma_s);
   if (hessian) {
     const Mat6x12 psi_ee_B = (rest.volume * strainHessian(state, material)) * B;
-    hessian->noalias() = B.transpose() * psi_ee_B;
+    // lazyProduct: fixed-size coefficient loops; the default product of these sizes goes
+    // through Eigen's blocked GEMM (packing for a 12 × 12 result), ~2× slower here.
+    hessian->noalias() = B.transpose().lazyProduct(psi_ee_B);
     // Geometric term: block (a, b) = V (g_aᵀ S g_b) I₃.
     const Mat3 S = psd ? clampedStress(state.S) : state.S;
     const Eigen::Matrix4d GSG = rest.volume * (G.transpose() * S * G);

@@ -1169,6 +1169,18 @@ void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
 
 void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset,
                                                  bool psd) const {
+  potentialHessian(H, nullptr, offset, psd);
+}
+
+void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H,
+                                                 FixedHessianBlocks& blocks, int offset,
+                                                 bool psd) const {
+  blocks = FixedHessianBlocks();
+  potentialHessian(H, &blocks, offset, psd);
+}
+
+void Simulable::potentialHessian(std::vector<Triplet>& H, FixedHessianBlocks* blocks, int offset,
+                                 bool psd) const {
   const Impl& m = *impl_;
   const bool tracking = m.mocap && m.options.track_mocap;
   Mat6 H6;
@@ -1209,7 +1221,7 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int of
   if (m.soft) {
     m.prepareSoft();
     m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd);
-    m.soft->elastic(nullptr, &H, offset, psd);
+    m.soft->elastic(nullptr, &H, offset, psd, blocks);
     m.ensureContact();
     m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
                     &m.contact.candidates);

@@ -11,6 +11,7 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
+#include "flsh/sim/simulable.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
 
@@ -229,12 +230,16 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     for (Eigen::Index e = 0; e < tets_.rows(); ++e)
       for (int a = 0; a < 4; ++a)
         for (int b = 0; b < 4; ++b) {
-          const std::pair<int, int> key(tets_(e, a), tets_(e, b));
+          const std::pair<int, int> key(tets_(e, b), tets_(e, a));  // (column, row)
           if (node_dof_[key.first] < 0 || node_dof_[key.second] < 0) continue;
           tet_block_[16 * e + 4 * a + b] =
               int(std::lower_bound(block_pairs_.begin(), block_pairs_.end(), key) -
                   block_pairs_.begin());
         }
+    block_dofs_.resize(block_pairs_.size());
+    for (size_t k = 0; k < block_pairs_.size(); ++k)
+      block_dofs_[k] = {bone_dofs_ + node_dof_[block_pairs_[k].second],
+                        bone_dofs_ + node_dof_[block_pairs_[k].first]};
   }
 
   areas_ = avatar.vertexAreas();
@@ -569,7 +574,8 @@ Eigen::Matrix<double, 3, 4> SoftTissue::elementDisplacement(int e) const {
   return U;
 }
 
-double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd) const {
+double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                           FixedHessianBlocks* blocks) const {
   const int T = int(tets_.rows());
   if (g) element_gradients_.resize(T);
   if (H) element_hessians_.resize(T);
@@ -640,10 +646,14 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
           if (slots[4 * a + b] >= 0)
             blocks_[slots[4 * a + b]] += element_hessians_[e].block<3, 3>(3 * a, 3 * b);
     }
-    const int base = offset + bone_dofs_;
-    for (size_t k = 0; k < block_pairs_.size(); ++k)
-      addBlock(*H, base + node_dof_[block_pairs_[k].first], base + node_dof_[block_pairs_[k].second],
-               blocks_[k]);
+    if (blocks) {
+      blocks->positions = &block_dofs_;
+      blocks->values = &blocks_;
+      blocks->offset = offset;
+    } else {
+      for (size_t k = 0; k < block_pairs_.size(); ++k)
+        addBlock(*H, offset + block_dofs_[k].first, offset + block_dofs_[k].second, blocks_[k]);
+    }
   }
   return E;
 }

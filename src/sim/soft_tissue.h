@@ -31,6 +31,10 @@
 #include "flsh/volume/soft_avatar.h"
 #include "hessian_blocks.h"
 
+namespace flsh {
+struct FixedHessianBlocks;  // flsh/sim/simulable.h
+}
+
 namespace flsh::detail {
 
 /// Bone transforms a soft-tissue evaluation reads (borrowed).
@@ -87,7 +91,10 @@ class SoftTissue {
   double inertia(VecX* g, std::vector<Triplet>* H, int offset, bool psd) const;
   double gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
                  bool psd) const;
-  double elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd) const;
+  /// `blocks` (FEM only; may be null): the node-pair blocks are returned through it (positions
+  /// fixed, column-major) instead of appended to H.
+  double elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                 FixedHessianBlocks* blocks = nullptr) const;
   /// Penalty contact of the surface nodes against colliders at time t: of `candidates` (surface
   /// node indices; a broad phase's: the others must be out of contact) or, null, every one.
   double contact(const std::vector<Collider>& colliders, double time,
@@ -169,10 +176,13 @@ class SoftTissue {
   MatX4i tets_;
   std::vector<TetElementRest> elements_;
   std::vector<FemMaterialPoint> materials_;
-  // Ordered soft-node pairs (i, j) sharing a tet, one 3 × 3 block each; element e's local pair
-  // (a, b) adds into block tet_block_[16 e + 4 a + b] (−1: a bone node).
+  // Soft-node pairs sharing a tet as (column node, row node), sorted (so column-major), one
+  // 3 × 3 block ∂²E/∂u_row∂u_col each; element e's local block (a, b) adds into block
+  // tet_block_[16 e + 4 a + b] (−1: a bone node). block_dofs_: each block's (row, column) DoF
+  // relative to the simulable's first DoF.
   std::vector<std::pair<int, int>> block_pairs_;
   std::vector<int> tet_block_;
+  std::vector<std::pair<int, int>> block_dofs_;
 
   // Caches of the prepared state.
   mutable long version_ = -1;

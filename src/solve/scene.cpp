@@ -160,6 +160,21 @@ struct Scene::BlockAccumulator {
 
 // ---- general Hessian pattern -------------------------------------------------------------------
 
+namespace {
+
+// H takes P's pattern (kept, with its storage, when it already has it) with zero values.
+void resetToPattern(const SpMat& P, SpMat& H) {
+  const int n = int(P.rows());
+  const Eigen::Index nnz = P.nonZeros();
+  const bool same = H.rows() == n && H.cols() == n && H.isCompressed() && H.nonZeros() == nnz &&
+                    std::equal(P.outerIndexPtr(), P.outerIndexPtr() + n + 1, H.outerIndexPtr()) &&
+                    std::equal(P.innerIndexPtr(), P.innerIndexPtr() + nnz, H.innerIndexPtr());
+  if (!same) H = P;
+  std::fill(H.valuePtr(), H.valuePtr() + nnz, 0.0);
+}
+
+}  // namespace
+
 void HessianAssembler::setGroups(std::vector<int> group_start) {
   if (group_start.empty() || group_start.front() != 0)
     throw InputError(
@@ -176,6 +191,7 @@ void HessianAssembler::setGroups(std::vector<int> group_start) {
   pending_blocks_.clear();
   slot_key_.clear();
   slot_index_.clear();
+  block_slots_.clear();
 }
 
 void HessianAssembler::setDense(bool dense) {
@@ -183,6 +199,7 @@ void HessianAssembler::setDense(bool dense) {
   pattern_ = SpMat();
   slot_key_.clear();
   slot_index_.clear();
+  block_slots_.clear();
 }
 
 void HessianAssembler::addBlocks(const std::vector<std::pair<int, int>>& blocks) {
@@ -191,6 +208,12 @@ void HessianAssembler::addBlocks(const std::vector<std::pair<int, int>>& blocks)
 
 void HessianAssembler::assemble(const std::vector<Triplet>& triplets,
                                 const std::vector<size_t>& segment_end, int n, SpMat& H) {
+  assemble(triplets, segment_end, {}, n, H);
+}
+
+void HessianAssembler::assemble(const std::vector<Triplet>& triplets,
+                                const std::vector<size_t>& segment_end,
+                                const std::vector<FixedHessianBlocks>& blocks, int n, SpMat& H) {
   if (n < 0)
     throw InputError("HessianAssembler::assemble: n must be ≥ 0, got " + std::to_string(n));
   if (!group_start_.empty() && group_start_.back() != n)
@@ -203,11 +226,27 @@ void HessianAssembler::assemble(const std::vector<Triplet>& triplets,
       throw InputError("HessianAssembler::assemble: segment_end must increase and end at the " +
                        std::to_string(triplets.size()) + " triplets; entry " + std::to_string(s) +
                        " is " + std::to_string(segment_end[s]));
+  for (size_t b = 0; b < blocks.size(); ++b) {
+    if (blocks[b].empty()) continue;
+    if (!blocks[b].values || blocks[b].values->size() != blocks[b].positions->size())
+      throw InputError("HessianAssembler::assemble: fixed-block list " + std::to_string(b) +
+                       " has " + std::to_string(blocks[b].positions->size()) + " positions but " +
+                       std::to_string(blocks[b].values ? blocks[b].values->size() : 0) +
+                       " values");
+    for (const auto& [r, c] : *blocks[b].positions) {
+      const long long row = (long long)r + blocks[b].offset, col = (long long)c + blocks[b].offset;
+      if (row < 0 || col < 0 || row + 3 > n || col + 3 > n)
+        throw InputError("HessianAssembler::assemble: fixed block at (" + std::to_string(row) +
+                         ", " + std::to_string(col) + ") of list " + std::to_string(b) +
+                         " is outside the " + std::to_string(n) + " × " + std::to_string(n) +
+                         " matrix");
+    }
+  }
   if (dense_) {
     if (n > kMaxDenseDofs)
       throw InputError("HessianAssembler::assemble: dense storage holds at most " +
                        std::to_string(kMaxDenseDofs) + " DoFs, got n = " + std::to_string(n));
-    fillDense(triplets, n, H);
+    fillDense(triplets, blocks, n, H);
     return;
   }
   if (int(group_of_.size()) != n) {
@@ -228,32 +267,26 @@ void HessianAssembler::assemble(const std::vector<Triplet>& triplets,
   if (!pending_blocks_.empty()) grow(n);
   const std::vector<size_t> whole{triplets.size()};
   const std::vector<size_t>& ends = segment_end.empty() ? whole : segment_end;
-  if (fill(triplets, ends, H)) return;
-  grow(n);  // fill() left the missing blocks in pending_blocks_
-  if (!fill(triplets, ends, H))
-    throw Error("HessianAssembler::assemble: the grown pattern still misses a triplet");
+  // fill() and fillBlocks() leave the missing blocks in pending_blocks_.
+  auto fillAll = [&] {
+    resetToPattern(pattern_, H);
+    const bool triplets_in = fill(triplets, ends, H);
+    const bool blocks_in = fillBlocks(blocks, H);
+    return triplets_in && blocks_in;
+  };
+  if (fillAll()) return;
+  grow(n);
+  if (!fillAll())
+    throw Error("HessianAssembler::assemble: the grown pattern still misses an entry");
 }
 
 // Old slots searched ahead for a moved triplet's key (a removed run of triplets up to this long
 // is recognized; a longer one costs one lookup per later slot).
 constexpr long kResyncWindow = 48;
 
-namespace {
 
-// H takes P's pattern (kept, with its storage, when it already has it) with zero values.
-void resetToPattern(const SpMat& P, SpMat& H) {
-  const int n = int(P.rows());
-  const Eigen::Index nnz = P.nonZeros();
-  const bool same = H.rows() == n && H.cols() == n && H.isCompressed() && H.nonZeros() == nnz &&
-                    std::equal(P.outerIndexPtr(), P.outerIndexPtr() + n + 1, H.outerIndexPtr()) &&
-                    std::equal(P.innerIndexPtr(), P.innerIndexPtr() + nnz, H.innerIndexPtr());
-  if (!same) H = P;
-  std::fill(H.valuePtr(), H.valuePtr() + nnz, 0.0);
-}
-
-}  // namespace
-
-void HessianAssembler::fillDense(const std::vector<Triplet>& triplets, int n, SpMat& H) {
+void HessianAssembler::fillDense(const std::vector<Triplet>& triplets,
+                                 const std::vector<FixedHessianBlocks>& blocks, int n, SpMat& H) {
   if (pattern_.rows() != n || pattern_.nonZeros() != Eigen::Index(n) * n) {
     pattern_.resize(n, n);
     pattern_.resizeNonZeros(Eigen::Index(n) * n);
@@ -275,6 +308,16 @@ void HessianAssembler::fillDense(const std::vector<Triplet>& triplets, int n, Sp
                        std::to_string(n) + " × " + std::to_string(n) + " matrix");
     values[size_t(c) * n + r] += t.value();
   }
+  for (const FixedHessianBlocks& list : blocks) {
+    if (list.empty()) continue;
+    for (size_t k = 0; k < list.positions->size(); ++k) {
+      const int r = (*list.positions)[k].first + list.offset;
+      const int c = (*list.positions)[k].second + list.offset;
+      const Mat3& B = (*list.values)[k];
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) values[size_t(c + j) * n + r + i] += B(i, j);
+    }
+  }
 }
 
 // Sums the triplets into H on pattern_; false (and the missing blocks in pending_blocks_) if
@@ -283,7 +326,6 @@ bool HessianAssembler::fill(const std::vector<Triplet>& triplets,
                             const std::vector<size_t>& segment_end, SpMat& H) {
   const SpMat& P = pattern_;
   const int n = int(P.rows());
-  resetToPattern(P, H);
   double* values = H.valuePtr();
   const int* outer = P.outerIndexPtr();
   const int* inner = P.innerIndexPtr();
@@ -366,9 +408,76 @@ bool HessianAssembler::fill(const std::vector<Triplet>& triplets,
   return complete;
 }
 
+// Adds the fixed blocks into H on pattern_ (values already reset); false (and the missing
+// group blocks in pending_blocks_) if some block falls outside it.
+bool HessianAssembler::fillBlocks(const std::vector<FixedHessianBlocks>& blocks, SpMat& H) {
+  const int* outer = pattern_.outerIndexPtr();
+  const int* inner = pattern_.innerIndexPtr();
+  double* values = H.valuePtr();
+  if (block_slots_.size() < blocks.size()) block_slots_.resize(blocks.size());
+  bool complete = true;
+  for (size_t b = 0; b < blocks.size(); ++b) {
+    const FixedHessianBlocks& list = blocks[b];
+    if (list.empty()) continue;
+    const std::vector<std::pair<int, int>>& positions = *list.positions;
+    const int count = int(positions.size());
+    BlockSlots& cache = block_slots_[b];
+    if (cache.offset != list.offset || cache.positions != positions ||
+        cache.slots.size() != 3 * positions.size() || cache.slots.empty() || cache.slots[0] < 0) {
+      // Distinct positions: the blocks are added in parallel below.
+      std::vector<long long> keys(positions.size());
+      const long long n = pattern_.rows();
+      for (int k = 0; k < count; ++k)
+        keys[size_t(k)] = (long long)positions[size_t(k)].second * n + positions[size_t(k)].first;
+      std::sort(keys.begin(), keys.end());
+      if (std::adjacent_find(keys.begin(), keys.end()) != keys.end())
+        throw InputError("HessianAssembler::assemble: fixed-block list " + std::to_string(b) +
+                         " has two blocks at the same position");
+      cache.positions = positions;
+      cache.offset = list.offset;
+      cache.slots.assign(3 * positions.size(), -1);
+      bool found_all = true;
+      for (int k = 0; k < count; ++k) {
+        const int r = positions[size_t(k)].first + list.offset;
+        const int c0 = positions[size_t(k)].second + list.offset;
+        for (int j = 0; j < 3; ++j) {
+          const int c = c0 + j;
+          const int* begin = inner + outer[c];
+          const int* end = inner + outer[c + 1];
+          const int* found = std::lower_bound(begin, end, r);
+          // Rows r … r + 2 are consecutive entries of the column when all three are stored.
+          if (end - found < 3 || found[0] != r || found[2] != r + 2) {
+            for (int i = 0; i < 3; ++i) pending_blocks_.emplace_back(group_of_[r + i], group_of_[c]);
+            found_all = false;
+            continue;
+          }
+          cache.slots[3 * size_t(k) + size_t(j)] = int(found - inner);
+        }
+      }
+      if (!found_all) {
+        cache.slots.assign(cache.slots.size(), -1);  // look up again after the growth
+        complete = false;
+        continue;
+      }
+    }
+    const int* slots = cache.slots.data();
+    const Mat3* B = list.values->data();
+#pragma omp parallel for schedule(static) if (count > 20000)
+    for (int k = 0; k < count; ++k)
+      for (int j = 0; j < 3; ++j) {
+        double* v = values + slots[3 * k + j];
+        v[0] += B[k](0, j);
+        v[1] += B[k](1, j);
+        v[2] += B[k](2, j);
+      }
+  }
+  return complete;
+}
+
 // Adds pending_blocks_ (whole group × group blocks) to the pattern, column by column, and moves
 // the cached value slots to their entries' new places (a linear pass: no sort of the triplets).
 void HessianAssembler::grow(int n) {
+  for (BlockSlots& cache : block_slots_) cache.slots.clear();  // looked up again on the new pattern
   const bool grouped = !group_start_.empty();
   const int groups = grouped ? int(group_start_.size()) - 1 : n;
   const auto first = [&](int g) { return grouped ? group_start_[g] : g; };
@@ -594,16 +703,19 @@ void Scene::hessian(SpMat& H, bool psd) {
     // One cached segment per energy kind, so a term whose triplet count changes (contacts)
     // does not move the others' value slots.
     segment_end_.clear();
+    fixed_blocks_.resize(simulables_.size());
     for (size_t i = 0; i < simulables_.size(); ++i) {
       simulables_[i]->getDynamicHessianTripletVector(triplets_, offsets_[i], psd);
       segment_end_.push_back(triplets_.size());
-      simulables_[i]->getPotentialHessianTripletVector(triplets_, offsets_[i], psd);
+      // The FEM's elastic node-pair blocks come as fixed blocks: no 9 triplets per block.
+      simulables_[i]->getPotentialHessianTripletVector(triplets_, fixed_blocks_[i], offsets_[i],
+                                                       psd);
       segment_end_.push_back(triplets_.size());
     }
     if (avatarContactActive()) avatarContactEnergy(nullptr, &triplets_, psd);
     segment_end_.push_back(triplets_.size());
     if (!general_) setUpGeneralPattern();
-    general_->assemble(triplets_, segment_end_, num_dofs_, H);
+    general_->assemble(triplets_, segment_end_, fixed_blocks_, num_dofs_, H);
     return;
   }
   for (size_t i = 0; i < simulables_.size(); ++i) {

@@ -154,6 +154,87 @@ TEST(HessianAssembler, DenseStorageSumsLikeSetFromTriplets) {
   EXPECT_LE(maxAbs(H - summed(triplets, n)), 1e-12 * maxAbs(H));
 }
 
+/// The triplets of `blocks` (3 × 3 each, at their positions plus the list's offset).
+std::vector<Triplet> expanded(const std::vector<FixedHessianBlocks>& blocks) {
+  std::vector<Triplet> out;
+  for (const FixedHessianBlocks& list : blocks)
+    for (size_t k = 0; !list.empty() && k < list.positions->size(); ++k)
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i)
+          out.emplace_back((*list.positions)[k].first + list.offset + i,
+                           (*list.positions)[k].second + list.offset + j, (*list.values)[k](i, j));
+  return out;
+}
+
+TEST(HessianAssembler, FixedBlocksSumLikeTheirTriplets) {
+  // Two "bones" (6 DoFs) and five "nodes" (3 DoFs); the block lists sit on node DoFs, one of
+  // them shifted by an offset of 3 (as a simulable's list at its offset).
+  const std::vector<int> group_start{0, 6, 12, 15, 18, 21, 24, 27};
+  const int n = 27;
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> value(-1.0, 1.0);
+  auto randomBlocks = [&](size_t count) {
+    std::vector<Mat3> v(count);
+    for (Mat3& B : v) B = Mat3::NullaryExpr([&] { return value(rng); });
+    return v;
+  };
+  const std::vector<std::pair<int, int>> positions_a{{12, 12}, {15, 12}, {12, 15}, {24, 21}};
+  const std::vector<std::pair<int, int>> positions_b{{9, 9}, {18, 9}};  // + offset 3
+  std::vector<Mat3> values_a = randomBlocks(4), values_b = randomBlocks(2);
+  std::vector<FixedHessianBlocks> blocks(3);  // the middle list empty (a skeleton simulable)
+  blocks[0] = {&positions_a, &values_a, 0};
+  blocks[2] = {&positions_b, &values_b, 3};
+  const std::vector<Triplet> triplets = randomBlockTriplets(group_start, 6, 22);
+  auto all = [&] {
+    std::vector<Triplet> t = triplets;
+    const std::vector<Triplet> b = expanded(blocks);
+    t.insert(t.end(), b.begin(), b.end());
+    return t;
+  };
+  HessianAssembler assembler;
+  assembler.setGroups(group_start);
+  SpMat H;
+  assembler.assemble(triplets, {}, blocks, n, H);
+  ASSERT_GT(maxAbs(H), 0.0);
+  EXPECT_LE(maxAbs(H - summed(all(), n)), 1e-14 * maxAbs(H));
+  EXPECT_NE(H.coeff(18 + 3 + 2, 9 + 3 + 1), 0.0);  // list b's second block, offset applied
+  const int builds = assembler.numPatternBuilds();
+  // New values at the same positions: cached slots, no growth.
+  values_a = randomBlocks(4);
+  values_b = randomBlocks(2);
+  assembler.assemble(triplets, {}, blocks, n, H);
+  EXPECT_EQ(assembler.numPatternBuilds(), builds);
+  EXPECT_LE(maxAbs(H - summed(all(), n)), 1e-14 * maxAbs(H));
+  // A block where the pattern has none grows it once; the others are looked up again.
+  std::vector<std::pair<int, int>> moved = positions_a;
+  moved.back() = {6, 24};  // bone 1's translation rows × node 4
+  blocks[0].positions = &moved;
+  assembler.assemble(triplets, {}, blocks, n, H);
+  EXPECT_EQ(assembler.numPatternBuilds(), builds + 1);
+  EXPECT_LE(maxAbs(H - summed(all(), n)), 1e-14 * maxAbs(H));
+  EXPECT_NE(H.coeff(8, 26), 0.0);
+  // Dense storage adds the same blocks.
+  HessianAssembler dense;
+  dense.setDense(true);
+  dense.assemble(triplets, {}, blocks, n, H);
+  EXPECT_LE(maxAbs(H - summed(all(), n)), 1e-14 * maxAbs(H));
+  // Two blocks at one position would race in the parallel fill: refused.
+  std::vector<std::pair<int, int>> twice{{12, 12}, {12, 12}};
+  std::vector<Mat3> two = randomBlocks(2);
+  std::string message = test::messageOf<InputError>(
+      [&] { assembler.assemble(triplets, {}, {{&twice, &two, 0}}, n, H); });
+  EXPECT_NE(message.find("same position"), std::string::npos) << message;
+  // Outside the matrix, and a size mismatch.
+  std::vector<std::pair<int, int>> outside{{25, 0}};
+  std::vector<Mat3> one = randomBlocks(1);
+  message = test::messageOf<InputError>(
+      [&] { assembler.assemble(triplets, {}, {{&outside, &one, 0}}, n, H); });
+  EXPECT_NE(message.find("(25, 0)"), std::string::npos) << message;
+  message = test::messageOf<InputError>(
+      [&] { assembler.assemble(triplets, {}, {{&positions_a, &one, 0}}, n, H); });
+  EXPECT_NE(message.find("4 positions but 1 values"), std::string::npos) << message;
+}
+
 TEST(HessianAssembler, RejectsBadInput) {
   HessianAssembler assembler;
   SpMat H;
@@ -424,6 +505,39 @@ TEST(SceneSoft, SoftAvatarContactEnergyEqualsTheBruteForceSum) {
   }
   ASSERT_GT(brute, 0.0);
   EXPECT_NEAR(scene->avatarContactEnergy(nullptr, nullptr, true), brute, 1e-10 * brute);
+}
+
+TEST(SceneSoft, FixedBlocksPlusTripletsAreTheTripletHessian) {
+  auto scene = twoInContact(softAvatar(), shared().avatar, 0.03, true);
+  if (!scene->simulables()[0]->hasSoftTissue()) GTEST_SKIP() << "FEM model not present";
+  scene->step(randomVector(scene->numDofs(), 0.01, 14));
+  const int n = scene->numDofs();
+  for (int i = 0; i < 2; ++i) {
+    const Simulable& sim = *scene->simulables()[size_t(i)];
+    for (bool psd : {true, false}) {
+      std::vector<Triplet> plain, rest;
+      sim.getPotentialHessianTripletVector(plain, scene->offset(i), psd);
+      std::vector<FixedHessianBlocks> blocks(1);
+      sim.getPotentialHessianTripletVector(rest, blocks[0], scene->offset(i), psd);
+      const std::vector<Triplet> block_triplets = expanded(blocks);
+      if (sim.hasSoftTissue()) {
+        // The FEM's elastic node pairs come as blocks, column-major and distinct.
+        ASSERT_FALSE(blocks[0].empty());
+        EXPECT_LT(rest.size(), plain.size());
+        const auto& p = *blocks[0].positions;
+        for (size_t k = 1; k < p.size(); ++k)
+          ASSERT_TRUE(std::make_pair(p[k - 1].second, p[k - 1].first) <
+                      std::make_pair(p[k].second, p[k].first));
+      } else {
+        EXPECT_TRUE(blocks[0].empty());
+        EXPECT_EQ(rest.size(), plain.size());
+      }
+      rest.insert(rest.end(), block_triplets.begin(), block_triplets.end());
+      const SpMat S = summed(plain, n);
+      ASSERT_GT(maxAbs(S), 0.0);
+      EXPECT_LE(maxAbs(summed(rest, n) - S), 1e-12 * maxAbs(S)) << "simulable " << i;
+    }
+  }
 }
 
 TEST(SceneSoft, SoftSceneHessianAndSteps) {

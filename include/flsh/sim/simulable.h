@@ -93,6 +93,18 @@ struct SimulableStats {
   int active_contacts = 0;
 };
 
+/// 3 × 3 Hessian blocks whose positions stay the same from one evaluation to the next (the FEM
+/// elastic energy's node pairs), handed to an assembler without expanding them into triplets.
+/// Block k is added at rows positions[k].first … + 2 and columns positions[k].second … + 2
+/// (plus `offset`); positions are distinct, in column-major order. Both vectors belong to the
+/// simulable and hold until its next Hessian evaluation.
+struct FixedHessianBlocks {
+  const std::vector<std::pair<int, int>>* positions = nullptr;
+  const std::vector<Mat3>* values = nullptr;
+  int offset = 0;
+  bool empty() const { return !positions || positions->empty(); }
+};
+
 class Simulable {
  public:
   /// `avatar` must be initialized (initVolumetricData()); `mocap` may be null (no tracking,
@@ -215,6 +227,12 @@ class Simulable {
                                       bool psd = true) const;
   void getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset = 0,
                                         bool psd = true) const;
+  /// The same Hessian with the blocks of fixed position (the FEM's elastic node pairs) returned
+  /// through `blocks` instead of appended as triplets (for assemblers that cache their slots,
+  /// e.g. Scene's; the sum of both is the triplet version's Hessian). Without such blocks,
+  /// `blocks` is left empty.
+  void getPotentialHessianTripletVector(std::vector<Triplet>& H, FixedHessianBlocks& blocks,
+                                        int offset, bool psd) const;
   /// Makes kinematic rows/columns of the assembled H identity (drops their triplets and adds
   /// unit diagonals): call on the full triplet list before assembly.
   void fixMatrixKinematic(std::vector<Triplet>& H, int offset = 0) const;
@@ -271,6 +289,9 @@ class Simulable {
   struct Impl;
 
  private:
+  /// Both getPotentialHessianTripletVector overloads (blocks null: every term as triplets).
+  void potentialHessian(std::vector<Triplet>& H, FixedHessianBlocks* blocks, int offset,
+                        bool psd) const;
   std::unique_ptr<Impl> impl_;
 };
 

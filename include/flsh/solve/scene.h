@@ -41,6 +41,11 @@ class HessianAssembler {
   /// one segment). Throws InputError for a triplet outside n × n or bad segment ends.
   void assemble(const std::vector<Triplet>& triplets, const std::vector<size_t>& segment_end, int n,
                 SpMat& H);
+  /// The same plus lists of 3 × 3 blocks of fixed position (see FixedHessianBlocks; the blocks
+  /// of one list must have distinct positions, or InputError). A list's value slots are cached
+  /// while its positions and offset repeat, and its blocks are added in parallel (OpenMP).
+  void assemble(const std::vector<Triplet>& triplets, const std::vector<size_t>& segment_end,
+                const std::vector<FixedHessianBlocks>& blocks, int n, SpMat& H);
   /// Full n × n storage (for small systems that are dense anyway, e.g. reduced-model scenes on
   /// the dense solver): every entry is in the pattern, a triplet's value slot is col·n + row and
   /// no slot cache is kept; segments, groups and added blocks then make no difference. Resets
@@ -56,7 +61,9 @@ class HessianAssembler {
  private:
   void grow(int n);
   bool fill(const std::vector<Triplet>& triplets, const std::vector<size_t>& segment_end, SpMat& H);
-  void fillDense(const std::vector<Triplet>& triplets, int n, SpMat& H);
+  bool fillBlocks(const std::vector<FixedHessianBlocks>& blocks, SpMat& H);
+  void fillDense(const std::vector<Triplet>& triplets, const std::vector<FixedHessianBlocks>& blocks,
+                 int n, SpMat& H);
   SpMat pattern_;                 // values unused (zero)
   std::vector<int> group_start_;  // as set by setGroups (empty: one DoF per group)
   std::vector<int> group_of_;     // group of each DoF
@@ -64,6 +71,14 @@ class HessianAssembler {
   // Per segment: pattern row·n + col key and value index of each triplet slot.
   std::vector<std::vector<long long>> slot_key_;
   std::vector<std::vector<int>> slot_index_;
+  // Per fixed-block list: the positions and offset its slots were found for, and the value
+  // slot of each block's three column tops (−1 for all: not looked up yet).
+  struct BlockSlots {
+    std::vector<std::pair<int, int>> positions;
+    int offset = 0;
+    std::vector<int> slots;
+  };
+  std::vector<BlockSlots> block_slots_;
   std::vector<long long> old_key_;  // a segment's previous slots from its first moved one
   std::vector<int> old_index_;
   int pattern_builds_ = 0;
@@ -198,6 +213,7 @@ class Scene : public Objective {
   LinearSolverType solver_type_ = LinearSolverType::Auto;  // of solver_ (resolved)
   int stack_depth_ = 0;            // push() levels not yet popped
   std::vector<Triplet> triplets_;  // Hessian assembly buffer, reused
+  std::vector<FixedHessianBlocks> fixed_blocks_;  // per simulable, with triplets_
   // Fixed Hessian pattern of whole 6 × 6 bone blocks, a superset of every evaluation's
   // (all bone pairs that share a vertex, so collider contacts never change it): assembly
   // writes values in place and the solver keeps its analysis. block_rank_ (bones² entries):

@@ -45,14 +45,6 @@ SpMat gridLaplacian(int nx, int ny, int nz, unsigned seed, double shift) {
   return A;
 }
 
-VecX randomVector(int n, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::normal_distribution<double> g(0.0, 1.0);
-  VecX b(n);
-  for (int i = 0; i < n; ++i) b[i] = g(rng);
-  return b;
-}
-
 /// Runs f with OpenMP limited to `threads` threads, restoring the limit afterwards.
 template <class F>
 void withThreads(int threads, F f) {
@@ -65,7 +57,7 @@ void withThreads(int threads, F f) {
 TEST(SupernodalPreconditioner, MatchesTheDoubleSolveSeriallyAndSplitOverTwoThreads) {
   const SpMat A = gridLaplacian(18, 16, 14, 3, 1e-2);
   const int n = int(A.rows());
-  const VecX b = randomVector(n, 4);
+  const VecX b = test::randomVector(n, 1.0, 4);
   for (int threads : {1, 2}) {
     withThreads(threads, [&] {
       auto solver = makeLinearSolver(LinearSolverType::Cholmod, n);
@@ -78,7 +70,7 @@ TEST(SupernodalPreconditioner, MatchesTheDoubleSolveSeriallyAndSplitOverTwoThrea
       EXPECT_LT(error, 1e-4) << threads << " threads";
       EXPECT_GT(error, 0.0) << "the float copy cannot be bitwise the double solve";
       // A second right-hand side with the same copy.
-      const VecX b2 = A * randomVector(n, 5);
+      const VecX b2 = A * test::randomVector(n, 1.0, 5);
       VecX x2 = b2;
       solver->preconditionInPlace(x2);
       EXPECT_LT((x2 - solver->solve(b2)).norm() / x2.norm(), 1e-4);
@@ -98,7 +90,7 @@ TEST(SupernodalPreconditioner, MatchesTheDoubleSolveSeriallyAndSplitOverTwoThrea
 TEST(SupernodalPreconditioner, TwoThreadsGiveTheSerialResultUpToRounding) {
   const SpMat A = gridLaplacian(20, 12, 12, 8, 1e-1);
   const int n = int(A.rows());
-  const VecX b = randomVector(n, 9);
+  const VecX b = test::randomVector(n, 1.0, 9);
   VecX serial = b, split = b;
   withThreads(1, [&] {
     auto solver = makeLinearSolver(LinearSolverType::Cholmod, n);
@@ -119,7 +111,7 @@ TEST(SupernodalPreconditioner, TwoThreadsGiveTheSerialResultUpToRounding) {
 TEST(SupernodalPreconditioner, FollowsEachNewFactor) {
   SpMat A = gridLaplacian(10, 10, 10, 12, 1e-2);
   const int n = int(A.rows());
-  const VecX b = randomVector(n, 13);
+  const VecX b = test::randomVector(n, 1.0, 13);
   auto solver = makeLinearSolver(LinearSolverType::Cholmod, n);
   for (int round = 0; round < 3; ++round) {
     // Same pattern, new values: the copy must be rebuilt from the new factor.
@@ -153,7 +145,7 @@ TEST(SupernodalPreconditioner, RejectsCallsWithoutAFactorAndWrongSizes) {
 
 TEST(SupernodalPreconditioner, OtherSolversApplyTheirExactSolve) {
   const SpMat A = gridLaplacian(5, 4, 3, 2, 1.0);
-  const VecX b = randomVector(int(A.rows()), 3);
+  const VecX b = test::randomVector(int(A.rows()), 1.0, 3);
   for (LinearSolverType type : {LinearSolverType::Dense, LinearSolverType::SparseLLT}) {
     auto solver = makeLinearSolver(type, int(A.rows()));
     ASSERT_TRUE(solver->factorize(A));

@@ -1079,11 +1079,24 @@ void Simulable::getDynamicGradientVector(VecX& g, int offset) const {
 
 void Simulable::getDynamicHessianTripletVector(std::vector<Triplet>& H, int offset,
                                                bool psd) const {
+  dynamicHessian(H, nullptr, offset, psd);
+}
+
+void Simulable::getDynamicHessianTripletVector(std::vector<Triplet>& H,
+                                               std::vector<FixedHessianBlocks>& blocks,
+                                               int offset, bool psd) const {
+  dynamicHessian(H, &blocks, offset, psd);
+}
+
+void Simulable::dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
+                               int offset, bool psd) const {
   const Impl& m = *impl_;
   if (m.is_static) return;
   if (m.soft) {
     m.prepareSoft();
-    m.soft->inertia(nullptr, &H, offset, psd);
+    FixedHessianBlocks inertia_blocks;
+    m.soft->inertia(nullptr, &H, offset, psd, blocks ? &inertia_blocks : nullptr);
+    if (blocks && !inertia_blocks.empty()) blocks->push_back(inertia_blocks);
     m.soft->flushReduced(H, offset);
     return;
   }
@@ -1173,14 +1186,13 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int of
 }
 
 void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H,
-                                                 FixedHessianBlocks& blocks, int offset,
-                                                 bool psd) const {
-  blocks = FixedHessianBlocks();
+                                                 std::vector<FixedHessianBlocks>& blocks,
+                                                 int offset, bool psd) const {
   potentialHessian(H, &blocks, offset, psd);
 }
 
-void Simulable::potentialHessian(std::vector<Triplet>& H, FixedHessianBlocks* blocks, int offset,
-                                 bool psd) const {
+void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
+                                 int offset, bool psd) const {
   const Impl& m = *impl_;
   const bool tracking = m.mocap && m.options.track_mocap;
   Mat6 H6;
@@ -1220,8 +1232,13 @@ void Simulable::potentialHessian(std::vector<Triplet>& H, FixedHessianBlocks* bl
   }
   if (m.soft) {
     m.prepareSoft();
-    m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd);
-    m.soft->elastic(nullptr, &H, offset, psd, blocks);
+    FixedHessianBlocks gravity_blocks, elastic_blocks;
+    m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd,
+                    blocks ? &gravity_blocks : nullptr);
+    m.soft->elastic(nullptr, &H, offset, psd, blocks ? &elastic_blocks : nullptr);
+    if (blocks)
+      for (const FixedHessianBlocks& list : {elastic_blocks, gravity_blocks})
+        if (!list.empty()) blocks->push_back(list);
     m.ensureContact();
     m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
                     &m.contact.candidates);

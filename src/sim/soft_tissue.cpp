@@ -215,6 +215,23 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     eval_nodes_ = mass_nodes_;
   }
 
+  // Fixed coupling positions of the FEM's inertia and gravity Hessians.
+  if (!reduced_) {
+    coupling_start_.assign(mass_nodes_.size() + 1, 0);
+    for (size_t idx = 0; idx < mass_nodes_.size(); ++idx) {
+      const int j = mass_nodes_[idx];
+      coupling_start_[idx + 1] = coupling_start_[idx];
+      if (node_dof_[j] < 0) continue;
+      const int u = bone_dofs_ + node_dof_[j];
+      for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
+        const int b = 6 * influences_[k].bone;
+        coupling_dofs_.insert(coupling_dofs_.end(), {{b, u}, {b + 3, u}, {u, b}, {u, b + 3}});
+      }
+      coupling_dofs_.emplace_back(u, u);
+      coupling_start_[idx + 1] = int(coupling_dofs_.size());
+    }
+  }
+
   // Ordered soft-node pairs of the FEM elastic Hessian.
   if (!reduced_) {
     std::vector<std::pair<int, int>> pairs;
@@ -467,7 +484,8 @@ void SoftTissue::mapForces(const std::vector<int>& nodes, const std::vector<Vec3
 
 void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                             const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset,
-                            bool psd) const {
+                            bool psd, std::vector<Mat3>* fixed) const {
+  if (fixed) fixed->assign(coupling_dofs_.size(), Mat3::Zero());
   const std::vector<Mat3>& R = *cur_R_;
   auto block = [&](int b, int c) -> Mat6& { return pair_blocks_.block(b, c); };
   Mat3 curvature[kNumJoints];
@@ -502,7 +520,10 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
       if (k_coupling) {
         const Mat3 KM = Kj * node_M_[j];
         for (int a = 0; a < count; ++a) coupling[a].noalias() += Jb[a].transpose() * KM;
-        addSoftSoft(H, offset, j, j, node_M_[j].transpose() * KM);
+        if (fixed)
+          (*fixed)[size_t(coupling_start_[idx + 1]) - 1].noalias() = node_M_[j].transpose() * KM;
+        else
+          addSoftSoft(H, offset, j, j, node_M_[j].transpose() * KM);
       }
     }
     if (force) {
@@ -515,6 +536,16 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         curvature[b] += w * rotationCurvature(f, lever[a]);
         if (f_coupling) coupling[a].bottomRows<3>() -= w * skew(f) * R[b];
       }
+    }
+    if (fixed && (k_coupling || f_coupling)) {
+      Mat3* out = fixed->data() + coupling_start_[idx];
+      for (int a = 0; a < count; ++a, out += 4) {
+        out[0] = coupling[a].topRows<3>();
+        out[1] = coupling[a].bottomRows<3>();
+        out[2] = out[0].transpose();
+        out[3] = out[1].transpose();
+      }
+      continue;
     }
     for (int a = 0; a < count; ++a) {  // without K only the rotation rows are nonzero
       if (k_coupling)
@@ -531,7 +562,8 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
 
 // ---- energies -------------------------------------------------------------------------------
 
-double SoftTissue::inertia(VecX* g, std::vector<Triplet>* H, int offset, bool psd) const {
+double SoftTissue::inertia(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                           FixedHessianBlocks* blocks) const {
   const double k = 1.0 / (h_ * h_);
   const size_t count = mass_nodes_.size();
   double E = 0.0;
@@ -548,13 +580,16 @@ double SoftTissue::inertia(VecX* g, std::vector<Triplet>* H, int offset, bool ps
     for (size_t idx = 0; idx < count; ++idx)
       node_blocks_[idx] = k * inertia_mass_[mass_nodes_[idx]] * Mat3::Identity();
     // psd: Gauss–Newton Σ m JᵀJ; exact: plus the curvature of the rotating nodes.
-    mapHessian(mass_nodes_, &node_blocks_, psd ? nullptr : &node_forces_, *H, offset, psd);
+    const bool fixed = blocks && !reduced_;
+    mapHessian(mass_nodes_, &node_blocks_, psd ? nullptr : &node_forces_, *H, offset, psd,
+               fixed ? &inertia_fixed_ : nullptr);
+    if (fixed) *blocks = {&coupling_dofs_, &inertia_fixed_, offset};
   }
   return E;
 }
 
 double SoftTissue::gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
-                           bool psd) const {
+                           bool psd, FixedHessianBlocks* blocks) const {
   const size_t count = mass_nodes_.size();
   double E = 0.0;
   node_forces_.resize(count);
@@ -564,7 +599,14 @@ double SoftTissue::gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H
     node_forces_[idx] = -inertia_mass_[j] * gravity;
   }
   if (g) mapForces(mass_nodes_, node_forces_, *g, offset);
-  if (H) mapHessian(mass_nodes_, nullptr, &node_forces_, *H, offset, psd);
+  if (H) {
+    // The PSD form has no coupling blocks: the fixed list is then all zeros, so that its
+    // positions (and an assembler's cached slots) stay the same in both forms.
+    const bool fixed = blocks && !reduced_;
+    mapHessian(mass_nodes_, nullptr, &node_forces_, *H, offset, psd,
+               fixed ? &gravity_fixed_ : nullptr);
+    if (fixed) *blocks = {&coupling_dofs_, &gravity_fixed_, offset};
+  }
   return E;
 }
 

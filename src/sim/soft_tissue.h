@@ -88,9 +88,12 @@ class SoftTissue {
 
   // ---- energies at the prepared state; gradients ADDED at offset (bones at offset, u at
   // offset + bone_dofs), Hessian triplets APPENDED (both triangles) ----
-  double inertia(VecX* g, std::vector<Triplet>* H, int offset, bool psd) const;
-  double gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
-                 bool psd) const;
+  /// `blocks` (FEM only; may be null): the bone–tissue coupling and node-diagonal blocks are
+  /// returned through it (fixed positions, one list per energy) instead of appended to H.
+  double inertia(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                 FixedHessianBlocks* blocks = nullptr) const;
+  double gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                 FixedHessianBlocks* blocks = nullptr) const;
   /// `blocks` (FEM only; may be null): the node-pair blocks are returned through it (positions
   /// fixed, column-major) instead of appended to H.
   double elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
@@ -227,9 +230,17 @@ class SoftTissue {
   /// Appends Σ_j J_jᵀ K_j J_j (K_j symmetric 3 × 3; null = none) plus, when `forces` is given,
   /// the curvature of the rotating points against f_j: exact (psd = false) or, for psd, the PSD
   /// projection of each bone's rotation curvature (the mixed δω–δu terms dropped).
+  /// `fixed` (FEM, nodes = mass_nodes_ only; may be null): the bone–tissue coupling and
+  /// node-diagonal blocks go into it, laid out as coupling_dofs_, instead of into H.
   void mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                   const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset,
-                  bool psd) const;
+                  bool psd, std::vector<Mat3>* fixed = nullptr) const;
+  // FEM: the fixed positions (relative to the simulable's first DoF) of the blocks mapHessian
+  // writes for the mass nodes: per mass node with a DoF, from coupling_start_[idx], four per
+  // influence a of bone b — (6b, u), (6b + 3, u), (u, 6b), (u, 6b + 3) — then (u, u).
+  std::vector<std::pair<int, int>> coupling_dofs_;
+  std::vector<int> coupling_start_;
+  mutable std::vector<Mat3> inertia_fixed_, gravity_fixed_;
   std::vector<int> all_nodes_, surface_nodes_;
   mutable MatX3 contact_x_;
   mutable VecX contact_areas_;

@@ -703,12 +703,13 @@ void Scene::hessian(SpMat& H, bool psd) {
     // One cached segment per energy kind, so a term whose triplet count changes (contacts)
     // does not move the others' value slots.
     segment_end_.clear();
-    fixed_blocks_.resize(simulables_.size());
+    fixed_blocks_.clear();
     for (size_t i = 0; i < simulables_.size(); ++i) {
-      simulables_[i]->getDynamicHessianTripletVector(triplets_, offsets_[i], psd);
+      // The FEM's elastic node pairs and its bone–tissue coupling come as fixed blocks (the
+      // same lists in the same order every call): no 9 triplets per block.
+      simulables_[i]->getDynamicHessianTripletVector(triplets_, fixed_blocks_, offsets_[i], psd);
       segment_end_.push_back(triplets_.size());
-      // The FEM's elastic node-pair blocks come as fixed blocks: no 9 triplets per block.
-      simulables_[i]->getPotentialHessianTripletVector(triplets_, fixed_blocks_[i], offsets_[i],
+      simulables_[i]->getPotentialHessianTripletVector(triplets_, fixed_blocks_, offsets_[i],
                                                        psd);
       segment_end_.push_back(triplets_.size());
     }

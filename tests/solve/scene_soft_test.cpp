@@ -515,27 +515,44 @@ TEST(SceneSoft, FixedBlocksPlusTripletsAreTheTripletHessian) {
   for (int i = 0; i < 2; ++i) {
     const Simulable& sim = *scene->simulables()[size_t(i)];
     for (bool psd : {true, false}) {
-      std::vector<Triplet> plain, rest;
-      sim.getPotentialHessianTripletVector(plain, scene->offset(i), psd);
-      std::vector<FixedHessianBlocks> blocks(1);
-      sim.getPotentialHessianTripletVector(rest, blocks[0], scene->offset(i), psd);
-      const std::vector<Triplet> block_triplets = expanded(blocks);
-      if (sim.hasSoftTissue()) {
-        // The FEM's elastic node pairs come as blocks, column-major and distinct.
-        ASSERT_FALSE(blocks[0].empty());
-        EXPECT_LT(rest.size(), plain.size());
-        const auto& p = *blocks[0].positions;
-        for (size_t k = 1; k < p.size(); ++k)
-          ASSERT_TRUE(std::make_pair(p[k - 1].second, p[k - 1].first) <
-                      std::make_pair(p[k].second, p[k].first));
-      } else {
-        EXPECT_TRUE(blocks[0].empty());
-        EXPECT_EQ(rest.size(), plain.size());
+      for (bool dynamic : {true, false}) {
+        std::vector<Triplet> plain, rest;
+        std::vector<FixedHessianBlocks> blocks;
+        if (dynamic) {
+          sim.getDynamicHessianTripletVector(plain, scene->offset(i), psd);
+          sim.getDynamicHessianTripletVector(rest, blocks, scene->offset(i), psd);
+        } else {
+          sim.getPotentialHessianTripletVector(plain, scene->offset(i), psd);
+          sim.getPotentialHessianTripletVector(rest, blocks, scene->offset(i), psd);
+        }
+        const std::vector<Triplet> block_triplets = expanded(blocks);
+        if (sim.hasSoftTissue()) {
+          // Inertia: its coupling list; potential: the elastic node pairs (column-major) and
+          // gravity's coupling list (all zero in the PSD form, same positions).
+          ASSERT_EQ(blocks.size(), dynamic ? 1u : 2u);
+          EXPECT_LT(rest.size(), plain.size());
+          if (!dynamic) {
+            const auto& p = *blocks[0].positions;
+            for (size_t k = 1; k < p.size(); ++k)
+              ASSERT_TRUE(std::make_pair(p[k - 1].second, p[k - 1].first) <
+                          std::make_pair(p[k].second, p[k].first));
+            double largest = 0.0;
+            for (const Mat3& B : *blocks[1].values) largest = std::max(largest, B.cwiseAbs().maxCoeff());
+            if (psd)
+              EXPECT_EQ(largest, 0.0);  // gravity couples bones and tissue only in the exact form
+            else
+              EXPECT_GT(largest, 0.0);
+          }
+        } else {
+          EXPECT_TRUE(blocks.empty());
+          EXPECT_EQ(rest.size(), plain.size());
+        }
+        rest.insert(rest.end(), block_triplets.begin(), block_triplets.end());
+        const SpMat S = summed(plain, n);
+        ASSERT_GT(maxAbs(S), 0.0);
+        EXPECT_LE(maxAbs(summed(rest, n) - S), 1e-12 * maxAbs(S))
+            << "simulable " << i << (dynamic ? ", dynamic" : ", potential") << ", psd " << psd;
       }
-      rest.insert(rest.end(), block_triplets.begin(), block_triplets.end());
-      const SpMat S = summed(plain, n);
-      ASSERT_GT(maxAbs(S), 0.0);
-      EXPECT_LE(maxAbs(summed(rest, n) - S), 1e-12 * maxAbs(S)) << "simulable " << i;
     }
   }
 }

@@ -227,12 +227,18 @@ class Simulable {
                                       bool psd = true) const;
   void getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset = 0,
                                         bool psd = true) const;
-  /// The same Hessian with the blocks of fixed position (the FEM's elastic node pairs) returned
-  /// through `blocks` instead of appended as triplets (for assemblers that cache their slots,
-  /// e.g. Scene's; the sum of both is the triplet version's Hessian). Without such blocks,
-  /// `blocks` is left empty.
-  void getPotentialHessianTripletVector(std::vector<Triplet>& H, FixedHessianBlocks& blocks,
-                                        int offset, bool psd) const;
+  /// The same Hessians with the blocks of fixed position (FEM: the elastic node pairs, and the
+  /// bone–tissue coupling and node-diagonal blocks of inertia and gravity) returned as lists
+  /// APPENDED to `blocks` instead of as triplets (for assemblers that cache their slots, e.g.
+  /// Scene's; triplets plus blocks sum to the triplet version's Hessian). Each call appends the
+  /// same number of lists with the same positions for a given simulable (none for skeleton and
+  /// reduced models).
+  void getDynamicHessianTripletVector(std::vector<Triplet>& H,
+                                      std::vector<FixedHessianBlocks>& blocks, int offset,
+                                      bool psd) const;
+  void getPotentialHessianTripletVector(std::vector<Triplet>& H,
+                                        std::vector<FixedHessianBlocks>& blocks, int offset,
+                                        bool psd) const;
   /// Makes kinematic rows/columns of the assembled H identity (drops their triplets and adds
   /// unit diagonals): call on the full triplet list before assembly.
   void fixMatrixKinematic(std::vector<Triplet>& H, int offset = 0) const;
@@ -289,9 +295,12 @@ class Simulable {
   struct Impl;
 
  private:
-  /// Both getPotentialHessianTripletVector overloads (blocks null: every term as triplets).
-  void potentialHessian(std::vector<Triplet>& H, FixedHessianBlocks* blocks, int offset,
-                        bool psd) const;
+  /// Both overloads of getDynamicHessianTripletVector / getPotentialHessianTripletVector
+  /// (blocks null: every term as triplets).
+  void dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
+                      int offset, bool psd) const;
+  void potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
+                        int offset, bool psd) const;
   std::unique_ptr<Impl> impl_;
 };
 

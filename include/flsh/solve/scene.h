@@ -213,7 +213,7 @@ class Scene : public Objective {
   LinearSolverType solver_type_ = LinearSolverType::Auto;  // of solver_ (resolved)
   int stack_depth_ = 0;            // push() levels not yet popped
   std::vector<Triplet> triplets_;  // Hessian assembly buffer, reused
-  std::vector<FixedHessianBlocks> fixed_blocks_;  // per simulable, with triplets_
+  std::vector<FixedHessianBlocks> fixed_blocks_;  // the simulables' block lists, with triplets_
   // Fixed Hessian pattern of whole 6 × 6 bone blocks, a superset of every evaluation's
   // (all bone pairs that share a vertex, so collider contacts never change it): assembly
   // writes values in place and the solver keeps its analysis. block_rank_ (bones² entries):

@@ -232,17 +232,17 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     }
   }
 
-  // Ordered soft-node pairs of the FEM elastic Hessian.
+  // The FEM elastic Hessian's blocks: soft-node pairs sharing a tet as (column node, row node),
+  // sorted, so that the blocks are column-major.
   if (!reduced_) {
     std::vector<std::pair<int, int>> pairs;
     for (Eigen::Index e = 0; e < tets_.rows(); ++e)
       for (int a = 0; a < 4; ++a)
         for (int b = 0; b < 4; ++b)
           if (node_dof_[tets_(e, a)] >= 0 && node_dof_[tets_(e, b)] >= 0)
-            pairs.emplace_back(tets_(e, a), tets_(e, b));
+            pairs.emplace_back(tets_(e, b), tets_(e, a));
     std::sort(pairs.begin(), pairs.end());
     pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
-    block_pairs_ = pairs;
     tet_block_.assign(16 * size_t(tets_.rows()), -1);
     for (Eigen::Index e = 0; e < tets_.rows(); ++e)
       for (int a = 0; a < 4; ++a)
@@ -250,13 +250,12 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
           const std::pair<int, int> key(tets_(e, b), tets_(e, a));  // (column, row)
           if (node_dof_[key.first] < 0 || node_dof_[key.second] < 0) continue;
           tet_block_[16 * e + 4 * a + b] =
-              int(std::lower_bound(block_pairs_.begin(), block_pairs_.end(), key) -
-                  block_pairs_.begin());
+              int(std::lower_bound(pairs.begin(), pairs.end(), key) - pairs.begin());
         }
-    block_dofs_.resize(block_pairs_.size());
-    for (size_t k = 0; k < block_pairs_.size(); ++k)
-      block_dofs_[k] = {bone_dofs_ + node_dof_[block_pairs_[k].second],
-                        bone_dofs_ + node_dof_[block_pairs_[k].first]};
+    block_dofs_.resize(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k)
+      block_dofs_[k] = {bone_dofs_ + node_dof_[pairs[k].second],
+                        bone_dofs_ + node_dof_[pairs[k].first]};
   }
 
   areas_ = avatar.vertexAreas();
@@ -680,7 +679,7 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
               K.block<3, 3>(3 * s, 3 * r);
     }
   } else if (H) {
-    blocks_.assign(block_pairs_.size(), Mat3::Zero());
+    blocks_.assign(block_dofs_.size(), Mat3::Zero());
     for (int e = 0; e < T; ++e) {
       const int* slots = &tet_block_[16 * size_t(e)];
       for (int a = 0; a < 4; ++a)
@@ -689,11 +688,9 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
             blocks_[slots[4 * a + b]] += element_hessians_[e].block<3, 3>(3 * a, 3 * b);
     }
     if (blocks) {
-      blocks->positions = &block_dofs_;
-      blocks->values = &blocks_;
-      blocks->offset = offset;
+      *blocks = {&block_dofs_, &blocks_, offset};
     } else {
-      for (size_t k = 0; k < block_pairs_.size(); ++k)
+      for (size_t k = 0; k < block_dofs_.size(); ++k)
         addBlock(*H, offset + block_dofs_[k].first, offset + block_dofs_[k].second, blocks_[k]);
     }
   }

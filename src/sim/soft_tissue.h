@@ -179,11 +179,10 @@ class SoftTissue {
   MatX4i tets_;
   std::vector<TetElementRest> elements_;
   std::vector<FemMaterialPoint> materials_;
-  // Soft-node pairs sharing a tet as (column node, row node), sorted (so column-major), one
-  // 3 × 3 block ∂²E/∂u_row∂u_col each; element e's local block (a, b) adds into block
-  // tet_block_[16 e + 4 a + b] (−1: a bone node). block_dofs_: each block's (row, column) DoF
-  // relative to the simulable's first DoF.
-  std::vector<std::pair<int, int>> block_pairs_;
+  // FEM elastic Hessian: one 3 × 3 block ∂²E/∂u_row∂u_col per pair of soft nodes sharing a
+  // tet, at block_dofs_ (row, column DoF relative to the simulable's first DoF; column-major
+  // order); element e's local block (a, b) adds into block tet_block_[16 e + 4 a + b] (−1: a
+  // bone node).
   std::vector<int> tet_block_;
   std::vector<std::pair<int, int>> block_dofs_;
 

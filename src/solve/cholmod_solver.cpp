@@ -92,12 +92,7 @@ class CholmodSolver final : public LinearSolver {
   }
 
   void preconditionInPlace(VecX& b) const override {
-    if (!has_factor_)
-      throw Error("CholmodSolver::preconditionInPlace: no factor (the last factorize() failed "
-                  "or was never called)");
-    if (b.size() != Eigen::Index(factor_->n))
-      throw InputError("CholmodSolver::preconditionInPlace: b must have " +
-                       std::to_string(factor_->n) + " entries, got " + std::to_string(b.size()));
+    requireFactorFor(b, "CholmodSolver::preconditionInPlace");
     if (!factor_->is_super) {  // CHOLMOD chose a simplicial factor: no float copy
       solveInPlace(b);
       return;
@@ -120,14 +115,19 @@ class CholmodSolver final : public LinearSolver {
   std::string name() const override { return "cholmod-supernodal"; }
 
  private:
-  /// x_ = A⁻¹ b with the held factor; `who` names the caller in errors.
-  void solveIntoWorkspace(const VecX& b, const char* who) const {
+  /// Throws Error without a factor and InputError unless b has its size; `who` names the caller.
+  void requireFactorFor(const VecX& b, const char* who) const {
     if (!has_factor_)
       throw Error(std::string(who) +
                   ": no factor (the last factorize() failed or was never called)");
     if (b.size() != Eigen::Index(factor_->n))
       throw InputError(std::string(who) + ": b must have " + std::to_string(factor_->n) +
                        " entries, got " + std::to_string(b.size()));
+  }
+
+  /// x_ = A⁻¹ b with the held factor; `who` names the caller in errors.
+  void solveIntoWorkspace(const VecX& b, const char* who) const {
+    requireFactorFor(b, who);
     cholmod_dense rhs;
     std::memset(&rhs, 0, sizeof(rhs));
     rhs.nrow = rhs.d = rhs.nzmax = size_t(b.size());

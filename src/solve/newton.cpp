@@ -73,9 +73,10 @@ struct CgWorkspace {
 };
 
 /// Preconditioned conjugate gradients on H x = b from x = 0 with M⁻¹ = preconditioner's held
-/// factor (`fast`: through preconditionInPlace, else the exact solveInPlace); stops when ‖b − H x‖₂ ≤ residual_tolerance. H is symmetric in full storage and need
-/// not be positive definite: a direction with pᵀHp ≤ 0 stops it (NonPositiveCurvature). Every
-/// iterate is a descent direction of ½xᵀHx − bᵀx as long as the curvatures met were positive.
+/// factor (`fast`: through preconditionInPlace, else the exact solveInPlace); stops when
+/// ‖b − H x‖₂ ≤ residual_tolerance. H is symmetric in full storage and need not be positive
+/// definite: a direction with pᵀHp ≤ 0 stops it (NonPositiveCurvature). Every iterate is a
+/// descent direction of ½xᵀHx − bᵀx as long as the curvatures met were positive.
 CgOutcome preconditionedCg(const SpMat& H, const VecX& b, double residual_tolerance,
                            int max_iterations, const LinearSolver& preconditioner, bool fast,
                            VecX& x, CgWorkspace& w, int& iterations) {
@@ -277,7 +278,14 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     }
     const double gradient_norm2 = g.norm();
     assembled_form = -1;  // the state moved: H, if any, is of an earlier iterate
+    // An iteration that uses the PSD form although the exact one was asked counts once.
     bool counted_psd_fallback = false;
+    const auto notePsdForm = [&](bool psd) {
+      if (psd && options.exact_hessian && !counted_psd_fallback) {
+        ++result.psd_fallbacks;
+        counted_psd_fallback = true;
+      }
+    };
 
     // Attempt 0 may take the lagged-factor PCG direction; if PCG fails (no convergence,
     // non-positive curvature, no descent) the same attempt factors the Hessian it assembled,
@@ -307,10 +315,7 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
         rhs = -g;
         // The exact form first; if PCG meets non-positive curvature on it, the PSD form.
         for (bool psd = !options.exact_hessian;; psd = true) {
-          if (psd && options.exact_hessian && !counted_psd_fallback) {
-            ++result.psd_fallbacks;
-            counted_psd_fallback = true;
-          }
+          notePsdForm(psd);
           evaluateHessian(psd);
           scaleOfDiagonal();
           int iterations = 0;
@@ -342,10 +347,7 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
         const int first_form = options.exact_hessian && !lag.enabled ? 0 : 1;
         for (int form = first_form; form < 2 && !have_direction; ++form) {
           const bool psd = form == 1;
-          if (psd && options.exact_hessian && !counted_psd_fallback) {
-            ++result.psd_fallbacks;
-            counted_psd_fallback = true;
-          }
+          notePsdForm(psd);
           if (assembled_form != form) evaluateHessian(psd);
           scaleOfDiagonal();
           have_direction = factorize();

@@ -162,6 +162,19 @@ struct Scene::BlockAccumulator {
 
 namespace {
 
+// Throws InputError if a block of fixed-block list `b` reaches outside the n × n matrix
+// (checked wherever a list's positions are first read: slot lookup, dense fill).
+void checkBlockPositions(const FixedHessianBlocks& list, size_t b, int n) {
+  for (const auto& [r, c] : *list.positions) {
+    const long long row = (long long)r + list.offset, col = (long long)c + list.offset;
+    if (row < 0 || col < 0 || row + 3 > n || col + 3 > n)
+      throw InputError("HessianAssembler::assemble: fixed block at (" + std::to_string(row) +
+                       ", " + std::to_string(col) + ") of list " + std::to_string(b) +
+                       " is outside the " + std::to_string(n) + " × " + std::to_string(n) +
+                       " matrix");
+  }
+}
+
 // H takes P's pattern (kept, with its storage, when it already has it) with zero values.
 void resetToPattern(const SpMat& P, SpMat& H) {
   const int n = int(P.rows());
@@ -233,14 +246,6 @@ void HessianAssembler::assemble(const std::vector<Triplet>& triplets,
                        " has " + std::to_string(blocks[b].positions->size()) + " positions but " +
                        std::to_string(blocks[b].values ? blocks[b].values->size() : 0) +
                        " values");
-    for (const auto& [r, c] : *blocks[b].positions) {
-      const long long row = (long long)r + blocks[b].offset, col = (long long)c + blocks[b].offset;
-      if (row < 0 || col < 0 || row + 3 > n || col + 3 > n)
-        throw InputError("HessianAssembler::assemble: fixed block at (" + std::to_string(row) +
-                         ", " + std::to_string(col) + ") of list " + std::to_string(b) +
-                         " is outside the " + std::to_string(n) + " × " + std::to_string(n) +
-                         " matrix");
-    }
   }
   if (dense_) {
     if (n > kMaxDenseDofs)
@@ -284,7 +289,6 @@ void HessianAssembler::assemble(const std::vector<Triplet>& triplets,
 // is recognized; a longer one costs one lookup per later slot).
 constexpr long kResyncWindow = 48;
 
-
 void HessianAssembler::fillDense(const std::vector<Triplet>& triplets,
                                  const std::vector<FixedHessianBlocks>& blocks, int n, SpMat& H) {
   if (pattern_.rows() != n || pattern_.nonZeros() != Eigen::Index(n) * n) {
@@ -308,8 +312,10 @@ void HessianAssembler::fillDense(const std::vector<Triplet>& triplets,
                        std::to_string(n) + " × " + std::to_string(n) + " matrix");
     values[size_t(c) * n + r] += t.value();
   }
-  for (const FixedHessianBlocks& list : blocks) {
+  for (size_t b = 0; b < blocks.size(); ++b) {
+    const FixedHessianBlocks& list = blocks[b];
     if (list.empty()) continue;
+    checkBlockPositions(list, b, n);
     for (size_t k = 0; k < list.positions->size(); ++k) {
       const int r = (*list.positions)[k].first + list.offset;
       const int c = (*list.positions)[k].second + list.offset;
@@ -423,10 +429,11 @@ bool HessianAssembler::fillBlocks(const std::vector<FixedHessianBlocks>& blocks,
     const int count = int(positions.size());
     BlockSlots& cache = block_slots_[b];
     if (cache.offset != list.offset || cache.positions != positions ||
-        cache.slots.size() != 3 * positions.size() || cache.slots.empty() || cache.slots[0] < 0) {
+        cache.slots.size() != 3 * positions.size()) {
+      const long long n = pattern_.rows();
+      checkBlockPositions(list, b, int(n));
       // Distinct positions: the blocks are added in parallel below.
       std::vector<long long> keys(positions.size());
-      const long long n = pattern_.rows();
       for (int k = 0; k < count; ++k)
         keys[size_t(k)] = (long long)positions[size_t(k)].second * n + positions[size_t(k)].first;
       std::sort(keys.begin(), keys.end());
@@ -455,7 +462,7 @@ bool HessianAssembler::fillBlocks(const std::vector<FixedHessianBlocks>& blocks,
         }
       }
       if (!found_all) {
-        cache.slots.assign(cache.slots.size(), -1);  // look up again after the growth
+        cache.slots.clear();  // looked up again after the growth
         complete = false;
         continue;
       }

@@ -93,11 +93,12 @@ struct SimulableStats {
   int active_contacts = 0;
 };
 
-/// 3 × 3 Hessian blocks whose positions stay the same from one evaluation to the next (the FEM
-/// elastic energy's node pairs), handed to an assembler without expanding them into triplets.
-/// Block k is added at rows positions[k].first … + 2 and columns positions[k].second … + 2
-/// (plus `offset`); positions are distinct, in column-major order. Both vectors belong to the
-/// simulable and hold until its next Hessian evaluation.
+/// 3 × 3 Hessian blocks whose positions stay the same from one evaluation to the next (the FEM's
+/// elastic node pairs, its bone–tissue coupling and node-diagonal blocks), handed to an
+/// assembler without expanding them into triplets. Block k is added at rows
+/// positions[k].first … + 2 and columns positions[k].second … + 2 (plus `offset`); the
+/// positions of one list are distinct. Both vectors belong to the simulable and hold until its
+/// next Hessian evaluation.
 struct FixedHessianBlocks {
   const std::vector<std::pair<int, int>>* positions = nullptr;
   const std::vector<Mat3>* values = nullptr;

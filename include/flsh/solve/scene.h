@@ -72,7 +72,7 @@ class HessianAssembler {
   std::vector<std::vector<long long>> slot_key_;
   std::vector<std::vector<int>> slot_index_;
   // Per fixed-block list: the positions and offset its slots were found for, and the value
-  // slot of each block's three column tops (−1 for all: not looked up yet).
+  // slot of each block's three column tops (empty: not looked up yet).
   struct BlockSlots {
     std::vector<std::pair<int, int>> positions;
     int offset = 0;

@@ -304,55 +304,122 @@ Mat3 tetDeformationGradient(const TetElementRest& rest, const Mat34& u) {
   return Mat3::Identity() + Du * rest.Dm_inv;
 }
 
+namespace {
+
+/// volume · Ψ(F) and its derivatives with respect to n "nodes" whose values enter F linearly,
+/// δF = δv_s g_sᵀ for node s with gradient g_s (column s of G, 3 × n): the nodal form of a tet
+/// (n = 4, g_a the shape-function gradients) and the reduced form (g̃_s = Σ_a Φ(a, s) g_a).
+/// Gradient (3n) and Hessian (3n × 3n) node-major; sizes from G's type (fixed, bounded or
+/// dynamic), so the fixed and bounded forms never allocate.
+template <class GType, class Gradient, class Hessian>
+double gradientFormEnergy(double volume, const FemMaterialPoint& material, const Mat3& F,
+                          const GType& G, Gradient* gradient, Hessian* hessian, bool psd) {
+  constexpr int N = GType::ColsAtCompileTime, MaxN = GType::MaxColsAtCompileTime;
+  constexpr int C = N == Eigen::Dynamic ? Eigen::Dynamic : 3 * N;
+  constexpr int MaxC = MaxN == Eigen::Dynamic ? Eigen::Dynamic : 3 * MaxN;
+  using StrainMap = Eigen::Matrix<double, 6, C, 0, 6, MaxC>;
+  using NodeVector = Eigen::Matrix<double, C, 1, 0, MaxC, 1>;
+  using NodeSquare = Eigen::Matrix<double, N, N, 0, MaxN, MaxN>;
+  const int n = int(G.cols());
+  const FungState state = fungState(F, material);
+  const InversionGuard guard = inversionGuard(F, material);
+  const double psi = state.map.psi + guard.energy();
+  if (!gradient && !hessian) return volume * psi;
+  // ∂ε/∂v (6 × 3n): column 3s + k is the strain of δF = e_k g_sᵀ.
+  StrainMap B(6, 3 * n);
+  for (int s = 0; s < n; ++s)
+    for (int k = 0; k < 3; ++k)
+      B.col(3 * s + k) = symmetricProductStrain(F.row(k).transpose(), G.col(s));
+  if (gradient) gradient->noalias() = (volume * state.map.d1) * (B.transpose() * state.sigma_s);
+  if (hessian) {
+    const StrainMap psi_ee_B = (volume * strainHessian(state, material)) * B;
+    // Bᵀ (Ψ_εε B). The default product of these sizes goes through Eigen's blocked GEMM,
+    // packing for every tet (~2× slower). Fixed sizes (the nodal 12 × 12): lazyProduct's
+    // unrolled coefficient loops, 0.47 against 0.58 µs per tet for one triangle of dot
+    // products; runtime sizes (reduced): the symmetric triangle, mirrored, is faster.
+    if constexpr (N != Eigen::Dynamic) {
+      hessian->noalias() = B.transpose().lazyProduct(psi_ee_B);
+    } else {
+      for (int j = 0; j < 3 * n; ++j)
+        for (int i = 0; i <= j; ++i) {
+          const double value =
+              B.col(i).template head<6>().dot(psi_ee_B.col(j).template head<6>());
+          (*hessian)(i, j) = value;
+          (*hessian)(j, i) = value;
+        }
+    }
+    // Geometric term: block (s, r) = V (g_sᵀ S g_r) I₃.
+    const Mat3 S = psd ? clampedStress(state.S) : state.S;
+    const NodeSquare GSG = volume * (G.transpose() * S * G);
+    for (int s = 0; s < n; ++s)
+      for (int r = 0; r < n; ++r)
+        for (int k = 0; k < 3; ++k) (*hessian)(3 * s + k, 3 * r + k) += GSG(s, r);
+  }
+  if (guard.active()) {
+    // ∂J/∂v_s = cof g_s; ∂²J/∂v_s∂v_r = −[F (g_s × g_r)]×.
+    const Mat3 cof = cofactor(F);
+    NodeVector c(3 * n);
+    for (int s = 0; s < n; ++s) c.template segment<3>(3 * s) = cof * G.col(s);
+    if (gradient) *gradient -= (volume * guard.kappa * guard.depth) * c;
+    if (hessian) {
+      hessian->noalias() += (volume * guard.kappa) * c * c.transpose();
+      if (!psd)
+        for (int s = 0; s < n; ++s)
+          for (int r = 0; r < n; ++r)
+            hessian->template block<3, 3>(3 * s, 3 * r) +=
+                (volume * guard.kappa * guard.depth) *
+                skew(Vec3(F * Vec3(G.col(s)).cross(Vec3(G.col(r)))));
+    }
+  }
+  return volume * psi;
+}
+
+/// The shape-function gradients of a tet as columns (g_0 = −g_1 − g_2 − g_3).
+Mat34 shapeGradients(const TetElementRest& rest) {
+  Mat34 G;
+  G.rightCols<3>() = rest.Dm_inv.transpose();
+  G.col(0) = -G.rightCols<3>().rowwise().sum();
+  return G;
+}
+
+}  // namespace
+
 double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& material,
                         const Mat34& u, Vec12* gradient, Mat12* hessian, bool psd) {
   if (!u.allFinite())
     throw InputError("tetElasticEnergy: nodal displacements u have a non-finite entry");
-  // F = I + u Gᵀ with G's columns the shape-function gradients g_a (g_0 = −g_1 − g_2 − g_3).
-  Mat34 G;
-  G.rightCols<3>() = rest.Dm_inv.transpose();
-  G.col(0) = -G.rightCols<3>().rowwise().sum();
+  // F = I + u Gᵀ with G's columns the shape-function gradients g_a.
+  const Mat34 G = shapeGradients(rest);
   const Mat3 F = Mat3::Identity() + u * G.transpose();
-  const FungState state = fungState(F, material);
-  const InversionGuard guard = inversionGuard(F, material);
-  const double psi = state.map.psi + guard.energy();
-  if (!gradient && !hessian) return rest.volume * psi;
-  // ∂ε/∂u (6 × 12): column 3a + k is the strain of δF = e_k g_aᵀ.
-  Mat6x12 B;
-  for (int a = 0; a < 4; ++a)
-    for (int k = 0; k < 3; ++k)
-      B.col(3 * a + k) = symmetricProductStrain(F.row(k).transpose(), G.col(a));
-  if (gradient)
-    gradient->noalias() = (rest.volume * state.map.d1) * (B.transpose() * state.sigma_s);
-  if (hessian) {
-    const Mat6x12 psi_ee_B = (rest.volume * strainHessian(state, material)) * B;
-    // lazyProduct: fixed-size coefficient loops; the default product of these sizes goes
-    // through Eigen's blocked GEMM (packing for a 12 × 12 result), ~2× slower here.
-    hessian->noalias() = B.transpose().lazyProduct(psi_ee_B);
-    // Geometric term: block (a, b) = V (g_aᵀ S g_b) I₃.
-    const Mat3 S = psd ? clampedStress(state.S) : state.S;
-    const Eigen::Matrix4d GSG = rest.volume * (G.transpose() * S * G);
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b < 4; ++b)
-        for (int k = 0; k < 3; ++k) (*hessian)(3 * a + k, 3 * b + k) += GSG(a, b);
+  return gradientFormEnergy(rest.volume, material, F, G, gradient, hessian, psd);
+}
+
+Mat3X reducedShapeGradients(const TetElementRest& rest, const Eigen::Ref<const Mat4X>& Phi) {
+  return shapeGradients(rest) * Phi;
+}
+
+double reducedTetElasticEnergy(double volume, const FemMaterialPoint& material,
+                               const Eigen::Ref<const Mat3X>& G, const Eigen::Ref<const Mat3X>& Z,
+                               Eigen::Ref<VecX>* gradient, Eigen::Ref<MatX>* hessian, bool psd) {
+  const Eigen::Index n = G.cols();
+  if (Z.cols() != n)
+    throw InputError("reducedTetElasticEnergy: Z has " + std::to_string(Z.cols()) +
+                     " columns, expected as many as G (" + std::to_string(n) + ")");
+  if (gradient && gradient->size() != 3 * n)
+    throw InputError("reducedTetElasticEnergy: gradient has size " +
+                     std::to_string(gradient->size()) + ", expected 3 · " + std::to_string(n));
+  if (hessian && (hessian->rows() != 3 * n || hessian->cols() != 3 * n))
+    throw InputError("reducedTetElasticEnergy: Hessian is " + std::to_string(hessian->rows()) +
+                     " × " + std::to_string(hessian->cols()) + ", expected 3 · " +
+                     std::to_string(n) + " square");
+  if (!Z.allFinite())
+    throw InputError("reducedTetElasticEnergy: reduced coordinates Z have a non-finite entry");
+  const Mat3 F = Mat3::Identity() + Z * G.transpose();
+  if (n <= kMaxBoundedReducedColumns) {  // stack storage
+    using Bounded = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, kMaxBoundedReducedColumns>;
+    return gradientFormEnergy(volume, material, F, Bounded(G), gradient, hessian, psd);
   }
-  if (guard.active()) {
-    // ∂J/∂u_a = cof g_a; ∂²J/∂u_a∂u_b = −[F (g_a × g_b)]×.
-    const Mat3 cof = cofactor(F);
-    Vec12 c;
-    for (int a = 0; a < 4; ++a) c.segment<3>(3 * a) = cof * G.col(a);
-    const double V = rest.volume;
-    if (gradient) *gradient -= (V * guard.kappa * guard.depth) * c;
-    if (hessian) {
-      hessian->noalias() += (V * guard.kappa) * c * c.transpose();
-      if (!psd)
-        for (int a = 0; a < 4; ++a)
-          for (int b = 0; b < 4; ++b)
-            hessian->block<3, 3>(3 * a, 3 * b) +=
-                (V * guard.kappa * guard.depth) * skew(Vec3(F * G.col(a).cross(G.col(b))));
-    }
-  }
-  return rest.volume * psi;
+  return gradientFormEnergy(volume, material, F, Mat3X(G), gradient, hessian, psd);
 }
 
 }  // namespace flsh

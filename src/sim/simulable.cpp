@@ -1094,10 +1094,11 @@ void Simulable::dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessian
   if (m.is_static) return;
   if (m.soft) {
     m.prepareSoft();
+    m.soft->beginReduced(0);
     FixedHessianBlocks inertia_blocks;
     m.soft->inertia(nullptr, &H, offset, psd, blocks ? &inertia_blocks : nullptr);
     if (blocks && !inertia_blocks.empty()) blocks->push_back(inertia_blocks);
-    m.soft->flushReduced(H, offset);
+    m.soft->flushReduced(H, offset, blocks);
     return;
   }
   Mat6 Hb;
@@ -1232,6 +1233,7 @@ void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessi
   }
   if (m.soft) {
     m.prepareSoft();
+    m.soft->beginReduced(1);
     FixedHessianBlocks gravity_blocks, elastic_blocks;
     m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd,
                     blocks ? &gravity_blocks : nullptr);
@@ -1242,7 +1244,7 @@ void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessi
     m.ensureContact();
     m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
                     &m.contact.candidates);
-    m.soft->flushReduced(H, offset);
+    m.soft->flushReduced(H, offset, blocks);
     return;
   }
   m.addContactHessian(H, offset, psd);

@@ -78,8 +78,6 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
           phi_.emplace_back(int(it.row()), it.value());
       phi_start_[j + 1] = int(phi_.size());
     }
-    bz_blocks_.resize(2 * num_bones_, num_handles_);
-    zz_blocks_.resize(num_handles_, num_handles_);
   }
   u = u_n = u_nm1 = VecX::Zero(numSoftDofs());
 
@@ -171,10 +169,10 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
       for (int b = 0; b < num_handles_; ++b)
         if (!correction_.block<3, 3>(3 * a, 3 * b).isZero(0.0)) correction_blocks_.emplace_back(a, b);
   }
-  if (reduced_) {  // each elastic tet's handles and basis rows
+  if (reduced_) {  // each elastic tet's handles and its shape gradients through the basis
     tet_handle_start_.assign(1, 0);
-    std::vector<double> columns;
-    int max_tet_handles = 0;
+    std::vector<Mat3X> gradients;
+    int columns = 0;
     for (Eigen::Index e = 0; e < tets_.rows(); ++e) {
       std::vector<int> handles;
       for (int a = 0; a < 4; ++a)
@@ -182,21 +180,21 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
           handles.push_back(phi_[k].first);
       std::sort(handles.begin(), handles.end());
       handles.erase(std::unique(handles.begin(), handles.end()), handles.end());
-      for (int h : handles) {
-        tet_handles_.push_back(h);
-        for (int a = 0; a < 4; ++a) {
-          double w = 0.0;
+      Mat4X Phi = Mat4X::Zero(4, Eigen::Index(handles.size()));
+      for (size_t s = 0; s < handles.size(); ++s) {
+        tet_handles_.push_back(handles[s]);
+        for (int a = 0; a < 4; ++a)
           for (int k = phi_start_[tets_(e, a)]; k < phi_start_[tets_(e, a) + 1]; ++k)
-            if (phi_[k].first == h) w = phi_[k].second;
-          columns.push_back(w);
-        }
+            if (phi_[k].first == handles[s]) Phi(a, Eigen::Index(s)) = phi_[k].second;
       }
+      gradients.push_back(reducedShapeGradients(elements_[size_t(e)], Phi));
+      columns += int(handles.size());
       tet_handle_start_.push_back(int(tet_handles_.size()));
-      max_tet_handles = std::max(max_tet_handles, int(handles.size()));
+      max_tet_handles_ = std::max(max_tet_handles_, int(handles.size()));
     }
-    tet_phi_ = Eigen::Map<const MatX>(columns.data(), 4, Eigen::Index(tet_handles_.size()));
-    tet_projection_.resize(12, 3 * max_tet_handles);
-    tet_reduced_.resize(3 * max_tet_handles, 3 * max_tet_handles);
+    tet_gradients_.resize(3, columns);
+    for (size_t e = 0; e < gradients.size(); ++e)
+      tet_gradients_.middleCols(tet_handle_start_[e], gradients[e].cols()) = gradients[e];
   }
 
   // Inertia and gravity: every node with its lumped mass, or the inertial cubature's nodes.
@@ -285,7 +283,58 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     phi_sum_ = VecX::Zero(num_surface_);
     for (int i = 0; i < num_surface_; ++i)
       for (int k = phi_start_[i]; k < phi_start_[i + 1]; ++k) phi_sum_[i] += phi_[k].second;
+    buildReducedPattern();
   }
+}
+
+void SoftTissue::buildReducedPattern() {
+  // Every (handle, handle) pair some node or elastic tet couples, plus the rest correction's;
+  // every (bone row block, handle) pair some node's skinning couples.
+  const int H = num_handles_, rows = 2 * num_bones_;
+  std::vector<char> zz(size_t(H) * H, 0), bz(size_t(rows) * H, 0);
+  for (int j = 0; j < numNodes(); ++j) {
+    for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) {
+      for (int b = phi_start_[j]; b < phi_start_[j + 1]; ++b)
+        zz[size_t(phi_[a].first) * H + phi_[b].first] = 1;
+      for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k)
+        for (int r = 0; r < 2; ++r)
+          bz[size_t(2 * influences_[k].bone + r) * H + phi_[a].first] = 1;
+    }
+  }
+  for (size_t e = 0; e + 1 < tet_handle_start_.size(); ++e)
+    for (int s = tet_handle_start_[e]; s < tet_handle_start_[e + 1]; ++s)
+      for (int r = tet_handle_start_[e]; r < tet_handle_start_[e + 1]; ++r)
+        zz[size_t(tet_handles_[s]) * H + tet_handles_[r]] = 1;
+  for (const auto& [a, b] : correction_blocks_) zz[size_t(a) * H + b] = 1;
+  // Slots: the z–z blocks, then the bone–z blocks, then their transposes (z–bone).
+  zz_slot_.assign(zz.size(), -1);
+  bz_slot_.assign(bz.size(), -1);
+  reduced_positions_.clear();
+  for (int k = 0; k < H; ++k)  // column-major
+    for (int h = 0; h < H; ++h)
+      if (zz[size_t(h) * H + k]) {
+        zz_slot_[size_t(h) * H + k] = int(reduced_positions_.size());
+        reduced_positions_.emplace_back(bone_dofs_ + 3 * h, bone_dofs_ + 3 * k);
+      }
+  num_zz_ = int(reduced_positions_.size());
+  zz_mirror_.clear();  // the terms sum the upper blocks (h ≤ k); the lower ones are their transposes
+  for (int h = 0; h < H; ++h)
+    for (int k = 0; k < h; ++k)
+      if (zz_slot_[size_t(h) * H + k] >= 0)
+        zz_mirror_.emplace_back(zz_slot_[size_t(h) * H + k], zz_slot_[size_t(k) * H + h]);
+  for (int h = 0; h < H; ++h)
+    for (int r = 0; r < rows; ++r)
+      if (bz[size_t(r) * H + h]) {
+        bz_slot_[size_t(r) * H + h] = int(reduced_positions_.size());
+        reduced_positions_.emplace_back(3 * r, bone_dofs_ + 3 * h);
+      }
+  num_bz_ = int(reduced_positions_.size()) - num_zz_;
+  for (int k = 0; k < num_bz_; ++k) {
+    const auto [row, col] = reduced_positions_[size_t(num_zz_ + k)];
+    reduced_positions_.emplace_back(col, row);
+  }
+  for (auto& values : reduced_values_) values.assign(reduced_positions_.size(), Mat3::Zero());
+  reduced_target_ = &reduced_values_[0];
 }
 
 // ---- positions ----------------------------------------------------------------------------
@@ -435,29 +484,53 @@ void SoftTissue::addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j
     addBlock(H, u_index, offset + row, B.transpose());
     return;
   }
+  Mat3* values = reduced_target_->data();
+  const size_t handles = size_t(num_handles_);
   for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
     for (int r = 0; r < Rows; r += 3)
-      bz_blocks_.block((row + r) / 3, phi_[k].first) +=
+      values[bz_slot_[size_t((row + r) / 3) * handles + size_t(phi_[k].first)]] +=
           phi_[k].second * B.template middleRows<3>(r);
 }
 
-void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int i, int j,
-                             const Mat3& B) const {
+void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B) const {
   if (!reduced_) {
-    if (node_dof_[i] < 0 || node_dof_[j] < 0) return;
-    const int base = offset + bone_dofs_;
-    addBlock(H, base + node_dof_[i], base + node_dof_[j], B);
+    if (node_dof_[j] < 0) return;
+    const int u_index = offset + bone_dofs_ + node_dof_[j];
+    addBlock(H, u_index, u_index, B);
     return;
   }
-  for (int a = phi_start_[i]; a < phi_start_[i + 1]; ++a)
-    for (int b = phi_start_[j]; b < phi_start_[j + 1]; ++b)
-      zz_blocks_.block(phi_[a].first, phi_[b].first) += (phi_[a].second * phi_[b].second) * B;
+  // B is symmetric: the upper triangle of handle pairs (φ_ rows are sorted by handle);
+  // flushReduced mirrors it.
+  Mat3* values = reduced_target_->data();
+  const size_t handles = size_t(num_handles_);
+  for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) {
+    const size_t row = size_t(phi_[a].first) * handles;
+    for (int b = a; b < phi_start_[j + 1]; ++b)
+      values[zz_slot_[row + size_t(phi_[b].first)]] += (phi_[a].second * phi_[b].second) * B;
+  }
 }
 
-void SoftTissue::flushReduced(std::vector<Triplet>& H, int offset) const {
+void SoftTissue::beginReduced(int list) const {
   if (!reduced_) return;
-  bz_blocks_.emit(H, offset, offset + bone_dofs_, true);
-  zz_blocks_.emit(H, offset + bone_dofs_, offset + bone_dofs_, false);
+  reduced_target_ = &reduced_values_[size_t(list)];
+  std::fill(reduced_target_->begin(), reduced_target_->end(), Mat3::Zero());
+}
+
+void SoftTissue::flushReduced(std::vector<Triplet>& H, int offset,
+                              std::vector<FixedHessianBlocks>* blocks) const {
+  if (!reduced_) return;
+  std::vector<Mat3>& values = *reduced_target_;
+  for (const auto& [lower, upper] : zz_mirror_) values[size_t(lower)] = values[size_t(upper)].transpose();
+  for (int k = 0; k < num_bz_; ++k)
+    values[size_t(num_zz_ + num_bz_ + k)] = values[size_t(num_zz_ + k)].transpose();
+  if (blocks) {
+    blocks->push_back({&reduced_positions_, reduced_target_, offset});
+    return;
+  }
+  for (size_t k = 0; k < values.size(); ++k)
+    if (!values[k].isZero(0.0))
+      addBlock(H, offset + reduced_positions_[k].first, offset + reduced_positions_[k].second,
+               values[k]);
 }
 
 // ---- mapping node derivatives to the state ----------------------------------------------------
@@ -522,7 +595,7 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         if (fixed)
           (*fixed)[size_t(coupling_start_[idx + 1]) - 1].noalias() = node_M_[j].transpose() * KM;
         else
-          addSoftSoft(H, offset, j, j, node_M_[j].transpose() * KM);
+          addSoftSoft(H, offset, j, node_M_[j].transpose() * KM);
       }
     }
     if (force) {
@@ -617,6 +690,7 @@ Eigen::Matrix<double, 3, 4> SoftTissue::elementDisplacement(int e) const {
 
 double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                            FixedHessianBlocks* blocks) const {
+  if (reduced_) return elasticReduced(g, H != nullptr, offset, psd);
   const int T = int(tets_.rows());
   if (g) element_gradients_.resize(T);
   if (H) element_hessians_.resize(T);
@@ -640,45 +714,12 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
     }
   }
   if (failure) std::rethrow_exception(failure);
-  if (correction_.size() > 0) {  // ½ zᵀ C z
-    const VecX Cz = correction_ * u;
-    E += 0.5 * u.dot(Cz);
-    if (g) g->segment(offset + bone_dofs_, Cz.size()) += Cz;
-    // C is positive semi-definite (ReducedData): the same in the PSD and exact forms.
-    if (H)
-      for (const auto& [a, b] : correction_blocks_)
-        zz_blocks_.block(a, b) += correction_.block<3, 3>(3 * a, 3 * b);
-  }
   if (g) {
     for (int e = 0; e < T; ++e)
       for (int a = 0; a < 4; ++a)
         addSoftGradient(*g, offset, tets_(e, a), element_gradients_[e].segment<3>(3 * a));
   }
-  if (H && reduced_) {
-    // Per tet K = (Φ_e ⊗ I₃)ᵀ H_e (Φ_e ⊗ I₃) on the tet's handles S_e (Φ_e: 4 × |S_e|, the
-    // basis rows of its nodes), then one block per handle pair: |S_e|² block updates instead
-    // of 16 k² (k handles per node) through addSoftSoft.
-    for (int e = 0; e < T; ++e) {
-      const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
-      if (count == 0) continue;
-      const auto Phi = tet_phi_.middleCols(begin, count);  // 4 × count
-      const Mat12& He = element_hessians_[e];
-      auto A = tet_projection_.leftCols(3 * count);  // H_e (Φ_e ⊗ I₃)
-      A.setZero();
-      for (int s = 0; s < count; ++s)
-        for (int a = 0; a < 4; ++a)
-          if (Phi(a, s) != 0.0) A.middleCols<3>(3 * s) += Phi(a, s) * He.middleCols<3>(3 * a);
-      auto K = tet_reduced_.topLeftCorner(3 * count, 3 * count);
-      K.setZero();
-      for (int s = 0; s < count; ++s)
-        for (int a = 0; a < 4; ++a)
-          if (Phi(a, s) != 0.0) K.middleRows<3>(3 * s) += Phi(a, s) * A.middleRows<3>(3 * a);
-      for (int s = 0; s < count; ++s)
-        for (int r = 0; r < count; ++r)
-          zz_blocks_.block(tet_handles_[begin + s], tet_handles_[begin + r]) +=
-              K.block<3, 3>(3 * s, 3 * r);
-    }
-  } else if (H) {
+  if (H) {
     blocks_.assign(block_dofs_.size(), Mat3::Zero());
     for (int e = 0; e < T; ++e) {
       const int* slots = &tet_block_[16 * size_t(e)];
@@ -693,6 +734,52 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
       for (size_t k = 0; k < block_dofs_.size(); ++k)
         addBlock(*H, offset + block_dofs_[k].first, offset + block_dofs_[k].second, blocks_[k]);
     }
+  }
+  return E;
+}
+
+double SoftTissue::elasticReduced(VecX* g, bool hessian, int offset, bool psd) const {
+  // Per elastic tet, F = I + Z G̃ᵀ on the tet's handles (reducedTetElasticEnergy): gradient
+  // and Hessian come straight in the handles' coordinates, one 3 × 3 block per handle pair.
+  const int T = int(tets_.rows());
+  const int base = offset + bone_dofs_;
+  const size_t handles = size_t(num_handles_);
+  double E = 0.0;
+  Mat3X Z(3, max_tet_handles_);
+  VecX ge(3 * max_tet_handles_);
+  MatX He(3 * max_tet_handles_, 3 * max_tet_handles_);
+  Mat3* values = hessian ? reduced_target_->data() : nullptr;
+  for (int e = 0; e < T; ++e) {
+    const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
+    if (count == 0) continue;
+    const int* tet_handles = &tet_handles_[size_t(begin)];
+    for (int s = 0; s < count; ++s) Z.col(s) = u.segment<3>(3 * tet_handles[s]);
+    Eigen::Ref<VecX> gradient = ge.head(3 * count);
+    Eigen::Ref<MatX> tet_hessian = He.topLeftCorner(3 * count, 3 * count);
+    const double w = element_weight_[e];
+    E += w * reducedTetElasticEnergy(elements_[size_t(e)].volume, materials_[size_t(e)],
+                                     tet_gradients_.middleCols(begin, count), Z.leftCols(count),
+                                     g ? &gradient : nullptr, hessian ? &tet_hessian : nullptr,
+                                     psd);
+    if (g)
+      for (int s = 0; s < count; ++s)
+        g->segment<3>(base + 3 * tet_handles[s]) += w * gradient.segment<3>(3 * s);
+    if (hessian)  // upper triangle of handle pairs (tet_handles_ ascending)
+      for (int s = 0; s < count; ++s) {
+        const size_t row = size_t(tet_handles[s]) * handles;
+        for (int r = s; r < count; ++r)
+          values[zz_slot_[row + size_t(tet_handles[r])]] += w * tet_hessian.block<3, 3>(3 * s, 3 * r);
+      }
+  }
+  if (correction_.size() > 0) {  // ½ zᵀ C z
+    const VecX Cz = correction_ * u;
+    E += 0.5 * u.dot(Cz);
+    if (g) g->segment(base, Cz.size()) += Cz;
+    // C is positive semi-definite (ReducedData): the same in the PSD and exact forms.
+    if (hessian)
+      for (const auto& [a, b] : correction_blocks_)
+        if (a <= b)
+          values[zz_slot_[size_t(a) * handles + size_t(b)]] += correction_.block<3, 3>(3 * a, 3 * b);
   }
   return E;
 }

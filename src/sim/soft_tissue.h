@@ -104,9 +104,15 @@ class SoftTissue {
                  const ContactOptions& options, VecX* g, std::vector<Triplet>* H, int offset,
                  bool psd, int* active = nullptr,
                  const std::vector<int>* candidates = nullptr) const;
-  /// Appends the ROM's accumulated bone–z and z–z Hessian blocks (no-op for the FEM): call once
-  /// after the Hessian terms of one evaluation.
-  void flushReduced(std::vector<Triplet>& H, int offset) const;
+  /// ROM (no-op for the FEM): the Hessian terms' bone–z and z–z blocks are summed at fixed
+  /// positions (every pair the basis, the skinning and the elastic tets can couple) into one of
+  /// two value lists: beginReduced(list) zeroes list 0 (the dynamic Hessian) or 1 (the
+  /// potential one) and makes it the target; after the terms of one evaluation flushReduced
+  /// appends its blocks to H as triplets or, with `blocks`, returns the list as fixed blocks
+  /// (valid until the next beginReduced of that list).
+  void beginReduced(int list) const;
+  void flushReduced(std::vector<Triplet>& H, int offset,
+                    std::vector<FixedHessianBlocks>* blocks = nullptr) const;
 
   /// Bounds for a contact broad phase: ‖Y_i − X̄_i‖ ≤ blendBound(i) · poseFeatureNorm() +
   /// displacementWeight(i) · largestSoftState() for surface node i (pose blend plus
@@ -159,13 +165,11 @@ class SoftTissue {
   std::vector<int> eval_nodes_, mass_nodes_;
   VecX inertia_mass_;
   VecX element_weight_;
-  // ROM: elastic tet e's handles tet_handles_[tet_handle_start_[e] ..) and their basis rows at
-  // its 4 nodes (columns of tet_phi_, 4 × Σ|S_e|).
+  // ROM: elastic tet e's handles tet_handles_[tet_handle_start_[e] ..) and the tet's shape
+  // gradients through the basis, G̃_e = G_e Φ_e (columns of tet_gradients_ at the same offsets).
   std::vector<int> tet_handle_start_, tet_handles_;
-  MatX tet_phi_;
-  // Scratch of the reduced elastic Hessian, sized for the tet with the most handles:
-  // H_e (Φ_e ⊗ I₃) (12 × 3|S_e|) and its projection (3|S_e| square).
-  mutable MatX tet_projection_, tet_reduced_;
+  Mat3X tet_gradients_;
+  int max_tet_handles_ = 0;
   // ROM with the elastic cubature: the rest-stiffness correction ½ zᵀ C z (ReducedData) and the
   // handle pairs whose 3 × 3 block is nonzero.
   MatX correction_;
@@ -194,14 +198,23 @@ class SoftTissue {
   mutable std::vector<Mat12> element_hessians_;
   mutable std::vector<Mat3> blocks_;
   mutable BonePairBlocks pair_blocks_;
-  // ROM: Hessian blocks bone rows (t, ω of each bone: 2 · 24 row blocks) × handles, and
-  // handles × handles.
-  mutable TouchedBlocks<3> bz_blocks_, zz_blocks_;
+  // ROM Hessian blocks at fixed positions (buildReducedPattern): z–z blocks (zz_slot_[h · H +
+  // k], H handles), bone–z blocks (bz_slot_[r · H + h], r = 2b for bone b's t rows, 2b + 1 for
+  // its ω rows), then the bone–z blocks' transposes; positions relative to the first DoF. Two
+  // value lists (dynamic, potential); beginReduced picks the target.
+  std::vector<int> zz_slot_, bz_slot_;
+  int num_zz_ = 0, num_bz_ = 0;
+  std::vector<std::pair<int, int>> zz_mirror_;  // (slot of (h, k), slot of (k, h)) for h > k
+  std::vector<std::pair<int, int>> reduced_positions_;
+  mutable std::vector<Mat3> reduced_values_[2];
+  mutable std::vector<Mat3>* reduced_target_ = nullptr;
   // Bones of the prepared state (the simulable's, which outlive every evaluation).
   mutable const std::vector<Mat3>* cur_R_ = nullptr;
   mutable const MatX3* cur_t_ = nullptr;
 
   Eigen::Matrix<double, 3, 4> elementDisplacement(int e) const;
+  void buildReducedPattern();
+  double elasticReduced(VecX* g, bool hessian, int offset, bool psd) const;
   Vec3 nodeDisplacement(const VecX& state, int j) const {
     if (!reduced_)
       return node_dof_[j] < 0 ? Vec3::Zero() : Vec3(state.segment<3>(node_dof_[j]));
@@ -216,13 +229,13 @@ class SoftTissue {
   /// Y_, x_ and node_M_ rows of `nodes` at the prepared state.
   void skinNodes(const std::vector<int>& nodes) const;
   // Chain rule to the soft state: g(u_j) += v; H(bone row block at `row` (6b or 6b + 3), u_j) +=
-  // B and its transpose; H(u_i, u_j) += B. FEM: straight to g / triplets; ROM: through φ into
-  // the z entries / bz_blocks_, zz_blocks_ (flushReduced emits them).
+  // B and its transpose; H(u_j, u_j) += B (symmetric). FEM: straight to g / triplets; ROM:
+  // through φ into the z entries / the target value list (flushReduced emits it).
   void addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const;
   template <int Rows>
   void addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
                    const Eigen::Matrix<double, Rows, 3>& B) const;
-  void addSoftSoft(std::vector<Triplet>& H, int offset, int i, int j, const Mat3& B) const;
+  void addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B) const;
   /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g.
   void mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces, VecX& g,
                  int offset) const;

@@ -547,6 +547,122 @@ TEST(TetElement, GradientAndHessianMatchFiniteDifferences) {
   }
 }
 
+// The reduced tet (ROM): Z (3 × n) with u = Z Φᵀ gives the tet's energy, and its gradient and
+// Hessian chained through Φ, for n handles below and above the stack-storage bound; the inverting
+// case exercises the inversion guard.
+TEST(ReducedTetElement, IsTheTetChainedThroughTheBasis) {
+  Random random(21);
+  const FemMaterialPoint m = tissue(random.rotation(), 3.0);
+  const TetElementRest rest = tetElementRest(restTet(random), 0);
+  for (const int n : {4, 7, kMaxBoundedReducedColumns + 4}) {
+    Mat4X Phi(4, n);
+    for (int i = 0; i < Phi.size(); ++i) Phi.data()[i] = random.uniform(0.0, 1.0);
+    // Z = U (Φ Φᵀ)⁻¹ Φ reproduces any nodal U (Φ has full row rank).
+    const MatX right = (Phi * Phi.transpose()).inverse() * Phi;  // 4 × n, Φᵀ on its right is I
+    Mat34 moderate, inverting = Mat34::Zero();
+    for (int a = 0; a < 4; ++a) moderate.col(a) = random.vec(0.004);
+    inverting.col(3) = Vec3(0.002, 0.001, -0.03);
+    const Mat3X G = reducedShapeGradients(rest, Phi);
+    // (Φ ⊗ I₃): ∂u/∂z, node-major rows, handle-major columns.
+    MatX P = MatX::Zero(12, 3 * n);
+    for (int a = 0; a < 4; ++a)
+      for (int s = 0; s < n; ++s) P.block<3, 3>(3 * a, 3 * s) = Phi(a, s) * Mat3::Identity();
+    for (const bool inverts : {false, true}) {
+      SCOPED_TRACE("n " + std::to_string(n) + (inverts ? ", inverting" : ", moderate"));
+      const Mat34 U = inverts ? inverting : moderate;
+      const Mat3X Z = U * right;
+      ASSERT_LT((Z * Phi.transpose() - U).cwiseAbs().maxCoeff(), 1e-12);
+      if (inverts) ASSERT_LT(tetDeformationGradient(rest, U).determinant(), kInversionOnset);
+      for (const bool psd : {false, true}) {
+        Vec12 g;
+        Mat12 h;
+        const double E = tetElasticEnergy(rest, m, U, &g, &h, psd);
+        VecX gz(3 * n);
+        MatX hz(3 * n, 3 * n);
+        Eigen::Ref<VecX> gz_view = gz;
+        Eigen::Ref<MatX> hz_view = hz;
+        const double Ez = reducedTetElasticEnergy(rest.volume, m, G, Z, &gz_view, &hz_view, psd);
+        ASSERT_GT(gz.cwiseAbs().maxCoeff(), 0.0);
+        ASSERT_GT(hz.cwiseAbs().maxCoeff(), 0.0);
+        EXPECT_NEAR(Ez, E, 1e-9 * E);  // Z Φᵀ reproduces U to rounding only
+        const VecX g_expected = P.transpose() * g;
+        const MatX h_expected = P.transpose() * h * P;
+        EXPECT_LT((gz - g_expected).cwiseAbs().maxCoeff(), 1e-10 * g_expected.cwiseAbs().maxCoeff());
+        EXPECT_LT((hz - h_expected).cwiseAbs().maxCoeff(), 1e-10 * h_expected.cwiseAbs().maxCoeff());
+        EXPECT_LT((hz - hz.transpose()).cwiseAbs().maxCoeff(), 1e-12 * hz.cwiseAbs().maxCoeff());
+      }
+    }
+  }
+}
+
+TEST(ReducedTetElement, GradientAndHessianMatchFiniteDifferences) {
+  Random random(22);
+  const FemMaterialPoint m = skin(random.rotation(), 8.0);
+  const TetElementRest rest = tetElementRest(restTet(random), 0);
+  const int n = 6;
+  Mat4X Phi(4, n);
+  for (int i = 0; i < Phi.size(); ++i) Phi.data()[i] = random.uniform(0.0, 1.0);
+  const Mat3X G = reducedShapeGradients(rest, Phi);
+  Mat3X Z(3, n);
+  for (int s = 0; s < n; ++s) Z.col(s) = random.vec(0.002);
+  const auto flat = [](const Mat3X& z) { return VecX(Eigen::Map<const VecX>(z.data(), z.size())); };
+  const auto unflat = [n](const VecX& x) { return Mat3X(Eigen::Map<const Mat3X>(x.data(), 3, n)); };
+  VecX gradient(3 * n);
+  MatX hessian(3 * n, 3 * n);
+  Eigen::Ref<VecX> g_view = gradient;
+  Eigen::Ref<MatX> h_view = hessian;
+  reducedTetElasticEnergy(rest.volume, m, G, Z, &g_view, &h_view, false);
+  ASSERT_GT(gradient.cwiseAbs().maxCoeff(), 0.0);
+  ASSERT_GT(hessian.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+      [&](const VecX& x) {
+        return VecX::Constant(1, reducedTetElasticEnergy(rest.volume, m, G, unflat(x)));
+      },
+      flat(Z), MatX(gradient.transpose()), 1e-9, 1e-7));
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+      [&](const VecX& x) {
+        VecX g(3 * n);
+        Eigen::Ref<VecX> view = g;
+        reducedTetElasticEnergy(rest.volume, m, G, unflat(x), &view);
+        return g;
+      },
+      flat(Z), hessian, 1e-7, 1e-7));
+}
+
+TEST(ReducedTetElement, SizeMismatchAndNonFiniteInputAreInputErrors) {
+  Random random(23);
+  const FemMaterialPoint m = tissue(Mat3::Identity(), 0.0);
+  const TetElementRest rest = tetElementRest(restTet(random), 0);
+  const Mat3X G = reducedShapeGradients(rest, Mat4X::Constant(4, 3, 0.5));
+  const Mat3X Z = Mat3X::Zero(3, 3);
+  EXPECT_NE(messageOf<InputError>([&] {
+              reducedTetElasticEnergy(rest.volume, m, G, Mat3X::Zero(3, 2));
+            }).find("expected as many as G (3)"),
+            std::string::npos);
+  VecX small(4);
+  Eigen::Ref<VecX> small_view = small;
+  EXPECT_NE(messageOf<InputError>([&] {
+              reducedTetElasticEnergy(rest.volume, m, G, Z, &small_view);
+            }).find("gradient has size 4, expected 3 · 3"),
+            std::string::npos);
+  MatX wrong(9, 8);
+  Eigen::Ref<MatX> wrong_view = wrong;
+  EXPECT_NE(messageOf<InputError>([&] {
+              reducedTetElasticEnergy(rest.volume, m, G, Z, nullptr, &wrong_view);
+            }).find("Hessian is 9 × 8"),
+            std::string::npos);
+  Mat3X nan = Z;
+  nan(1, 2) = NAN;
+  EXPECT_NE(messageOf<InputError>([&] { reducedTetElasticEnergy(rest.volume, m, G, nan); })
+                .find("non-finite"),
+            std::string::npos);
+  // At Z = 0 the tet is at rest: zero energy and gradient.
+  VecX g(9);
+  Eigen::Ref<VecX> g_view = g;
+  EXPECT_EQ(reducedTetElasticEnergy(rest.volume, m, G, Z, &g_view), 0.0);
+  EXPECT_EQ(g.cwiseAbs().maxCoeff(), 0.0);
+}
+
 TEST(TetElement, ProjectedHessianIsPSD) {
   Random random(15);
   for (double gamma : kGammas) {

@@ -201,6 +201,51 @@ TEST(ReducedModel, CubatureOfEveryTetWithUnitWeightsIsExactIntegration) {
   EXPECT_LT((Hc - He).cwiseAbs().maxCoeff(), 1e-10 * He.cwiseAbs().maxCoeff());
 }
 
+// The block overloads return the ROM's bone–z and z–z blocks as one fixed list per part (same
+// positions in both parts and every call), summing with the remaining triplets to the triplet
+// overloads' Hessian, the triplets left being bone–bone ones; the list is symmetric (its lower
+// blocks mirror the upper ones) and covers every block even with the ground in contact.
+TEST(ReducedModel, HessianBlocksComeAsOneFixedListPerPart) {
+  for (int kind : {1, 2}) {
+    Simulable sim(avatar(kind), test::smallScene(800).walk);
+    sim.initialize();
+    sim.preUpdate();
+    VecX d = randomVector(sim.numDofs(), 0.03, 5);
+    d.tail(sim.numDofs() - 144) = randomVector(sim.numDofs() - 144, 0.01, 6);
+    sim.updateState(d);
+    sim.setColliders(
+        {Collider::plane(Vec3(0, sim.getNodes().col(1).minCoeff() + 0.015, 0), Vec3::UnitY())});
+    const int n = sim.numDofs(), offset = 7;
+    const std::vector<std::pair<int, int>>* positions = nullptr;
+    for (bool psd : {false, true})
+      for (bool dynamic : {true, false}) {
+        SCOPED_TRACE(std::string(kind == 2 ? "cubature" : "exact") +
+                     (dynamic ? ", dynamic" : ", potential") + (psd ? ", psd" : ", exact form"));
+        std::vector<Triplet> plain, rest;
+        std::vector<FixedHessianBlocks> blocks;
+        if (dynamic) {
+          sim.getDynamicHessianTripletVector(plain, offset, psd);
+          sim.getDynamicHessianTripletVector(rest, blocks, offset, psd);
+        } else {
+          sim.getPotentialHessianTripletVector(plain, offset, psd);
+          sim.getPotentialHessianTripletVector(rest, blocks, offset, psd);
+        }
+        ASSERT_EQ(blocks.size(), 1u);
+        ASSERT_EQ(blocks[0].offset, offset);
+        if (!positions) positions = blocks[0].positions;
+        EXPECT_EQ(blocks[0].positions, positions);  // one pattern for both parts
+        for (const Triplet& t : rest)  // the triplets left are bone–bone ones
+          ASSERT_TRUE(t.row() < offset + 144 && t.col() < offset + 144) << t.row() << ", " << t.col();
+        const MatX S = test::denseFromTriplets(plain, n + offset);
+        const MatX B = test::denseFromTriplets(test::expanded(blocks), n + offset);
+        ASSERT_GT(B.bottomRightCorner(n - 144, n - 144).cwiseAbs().maxCoeff(), 0.0);
+        EXPECT_LE((B - B.transpose()).cwiseAbs().maxCoeff(), 1e-14 * B.cwiseAbs().maxCoeff());
+        const MatX sum = test::denseFromTriplets(rest, n + offset) + B;
+        EXPECT_LE((sum - S).cwiseAbs().maxCoeff(), 1e-12 * S.cwiseAbs().maxCoeff());
+      }
+  }
+}
+
 TEST(ReducedModel, SceneOnTheDenseSolverStoresItsHessianDense) {
   // A reduced-model scene (a few hundred DoFs) gets the dense solver, and its Hessian full n × n
   // storage: the same sums as the simulable's triplets, and steps that converge.

@@ -20,6 +20,7 @@
 namespace flsh {
 namespace {
 
+using test::expanded;
 using test::jacobianMatchesFiniteDifferences;
 using test::randomVector;
 
@@ -152,18 +153,6 @@ TEST(HessianAssembler, DenseStorageSumsLikeSetFromTriplets) {
   assembler.assemble(triplets, {}, n, H);
   EXPECT_LT(H.nonZeros(), Eigen::Index(n) * n);
   EXPECT_LE(maxAbs(H - summed(triplets, n)), 1e-12 * maxAbs(H));
-}
-
-/// The triplets of `blocks` (3 × 3 each, at their positions plus the list's offset).
-std::vector<Triplet> expanded(const std::vector<FixedHessianBlocks>& blocks) {
-  std::vector<Triplet> out;
-  for (const FixedHessianBlocks& list : blocks)
-    for (size_t k = 0; !list.empty() && k < list.positions->size(); ++k)
-      for (int j = 0; j < 3; ++j)
-        for (int i = 0; i < 3; ++i)
-          out.emplace_back((*list.positions)[k].first + list.offset + i,
-                           (*list.positions)[k].second + list.offset + j, (*list.values)[k](i, j));
-  return out;
 }
 
 TEST(HessianAssembler, FixedBlocksSumLikeTheirTriplets) {

@@ -157,6 +157,17 @@ MatX denseFromTriplets(const std::vector<Triplet>& H, int n) {
   return D;
 }
 
+std::vector<Triplet> expanded(const std::vector<FixedHessianBlocks>& blocks) {
+  std::vector<Triplet> out;
+  for (const FixedHessianBlocks& list : blocks)
+    for (size_t k = 0; !list.empty() && k < list.positions->size(); ++k)
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i)
+          out.emplace_back((*list.positions)[k].first + list.offset + i,
+                           (*list.positions)[k].second + list.offset + j, (*list.values)[k](i, j));
+  return out;
+}
+
 VecX pullBackRotationGradient(const VecX& g, const VecX& d) {
   VecX out = g;
   for (int b = 0; b < d.size() / 6; ++b)

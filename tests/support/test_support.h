@@ -10,6 +10,7 @@
 
 #include "flsh/body/body_model.h"
 #include "flsh/io/motion.h"
+#include "flsh/sim/simulable.h"
 #include "flsh/volume/soft_avatar.h"
 #include "flsh/core/types.h"
 
@@ -30,6 +31,10 @@ VecX randomVector(int n, double scale, unsigned seed);
 
 /// The dense n × n sum of Hessian triplets.
 MatX denseFromTriplets(const std::vector<Triplet>& H, int n);
+
+/// The triplets of fixed Hessian block lists (3 × 3 each, at their positions plus the list's
+/// offset).
+std::vector<Triplet> expanded(const std::vector<FixedHessianBlocks>& blocks);
 
 /// f() evaluated at the state of `sim` (a Simulable) moved by increments d; the state is
 /// restored exactly afterwards (pushState / updateState / popState).

@@ -39,6 +39,8 @@ using Vec12 = Eigen::Matrix<double, 12, 1>;
 using Mat12 = Eigen::Matrix<double, 12, 12>;
 /// Nodal values of one tet (3 × 4): column a is node a.
 using Mat34 = Eigen::Matrix<double, 3, 4>;
+using Mat3X = Eigen::Matrix<double, 3, Eigen::Dynamic>;
+using Mat4X = Eigen::Matrix<double, 4, Eigen::Dynamic>;
 
 /// Exponent x = γΨ_S/μ beyond which the Fung exponential is continued quadratically.
 constexpr double kFungExponentCap = 50.0;
@@ -120,5 +122,25 @@ Mat3 tetDeformationGradient(const TetElementRest& rest, const Mat34& u);
 double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& material,
                         const Mat34& u, Vec12* gradient = nullptr, Mat12* hessian = nullptr,
                         bool psd = false);
+
+/// Reduced tets (the ROM's elastic term): the tet's nodal displacements are a linear map of n
+/// reduced 3-vectors z_s, u_a = Σ_s Φ(a, s) z_s (Φ: the 4 × n basis rows of the tet's nodes).
+/// Then F = I + Z G̃ᵀ with Z (3 × n, columns z_s) and G̃ = G Φ (3 × n), G the shape-function
+/// gradients (columns g_a, g_0 = −g_1 − g_2 − g_3): this returns G̃.
+Mat3X reducedShapeGradients(const TetElementRest& rest, const Eigen::Ref<const Mat4X>& Phi);
+
+/// Up to this many columns reducedTetElasticEnergy works in stack storage (more: on the heap).
+constexpr int kMaxBoundedReducedColumns = 16;
+
+/// volume · Ψ(I + Z G̃ᵀ) (J) and, when not null, its gradient (3n, entry 3s + k = ∂/∂Z(k, s))
+/// and Hessian (3n × 3n) with respect to Z, written into the given views (sized 3n). The same
+/// law, PSD projection (psd) and inversion guard as tetElasticEnergy, whose value, gradient and
+/// Hessian at u = Z Φᵀ these are chained through Φ — formed directly on the 6 × 3n strain map of
+/// the reduced columns instead of through the 12 × 12 element Hessian. InputError on sizes that
+/// do not match or a non-finite Z.
+double reducedTetElasticEnergy(double volume, const FemMaterialPoint& material,
+                               const Eigen::Ref<const Mat3X>& G, const Eigen::Ref<const Mat3X>& Z,
+                               Eigen::Ref<VecX>* gradient = nullptr,
+                               Eigen::Ref<MatX>* hessian = nullptr, bool psd = false);
 
 }  // namespace flsh

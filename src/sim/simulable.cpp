@@ -6,8 +6,11 @@
 // Not thread-safe per instance: const evaluations share a mutable contact cache.
 #include "flsh/sim/simulable.h"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <string>
 
 #include "flsh/body/body_forward.h"
@@ -134,6 +137,8 @@ struct Simulable::Impl {
   mutable ContactCache contact;
   // Scratch for assembling contact Hessians bone pair by bone pair.
   mutable detail::BonePairBlocks pair_blocks;
+  // Scratch of getHessianTripletVector: the ROM inertia's triplets, summed on another thread.
+  mutable std::vector<Triplet> hessian_scratch;
 
   // FEM soft skeleton (null for the articulated skeleton): node data, displacements u.
   std::unique_ptr<detail::SoftTissue> soft;
@@ -1193,7 +1198,7 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H,
 }
 
 void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
-                                 int offset, bool psd) const {
+                                 int offset, bool psd, bool elastic_done) const {
   const Impl& m = *impl_;
   const bool tracking = m.mocap && m.options.track_mocap;
   Mat6 H6;
@@ -1233,11 +1238,14 @@ void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessi
   }
   if (m.soft) {
     m.prepareSoft();
-    m.soft->beginReduced(1);
+    // With elastic_done the ROM's elastic blocks are already in list 1 (getHessianTripletVector).
+    if (elastic_done) m.soft->setReducedTarget(1);
+    else m.soft->beginReduced(1);
     FixedHessianBlocks gravity_blocks, elastic_blocks;
     m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd,
                     blocks ? &gravity_blocks : nullptr);
-    m.soft->elastic(nullptr, &H, offset, psd, blocks ? &elastic_blocks : nullptr);
+    if (!elastic_done)
+      m.soft->elastic(nullptr, &H, offset, psd, blocks ? &elastic_blocks : nullptr);
     if (blocks)
       for (const FixedHessianBlocks& list : {elastic_blocks, gravity_blocks})
         if (!list.empty()) blocks->push_back(list);
@@ -1248,6 +1256,55 @@ void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessi
     return;
   }
   m.addContactHessian(H, offset, psd);
+}
+
+size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
+                                          std::vector<FixedHessianBlocks>& blocks, int offset,
+                                          bool psd) const {
+  const Impl& m = *impl_;
+  if (!m.soft || !m.soft->reduced() || m.is_static || omp_get_max_threads() < 2) {
+    dynamicHessian(H, &blocks, offset, psd);
+    const size_t potential_start = H.size();
+    potentialHessian(H, &blocks, offset, psd);
+    return potential_start;
+  }
+  // ROM: inertia (value list 0, its bone triplets) and the elastic term (list 1) on two
+  // threads; they share no scratch. Then the rest of the potential part into list 1.
+  m.prepareSoft();
+  m.ensureContact();
+  m.soft->beginReduced(1);
+  m.soft->beginReduced(0);
+  std::vector<Triplet>& inertia = m.hessian_scratch;
+  inertia.clear();
+  std::exception_ptr failure;
+#pragma omp parallel sections num_threads(2)
+  {
+#pragma omp section
+    {
+      try {
+        m.soft->inertia(nullptr, &inertia, offset, psd);
+      } catch (...) {
+#pragma omp critical(flsh_simulable_hessian_failure)
+        if (!failure) failure = std::current_exception();
+      }
+    }
+#pragma omp section
+    {
+      try {
+        std::vector<Triplet> none;  // the ROM's elastic term appends no triplets
+        m.soft->elastic(nullptr, &none, offset, psd, nullptr, 1);
+      } catch (...) {
+#pragma omp critical(flsh_simulable_hessian_failure)
+        if (!failure) failure = std::current_exception();
+      }
+    }
+  }
+  if (failure) std::rethrow_exception(failure);
+  H.insert(H.end(), inertia.begin(), inertia.end());
+  m.soft->flushReduced(H, offset, &blocks);  // list 0
+  const size_t potential_start = H.size();
+  potentialHessian(H, &blocks, offset, psd, true);
+  return potential_start;
 }
 
 void Simulable::fixVectorKinematic(VecX& g, int offset) const {

@@ -512,8 +512,12 @@ void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const M
 
 void SoftTissue::beginReduced(int list) const {
   if (!reduced_) return;
-  reduced_target_ = &reduced_values_[size_t(list)];
+  setReducedTarget(list);
   std::fill(reduced_target_->begin(), reduced_target_->end(), Mat3::Zero());
+}
+
+void SoftTissue::setReducedTarget(int list) const {
+  if (reduced_) reduced_target_ = &reduced_values_[size_t(list)];
 }
 
 void SoftTissue::flushReduced(std::vector<Triplet>& H, int offset,
@@ -689,8 +693,11 @@ Eigen::Matrix<double, 3, 4> SoftTissue::elementDisplacement(int e) const {
 }
 
 double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                           FixedHessianBlocks* blocks) const {
-  if (reduced_) return elasticReduced(g, H != nullptr, offset, psd);
+                           FixedHessianBlocks* blocks, int list) const {
+  if (reduced_)
+    return elasticReduced(
+        g, H ? (list < 0 ? reduced_target_ : &reduced_values_[size_t(list)]) : nullptr, offset,
+        psd);
   const int T = int(tets_.rows());
   if (g) element_gradients_.resize(T);
   if (H) element_hessians_.resize(T);
@@ -738,7 +745,7 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
   return E;
 }
 
-double SoftTissue::elasticReduced(VecX* g, bool hessian, int offset, bool psd) const {
+double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, bool psd) const {
   // Per elastic tet, F = I + Z G̃ᵀ on the tet's handles (reducedTetElasticEnergy): gradient
   // and Hessian come straight in the handles' coordinates, one 3 × 3 block per handle pair.
   const int T = int(tets_.rows());
@@ -748,7 +755,8 @@ double SoftTissue::elasticReduced(VecX* g, bool hessian, int offset, bool psd) c
   Mat3X Z(3, max_tet_handles_);
   VecX ge(3 * max_tet_handles_);
   MatX He(3 * max_tet_handles_, 3 * max_tet_handles_);
-  Mat3* values = hessian ? reduced_target_->data() : nullptr;
+  const bool hessian = list != nullptr;
+  Mat3* values = hessian ? list->data() : nullptr;
   for (int e = 0; e < T; ++e) {
     const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
     if (count == 0) continue;

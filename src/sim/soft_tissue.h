@@ -96,8 +96,11 @@ class SoftTissue {
                  FixedHessianBlocks* blocks = nullptr) const;
   /// `blocks` (FEM only; may be null): the node-pair blocks are returned through it (positions
   /// fixed, column-major) instead of appended to H.
+  /// ROM: the Hessian goes into value list `list` (−1: the current target, see beginReduced),
+  /// the only state it writes besides g, so it may run concurrently with inertia into the
+  /// other list.
   double elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                 FixedHessianBlocks* blocks = nullptr) const;
+                 FixedHessianBlocks* blocks = nullptr, int list = -1) const;
   /// Penalty contact of the surface nodes against colliders at time t: of `candidates` (surface
   /// node indices; a broad phase's: the others must be out of contact) or, null, every one.
   double contact(const std::vector<Collider>& colliders, double time,
@@ -110,7 +113,10 @@ class SoftTissue {
   /// potential one) and makes it the target; after the terms of one evaluation flushReduced
   /// appends its blocks to H as triplets or, with `blocks`, returns the list as fixed blocks
   /// (valid until the next beginReduced of that list).
+  /// setReducedTarget makes a list the target without zeroing it; flushReduced emits the
+  /// current target.
   void beginReduced(int list) const;
+  void setReducedTarget(int list) const;
   void flushReduced(std::vector<Triplet>& H, int offset,
                     std::vector<FixedHessianBlocks>* blocks = nullptr) const;
 
@@ -214,7 +220,7 @@ class SoftTissue {
 
   Eigen::Matrix<double, 3, 4> elementDisplacement(int e) const;
   void buildReducedPattern();
-  double elasticReduced(VecX* g, bool hessian, int offset, bool psd) const;
+  double elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, bool psd) const;
   Vec3 nodeDisplacement(const VecX& state, int j) const {
     if (!reduced_)
       return node_dof_[j] < 0 ? Vec3::Zero() : Vec3(state.segment<3>(node_dof_[j]));

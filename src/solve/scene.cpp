@@ -714,10 +714,8 @@ void Scene::hessian(SpMat& H, bool psd) {
     for (size_t i = 0; i < simulables_.size(); ++i) {
       // The FEM's elastic node pairs and its bone–tissue coupling come as fixed blocks (the
       // same lists in the same order every call): no 9 triplets per block.
-      simulables_[i]->getDynamicHessianTripletVector(triplets_, fixed_blocks_, offsets_[i], psd);
-      segment_end_.push_back(triplets_.size());
-      simulables_[i]->getPotentialHessianTripletVector(triplets_, fixed_blocks_, offsets_[i],
-                                                       psd);
+      segment_end_.push_back(
+          simulables_[i]->getHessianTripletVector(triplets_, fixed_blocks_, offsets_[i], psd));
       segment_end_.push_back(triplets_.size());
     }
     if (avatarContactActive()) avatarContactEnergy(nullptr, &triplets_, psd);

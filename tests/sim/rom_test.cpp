@@ -246,6 +246,53 @@ TEST(ReducedModel, HessianBlocksComeAsOneFixedListPerPart) {
   }
 }
 
+// getHessianTripletVector (inertia and elastic terms on two threads for the ROM) returns exactly
+// the two block overloads' triplets and lists, in their order.
+TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
+  for (int kind : {0, 1, 2}) {
+    Simulable sim(avatar(kind), test::smallScene(800).walk);
+    sim.initialize();
+    sim.preUpdate();
+    VecX d = randomVector(sim.numDofs(), 0.03, 8);
+    d.tail(sim.numDofs() - 144) = randomVector(sim.numDofs() - 144, 0.01, 9);
+    sim.updateState(d);
+    sim.setColliders(
+        {Collider::plane(Vec3(0, sim.getNodes().col(1).minCoeff() + 0.015, 0), Vec3::UnitY())});
+    for (bool psd : {false, true}) {
+      SCOPED_TRACE("kind " + std::to_string(kind) + (psd ? ", psd" : ", exact form"));
+      std::vector<Triplet> parts;
+      std::vector<FixedHessianBlocks> part_blocks;
+      sim.getDynamicHessianTripletVector(parts, part_blocks, 3, psd);
+      const size_t dynamic_count = parts.size();
+      std::vector<std::vector<Mat3>> part_values;
+      for (const auto& list : part_blocks) part_values.push_back(*list.values);
+      const size_t dynamic_lists = part_blocks.size();
+      sim.getPotentialHessianTripletVector(parts, part_blocks, 3, psd);
+      for (size_t k = dynamic_lists; k < part_blocks.size(); ++k)
+        part_values.push_back(*part_blocks[k].values);
+
+      std::vector<Triplet> both = {Triplet(0, 0, 1.0)};  // appended after what is there
+      std::vector<FixedHessianBlocks> both_blocks;
+      EXPECT_EQ(sim.getHessianTripletVector(both, both_blocks, 3, psd), 1 + dynamic_count);
+      ASSERT_EQ(both.size(), 1 + parts.size());
+      for (size_t k = 0; k < parts.size(); ++k) {
+        ASSERT_EQ(both[k + 1].row(), parts[k].row());
+        ASSERT_EQ(both[k + 1].col(), parts[k].col());
+        ASSERT_EQ(both[k + 1].value(), parts[k].value());
+      }
+      ASSERT_EQ(both_blocks.size(), part_blocks.size());
+      ASSERT_EQ(both_blocks.size(), kind == 0 ? 3u : 2u);
+      for (size_t k = 0; k < both_blocks.size(); ++k) {
+        EXPECT_EQ(both_blocks[k].positions, part_blocks[k].positions);
+        EXPECT_EQ(both_blocks[k].offset, 3);
+        ASSERT_EQ(both_blocks[k].values->size(), part_values[k].size());
+        for (size_t b = 0; b < part_values[k].size(); ++b)
+          ASSERT_EQ((*both_blocks[k].values)[b], part_values[k][b]) << "list " << k << " block " << b;
+      }
+    }
+  }
+}
+
 TEST(ReducedModel, SceneOnTheDenseSolverStoresItsHessianDense) {
   // A reduced-model scene (a few hundred DoFs) gets the dense solver, and its Hessian full n × n
   // storage: the same sums as the simulable's triplets, and steps that converge.

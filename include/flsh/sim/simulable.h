@@ -240,6 +240,12 @@ class Simulable {
   void getPotentialHessianTripletVector(std::vector<Triplet>& H,
                                         std::vector<FixedHessianBlocks>& blocks, int offset,
                                         bool psd) const;
+  /// Both parts at once, as a scene assembles them: the triplets and lists of the dynamic
+  /// block overload followed by those of the potential one (same values, same order). Returns
+  /// the index in H where the potential part's triplets start. The ROM evaluates its inertia
+  /// and elastic terms concurrently (two OpenMP threads) here.
+  size_t getHessianTripletVector(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>& blocks,
+                                 int offset, bool psd) const;
   /// Makes kinematic rows/columns of the assembled H identity (drops their triplets and adds
   /// unit diagonals): call on the full triplet list before assembly.
   void fixMatrixKinematic(std::vector<Triplet>& H, int offset = 0) const;
@@ -300,8 +306,9 @@ class Simulable {
   /// (blocks null: every term as triplets).
   void dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
                       int offset, bool psd) const;
+  /// elastic_done (ROM): the elastic blocks are already summed into the potential value list.
   void potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
-                        int offset, bool psd) const;
+                        int offset, bool psd, bool elastic_done = false) const;
   std::unique_ptr<Impl> impl_;
 };
 

@@ -137,8 +137,9 @@ struct Simulable::Impl {
   mutable ContactCache contact;
   // Scratch for assembling contact Hessians bone pair by bone pair.
   mutable detail::BonePairBlocks pair_blocks;
-  // Scratch of getHessianTripletVector: the ROM inertia's triplets, summed on another thread.
-  mutable std::vector<Triplet> hessian_scratch;
+  // Scratch of getHessianTripletVector: the ROM's inertia and gravity triplets, summed on two
+  // threads.
+  mutable std::vector<Triplet> hessian_scratch[2];
 
   // FEM soft skeleton (null for the articulated skeleton): node data, displacements u.
   std::unique_ptr<detail::SoftTissue> soft;
@@ -1103,7 +1104,7 @@ void Simulable::dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessian
     FixedHessianBlocks inertia_blocks;
     m.soft->inertia(nullptr, &H, offset, psd, blocks ? &inertia_blocks : nullptr);
     if (blocks && !inertia_blocks.empty()) blocks->push_back(inertia_blocks);
-    m.soft->flushReduced(H, offset, blocks);
+    m.soft->flushReduced(0, H, offset, blocks);
     return;
   }
   Mat6 Hb;
@@ -1198,7 +1199,7 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H,
 }
 
 void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
-                                 int offset, bool psd, bool elastic_done) const {
+                                 int offset, bool psd, bool soft_done) const {
   const Impl& m = *impl_;
   const bool tracking = m.mocap && m.options.track_mocap;
   Mat6 H6;
@@ -1238,21 +1239,22 @@ void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessi
   }
   if (m.soft) {
     m.prepareSoft();
-    // With elastic_done the ROM's elastic blocks are already in list 1 (getHessianTripletVector).
-    if (elastic_done) m.soft->setReducedTarget(1);
-    else m.soft->beginReduced(1);
+    // With soft_done the ROM's gravity and elastic blocks are already in value list 1, their
+    // bone triplets in H (getHessianTripletVector).
     FixedHessianBlocks gravity_blocks, elastic_blocks;
-    m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd,
-                    blocks ? &gravity_blocks : nullptr);
-    if (!elastic_done)
+    if (!soft_done) {
+      m.soft->beginReduced(1);
+      m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd,
+                      blocks ? &gravity_blocks : nullptr);
       m.soft->elastic(nullptr, &H, offset, psd, blocks ? &elastic_blocks : nullptr);
+    }
     if (blocks)
       for (const FixedHessianBlocks& list : {elastic_blocks, gravity_blocks})
         if (!list.empty()) blocks->push_back(list);
     m.ensureContact();
     m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
                     &m.contact.candidates);
-    m.soft->flushReduced(H, offset, blocks);
+    m.soft->flushReduced(1, H, offset, blocks);
     return;
   }
   m.addContactHessian(H, offset, psd);
@@ -1268,14 +1270,17 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
     potentialHessian(H, &blocks, offset, psd);
     return potential_start;
   }
-  // ROM: inertia (value list 0, its bone triplets) and the elastic term (list 1) on two
-  // threads; they share no scratch. Then the rest of the potential part into list 1.
+  // ROM: inertia (value list 0 and its bone triplets) on one thread, gravity and the elastic
+  // term (list 1 and gravity's bone triplets) on the other; they share no scratch. Then
+  // contact and the bones' springs.
   m.prepareSoft();
   m.ensureContact();
-  m.soft->beginReduced(1);
   m.soft->beginReduced(0);
-  std::vector<Triplet>& inertia = m.hessian_scratch;
+  m.soft->beginReduced(1);
+  std::vector<Triplet>& inertia = m.hessian_scratch[0];
+  std::vector<Triplet>& gravity = m.hessian_scratch[1];
   inertia.clear();
+  gravity.clear();
   std::exception_ptr failure;
 #pragma omp parallel sections num_threads(2)
   {
@@ -1291,8 +1296,8 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
 #pragma omp section
     {
       try {
-        std::vector<Triplet> none;  // the ROM's elastic term appends no triplets
-        m.soft->elastic(nullptr, &none, offset, psd, nullptr, 1);
+        m.soft->gravity(m.options.gravity, nullptr, &gravity, offset, psd);
+        m.soft->elastic(nullptr, &gravity, offset, psd);
       } catch (...) {
 #pragma omp critical(flsh_simulable_hessian_failure)
         if (!failure) failure = std::current_exception();
@@ -1301,9 +1306,10 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
   }
   if (failure) std::rethrow_exception(failure);
   H.insert(H.end(), inertia.begin(), inertia.end());
-  m.soft->flushReduced(H, offset, &blocks);  // list 0
+  m.soft->flushReduced(0, H, offset, &blocks);
   const size_t potential_start = H.size();
   potentialHessian(H, &blocks, offset, psd, true);
+  H.insert(H.end(), gravity.begin(), gravity.end());
   return potential_start;
 }
 

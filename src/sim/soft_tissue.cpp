@@ -258,7 +258,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
 
   areas_ = avatar.vertexAreas();
   x_hat_ = rest_;
-  pair_blocks_.resize(num_bones_);
+  for (BonePairBlocks& blocks : pair_blocks_) blocks.resize(num_bones_);
   all_nodes_.resize(n);
   for (int j = 0; j < n; ++j) all_nodes_[j] = j;
   surface_nodes_.assign(all_nodes_.begin(), all_nodes_.begin() + num_surface_);
@@ -334,7 +334,6 @@ void SoftTissue::buildReducedPattern() {
     reduced_positions_.emplace_back(col, row);
   }
   for (auto& values : reduced_values_) values.assign(reduced_positions_.size(), Mat3::Zero());
-  reduced_target_ = &reduced_values_[0];
 }
 
 // ---- positions ----------------------------------------------------------------------------
@@ -476,7 +475,7 @@ void SoftTissue::addSoftGradient(VecX& g, int offset, int j, const Vec3& v) cons
 
 template <int Rows>
 void SoftTissue::addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
-                             const Eigen::Matrix<double, Rows, 3>& B) const {
+                             const Eigen::Matrix<double, Rows, 3>& B, int list) const {
   if (!reduced_) {
     if (node_dof_[j] < 0) return;
     const int u_index = offset + bone_dofs_ + node_dof_[j];
@@ -484,7 +483,7 @@ void SoftTissue::addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j
     addBlock(H, u_index, offset + row, B.transpose());
     return;
   }
-  Mat3* values = reduced_target_->data();
+  Mat3* values = reduced_values_[size_t(list)].data();
   const size_t handles = size_t(num_handles_);
   for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
     for (int r = 0; r < Rows; r += 3)
@@ -492,7 +491,8 @@ void SoftTissue::addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j
           phi_[k].second * B.template middleRows<3>(r);
 }
 
-void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B) const {
+void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B,
+                             int list) const {
   if (!reduced_) {
     if (node_dof_[j] < 0) return;
     const int u_index = offset + bone_dofs_ + node_dof_[j];
@@ -501,7 +501,7 @@ void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const M
   }
   // B is symmetric: the upper triangle of handle pairs (φ_ rows are sorted by handle);
   // flushReduced mirrors it.
-  Mat3* values = reduced_target_->data();
+  Mat3* values = reduced_values_[size_t(list)].data();
   const size_t handles = size_t(num_handles_);
   for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) {
     const size_t row = size_t(phi_[a].first) * handles;
@@ -512,23 +512,19 @@ void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const M
 
 void SoftTissue::beginReduced(int list) const {
   if (!reduced_) return;
-  setReducedTarget(list);
-  std::fill(reduced_target_->begin(), reduced_target_->end(), Mat3::Zero());
+  std::vector<Mat3>& values = reduced_values_[size_t(list)];
+  std::fill(values.begin(), values.end(), Mat3::Zero());
 }
 
-void SoftTissue::setReducedTarget(int list) const {
-  if (reduced_) reduced_target_ = &reduced_values_[size_t(list)];
-}
-
-void SoftTissue::flushReduced(std::vector<Triplet>& H, int offset,
+void SoftTissue::flushReduced(int list, std::vector<Triplet>& H, int offset,
                               std::vector<FixedHessianBlocks>* blocks) const {
   if (!reduced_) return;
-  std::vector<Mat3>& values = *reduced_target_;
+  std::vector<Mat3>& values = reduced_values_[size_t(list)];
   for (const auto& [lower, upper] : zz_mirror_) values[size_t(lower)] = values[size_t(upper)].transpose();
   for (int k = 0; k < num_bz_; ++k)
     values[size_t(num_zz_ + num_bz_ + k)] = values[size_t(num_zz_ + k)].transpose();
   if (blocks) {
-    blocks->push_back({&reduced_positions_, reduced_target_, offset});
+    blocks->push_back({&reduced_positions_, &values, offset});
     return;
   }
   for (size_t k = 0; k < values.size(); ++k)
@@ -560,10 +556,11 @@ void SoftTissue::mapForces(const std::vector<int>& nodes, const std::vector<Vec3
 
 void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                             const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset,
-                            bool psd, std::vector<Mat3>* fixed) const {
+                            bool psd, int list, std::vector<Mat3>* fixed) const {
   if (fixed) fixed->assign(coupling_dofs_.size(), Mat3::Zero());
   const std::vector<Mat3>& R = *cur_R_;
-  auto block = [&](int b, int c) -> Mat6& { return pair_blocks_.block(b, c); };
+  BonePairBlocks& pair_blocks = pair_blocks_[size_t(list)];
+  auto block = [&](int b, int c) -> Mat6& { return pair_blocks.block(b, c); };
   Mat3 curvature[kNumJoints];
   bool has_curvature[kNumJoints] = {};
   Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
@@ -599,7 +596,7 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         if (fixed)
           (*fixed)[size_t(coupling_start_[idx + 1]) - 1].noalias() = node_M_[j].transpose() * KM;
         else
-          addSoftSoft(H, offset, j, node_M_[j].transpose() * KM);
+          addSoftSoft(H, offset, j, node_M_[j].transpose() * KM, list);
       }
     }
     if (force) {
@@ -625,15 +622,15 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
     }
     for (int a = 0; a < count; ++a) {  // without K only the rotation rows are nonzero
       if (k_coupling)
-        addBoneSoft<6>(H, offset, 6 * bones[a], j, coupling[a]);
+        addBoneSoft<6>(H, offset, 6 * bones[a], j, coupling[a], list);
       else if (f_coupling)
-        addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval());
+        addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval(), list);
     }
   }
   for (int b = 0; b < num_bones_; ++b)
     if (has_curvature[b])
       block(b, b).bottomRightCorner<3, 3>() += psd ? projectToPSD<3>(curvature[b]) : curvature[b];
-  pair_blocks_.emit(H, offset);
+  pair_blocks.emit(H, offset);
 }
 
 // ---- energies -------------------------------------------------------------------------------
@@ -643,21 +640,21 @@ double SoftTissue::inertia(VecX* g, std::vector<Triplet>* H, int offset, bool ps
   const double k = 1.0 / (h_ * h_);
   const size_t count = mass_nodes_.size();
   double E = 0.0;
-  node_forces_.resize(count);
+  node_forces_[0].resize(count);
   for (size_t idx = 0; idx < count; ++idx) {
     const int j = mass_nodes_[idx];
     const Vec3 d = (x_.row(j) - x_hat_.row(j)).transpose();
     E += 0.5 * k * inertia_mass_[j] * d.squaredNorm();
-    node_forces_[idx] = k * inertia_mass_[j] * d;
+    node_forces_[0][idx] = k * inertia_mass_[j] * d;
   }
-  if (g) mapForces(mass_nodes_, node_forces_, *g, offset);
+  if (g) mapForces(mass_nodes_, node_forces_[0], *g, offset);
   if (H) {
     node_blocks_.resize(count);
     for (size_t idx = 0; idx < count; ++idx)
       node_blocks_[idx] = k * inertia_mass_[mass_nodes_[idx]] * Mat3::Identity();
     // psd: Gauss–Newton Σ m JᵀJ; exact: plus the curvature of the rotating nodes.
     const bool fixed = blocks && !reduced_;
-    mapHessian(mass_nodes_, &node_blocks_, psd ? nullptr : &node_forces_, *H, offset, psd,
+    mapHessian(mass_nodes_, &node_blocks_, psd ? nullptr : &node_forces_[0], *H, offset, psd, 0,
                fixed ? &inertia_fixed_ : nullptr);
     if (fixed) *blocks = {&coupling_dofs_, &inertia_fixed_, offset};
   }
@@ -668,18 +665,18 @@ double SoftTissue::gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H
                            bool psd, FixedHessianBlocks* blocks) const {
   const size_t count = mass_nodes_.size();
   double E = 0.0;
-  node_forces_.resize(count);
+  node_forces_[1].resize(count);
   for (size_t idx = 0; idx < count; ++idx) {
     const int j = mass_nodes_[idx];
     E -= inertia_mass_[j] * gravity.dot(x_.row(j).transpose());
-    node_forces_[idx] = -inertia_mass_[j] * gravity;
+    node_forces_[1][idx] = -inertia_mass_[j] * gravity;
   }
-  if (g) mapForces(mass_nodes_, node_forces_, *g, offset);
+  if (g) mapForces(mass_nodes_, node_forces_[1], *g, offset);
   if (H) {
     // The PSD form has no coupling blocks: the fixed list is then all zeros, so that its
     // positions (and an assembler's cached slots) stay the same in both forms.
     const bool fixed = blocks && !reduced_;
-    mapHessian(mass_nodes_, nullptr, &node_forces_, *H, offset, psd,
+    mapHessian(mass_nodes_, nullptr, &node_forces_[1], *H, offset, psd, 1,
                fixed ? &gravity_fixed_ : nullptr);
     if (fixed) *blocks = {&coupling_dofs_, &gravity_fixed_, offset};
   }
@@ -693,11 +690,8 @@ Eigen::Matrix<double, 3, 4> SoftTissue::elementDisplacement(int e) const {
 }
 
 double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                           FixedHessianBlocks* blocks, int list) const {
-  if (reduced_)
-    return elasticReduced(
-        g, H ? (list < 0 ? reduced_target_ : &reduced_values_[size_t(list)]) : nullptr, offset,
-        psd);
+                           FixedHessianBlocks* blocks) const {
+  if (reduced_) return elasticReduced(g, H ? &reduced_values_[1] : nullptr, offset, psd);
   const int T = int(tets_.rows());
   if (g) element_gradients_.resize(T);
   if (H) element_hessians_.resize(T);
@@ -835,7 +829,7 @@ double SoftTissue::contact(const std::vector<Collider>& colliders, double time,
       const int i = t.row() / 3;
       if (slot[i] >= 0) K[slot[i]](t.row() - 3 * i, t.col() - 3 * i) += t.value();
     }
-    mapHessian(nodes, &K, &forces, *H, offset, psd);
+    mapHessian(nodes, &K, &forces, *H, offset, psd, 1);
   }
   return E;
 }

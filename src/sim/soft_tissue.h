@@ -96,11 +96,8 @@ class SoftTissue {
                  FixedHessianBlocks* blocks = nullptr) const;
   /// `blocks` (FEM only; may be null): the node-pair blocks are returned through it (positions
   /// fixed, column-major) instead of appended to H.
-  /// ROM: the Hessian goes into value list `list` (−1: the current target, see beginReduced),
-  /// the only state it writes besides g, so it may run concurrently with inertia into the
-  /// other list.
   double elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                 FixedHessianBlocks* blocks = nullptr, int list = -1) const;
+                 FixedHessianBlocks* blocks = nullptr) const;
   /// Penalty contact of the surface nodes against colliders at time t: of `candidates` (surface
   /// node indices; a broad phase's: the others must be out of contact) or, null, every one.
   double contact(const std::vector<Collider>& colliders, double time,
@@ -108,16 +105,15 @@ class SoftTissue {
                  bool psd, int* active = nullptr,
                  const std::vector<int>* candidates = nullptr) const;
   /// ROM (no-op for the FEM): the Hessian terms' bone–z and z–z blocks are summed at fixed
-  /// positions (every pair the basis, the skinning and the elastic tets can couple) into one of
-  /// two value lists: beginReduced(list) zeroes list 0 (the dynamic Hessian) or 1 (the
-  /// potential one) and makes it the target; after the terms of one evaluation flushReduced
-  /// appends its blocks to H as triplets or, with `blocks`, returns the list as fixed blocks
-  /// (valid until the next beginReduced of that list).
-  /// setReducedTarget makes a list the target without zeroing it; flushReduced emits the
-  /// current target.
+  /// positions (every pair the basis, the skinning and the elastic tets can couple) into value
+  /// list 0 (inertia: the dynamic Hessian) or 1 (gravity, elasticity, contact: the potential
+  /// one). beginReduced zeroes a list; after the terms of one evaluation flushReduced appends
+  /// its blocks to H as triplets or, with `blocks`, returns the list as fixed blocks (valid
+  /// until the next beginReduced of that list). The terms of the two lists share no scratch
+  /// (mapHessian's is per list too): inertia may run concurrently with the potential terms
+  /// other than contact, which skins surface nodes.
   void beginReduced(int list) const;
-  void setReducedTarget(int list) const;
-  void flushReduced(std::vector<Triplet>& H, int offset,
+  void flushReduced(int list, std::vector<Triplet>& H, int offset,
                     std::vector<FixedHessianBlocks>* blocks = nullptr) const;
 
   /// Bounds for a contact broad phase: ‖Y_i − X̄_i‖ ≤ blendBound(i) · poseFeatureNorm() +
@@ -203,7 +199,7 @@ class SoftTissue {
   mutable std::vector<Vec12> element_gradients_;
   mutable std::vector<Mat12> element_hessians_;
   mutable std::vector<Mat3> blocks_;
-  mutable BonePairBlocks pair_blocks_;
+  mutable BonePairBlocks pair_blocks_[2];  // mapHessian's, per value list
   // ROM Hessian blocks at fixed positions (buildReducedPattern): z–z blocks (zz_slot_[h · H +
   // k], H handles), bone–z blocks (bz_slot_[r · H + h], r = 2b for bone b's t rows, 2b + 1 for
   // its ω rows), then the bone–z blocks' transposes; positions relative to the first DoF. Two
@@ -213,7 +209,6 @@ class SoftTissue {
   std::vector<std::pair<int, int>> zz_mirror_;  // (slot of (h, k), slot of (k, h)) for h > k
   std::vector<std::pair<int, int>> reduced_positions_;
   mutable std::vector<Mat3> reduced_values_[2];
-  mutable std::vector<Mat3>* reduced_target_ = nullptr;
   // Bones of the prepared state (the simulable's, which outlive every evaluation).
   mutable const std::vector<Mat3>* cur_R_ = nullptr;
   mutable const MatX3* cur_t_ = nullptr;
@@ -236,12 +231,12 @@ class SoftTissue {
   void skinNodes(const std::vector<int>& nodes) const;
   // Chain rule to the soft state: g(u_j) += v; H(bone row block at `row` (6b or 6b + 3), u_j) +=
   // B and its transpose; H(u_j, u_j) += B (symmetric). FEM: straight to g / triplets; ROM:
-  // through φ into the z entries / the target value list (flushReduced emits it).
+  // through φ into the z entries / value list `list` (flushReduced emits it).
   void addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const;
   template <int Rows>
   void addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
-                   const Eigen::Matrix<double, Rows, 3>& B) const;
-  void addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B) const;
+                   const Eigen::Matrix<double, Rows, 3>& B, int list) const;
+  void addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B, int list) const;
   /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g.
   void mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces, VecX& g,
                  int offset) const;
@@ -250,9 +245,10 @@ class SoftTissue {
   /// projection of each bone's rotation curvature (the mixed δω–δu terms dropped).
   /// `fixed` (FEM, nodes = mass_nodes_ only; may be null): the bone–tissue coupling and
   /// node-diagonal blocks go into it, laid out as coupling_dofs_, instead of into H.
+  /// `list`: the ROM value list and the scratch to use (0: inertia, 1: the potential terms).
   void mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                   const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset,
-                  bool psd, std::vector<Mat3>* fixed = nullptr) const;
+                  bool psd, int list, std::vector<Mat3>* fixed = nullptr) const;
   // FEM: the fixed positions (relative to the simulable's first DoF) of the blocks mapHessian
   // writes for the mass nodes: per mass node with a DoF, from coupling_start_[idx], four per
   // influence a of bone b — (6b, u), (6b + 3, u), (u, 6b), (u, 6b + 3) — then (u, u).
@@ -262,7 +258,7 @@ class SoftTissue {
   std::vector<int> all_nodes_, surface_nodes_;
   mutable MatX3 contact_x_;
   mutable VecX contact_areas_;
-  mutable std::vector<Vec3> node_forces_;
+  mutable std::vector<Vec3> node_forces_[2];  // inertia's, gravity's
   mutable std::vector<Mat3> node_blocks_;
 };
 

@@ -246,8 +246,9 @@ TEST(ReducedModel, HessianBlocksComeAsOneFixedListPerPart) {
   }
 }
 
-// getHessianTripletVector (inertia and elastic terms on two threads for the ROM) returns exactly
-// the two block overloads' triplets and lists, in their order.
+// getHessianTripletVector (ROM: inertia on one thread, gravity and elasticity on another) returns
+// the two block overloads' lists, bit for bit, and their triplets (the dynamic ones in order,
+// the potential ones summing to the same).
 TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
   for (int kind : {0, 1, 2}) {
     Simulable sim(avatar(kind), test::smallScene(800).walk);
@@ -275,11 +276,19 @@ TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
       std::vector<FixedHessianBlocks> both_blocks;
       EXPECT_EQ(sim.getHessianTripletVector(both, both_blocks, 3, psd), 1 + dynamic_count);
       ASSERT_EQ(both.size(), 1 + parts.size());
-      for (size_t k = 0; k < parts.size(); ++k) {
+      for (size_t k = 0; k < dynamic_count; ++k) {  // the dynamic part in its order
         ASSERT_EQ(both[k + 1].row(), parts[k].row());
         ASSERT_EQ(both[k + 1].col(), parts[k].col());
         ASSERT_EQ(both[k + 1].value(), parts[k].value());
       }
+      // The potential part's triplets: the same sum (the ROM appends gravity's last).
+      const int n = sim.numDofs() + 3;
+      const MatX expected = test::denseFromTriplets(
+          std::vector<Triplet>(parts.begin() + long(dynamic_count), parts.end()), n);
+      const MatX got = test::denseFromTriplets(
+          std::vector<Triplet>(both.begin() + long(1 + dynamic_count), both.end()), n);
+      ASSERT_GT(expected.cwiseAbs().maxCoeff(), 0.0);
+      EXPECT_LE((got - expected).cwiseAbs().maxCoeff(), 1e-14 * expected.cwiseAbs().maxCoeff());
       ASSERT_EQ(both_blocks.size(), part_blocks.size());
       ASSERT_EQ(both_blocks.size(), kind == 0 ? 3u : 2u);
       for (size_t k = 0; k < both_blocks.size(); ++k) {

@@ -243,7 +243,8 @@ class Simulable {
   /// Both parts at once, as a scene assembles them: the triplets and lists of the dynamic
   /// block overload followed by those of the potential one (same values, same order). Returns
   /// the index in H where the potential part's triplets start. The ROM evaluates its inertia
-  /// and elastic terms concurrently (two OpenMP threads) here.
+  /// concurrently with gravity and elasticity here (two OpenMP threads); its potential
+  /// triplets then come in another order (the same sum).
   size_t getHessianTripletVector(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>& blocks,
                                  int offset, bool psd) const;
   /// Makes kinematic rows/columns of the assembled H identity (drops their triplets and adds
@@ -306,9 +307,10 @@ class Simulable {
   /// (blocks null: every term as triplets).
   void dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
                       int offset, bool psd) const;
-  /// elastic_done (ROM): the elastic blocks are already summed into the potential value list.
+  /// soft_done (ROM): gravity's and the elastic term's Hessians are already summed (the ROM's
+  /// value list; gravity's bone triplets are the caller's to append).
   void potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
-                        int offset, bool psd, bool elastic_done = false) const;
+                        int offset, bool psd, bool soft_done = false) const;
   std::unique_ptr<Impl> impl_;
 };
 

@@ -300,7 +300,15 @@ void HessianAssembler::fillDense(const std::vector<Triplet>& triplets,
     std::fill(pattern_.valuePtr(), pattern_.valuePtr() + pattern_.nonZeros(), 0.0);
     ++pattern_builds_;
   }
-  resetToPattern(pattern_, H);
+  // H has the full pattern when its columns start at multiples of n with n² entries (a
+  // compressed column holds sorted distinct rows): no comparison of its n² row indices.
+  bool full = H.rows() == n && H.cols() == n && H.isCompressed() &&
+              H.nonZeros() == Eigen::Index(n) * n;
+  for (int c = 0; full && c <= n; ++c) full = H.outerIndexPtr()[c] == c * n;
+  if (full)
+    std::fill(H.valuePtr(), H.valuePtr() + H.nonZeros(), 0.0);
+  else
+    resetToPattern(pattern_, H);
   double* values = H.valuePtr();
   last_lookups_ = 0;
   for (size_t k = 0; k < triplets.size(); ++k) {

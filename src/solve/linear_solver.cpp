@@ -55,11 +55,28 @@ class DenseCholeskySolver final : public LinearSolver {
         if (it.row() >= it.col()) dense_(it.row(), it.col()) = it.value();
     if (!dense_.allFinite()) return false;
     llt_.compute(dense_);  // reads the lower triangle only
+    float_factor_.resize(0, 0);  // made again on the next preconditionInPlace
     if (llt_.info() != Eigen::Success) return false;
     const auto pivots = llt_.matrixLLT().diagonal();
     if (!(pivots.minCoeff() > std::sqrt(kRelativePivotFloor) * pivots.maxCoeff())) return false;
     has_factor_ = true;
     return true;
+  }
+
+  /// The factor's triangular solves in single precision (a float copy of L made on the first
+  /// use after each factorization): half the memory traffic and twice the SIMD width of the
+  /// double solves, for a preconditioner ~1e-7 relative from the exact solve.
+  void preconditionInPlace(VecX& b) const override {
+    if (!has_factor_ || b.size() != dense_.rows()) {
+      solveInPlace(b);  // throws the same errors
+      return;
+    }
+    if (float_factor_.rows() != dense_.rows())
+      float_factor_ = llt_.matrixLLT().triangularView<Eigen::Lower>().toDenseMatrix().cast<float>();
+    float_rhs_ = b.cast<float>();
+    float_factor_.triangularView<Eigen::Lower>().solveInPlace(float_rhs_);
+    float_factor_.transpose().triangularView<Eigen::Upper>().solveInPlace(float_rhs_);
+    b = float_rhs_.cast<double>();
   }
 
   VecX solve(const VecX& b) const override {
@@ -90,6 +107,8 @@ class DenseCholeskySolver final : public LinearSolver {
   MatX dense_;
   Eigen::LLT<MatX> llt_;
   bool has_factor_ = false;
+  mutable Eigen::MatrixXf float_factor_;  // L in single precision (empty: not made yet)
+  mutable Eigen::VectorXf float_rhs_;
 };
 
 /// Eigen's simplicial LLᵀ with the permuted copy P A Pᵀ kept between factorizations: Eigen's own

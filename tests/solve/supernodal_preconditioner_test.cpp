@@ -1,7 +1,8 @@
 // The single-precision supernodal preconditioner of the CHOLMOD solver
 // (LinearSolver::preconditionInPlace): it matches the double-precision solve to float
 // accuracy, serially and split over two or three threads along the elimination tree, follows
-// refactorizations, and rejects calls without a factor or with a wrong size.
+// refactorizations, and rejects calls without a factor or with a wrong size. The dense solver's
+// single-precision preconditioner too; the simplicial one applies its exact solve.
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -143,17 +144,45 @@ TEST(SupernodalPreconditioner, RejectsCallsWithoutAFactorAndWrongSizes) {
   EXPECT_THROW(solver->preconditionInPlace(b), Error);
 }
 
-TEST(SupernodalPreconditioner, OtherSolversApplyTheirExactSolve) {
+TEST(SupernodalPreconditioner, SparseLltAppliesItsExactSolve) {
   const SpMat A = gridLaplacian(5, 4, 3, 2, 1.0);
   const VecX b = test::randomVector(int(A.rows()), 1.0, 3);
-  for (LinearSolverType type : {LinearSolverType::Dense, LinearSolverType::SparseLLT}) {
-    auto solver = makeLinearSolver(type, int(A.rows()));
+  auto solver = makeLinearSolver(LinearSolverType::SparseLLT, int(A.rows()));
+  ASSERT_TRUE(solver->factorize(A));
+  VecX x = b;
+  solver->preconditionInPlace(x);
+  EXPECT_EQ(x, solver->solve(b));
+  EXPECT_EQ(detail::preconditionerSplit(*solver).threads, 0);
+}
+
+// The dense solver's preconditioner: its factor's solves in single precision, following each
+// new factor, with the exact solve's errors.
+TEST(DensePreconditioner, IsTheSolveInSinglePrecisionAndFollowsEachFactor) {
+  SpMat A = gridLaplacian(8, 7, 6, 4, 1e-2);
+  const int n = int(A.rows());
+  const VecX b = test::randomVector(n, 1.0, 5);
+  auto solver = makeLinearSolver(LinearSolverType::Dense, n);
+  VecX none = b;
+  const std::string no_factor = test::messageOf<Error>([&] { solver->preconditionInPlace(none); });
+  EXPECT_NE(no_factor.find("no factor"), std::string::npos) << no_factor;
+  for (int round = 0; round < 3; ++round) {
+    for (int k = 0; k < A.nonZeros(); ++k) A.valuePtr()[k] *= 1.0 + 0.5 * round;
+    A.diagonal().array() += 0.2 * round;
     ASSERT_TRUE(solver->factorize(A));
     VecX x = b;
     solver->preconditionInPlace(x);
-    EXPECT_EQ(x, solver->solve(b));
-    EXPECT_EQ(detail::preconditionerSplit(*solver).threads, 0);
+    const VecX exact = solver->solve(b);
+    ASSERT_GT(exact.norm(), 0.0);
+    const double difference = (x - exact).norm() / exact.norm();
+    EXPECT_GT(difference, 0.0) << "round " << round;  // single precision, not the double solve
+    EXPECT_LT(difference, 1e-4) << "round " << round;
   }
+  VecX wrong = VecX::Ones(7);
+  const std::string wrong_size =
+      test::messageOf<InputError>([&] { solver->preconditionInPlace(wrong); });
+  EXPECT_NE(wrong_size.find("got 7"), std::string::npos) << wrong_size;
+  EXPECT_FALSE(solver->factorize(SpMat(-1.0 * A)));
+  EXPECT_THROW(solver->preconditionInPlace(none), Error);
 }
 
 }  // namespace

@@ -35,8 +35,8 @@ class LinearSolver {
   /// b ← M⁻¹ b with M ≈ the factored matrix, for preconditioning (PCG on a lagged factor): by
   /// default the exact solveInPlace(). CHOLMOD's solver runs it on a single-precision copy of
   /// its factor, split over the OpenMP threads along the elimination tree (3–6× faster per
-  /// solve on the 27 k-DoF FEM Hessian; relative difference from solve() ~1e-7 × cond(L)).
-  /// Same errors as solveInPlace().
+  /// solve on the 27 k-DoF FEM Hessian; relative difference from solve() ~1e-7 × cond(L)); the
+  /// dense solver on a single-precision copy of its factor. Same errors as solveInPlace().
   virtual void preconditionInPlace(VecX& b) const { solveInPlace(b); }
   /// True while the last factorize() succeeded: solve() then uses that factor. A failed
   /// factorize() drops it. The factor persists across newtonSolve calls (lagged preconditioner).

@@ -430,7 +430,11 @@ void SoftTissue::skinNodes(const std::vector<int>& nodes) const {
   const MatX3& t = *cur_t_;
   Vec3 shift[kNumJoints];
   for (int b = 0; b < num_bones_; ++b) shift[b] = t.row(b).transpose() - R[b] * joints_.row(b).transpose();
-  for (int j : nodes) {
+  // Nodes are distinct: each writes its own rows (and blendOf its own row and stamp).
+  const long count = long(nodes.size());
+#pragma omp parallel for schedule(static) if (count >= 512)
+  for (long idx = 0; idx < count; ++idx) {
+    const int j = nodes[size_t(idx)];
     const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + nodeDisplacement(u, j);
     Vec3 p = Vec3::Zero();
     Mat3 M = Mat3::Zero();

@@ -227,7 +227,8 @@ class SoftTissue {
   void positionsOf(const std::vector<int>& nodes, const BoneFrames& bones, const VecX& state,
                    MatX3& x) const;
   Vec3 blendOf(int j) const;
-  /// Y_, x_ and node_M_ rows of `nodes` at the prepared state.
+  /// Y_, x_ and node_M_ rows of `nodes` (distinct; split over the threads from 512) at the
+  /// prepared state.
   void skinNodes(const std::vector<int>& nodes) const;
   // Chain rule to the soft state: g(u_j) += v; H(bone row block at `row` (6b or 6b + 3), u_j) +=
   // B and its transpose; H(u_j, u_j) += B (symmetric). FEM: straight to g / triplets; ROM:

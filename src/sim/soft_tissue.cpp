@@ -3,6 +3,8 @@
 
 #include "hessian_blocks.h"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <exception>
@@ -749,33 +751,63 @@ double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, 
   const int T = int(tets_.rows());
   const int base = offset + bone_dofs_;
   const size_t handles = size_t(num_handles_);
-  double E = 0.0;
-  Mat3X Z(3, max_tet_handles_);
-  VecX ge(3 * max_tet_handles_);
-  MatX He(3 * max_tet_handles_, 3 * max_tet_handles_);
   const bool hessian = list != nullptr;
   Mat3* values = hessian ? list->data() : nullptr;
-  for (int e = 0; e < T; ++e) {
-    const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
-    if (count == 0) continue;
-    const int* tet_handles = &tet_handles_[size_t(begin)];
-    for (int s = 0; s < count; ++s) Z.col(s) = u.segment<3>(3 * tet_handles[s]);
-    Eigen::Ref<VecX> gradient = ge.head(3 * count);
-    Eigen::Ref<MatX> tet_hessian = He.topLeftCorner(3 * count, 3 * count);
-    const double w = element_weight_[e];
-    E += w * reducedTetElasticEnergy(elements_[size_t(e)].volume, materials_[size_t(e)],
-                                     tet_gradients_.middleCols(begin, count), Z.leftCols(count),
-                                     g ? &gradient : nullptr, hessian ? &tet_hessian : nullptr,
-                                     psd);
-    if (g)
-      for (int s = 0; s < count; ++s)
-        g->segment<3>(base + 3 * tet_handles[s]) += w * gradient.segment<3>(3 * s);
-    if (hessian)  // upper triangle of handle pairs (tet_handles_ ascending)
-      for (int s = 0; s < count; ++s) {
-        const size_t row = size_t(tet_handles[s]) * handles;
-        for (int r = s; r < count; ++r)
-          values[zz_slot_[row + size_t(tet_handles[r])]] += w * tet_hessian.block<3, 3>(3 * s, 3 * r);
+  // Tets [first, last): energy returned, gradient added into gz (the handles' 3H entries).
+  const auto tetRange = [&](int first, int last, double* gz) {
+    double E = 0.0;
+    Mat3X Z(3, max_tet_handles_);
+    VecX ge(3 * max_tet_handles_);
+    MatX He(hessian ? 3 * max_tet_handles_ : 0, hessian ? 3 * max_tet_handles_ : 0);
+    for (int e = first; e < last; ++e) {
+      const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
+      if (count == 0) continue;
+      const int* tet_handles = &tet_handles_[size_t(begin)];
+      for (int s = 0; s < count; ++s) Z.col(s) = u.segment<3>(3 * tet_handles[s]);
+      Eigen::Ref<VecX> gradient = ge.head(3 * count);
+      Eigen::Ref<MatX> tet_hessian = He.topLeftCorner(hessian ? 3 * count : 0, hessian ? 3 * count : 0);
+      const double w = element_weight_[e];
+      E += w * reducedTetElasticEnergy(elements_[size_t(e)].volume, materials_[size_t(e)],
+                                       tet_gradients_.middleCols(begin, count), Z.leftCols(count),
+                                       gz ? &gradient : nullptr, hessian ? &tet_hessian : nullptr,
+                                       psd);
+      if (gz)
+        for (int s = 0; s < count; ++s)
+          Eigen::Map<Vec3>(gz + 3 * tet_handles[s]) += w * gradient.segment<3>(3 * s);
+      if (hessian)  // upper triangle of handle pairs (tet_handles_ ascending)
+        for (int s = 0; s < count; ++s) {
+          const size_t row = size_t(tet_handles[s]) * handles;
+          for (int r = s; r < count; ++r)
+            values[zz_slot_[row + size_t(tet_handles[r])]] +=
+                w * tet_hessian.block<3, 3>(3 * s, 3 * r);
+        }
+    }
+    return E;
+  };
+  double E = 0.0;
+  const int threads = std::min(2, omp_get_max_threads());
+  if (hessian || T < 256 || threads < 2 || omp_in_parallel()) {
+    // The Hessian's block sums stay on one thread (it runs beside inertia's, see Simulable).
+    E = tetRange(0, T, g ? g->data() + base : nullptr);
+  } else {
+    // Energy or gradient alone: the tets in two halves, the second half's gradient apart.
+    VecX second = g ? VecX::Zero(3 * num_handles_) : VecX();
+    double energies[2] = {0.0, 0.0};
+    std::exception_ptr failure;
+#pragma omp parallel num_threads(2)
+    {
+      const int t = omp_get_thread_num();
+      try {
+        energies[t] = t == 0 ? tetRange(0, T / 2, g ? g->data() + base : nullptr)
+                             : tetRange(T / 2, T, g ? second.data() : nullptr);
+      } catch (...) {
+#pragma omp critical(flsh_soft_tissue_failure)
+        if (!failure) failure = std::current_exception();
       }
+    }
+    if (failure) std::rethrow_exception(failure);
+    E = energies[0] + energies[1];
+    if (g) g->segment(base, second.size()) += second;
   }
   if (correction_.size() > 0) {  // ½ zᵀ C z
     const VecX Cz = correction_ * u;

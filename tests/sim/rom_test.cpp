@@ -201,20 +201,28 @@ TEST(ReducedModel, CubatureOfEveryTetWithUnitWeightsIsExactIntegration) {
   EXPECT_LT((Hc - He).cwiseAbs().maxCoeff(), 1e-10 * He.cwiseAbs().maxCoeff());
 }
 
+// A simulable of avatar(kind) one walking step in, at a random state (bones moved, soft state
+// random), with a ground plane 1.5 cm above its lowest vertex.
+std::unique_ptr<Simulable> movedOnTheGround(int kind, unsigned seed) {
+  auto sim = std::make_unique<Simulable>(avatar(kind), test::smallScene(800).walk);
+  sim->initialize();
+  sim->preUpdate();
+  VecX d = randomVector(sim->numDofs(), 0.03, seed);
+  d.tail(sim->numDofs() - 144) = randomVector(sim->numDofs() - 144, 0.01, seed + 1);
+  sim->updateState(d);
+  sim->setColliders(
+      {Collider::plane(Vec3(0, sim->getNodes().col(1).minCoeff() + 0.015, 0), Vec3::UnitY())});
+  return sim;
+}
+
 // The block overloads return the ROM's bone–z and z–z blocks as one fixed list per part (same
 // positions in both parts and every call), summing with the remaining triplets to the triplet
 // overloads' Hessian, the triplets left being bone–bone ones; the list is symmetric (its lower
 // blocks mirror the upper ones) and covers every block even with the ground in contact.
 TEST(ReducedModel, HessianBlocksComeAsOneFixedListPerPart) {
   for (int kind : {1, 2}) {
-    Simulable sim(avatar(kind), test::smallScene(800).walk);
-    sim.initialize();
-    sim.preUpdate();
-    VecX d = randomVector(sim.numDofs(), 0.03, 5);
-    d.tail(sim.numDofs() - 144) = randomVector(sim.numDofs() - 144, 0.01, 6);
-    sim.updateState(d);
-    sim.setColliders(
-        {Collider::plane(Vec3(0, sim.getNodes().col(1).minCoeff() + 0.015, 0), Vec3::UnitY())});
+    const auto moved = movedOnTheGround(kind, 5);
+    const Simulable& sim = *moved;
     const int n = sim.numDofs(), offset = 7;
     const std::vector<std::pair<int, int>>* positions = nullptr;
     for (bool psd : {false, true})
@@ -251,14 +259,8 @@ TEST(ReducedModel, HessianBlocksComeAsOneFixedListPerPart) {
 // the potential ones summing to the same).
 TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
   for (int kind : {0, 1, 2}) {
-    Simulable sim(avatar(kind), test::smallScene(800).walk);
-    sim.initialize();
-    sim.preUpdate();
-    VecX d = randomVector(sim.numDofs(), 0.03, 8);
-    d.tail(sim.numDofs() - 144) = randomVector(sim.numDofs() - 144, 0.01, 9);
-    sim.updateState(d);
-    sim.setColliders(
-        {Collider::plane(Vec3(0, sim.getNodes().col(1).minCoeff() + 0.015, 0), Vec3::UnitY())});
+    const auto moved = movedOnTheGround(kind, 8);
+    const Simulable& sim = *moved;
     for (bool psd : {false, true}) {
       SCOPED_TRACE("kind " + std::to_string(kind) + (psd ? ", psd" : ", exact form"));
       std::vector<Triplet> parts;

@@ -34,12 +34,58 @@ void bind_solve(py::module_& m) {
       .value("SparseLLT", LinearSolverType::SparseLLT,
              "Eigen's simplicial Cholesky (AMD ordering), analysis reused while the pattern holds");
 
+  const LaggedFactorOptions ld;
+  py::class_<LaggedFactorOptions>(
+      m, "LaggedFactorOptions",
+      "Newton directions by conjugate gradients preconditioned with the factor of an earlier "
+      "Hessian, refactoring only when that stops paying off (NewtonOptions.lagged).")
+      .def(py::init([](bool enabled, double cg_relative_tolerance, bool adaptive_forcing,
+                       int max_cg_iterations, int refactor_after_cg_iterations,
+                       bool fast_preconditioner) {
+             LaggedFactorOptions o;
+             o.enabled = enabled;
+             o.cg_relative_tolerance = cg_relative_tolerance;
+             o.adaptive_forcing = adaptive_forcing;
+             o.max_cg_iterations = max_cg_iterations;
+             o.refactor_after_cg_iterations = refactor_after_cg_iterations;
+             o.fast_preconditioner = fast_preconditioner;
+             return o;
+           }),
+           py::kw_only(), py::arg("enabled") = ld.enabled,
+           py::arg("cg_relative_tolerance") = ld.cg_relative_tolerance,
+           py::arg("adaptive_forcing") = ld.adaptive_forcing,
+           py::arg("max_cg_iterations") = ld.max_cg_iterations,
+           py::arg("refactor_after_cg_iterations") = ld.refactor_after_cg_iterations,
+           py::arg("fast_preconditioner") = ld.fast_preconditioner,
+           "Keyword arguments; values are checked when a solve starts (ValueError).")
+      .def_readwrite("enabled", &LaggedFactorOptions::enabled,
+                     "False: every Newton iteration factors its Hessian")
+      .def_readwrite("cg_relative_tolerance", &LaggedFactorOptions::cg_relative_tolerance,
+                     "forcing term in (0, 1): CG stops at ‖H d + g‖₂ ≤ η ‖g‖₂")
+      .def_readwrite("adaptive_forcing", &LaggedFactorOptions::adaptive_forcing,
+                     "η_k = min(η, ‖g_k‖₂/‖g_k−1‖₂): tighter as Newton converges")
+      .def_readwrite("max_cg_iterations", &LaggedFactorOptions::max_cg_iterations,
+                     "CG iterations (≥ 1) per direction before factoring instead")
+      .def_readwrite("refactor_after_cg_iterations",
+                     &LaggedFactorOptions::refactor_after_cg_iterations,
+                     "a solve needing more CG iterations than this (≥ 0) marks the factor stale")
+      .def_readwrite("fast_preconditioner", &LaggedFactorOptions::fast_preconditioner,
+                     "apply the factor in single precision (CHOLMOD: split over the threads)")
+      .def("__repr__", [](const LaggedFactorOptions& o) {
+        return "LaggedFactorOptions(enabled=" + std::string(o.enabled ? "True" : "False") +
+               ", cg_relative_tolerance=" +
+               py::repr(py::float_(o.cg_relative_tolerance)).cast<std::string>() +
+               ", max_cg_iterations=" + std::to_string(o.max_cg_iterations) + ")";
+      });
+
   const NewtonOptions nd;
   py::class_<NewtonOptions>(m, "NewtonOptions", "Newton's method with backtracking line search.")
       .def(py::init([](int max_iterations, double gradient_tolerance, double step_tolerance,
                        int max_line_search_steps, double armijo, double initial_regularization,
-                       LinearSolverType linear_solver, bool exact_hessian) {
+                       LinearSolverType linear_solver, bool exact_hessian,
+                       const py::object& lagged) {
              NewtonOptions o;
+             if (!lagged.is_none()) o.lagged = lagged.cast<LaggedFactorOptions>();
              o.max_iterations = max_iterations;
              o.gradient_tolerance = gradient_tolerance;
              o.step_tolerance = step_tolerance;
@@ -57,8 +103,9 @@ void bind_solve(py::module_& m) {
            py::arg("armijo") = nd.armijo,
            py::arg("initial_regularization") = nd.initial_regularization,
            py::arg("linear_solver") = nd.linear_solver,
-           py::arg("exact_hessian") = nd.exact_hessian,
-           "Keyword arguments; values are checked when a solve starts (ValueError).")
+           py::arg("exact_hessian") = nd.exact_hessian, py::arg("lagged") = py::none(),
+           "Keyword arguments (lagged: LaggedFactorOptions, or None: off); values are checked "
+           "when a solve starts (ValueError).")
       .def_readwrite("max_iterations", &NewtonOptions::max_iterations)
       .def_readwrite("gradient_tolerance", &NewtonOptions::gradient_tolerance,
                      "converged when ‖g‖∞ ≤ tol · max(1, ‖g₀‖∞)")
@@ -71,6 +118,8 @@ void bind_solve(py::module_& m) {
       .def_readwrite("linear_solver", &NewtonOptions::linear_solver)
       .def_readwrite("exact_hessian", &NewtonOptions::exact_hessian,
                      "try the exact Hessian first (falls back to the PSD form if not PD)")
+      .def_readwrite("lagged", &NewtonOptions::lagged,
+                     "LaggedFactorOptions (edit in place: options.lagged.enabled = False)")
       .def("__repr__", [](const NewtonOptions& o) {
         return "NewtonOptions(max_iterations=" + std::to_string(o.max_iterations) +
                ", gradient_tolerance=" +

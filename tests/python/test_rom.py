@@ -225,6 +225,46 @@ def test_scene_options_carry_the_reduced_newton():
     assert options.reduced_newton.gradient_tolerance == 2e-6
 
 
+def test_lagged_factor_options_reach_the_solver(avatar):
+    defaults = flsh.SceneOptions().reduced_newton.lagged
+    assert defaults.enabled and 0 < defaults.cg_relative_tolerance < 1
+    assert defaults.fast_preconditioner and defaults.max_cg_iterations >= 1
+    assert flsh.NewtonOptions().lagged.enabled is False  # plain Newton unless asked
+
+    def run(lagged):
+        motion = flsh.make_builtin_motion("jumping_jacks", seconds=0.5, fps=30.0)
+        sim = flsh.Simulable(avatar, motion, flsh.SimulableOptions(time_step=1.0 / 30.0))
+        options = flsh.SceneOptions()
+        options.reduced_newton.lagged = lagged
+        scene = flsh.Scene(options)
+        scene.add_simulable(sim)
+        scene.initialize()
+        totals = [0, 0, 0]
+        for _ in range(3):
+            n = scene.step().newton
+            assert n.converged, n.message
+            totals = [totals[0] + n.iterations, totals[1] + n.factorizations,
+                      totals[2] + n.cg_iterations]
+        return totals, sim.get_state()
+
+    (iterations, factorizations, cg), q_lag = run(flsh.LaggedFactorOptions(enabled=True))
+    assert cg > 0 and factorizations < iterations  # PCG on an earlier factor
+    off = flsh.NewtonOptions().lagged
+    off.enabled = False  # edited in place
+    assert off.enabled is False
+    (iterations, factorizations, cg), q_plain = run(off)
+    assert cg == 0 and factorizations >= iterations  # every iteration factors
+    assert np.abs(q_lag - q_plain).max() < 1e-4  # both converged to the same states
+    exact = flsh.LaggedFactorOptions(enabled=True, fast_preconditioner=False,
+                                     cg_relative_tolerance=1e-3)
+    assert not exact.fast_preconditioner and exact.cg_relative_tolerance == 1e-3
+    (_, _, cg_exact), _ = run(exact)
+    assert cg_exact > 0
+    with pytest.raises(ValueError, match="cg_relative_tolerance"):
+        run(flsh.LaggedFactorOptions(enabled=True, cg_relative_tolerance=2.0))
+    assert "LaggedFactorOptions(enabled=True" in repr(flsh.LaggedFactorOptions(enabled=True))
+
+
 def test_errors(small_body, avatar, rom, tmp_path):
     # The reduced model is a soft-tissue model.
     alone = flsh.SoftAvatar(small_body, use_cache=False)

@@ -94,7 +94,8 @@ struct SimulableStats {
 };
 
 /// 3 × 3 Hessian blocks whose positions stay the same from one evaluation to the next (the FEM's
-/// elastic node pairs, its bone–tissue coupling and node-diagonal blocks), handed to an
+/// elastic node pairs, its bone–tissue coupling and node-diagonal blocks; the ROM's bone–handle
+/// and handle–handle blocks), handed to an
 /// assembler without expanding them into triplets. Block k is added at rows
 /// positions[k].first … + 2 and columns positions[k].second … + 2 (plus `offset`); the
 /// positions of one list are distinct. Both vectors belong to the simulable and hold until its
@@ -229,11 +230,12 @@ class Simulable {
   void getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset = 0,
                                         bool psd = true) const;
   /// The same Hessians with the blocks of fixed position (FEM: the elastic node pairs, and the
-  /// bone–tissue coupling and node-diagonal blocks of inertia and gravity) returned as lists
-  /// APPENDED to `blocks` instead of as triplets (for assemblers that cache their slots, e.g.
-  /// Scene's; triplets plus blocks sum to the triplet version's Hessian). Each call appends the
-  /// same number of lists with the same positions for a given simulable (none for skeleton and
-  /// reduced models).
+  /// bone–tissue coupling and node-diagonal blocks of inertia and gravity; ROM: every bone–handle
+  /// and handle–handle block, one list per part) returned as lists APPENDED to `blocks` instead
+  /// of as triplets (for assemblers that cache their slots, e.g. Scene's; triplets plus blocks
+  /// sum to the triplet version's Hessian). Each call appends the same number of lists with the
+  /// same positions for a given simulable (none for the skeleton). A list's values are valid
+  /// until the next Hessian call of that part.
   void getDynamicHessianTripletVector(std::vector<Triplet>& H,
                                       std::vector<FixedHessianBlocks>& blocks, int offset,
                                       bool psd) const;

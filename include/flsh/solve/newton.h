@@ -84,7 +84,9 @@ struct LaggedFactorOptions {
   /// the factor, triangular solves split over the threads) instead of the exact double-precision
   /// solve. The preconditioner is an approximation anyway (a lagged factor); the float copy
   /// only moves it by ~1e-7 relative. FEM walk (27 k DoFs): the same Newton and PCG iteration
-  /// counts, a PCG iteration ~9 → ~4 ms (docs/benchmarks.md).
+  /// counts, a PCG iteration ~9 → ~4 ms (docs/benchmarks.md). The dense solver (ROM) applies a
+  /// float copy of its LLᵀ factor: the same PCG iteration counts, solves ~1.5 → ~1.2 ms per
+  /// walking step.
   bool fast_preconditioner = true;
 };
 

@@ -175,13 +175,17 @@ void checkBlockPositions(const FixedHessianBlocks& list, size_t b, int n) {
   }
 }
 
-// H takes P's pattern (kept, with its storage, when it already has it) with zero values.
+// H takes P's pattern (kept, with its storage, when it already has it) with zero values. With
+// the full n × n pattern the column starts decide (a compressed column holds sorted distinct
+// rows): no comparison of the n² row indices.
 void resetToPattern(const SpMat& P, SpMat& H) {
   const int n = int(P.rows());
   const Eigen::Index nnz = P.nonZeros();
+  const bool full = nnz == Eigen::Index(n) * n;
   const bool same = H.rows() == n && H.cols() == n && H.isCompressed() && H.nonZeros() == nnz &&
                     std::equal(P.outerIndexPtr(), P.outerIndexPtr() + n + 1, H.outerIndexPtr()) &&
-                    std::equal(P.innerIndexPtr(), P.innerIndexPtr() + nnz, H.innerIndexPtr());
+                    (full ||
+                     std::equal(P.innerIndexPtr(), P.innerIndexPtr() + nnz, H.innerIndexPtr()));
   if (!same) H = P;
   std::fill(H.valuePtr(), H.valuePtr() + nnz, 0.0);
 }
@@ -300,15 +304,7 @@ void HessianAssembler::fillDense(const std::vector<Triplet>& triplets,
     std::fill(pattern_.valuePtr(), pattern_.valuePtr() + pattern_.nonZeros(), 0.0);
     ++pattern_builds_;
   }
-  // H has the full pattern when its columns start at multiples of n with n² entries (a
-  // compressed column holds sorted distinct rows): no comparison of its n² row indices.
-  bool full = H.rows() == n && H.cols() == n && H.isCompressed() &&
-              H.nonZeros() == Eigen::Index(n) * n;
-  for (int c = 0; full && c <= n; ++c) full = H.outerIndexPtr()[c] == c * n;
-  if (full)
-    std::fill(H.valuePtr(), H.valuePtr() + H.nonZeros(), 0.0);
-  else
-    resetToPattern(pattern_, H);
+  resetToPattern(pattern_, H);
   double* values = H.valuePtr();
   last_lookups_ = 0;
   for (size_t k = 0; k < triplets.size(); ++k) {

@@ -21,8 +21,7 @@ void addBlock(std::vector<Triplet>& H, int row0, int col0, const Eigen::MatrixBa
 
 /// N × N blocks of a (row blocks × column blocks) matrix accumulated over many points and
 /// emitted once: block(r, c) zeroes a block on first touch; emit() appends the touched ones at
-/// (row0 + N r, col0 + N c), with `mirror` also their transposes at (col0 + N c, row0 + N r),
-/// and forgets them. Storage stays allocated between evaluations.
+/// (row0 + N r, col0 + N c) and forgets them. Storage stays allocated between evaluations.
 template <int N>
 class TouchedBlocks {
  public:
@@ -42,11 +41,9 @@ class TouchedBlocks {
     }
     return blocks_[key];
   }
-  void emit(std::vector<Triplet>& H, int row0, int col0, bool mirror = false) {
+  void emit(std::vector<Triplet>& H, int row0, int col0) {
     for (int key : list_) {
-      const int r = row0 + N * (key / cols_), c = col0 + N * (key % cols_);
-      addBlock(H, r, c, blocks_[key]);
-      if (mirror) addBlock(H, c, r, blocks_[key].transpose());
+      addBlock(H, row0 + N * (key / cols_), col0 + N * (key % cols_), blocks_[key]);
       touched_[key] = 0;
     }
     list_.clear();

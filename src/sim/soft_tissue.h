@@ -203,7 +203,7 @@ class SoftTissue {
   // ROM Hessian blocks at fixed positions (buildReducedPattern): z–z blocks (zz_slot_[h · H +
   // k], H handles), bone–z blocks (bz_slot_[r · H + h], r = 2b for bone b's t rows, 2b + 1 for
   // its ω rows), then the bone–z blocks' transposes; positions relative to the first DoF. Two
-  // value lists (dynamic, potential); beginReduced picks the target.
+  // value lists: 0 (inertia), 1 (the potential terms).
   std::vector<int> zz_slot_, bz_slot_;
   int num_zz_ = 0, num_bz_ = 0;
   std::vector<std::pair<int, int>> zz_mirror_;  // (slot of (h, k), slot of (k, h)) for h > k

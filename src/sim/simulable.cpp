@@ -10,9 +10,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <exception>
 #include <string>
 
+#include "core/first_failure.h"
 #include "flsh/body/body_forward.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
@@ -1281,30 +1281,18 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
   std::vector<Triplet>& gravity = m.hessian_scratch[1];
   inertia.clear();
   gravity.clear();
-  std::exception_ptr failure;
+  detail::FirstFailure failure;
 #pragma omp parallel sections num_threads(2)
   {
 #pragma omp section
-    {
-      try {
-        m.soft->inertia(nullptr, &inertia, offset, psd);
-      } catch (...) {
-#pragma omp critical(flsh_simulable_hessian_failure)
-        if (!failure) failure = std::current_exception();
-      }
-    }
+    failure.run([&] { m.soft->inertia(nullptr, &inertia, offset, psd); });
 #pragma omp section
-    {
-      try {
-        m.soft->gravity(m.options.gravity, nullptr, &gravity, offset, psd);
-        m.soft->elastic(nullptr, &gravity, offset, psd);
-      } catch (...) {
-#pragma omp critical(flsh_simulable_hessian_failure)
-        if (!failure) failure = std::current_exception();
-      }
-    }
+    failure.run([&] {
+      m.soft->gravity(m.options.gravity, nullptr, &gravity, offset, psd);
+      m.soft->elastic(nullptr, &gravity, offset, psd);
+    });
   }
-  if (failure) std::rethrow_exception(failure);
+  failure.rethrow();
   H.insert(H.end(), inertia.begin(), inertia.end());
   m.soft->flushReduced(0, H, offset, &blocks);
   const size_t potential_start = H.size();

@@ -7,9 +7,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <exception>
 #include <string>
 
+#include "core/first_failure.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
@@ -702,25 +702,23 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
   if (g) element_gradients_.resize(T);
   if (H) element_hessians_.resize(T);
   double E = 0.0;
-  // An exception must not leave an OpenMP region: the first one is kept and rethrown.
-  std::exception_ptr failure;
+  FirstFailure failure;
 #pragma omp parallel for schedule(static) reduction(+ : E) if (T > 2000)
   for (int e = 0; e < T; ++e) {
-    try {
+    double tet = 0.0;  // the reduction's E stays outside the lambda
+    failure.run([&] {
       const double w = element_weight_[e];
-      E += w * tetElasticEnergy(elements_[e], materials_[e], elementDisplacement(e),
-                                g ? &element_gradients_[e] : nullptr,
-                                H ? &element_hessians_[e] : nullptr, psd);
+      tet = w * tetElasticEnergy(elements_[e], materials_[e], elementDisplacement(e),
+                                 g ? &element_gradients_[e] : nullptr,
+                                 H ? &element_hessians_[e] : nullptr, psd);
       if (w != 1.0) {
         if (g) element_gradients_[e] *= w;
         if (H) element_hessians_[e] *= w;
       }
-    } catch (...) {
-#pragma omp critical(flsh_soft_tissue_failure)
-      if (!failure) failure = std::current_exception();
-    }
+    });
+    E += tet;
   }
-  if (failure) std::rethrow_exception(failure);
+  failure.rethrow();
   if (g) {
     for (int e = 0; e < T; ++e)
       for (int a = 0; a < 4; ++a)
@@ -793,19 +791,16 @@ double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, 
     // Energy or gradient alone: the tets in two halves, the second half's gradient apart.
     VecX second = g ? VecX::Zero(3 * num_handles_) : VecX();
     double energies[2] = {0.0, 0.0};
-    std::exception_ptr failure;
+    FirstFailure failure;
 #pragma omp parallel num_threads(2)
     {
       const int t = omp_get_thread_num();
-      try {
+      failure.run([&] {
         energies[t] = t == 0 ? tetRange(0, T / 2, g ? g->data() + base : nullptr)
                              : tetRange(T / 2, T, g ? second.data() : nullptr);
-      } catch (...) {
-#pragma omp critical(flsh_soft_tissue_failure)
-        if (!failure) failure = std::current_exception();
-      }
+      });
     }
-    if (failure) std::rethrow_exception(failure);
+    failure.rethrow();
     E = energies[0] + energies[1];
     if (g) g->segment(base, second.size()) += second;
   }

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "core/first_failure.h"
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
 #include "flsh/sim/fem_material.h"
@@ -338,12 +339,12 @@ MatX elasticRestCorrection(const VolumetricData& data, const SpMat& basis,
   threads = omp_get_max_threads();
 #endif
   std::vector<MatX> partial(size_t(threads), MatX::Zero(3 * H, 3 * H));
-  std::exception_ptr failure;
+  detail::FirstFailure failure;
 #pragma omp parallel for schedule(dynamic, 64)
   for (int c = 0; c < E; ++c) {
-    try {
+    failure.run([&] {
       const double scale = 1.0 - weight[size_t(c)];
-      if (scale == 0.0) continue;
+      if (scale == 0.0) return;
       int thread = 0;
 #ifdef _OPENMP
       thread = omp_get_thread_num();
@@ -359,12 +360,9 @@ MatX elasticRestCorrection(const VolumetricData& data, const SpMat& basis,
             for (SpMat::InnerIterator ib(rows, tets(t, b)); ib; ++ib)
               C.block<3, 3>(3 * ia.row(), 3 * ib.row()) +=
                   (scale * ia.value() * ib.value()) * K.block<3, 3>(3 * a, 3 * b);
-    } catch (...) {
-#pragma omp critical(flsh_reduced_correction_failure)
-      if (!failure) failure = std::current_exception();
-    }
+    });
   }
-  if (failure) std::rethrow_exception(failure);
+  failure.rethrow();
   MatX C = MatX::Zero(3 * H, 3 * H);
   for (const MatX& p : partial) C += p;
   C = 0.5 * (C + C.transpose());  // symmetric up to rounding: make it exactly so

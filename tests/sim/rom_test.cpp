@@ -304,6 +304,28 @@ TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
   }
 }
 
+// A soft state that overflowed to infinity: the elastic kernels' InputError reaches the caller
+// from inside the parallel regions (energy, gradient, both Hessian parts at once), no crash.
+TEST(ReducedModel, NonFiniteSoftStateIsAnInputErrorFromEveryEvaluation) {
+  for (int kind : {0, 1, 2}) {
+    SCOPED_TRACE("kind " + std::to_string(kind));
+    Simulable sim(avatar(kind), test::smallScene(800).walk);
+    sim.initialize();
+    sim.preUpdate();
+    VecX d = VecX::Zero(sim.numDofs());
+    d.tail(sim.numDofs() - 144).setConstant(1e308);
+    sim.updateState(d);
+    sim.updateState(d);  // 2e308: +inf
+    ASSERT_FALSE(sim.getState().allFinite());
+    EXPECT_THROW(sim.getPotentialEnergyScalar(), InputError);
+    VecX g = VecX::Zero(sim.numDofs());
+    EXPECT_THROW(sim.getPotentialGradientVector(g), InputError);
+    std::vector<Triplet> H;
+    std::vector<FixedHessianBlocks> blocks;
+    EXPECT_THROW(sim.getHessianTripletVector(H, blocks, 0, true), InputError);
+  }
+}
+
 TEST(ReducedModel, SceneOnTheDenseSolverStoresItsHessianDense) {
   // A reduced-model scene (a few hundred DoFs) gets the dense solver, and its Hessian full n × n
   // storage: the same sums as the simulable's triplets, and steps that converge.

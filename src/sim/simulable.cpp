@@ -1272,9 +1272,8 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
   }
   // ROM: inertia (value list 0 and its bone triplets) on one thread, gravity and the elastic
   // term (list 1 and gravity's bone triplets) on the other; they share no scratch. Then
-  // contact and the bones' springs.
-  m.prepareSoft();
-  m.ensureContact();
+  // contact and the bones' springs (potentialHessian).
+  m.prepareSoft();  // both threads read the skinned mass nodes
   m.soft->beginReduced(0);
   m.soft->beginReduced(1);
   std::vector<Triplet>& inertia = m.hessian_scratch[0];

@@ -103,19 +103,22 @@ void bind_sim(py::module_& m) {
   py::class_<SimulableOptions>(m, "SimulableOptions",
                                "Stiffnesses and physical settings of a Simulable (SI units).")
       .def(py::init([](double time_step, const py::object& gravity, double joint_stiffness,
-                       double tracking_stiffness, double root_stiffness, bool track_mocap,
+                       double tracking_stiffness, double tracking_inertia_floor,
+                       double root_stiffness, bool track_mocap,
                        const py::object& kinematic_bones, const py::object& contact) {
              if (!(std::isfinite(time_step) && time_step > 0.0))
                throw py::value_error("time_step: expected a finite value > 0 (s), got " +
                                      std::to_string(time_step));
              check_finite_nonnegative(joint_stiffness, "joint_stiffness");
              check_finite_nonnegative(tracking_stiffness, "tracking_stiffness");
+             check_finite_nonnegative(tracking_inertia_floor, "tracking_inertia_floor");
              check_finite_nonnegative(root_stiffness, "root_stiffness");
              SimulableOptions o;
              o.time_step = time_step;
              if (!gravity.is_none()) o.gravity = to_vec3(gravity, "gravity");
              o.joint_stiffness = joint_stiffness;
              o.tracking_stiffness = tracking_stiffness;
+             o.tracking_inertia_floor = tracking_inertia_floor;
              o.root_stiffness = root_stiffness;
              o.track_mocap = track_mocap;
              o.kinematic_bones = kinematic_list(kinematic_bones);
@@ -125,6 +128,7 @@ void bind_sim(py::module_& m) {
            py::kw_only(), py::arg("time_step") = defaults.time_step,
            py::arg("gravity") = py::none(), py::arg("joint_stiffness") = defaults.joint_stiffness,
            py::arg("tracking_stiffness") = defaults.tracking_stiffness,
+           py::arg("tracking_inertia_floor") = defaults.tracking_inertia_floor,
            py::arg("root_stiffness") = defaults.root_stiffness,
            py::arg("track_mocap") = defaults.track_mocap, py::arg("kinematic_bones") = py::none(),
            py::arg("contact") = py::none(),
@@ -136,7 +140,10 @@ void bind_sim(py::module_& m) {
                     "(3,) m/s²")
       .def_readwrite("joint_stiffness", &SimulableOptions::joint_stiffness, "k_J, N/m")
       .def_readwrite("tracking_stiffness", &SimulableOptions::tracking_stiffness,
-                     "ω_T², 1/s² (joint springs k_b = ω_T² I_b)")
+                     "ω_T², 1/s² (joint springs k_b = ω_T² (I_b + tracking_inertia_floor))")
+      .def_readwrite("tracking_inertia_floor", &SimulableOptions::tracking_inertia_floor,
+                     "kg·m², added to each non-root bone's subtree inertia I_b in its tracking "
+                     "stiffness, so that toes and hands are not nearly free (0 = pure I_b)")
       .def_readwrite("root_stiffness", &SimulableOptions::root_stiffness,
                      "1/s² (root springs scaled by mass and polar inertia)")
       .def_readwrite("track_mocap", &SimulableOptions::track_mocap,

@@ -427,12 +427,16 @@ class SceneReader {
                             SimulableOptions& options) const {
     requireObject(node, path);
     checkKeys(node, path,
-              {"tracking_stiffness", "root_stiffness", "joint_stiffness", "contact_stiffness",
-               "gravity", "kinematic_bones", "track_mocap"});
+              {"tracking_stiffness", "tracking_inertia_floor", "root_stiffness", "joint_stiffness",
+               "contact_stiffness", "gravity", "kinematic_bones", "track_mocap"});
     const double inf = std::numeric_limits<double>::infinity();
     if (node.contains("tracking_stiffness"))
       options.tracking_stiffness = toRange(
           node["tracking_stiffness"], child(path, "tracking_stiffness"), 0.0, inf, false, "1/s²");
+    if (node.contains("tracking_inertia_floor"))
+      options.tracking_inertia_floor =
+          toRange(node["tracking_inertia_floor"], child(path, "tracking_inertia_floor"), 0.0, inf,
+                  false, "kg·m²");
     if (node.contains("root_stiffness"))
       options.root_stiffness =
           toRange(node["root_stiffness"], child(path, "root_stiffness"), 0.0, inf, false, "1/s²");

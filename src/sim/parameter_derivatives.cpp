@@ -35,10 +35,12 @@ std::vector<std::vector<int>> subtrees(const SimulableParameterView& v) {
   return sub;
 }
 
-// I_b = Σ_{c ∈ subtree(b)} tr(S_c) + 2 m̄_c·d + M_c‖d‖², d = J_c − J_b (kg·m²), as the
-// stiffness construction computes it.
-double polarMoment(const SimulableParameterView& v, const std::vector<int>& subtree, int b) {
-  double I = 0.0;
+// The moment a tracking spring's stiffness scales (kg·m²), as the stiffness construction
+// computes it: I_b = Σ_{c ∈ subtree(b)} tr(S_c) + 2 m̄_c·d + M_c‖d‖², d = J_c − J_b, plus
+// SimulableOptions::tracking_inertia_floor for every bone but the root (a constant: it adds
+// nothing to the derivatives with respect to the joints or the inertias).
+double trackingMoment(const SimulableParameterView& v, const std::vector<int>& subtree, int b) {
+  double I = b == 0 ? 0.0 : v.options.tracking_inertia_floor;
   for (int c : subtree) {
     const Vec3 d = (v.J.row(c) - v.J.row(b)).transpose();
     const BoneInertia& in = v.inertia[c];
@@ -209,7 +211,7 @@ MatX poseTargetsJacobian(const SimulableParameterView& v) {
     const Mat3 R_p = p < 0 ? Mat3::Identity() : v.R[p];
     const double stiffness =
         (b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness) *
-        polarMoment(v, sub[b], b);
+        trackingMoment(v, sub[b], b);
     const Vec3 theta = logSO3(v.target_R[b]);
     const Vec3 e = logSO3(R_p.transpose() * v.R[b] * v.target_R[b].transpose());
     const Mat3 dw = -stiffness * R_p * leftJacobianInverseSO3(e).transpose() *
@@ -235,7 +237,7 @@ MatX stiffnessesJacobian(const SimulableParameterView& v) {
     const auto sub = subtrees(v);
     for (int b = 0; b < v.num_bones; ++b) {
       Eigen::RowVectorXd dk = Eigen::RowVectorXd::Zero(1);
-      dk[0] = polarMoment(v, sub[b], b);
+      dk[0] = trackingMoment(v, sub[b], b);
       addTrackingColumns(v, b, dk, b == 0 ? 2 : 1, D);
     }
     double mass = 0.0;
@@ -449,7 +451,7 @@ VecX poseTargetsVJP(const VJPContext& c) {
     const Mat3 R_p = p < 0 ? Mat3::Identity() : v.R[p];
     const double stiffness =
         (b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness) *
-        polarMoment(v, c.sub[b], b);
+        trackingMoment(v, c.sub[b], b);
     const Vec3 theta = logSO3(v.target_R[b]);
     const Vec3 e = logSO3(R_p.transpose() * v.R[b] * v.target_R[b].transpose());
     const Mat3 dw = -stiffness * R_p * leftJacobianInverseSO3(e).transpose() *
@@ -475,7 +477,7 @@ VecX stiffnessesVJP(const VJPContext& c) {
   }
   if (v.tracking) {
     for (int b = 0; b < v.num_bones; ++b)
-      out[b == 0 ? 2 : 1] += polarMoment(v, c.sub[b], b) * c.tracking[b];
+      out[b == 0 ? 2 : 1] += trackingMoment(v, c.sub[b], b) * c.tracking[b];
     out[2] += totalMass(v) * (v.t.row(0).transpose() - v.target_t0).dot(lambdaT(l, 0));
   }
   const int n = int(v.candidates.size());

@@ -188,6 +188,7 @@ void Simulable::Impl::validateOptions() const {
       {"joint_stiffness", options.joint_stiffness},
       {"tracking_stiffness", options.tracking_stiffness},
       {"root_stiffness", options.root_stiffness},
+      {"tracking_inertia_floor", options.tracking_inertia_floor},
       {"contact.stiffness", options.contact.stiffness}};
   for (const auto& [name, value] : stiffnesses)
     if (!(value >= 0.0) || !std::isfinite(value))
@@ -282,9 +283,10 @@ void Simulable::Impl::buildClusters() {
   }
 }
 
-// Tracking stiffness k_b = ω_T² I_b with I_b = Σ m‖X − J_b‖² over bone b's subtree, from each
-// bone c's moments about its own joint by the parallel-axis shift d = J_c − J_b:
-// Σ_c m‖(X − J_c) + d‖² = tr(S_c) + 2 m̄_c·d + M_c‖d‖². The root spring uses the whole body.
+// Tracking stiffness k_b = ω_T² (I_b + I_floor), I_floor = options.tracking_inertia_floor, with
+// I_b = Σ m‖X − J_b‖² over bone b's subtree from each bone c's moments about its own joint by
+// the parallel-axis shift d = J_c − J_b: Σ_c m‖(X − J_c) + d‖² = tr(S_c) + 2 m̄_c·d + M_c‖d‖².
+// The root spring uses the whole body (no floor).
 void Simulable::Impl::buildStiffnesses() {
   std::vector<std::vector<int>> children(num_bones);
   for (int b = 1; b < num_bones; ++b) children[parents[b]].push_back(b);
@@ -302,7 +304,8 @@ void Simulable::Impl::buildStiffnesses() {
     return I;
   };
   tracking_k.assign(num_bones, 0.0);
-  for (int b = 1; b < num_bones; ++b) tracking_k[b] = options.tracking_stiffness * polarMoment(b);
+  for (int b = 1; b < num_bones; ++b)
+    tracking_k[b] = options.tracking_stiffness * (polarMoment(b) + options.tracking_inertia_floor);
   double mass = 0.0;
   for (const BoneInertia& bone : inertia) mass += bone.mass;
   root_k_pos = options.root_stiffness * mass;

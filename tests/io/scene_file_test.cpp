@@ -74,8 +74,8 @@ TEST(SceneFile, ReadsEveryKey) {
     "avatars": [{"name": "a-1", "vertices": 800, "betas": [0.5, -1],
                  "motion": "builtin:jumping_jacks", "motion_seconds": 1.5,
                  "offset": [1, 0, -2], "yaw_degrees": 90,
-                 "options": {"tracking_stiffness": 100, "root_stiffness": 50,
-                             "joint_stiffness": 2e4, "contact_stiffness": 1e5,
+                 "options": {"tracking_stiffness": 100, "tracking_inertia_floor": 0.02,
+                             "root_stiffness": 50, "joint_stiffness": 2e4, "contact_stiffness": 1e5,
                              "gravity": [0, -1.62, 0], "kinematic_bones": [0, 15],
                              "track_mocap": false}},
                 {"name": "b"}],
@@ -106,6 +106,7 @@ TEST(SceneFile, ReadsEveryKey) {
   EXPECT_NEAR(a.yaw, M_PI / 2, 1e-12);
   EXPECT_DOUBLE_EQ(a.options.time_step, 0.01);
   EXPECT_DOUBLE_EQ(a.options.tracking_stiffness, 100);
+  EXPECT_DOUBLE_EQ(a.options.tracking_inertia_floor, 0.02);
   EXPECT_DOUBLE_EQ(a.options.root_stiffness, 50);
   EXPECT_DOUBLE_EQ(a.options.joint_stiffness, 2e4);
   EXPECT_DOUBLE_EQ(a.options.contact.stiffness, 1e5);
@@ -201,6 +202,8 @@ TEST(SceneFile, WrongTypesAndValuesAreNamedWithTheirPath) {
        "avatars[0].options.joint_stiffness: expected 0 < value"},
       {R"({"avatars": [{"options": {"tracking_stiffness": -1}}]})",
        "options.tracking_stiffness: expected 0 <= value"},
+      {R"({"avatars": [{"options": {"tracking_inertia_floor": -0.01}}]})",
+       "options.tracking_inertia_floor: expected 0 <= value"},
       {R"({"avatars": [{}], "colliders": [{"type": "sphere", "center": [0,0,0], "radius": 0}]})",
        "colliders[0].radius: expected 0 < value (m), got 0"},
       {R"({"avatars": [{}], "colliders": [{"type": "sphere", "radius": 1}]})",

@@ -155,6 +155,28 @@ def test_collider_path_moves_the_collider():
 # --- Simulable: state ------------------------------------------------------------------------
 
 
+def test_tracking_inertia_floor_reaches_the_toe_spring(avatar, walk):
+    # Without gravity, rotating a toe (a leaf: only its own tracking spring sees its rotation) by
+    # θ from its target at the first frame costs ½ ω_T² (I_toe + floor) θ²: the floor adds
+    # ½ ω_T² Δ θ².
+    assert flsh.SimulableOptions().tracking_inertia_floor == 0.01
+    theta, delta = 0.1, 0.05
+    costs = []
+    for floor in (0.0, delta):
+        options = flsh.SimulableOptions(tracking_inertia_floor=floor, gravity=[0.0, 0.0, 0.0])
+        assert options.tracking_inertia_floor == floor
+        sim = flsh.Simulable(avatar, walk, options)
+        sim.initialize()
+        e0 = sim.getPotentialEnergyScalar()
+        dq = np.zeros(sim.numDofs())
+        dq[6 * 10 + 3] = theta
+        sim.updateState(dq)
+        costs.append(sim.getPotentialEnergyScalar() - e0)
+    assert costs[0] > 0.0
+    expected = 0.5 * flsh.SimulableOptions().tracking_stiffness * delta * theta**2
+    assert costs[1] - costs[0] == pytest.approx(expected, rel=1e-9)
+
+
 def test_state_round_trips_through_set_state(avatar, walk, rng):
     sim = stepped(avatar, walk, rng)
     q = sim.getState()
@@ -312,6 +334,8 @@ def test_bad_arrays_raise_value_errors_naming_shapes(avatar, walk, rng):
         sim.fixVectorKinematic(np.zeros(3))
     with pytest.raises(ValueError, match="time_step"):
         flsh.SimulableOptions(time_step=0.0)
+    with pytest.raises(ValueError, match="tracking_inertia_floor"):
+        flsh.SimulableOptions(tracking_inertia_floor=-0.01)
     with pytest.raises(ValueError, match="not initialized"):
         flsh.Simulable(flsh.SoftAvatar(avatar.body))
     with pytest.raises(ValueError, match="body model passed is not the avatar's"):

@@ -11,6 +11,7 @@
 #include <random>
 
 #include "flsh/body/body_forward.h"
+#include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
@@ -578,6 +579,82 @@ TEST(Simulable, TracksTheMocapOnTheGround) {
   EXPECT_LT(error, 0.03) << "joints drift from the mocap";
   EXPECT_GT(contacts, 0);
   EXPECT_GT(lowestNodeHeight(sim), sim.colliders()[0].p0().y() - 0.02);  // no sinking
+}
+
+TEST(Simulable, TrackingStiffnessAddsTheInertiaFloorToEveryBoneButTheRoot) {
+  // At the mocap's first frame every tracking spring is at rest, so its Hessian block over the
+  // bone's rotation is k_b I₃ (the joint springs do not depend on a bone's own rotation and
+  // gravity is off). Raising the floor by ΔI adds ω_T² ΔI to each bone's own block, and to its
+  // parent's (the spring's other end); the root's spring has no floor.
+  const test::SmallScene& s = shared();
+  auto rotationBlocks = [&](double floor) {
+    SimulableOptions options;
+    options.gravity.setZero();
+    options.tracking_inertia_floor = floor;
+    Simulable sim(s.avatar, s.body, s.walk, options);
+    sim.initialize();
+    std::vector<Triplet> H;
+    sim.getPotentialHessianTripletVector(H, 0, false);
+    const MatX dense_H = dense(H, sim.numDofs());
+    std::vector<Mat3> blocks(24);
+    for (int b = 0; b < 24; ++b) blocks[b] = dense_H.block<3, 3>(6 * b + 3, 6 * b + 3);
+    return blocks;
+  };
+  const SimulableOptions defaults;
+  EXPECT_EQ(defaults.tracking_inertia_floor, 0.01);
+  const double delta = 0.05;
+  const std::vector<Mat3> without = rotationBlocks(0.0), with = rotationBlocks(delta);
+  int children_of[24] = {};
+  for (int b = 1; b < 24; ++b) ++children_of[kSmplParents[b]];
+  const double omega2 = defaults.tracking_stiffness;
+  for (int b = 0; b < 24; ++b) {
+    const double springs = (b == 0 ? 0 : 1) + children_of[b];
+    EXPECT_LT((with[b] - without[b] - springs * omega2 * delta * Mat3::Identity()).norm(),
+              1e-9 * with[b].norm())
+        << "bone " << b;
+  }
+  // Without the floor a toe (a leaf, SMPL bone 10) is nearly free: its block is its own spring.
+  EXPECT_GT(without[10].trace(), 0.0);
+  EXPECT_LT(without[10](0, 0), 0.2 * omega2 * delta);
+  EXPECT_LT((without[10] - without[10](0, 0) * Mat3::Identity()).norm(), 1e-9 * without[10].norm());
+}
+
+TEST(Simulable, ToesFollowTheirTargetsOnTheGround) {
+  // The walk keeps the toes straight (target 0 relative to the foot) while the foot rolls over
+  // the ground: the contact pushes the toe tips. With the pure inertia scaling a toe's spring
+  // is ~0.16 N·m/rad and the toes fold (0.74 rad on this body; 2 rad on the FEM walk of
+  // docs/benchmarks.md); with the default floor they stay within ~0.11 rad.
+  const test::SmallScene& s = shared();
+  auto largestToeError = [&](double floor) {
+    SimulableOptions options;
+    options.time_step = 1.0 / 30.0;
+    options.tracking_inertia_floor = floor;
+    Simulable sim(s.avatar, s.body, s.walk, options);
+    sim.initialize();
+    sim.setColliders({Collider::plane(Vec3(0, lowestNodeHeight(sim) - 0.002, 0), Vec3::UnitY())});
+    double largest = 0.0;
+    for (int step = 0; step < 29; ++step) {
+      sim.preUpdate();
+      EXPECT_TRUE(solveStep(sim).converged);
+      sim.postUpdate();
+      const std::vector<Mat3>& R = sim.boneRotations();
+      for (int toe : {10, 11})
+        largest = std::max(largest, logSO3(R[kSmplParents[toe]].transpose() * R[toe]).norm());
+    }
+    return largest;
+  };
+  const double floored = largestToeError(SimulableOptions().tracking_inertia_floor);
+  const double pure = largestToeError(0.0);
+  EXPECT_LT(floored, 0.2);
+  EXPECT_GT(pure, 2.0 * floored);
+}
+
+TEST(Simulable, NegativeTrackingInertiaFloorIsAnInputError) {
+  SimulableOptions options;
+  options.tracking_inertia_floor = -1e-3;
+  EXPECT_THROW(Simulable(shared().avatar, shared().body, shared().walk, options), InputError);
+  options.tracking_inertia_floor = std::nan("");
+  EXPECT_THROW(Simulable(shared().avatar, shared().body, shared().walk, options), InputError);
 }
 
 TEST(Simulable, StaysFiniteAtExtremeSettingsAndDeepPenetration) {

@@ -6,7 +6,7 @@
 // Usage: fem_benchmark [STEPS=30] [--resolution R] [--tolerance T] [--no-lag] [--threads N]
 //                      [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME]
 //                      [--no-ground] [--contact-stiffness K] [--psd-hessian]
-//                      [--exact-preconditioner]
+//                      [--exact-preconditioner] [--inertia-floor I]
 //   --tolerance: Newton's relative gradient tolerance (default: the scene default);
 //   --no-lag:    factor every Newton iteration (plain Newton on CHOLMOD) for comparison;
 //   --psd-hessian: the PSD Hessian form only (exact_hessian = false), for comparison;
@@ -18,6 +18,7 @@
 //   --cg:        the lagged-factor settings (NewtonOptions::lagged): CG forcing term, refactor
 //                after this many CG iterations, CG iteration limit;
 //   --motion:    a built-in motion instead of "walk" (e.g. jumping_jacks).
+//   --inertia-floor: SimulableOptions::tracking_inertia_floor (kg·m²; 0 = the former model).
 // Prints steps/s over the timed steps (after 3 warm-up steps) and the per-step breakdown:
 // Newton iterations, seconds in energy / gradient / Hessian assembly / factorization / solves,
 // factorizations and PCG iterations per step, and the largest soft-tissue displacement.
@@ -52,6 +53,7 @@ int main(int argc, char** argv) {
   double resolution = 1.0, tolerance = -1.0;
   bool lag = true, ground = true, psd_only = false, exact_preconditioner = false;
   double contact_stiffness = -1.0;
+  double inertia_floor = -1.0;
   std::string motion_name = "walk";
   double reference = -1.0;
   double cg_tolerance = -1.0;
@@ -66,6 +68,7 @@ int main(int argc, char** argv) {
     else if (a == "--exact-preconditioner") exact_preconditioner = true;
     else if (a == "--contact-stiffness" && i + 1 < argc) contact_stiffness = std::atof(argv[++i]);
     else if (a == "--motion" && i + 1 < argc) motion_name = argv[++i];
+    else if (a == "--inertia-floor" && i + 1 < argc) inertia_floor = std::atof(argv[++i]);
     else if (a == "--cg" && i + 3 < argc) {  // forcing term, refactor-after, max CG iterations
       cg_tolerance = std::atof(argv[++i]);
       refactor_after = std::atoi(argv[++i]);
@@ -77,7 +80,7 @@ int main(int argc, char** argv) {
     else {
       std::fprintf(stderr,
                    "usage: fem_benchmark [STEPS] [--resolution R] [--tolerance T] [--no-lag] "
-                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground] [--contact-stiffness K] [--psd-hessian] "
+                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground] [--contact-stiffness K] [--psd-hessian] [--inertia-floor I] "
                    "[--exact-preconditioner]\n");
       return 2;
     }
@@ -100,6 +103,7 @@ int main(int argc, char** argv) {
     SimulableOptions options;
     options.time_step = h;
     if (contact_stiffness > 0) options.contact.stiffness = contact_stiffness;
+    if (inertia_floor >= 0) options.tracking_inertia_floor = inertia_floor;
     auto sim = std::make_shared<Simulable>(avatar, walk, options);
     SceneOptions scene_options;
     if (tolerance > 0) scene_options.soft_tissue_newton.gradient_tolerance = tolerance;

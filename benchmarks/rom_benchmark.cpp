@@ -6,7 +6,7 @@
 //
 // Usage: rom_benchmark [STEPS=300] [--handles H] [--elastic N] [--inertial N] [--exact]
 //                      [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME]
-//                      [--no-ground] [--threads N] [--reference T_REF]
+//                      [--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I]
 //        rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
@@ -15,7 +15,9 @@
 //   --tolerance: Newton's gradient tolerance (default: the scene default);
 //   --reference: also run the scene at tolerance T_REF in lockstep (untimed) and print the
 //                largest surface vertex distance from it (the cost of the tolerance);
-//   --no-lag: factor every Newton iteration (no lagged-factor PCG) for comparison.
+//   --no-lag: factor every Newton iteration (no lagged-factor PCG) for comparison;
+//   --inertia-floor: SimulableOptions::tracking_inertia_floor (kg·m²; 0 = the former model), for
+//                    every model of the run (--compare too).
 // Prints generation time, steps/s over the timed steps (after 3 warm-up steps) and the per-step
 // breakdown (Newton iterations; seconds in energy / gradient / Hessian / factorization / solves).
 //
@@ -116,11 +118,15 @@ struct Run {
   std::unique_ptr<Scene> scene;
 };
 
+// --inertia-floor (negative: the SimulableOptions default).
+double inertia_floor_option = -1.0;
+
 Run makeRun(std::shared_ptr<SoftAvatar> avatar, const Scenario& sc, const SceneOptions& options,
             bool ground = true) {
   Run r;
   SimulableOptions sim_options;
   sim_options.time_step = 1.0 / 30.0;
+  if (inertia_floor_option >= 0) sim_options.tracking_inertia_floor = inertia_floor_option;
   r.sim = std::make_shared<Simulable>(avatar, sc.motion, sim_options);
   r.scene = std::make_unique<Scene>(options);
   r.scene->addSimulable(r.sim);
@@ -460,6 +466,7 @@ int main(int argc, char** argv) {
     else if (a == "--reference" && i + 1 < argc) reference = std::atof(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) omp_set_num_threads(std::atoi(argv[++i]));
     else if (a == "--compare") comparison = true;
+    else if (a == "--inertia-floor" && i + 1 < argc) inertia_floor_option = std::atof(argv[++i]);
     else if (a == "--frames" && i + 1 < argc) frames = std::max(1, std::atoi(argv[++i]));
     else if (a == "--png" && i + 1 < argc) png = argv[++i];
     else if (a == "--csv" && i + 1 < argc) csv = argv[++i];
@@ -469,7 +476,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr,
                    "usage: rom_benchmark [STEPS] [--handles H] [--elastic N] [--inertial N] "
                    "[--exact] [--surface-pou] [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME] "
-                   "[--no-ground] [--threads N] [--reference T_REF]\n"
+                   "[--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I]\n"
                    "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]\n"
                    "       rom_benchmark --plot-csv CSV [--png PATH]\n");
       return 2;

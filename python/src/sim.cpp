@@ -420,6 +420,30 @@ void bind_sim(py::module_& m) {
           "Hessian of the potential energy, scipy.sparse.csc_matrix (numDofs, numDofs). "
           "psd=True: projected positive semidefinite; False: exact.");
   alias("getPotentialHessianTripletVector", "get_potential_hessian_triplet_vector");
+  sim.def("getHessianTripletVector",
+          [](const S& s, bool psd) {
+            std::vector<Triplet> H;
+            {
+              py::gil_scoped_release release;
+              std::vector<FixedHessianBlocks> blocks;
+              s.getHessianTripletVector(H, blocks, 0, psd);
+              for (const FixedHessianBlocks& list : blocks)
+                for (size_t k = 0; !list.empty() && k < list.positions->size(); ++k) {
+                  const auto [row, col] = (*list.positions)[k];
+                  for (int j = 0; j < 3; ++j)
+                    for (int i = 0; i < 3; ++i)
+                      H.emplace_back(row + list.offset + i, col + list.offset + j,
+                                     (*list.values)[k](i, j));
+                }
+            }
+            return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
+          },
+          py::arg("psd") = true,
+          "Hessian of the whole objective (dynamic + potential), scipy.sparse.csc_matrix "
+          "(numDofs, numDofs), in one call as a Scene assembles it (the ROM evaluates its inertia "
+          "beside gravity and elasticity on two threads). The sum of "
+          "getDynamicHessianTripletVector and getPotentialHessianTripletVector of the same form.");
+  alias("getHessianTripletVector", "get_hessian_triplet_vector");
   sim.def("fixMatrixKinematic",
           [](const S& s, const py::object& H) {
             const int n = s.numDofs();

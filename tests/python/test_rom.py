@@ -189,6 +189,21 @@ def test_rom_state_is_one_z_per_handle_and_u_follows_the_basis(rom, avatar):
         assert getattr(cls, camel) is getattr(cls, snake), camel
 
 
+@pytest.mark.parametrize("psd", [True, False])
+def test_both_hessian_parts_in_one_call_are_their_sum(rom, psd):
+    rng = np.random.default_rng(7)
+    rom.updateState(rng.normal(scale=0.01, size=rom.numDofs()))
+    total = rom.getHessianTripletVector(psd=psd)
+    parts = rom.getDynamicHessianTripletVector(psd) + rom.getPotentialHessianTripletVector(psd)
+    assert total.shape == (rom.numDofs(), rom.numDofs())
+    scale = abs(parts).max()
+    assert scale > 0.0
+    assert abs(total - parts).max() <= 1e-10 * scale
+    # The handle blocks (the fixed-position lists of the C++ call) are in it.
+    assert abs(total[NUM_BONE_DOFS:, NUM_BONE_DOFS:]).max() > 0.0
+    assert rom.get_hessian_triplet_vector(psd=psd).shape == total.shape
+
+
 def test_a_few_steps_move_the_soft_tissue(avatar):
     motion = flsh.make_builtin_motion("jumping_jacks", seconds=0.5, fps=30.0)
     sim = flsh.Simulable(avatar, motion, flsh.SimulableOptions(time_step=1.0 / 30.0))

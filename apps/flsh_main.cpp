@@ -681,6 +681,10 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
   scene_options.reduced_newton.step_tolerance = scene.newton.step_tolerance;
   if (scene.reduced_gradient_tolerance > 0)
     scene_options.reduced_newton.gradient_tolerance = scene.reduced_gradient_tolerance;
+  // Their lagged-factor settings ("soft_tissue_lagged" / "reduced_lagged"; the solvers'
+  // defaults unless the file sets them).
+  scene_options.soft_tissue_newton.lagged = scene.soft_tissue_lagged;
+  scene_options.reduced_newton.lagged = scene.reduced_lagged;
   scene_options.avatar_contact = scene.avatar_contact;
   Scene sim_scene(scene_options);
   for (auto& run : runs) sim_scene.addSimulable(run.simulable);
@@ -716,12 +720,14 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
   record(0.0);
   const auto t_sim = Clock::now();
   ProgressBar progress(steps);
-  long newton_iterations = 0;
+  long newton_iterations = 0, factorizations = 0, cg_iterations = 0;
   int unconverged = 0, max_contacts = 0;
   std::string first_unconverged;
   for (int s = 1; s <= steps; ++s) {
     const StepStats stats = sim_scene.step();
     newton_iterations += stats.newton.iterations;
+    factorizations += stats.newton.factorizations;
+    cg_iterations += stats.newton.cg_iterations;
     max_contacts = std::max(max_contacts, stats.active_contacts);
     if (!stats.newton.converged && unconverged++ == 0)
       first_unconverged = "step " + std::to_string(s) + ": " + stats.newton.message;
@@ -906,11 +912,13 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
     std::fprintf(stderr, "simulate: warning: %d of %d steps did not converge (first: %s)\n",
                  unconverged, steps, first_unconverged.c_str());
   std::printf("simulate: %s: %zu avatar(s), %zu collider(s), %d steps of %.4g s (%.3g s), "
-              "%d frames; %.0f steps/s, %.2f Newton iterations/step, %d unconverged, "
+              "%d frames; %.0f steps/s, %.2f Newton iterations/step (%.2f factorizations, "
+              "%.1f PCG iterations), %d unconverged, "
               "max %d contacts; wall time: set-up %.2f s, simulation %.2f s, output %.2f s; "
               "wrote %s in %s\n",
               scene.source.c_str(), runs.size(), scene.colliders.size(), steps, h, steps * h, T,
-              steps / std::max(sim_seconds, 1e-9), double(newton_iterations) / steps, unconverged,
+              steps / std::max(sim_seconds, 1e-9), double(newton_iterations) / steps,
+              double(factorizations) / steps, double(cg_iterations) / steps, unconverged,
               max_contacts, setup_seconds, sim_seconds, out_seconds,
               outputs.empty() ? "nothing" : outputs.c_str(), dir.string().c_str());
   return 0;

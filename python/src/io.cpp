@@ -150,6 +150,10 @@ void bind_io(py::module_& m) {
                     "Newton tolerance of scenes with FEM avatars; <= 0 = the default")
       .def_readonly("reduced_gradient_tolerance", &SceneSpec::reduced_gradient_tolerance,
                     "Newton tolerance of scenes whose soft avatars are all ROM; <= 0 = the default")
+      .def_readonly("soft_tissue_lagged", &SceneSpec::soft_tissue_lagged,
+                    "LaggedFactorOptions of the FEM's solver (newton.soft_tissue_lagged)")
+      .def_readonly("reduced_lagged", &SceneSpec::reduced_lagged,
+                    "LaggedFactorOptions of the ROM's solver (newton.reduced_lagged)")
       .def_readonly("avatar_contact", &SceneSpec::avatar_contact)
       .def_readonly("outputs", &SceneSpec::outputs, "OutputSpec")
       .def("__repr__", [](const SceneSpec& s) {

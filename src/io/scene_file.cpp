@@ -228,6 +228,11 @@ class SceneReader {
         scene.reduced_gradient_tolerance =
             toRange(root["newton"]["reduced_gradient_tolerance"],
                     "newton.reduced_gradient_tolerance", 0.0, 1.0, true);
+      if (root["newton"].contains("soft_tissue_lagged"))
+        readLagged(root["newton"]["soft_tissue_lagged"], "newton.soft_tissue_lagged",
+                   scene.soft_tissue_lagged);
+      if (root["newton"].contains("reduced_lagged"))
+        readLagged(root["newton"]["reduced_lagged"], "newton.reduced_lagged", scene.reduced_lagged);
     }
 
     if (!root.contains("avatars")) fail("avatars", "missing (a scene needs at least one avatar)");
@@ -284,7 +289,8 @@ class SceneReader {
     requireObject(node, path);
     checkKeys(node, path,
               {"max_iterations", "gradient_tolerance", "step_tolerance", "linear_solver",
-               "soft_tissue_gradient_tolerance", "reduced_gradient_tolerance"});
+               "soft_tissue_gradient_tolerance", "reduced_gradient_tolerance",
+               "soft_tissue_lagged", "reduced_lagged"});
     NewtonOptions newton;
     if (node.contains("max_iterations"))
       newton.max_iterations =
@@ -308,6 +314,33 @@ class SceneReader {
         fail(p, "expected \"auto\", \"dense\" or \"cholmod\", got \"" + name + "\"");
     }
     return newton;
+  }
+
+  /// The keys given override `lagged` (LaggedFactorOptions, flsh/solve/newton.h).
+  void readLagged(const json& node, const std::string& path, LaggedFactorOptions& lagged) const {
+    requireObject(node, path);
+    checkKeys(node, path,
+              {"enabled", "cg_relative_tolerance", "adaptive_forcing", "max_cg_iterations",
+               "refactor_after_cg_iterations", "fast_preconditioner"});
+    if (node.contains("enabled")) lagged.enabled = toBool(node["enabled"], child(path, "enabled"));
+    if (node.contains("cg_relative_tolerance")) {
+      const std::string p = child(path, "cg_relative_tolerance");
+      const double eta = toDouble(node["cg_relative_tolerance"], p);
+      if (!(eta > 0.0 && eta < 1.0)) fail(p, "expected 0 < value < 1, got " + number(eta));
+      lagged.cg_relative_tolerance = eta;
+    }
+    if (node.contains("adaptive_forcing"))
+      lagged.adaptive_forcing = toBool(node["adaptive_forcing"], child(path, "adaptive_forcing"));
+    if (node.contains("max_cg_iterations"))
+      lagged.max_cg_iterations =
+          toIntRange(node["max_cg_iterations"], child(path, "max_cg_iterations"), 1, 100000);
+    if (node.contains("refactor_after_cg_iterations"))
+      lagged.refactor_after_cg_iterations =
+          toIntRange(node["refactor_after_cg_iterations"],
+                     child(path, "refactor_after_cg_iterations"), 0, 100000);
+    if (node.contains("fast_preconditioner"))
+      lagged.fast_preconditioner =
+          toBool(node["fast_preconditioner"], child(path, "fast_preconditioner"));
   }
 
   AvatarSpec readAvatar(const json& node, const std::string& path, size_t index,

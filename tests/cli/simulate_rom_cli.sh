@@ -88,6 +88,18 @@ grep -q "avatar 'soft' (rom): .* reduced data cache: hit" hit.err ||
   { cat off.err; fail "--no-cache run"; }
 grep -q "reduced data cache: off" off.err || { cat off.err; fail "--no-cache should be reported"; }
 
+# The default reduced solver preconditions CG with a lagged factor; "newton.reduced_lagged"
+# reaches it: without the lag every iteration factors and no PCG runs.
+grep -Eq "\([0-9.]+ factorizations, [1-9][0-9.]* PCG iterations\)" run.log ||
+  { cat run.log; fail "the ROM scene should run PCG on the lagged factor"; }
+sed 's/"newton": {"reduced_gradient_tolerance": 1e-6}/"newton": {"reduced_gradient_tolerance": 1e-6, "reduced_lagged": {"enabled": false}}/' \
+  rom.json > nolag.json
+grep -q '"reduced_lagged"' nolag.json || fail "nolag.json: the substitution did not apply"
+"$flsh" simulate nolag.json --cache cache --out out_nolag >nolag.log 2>nolag.err ||
+  { cat nolag.err; fail "scene with reduced_lagged.enabled = false"; }
+grep -Eq "\([0-9.]+ factorizations, 0.0 PCG iterations\)" nolag.log ||
+  { cat nolag.log; fail "reduced_lagged.enabled = false: no PCG expected"; }
+
 # `flsh avatar --soft rom`: JSON statistics of the reduced data (the volumetric body cached).
 "$flsh" avatar --model synthetic:600 --soft rom --resolution 0.3 --handles 12 \
   --elastic-cubature 40 --inertial-cubature 30 --cache cache >avatar.json 2>avatar.err ||

@@ -315,9 +315,57 @@ TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
   EXPECT_EQ(r.inertial_cubature, 0);  // off
   EXPECT_DOUBLE_EQ(scene.reduced_gradient_tolerance, 3e-6);
   EXPECT_DOUBLE_EQ(scene.soft_tissue_gradient_tolerance, 2e-4);
+  // Absent lagged-factor keys: each solver's defaults.
+  EXPECT_DOUBLE_EQ(scene.soft_tissue_lagged.cg_relative_tolerance,
+                   softTissueNewtonDefaults().lagged.cg_relative_tolerance);
+  EXPECT_DOUBLE_EQ(scene.reduced_lagged.cg_relative_tolerance,
+                   reducedNewtonDefaults().lagged.cg_relative_tolerance);
+  EXPECT_TRUE(scene.soft_tissue_lagged.enabled && scene.reduced_lagged.enabled);
   // The FEM avatar keeps the (unused) reduced defaults.
   EXPECT_EQ(scene.avatars[1].simulation, "fem");
   EXPECT_EQ(scene.avatars[1].handles, 87);
+}
+
+TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
+  const SceneSpec scene = parse(R"({
+    "newton": {"soft_tissue_lagged": {"cg_relative_tolerance": 0.02, "max_cg_iterations": 40,
+                                      "refactor_after_cg_iterations": 15,
+                                      "fast_preconditioner": false},
+               "reduced_lagged": {"enabled": false, "adaptive_forcing": false}},
+    "avatars": [{}]})");
+  const LaggedFactorOptions& fem = scene.soft_tissue_lagged;
+  EXPECT_DOUBLE_EQ(fem.cg_relative_tolerance, 0.02);
+  EXPECT_EQ(fem.max_cg_iterations, 40);
+  EXPECT_EQ(fem.refactor_after_cg_iterations, 15);
+  EXPECT_FALSE(fem.fast_preconditioner);
+  EXPECT_TRUE(fem.enabled);            // not given: the FEM solver's default
+  EXPECT_TRUE(fem.adaptive_forcing);
+  const LaggedFactorOptions& rom = scene.reduced_lagged;
+  EXPECT_FALSE(rom.enabled);
+  EXPECT_FALSE(rom.adaptive_forcing);
+  EXPECT_DOUBLE_EQ(rom.cg_relative_tolerance, reducedNewtonDefaults().lagged.cg_relative_tolerance);
+  EXPECT_EQ(rom.max_cg_iterations, reducedNewtonDefaults().lagged.max_cg_iterations);
+
+  struct Case {
+    const char* json;
+    const char* expected;
+  };
+  const Case cases[] = {
+      {R"({"newton": {"soft_tissue_lagged": {"cg_relative_tolerance": 1}}, "avatars": [{}]})",
+       "newton.soft_tissue_lagged.cg_relative_tolerance: expected 0 < value < 1, got 1"},
+      {R"({"newton": {"reduced_lagged": {"max_cg_iterations": 0}}, "avatars": [{}]})",
+       "newton.reduced_lagged.max_cg_iterations: expected an integer in [1, 100000], got 0"},
+      {R"({"newton": {"reduced_lagged": {"enabled": 1}}, "avatars": [{}]})",
+       "newton.reduced_lagged.enabled: expected true or false, got number 1"},
+      {R"({"newton": {"soft_tissue_lagged": {"refactor_after": 3}}, "avatars": [{}]})",
+       "newton.soft_tissue_lagged.refactor_after: unknown key (known: "},
+      {R"({"newton": {"soft_tissue_lagged": 0.05}, "avatars": [{}]})",
+       "newton.soft_tissue_lagged: expected a JSON object, got number 0.05"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.json);
+    EXPECT_THAT(inputError(c.json), HasSubstr(c.expected));
+  }
 }
 
 TEST(SceneFile, BadRomSettingsAreNamedWithTheirPath) {

@@ -430,6 +430,10 @@ def test_scene_files():
     assert rom.avatars[0].handles == 87 and rom.avatars[0].elastic_cubature == 500
     assert rom.avatars[0].inertial_cubature == 500 and rom.avatars[0].resolution > 0
     assert rom.reduced_gradient_tolerance > 0
+    # Lagged-factor settings: each soft solver's defaults unless the file sets them.
+    lagged = default.soft_tissue_lagged
+    assert lagged.enabled and lagged.cg_relative_tolerance == 0.05
+    assert default.reduced_lagged.cg_relative_tolerance == 0.01
 
 
 # --- examples -------------------------------------------------------------------------------

@@ -9,6 +9,7 @@
 #include "flsh/contact/collider.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/newton.h"
+#include "flsh/solve/scene.h"
 #include "flsh/volume/reduced_data.h"
 
 namespace flsh {
@@ -63,6 +64,11 @@ struct SceneSpec {
   /// "newton.reduced_gradient_tolerance": the same for scenes whose soft avatars are all "rom";
   /// ≤ 0 (absent) keeps SceneOptions::reduced_newton's default (reducedNewtonDefaults()).
   double reduced_gradient_tolerance = -1.0;
+  /// "newton.soft_tissue_lagged" / "newton.reduced_lagged": the lagged-factor settings of the
+  /// FEM's and the ROM's solvers (SceneOptions::soft_tissue_newton.lagged / reduced_newton.lagged);
+  /// keys absent from the file keep those solvers' defaults.
+  LaggedFactorOptions soft_tissue_lagged = softTissueNewtonDefaults().lagged;
+  LaggedFactorOptions reduced_lagged = reducedNewtonDefaults().lagged;
   bool avatar_contact = true;
   OutputSpec outputs;
   /// Avatar cache of the "fem" / "rom" avatars' volumetric bodies and reduced data: folder

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 
 #include "flsh/body/body_forward.h"
 #include "flsh/body/synthetic_body.h"
@@ -27,6 +28,19 @@ SceneSpec parse(const std::string& text, const std::string& base_dir = ".") {
 
 std::string inputError(const std::string& text) {
   return messageOf<InputError>([&] { parse(text); });
+}
+
+/// A scene text and a part of the InputError it must raise.
+struct ErrorCase {
+  const char* json;
+  const char* expected;
+};
+
+void expectInputErrors(std::initializer_list<ErrorCase> cases) {
+  for (const ErrorCase& c : cases) {
+    SCOPED_TRACE(c.json);
+    EXPECT_THAT(inputError(c.json), HasSubstr(c.expected));
+  }
 }
 
 void writeText(const std::string& path, const std::string& text) {
@@ -158,11 +172,7 @@ TEST(SceneFile, UnknownKeysAreNamedWithTheirPath) {
 }
 
 TEST(SceneFile, WrongTypesAndValuesAreNamedWithTheirPath) {
-  struct Case {
-    const char* json;
-    const char* expected;
-  };
-  const Case cases[] = {
+  expectInputErrors({
       {R"({"avatars": [{}], "time_step": -0.1})",
        "scene.json: time_step: expected 0 < value <= 1 (s), got -0.1"},
       {R"({"avatars": [{}], "time_step": "fast"})",
@@ -226,11 +236,7 @@ TEST(SceneFile, WrongTypesAndValuesAreNamedWithTheirPath) {
       {R"({"avatars": [{}], "outputs": {"dir": ""}})", "outputs.dir: expected a directory"},
       {R"({"avatars": [{}], "duration": 1e400})",
        "scene.json: invalid JSON: [json.exception.out_of_range.406] number overflow"},
-  };
-  for (const Case& c : cases) {
-    SCOPED_TRACE(c.json);
-    EXPECT_THAT(inputError(c.json), HasSubstr(c.expected));
-  }
+  });
 }
 
 TEST(SceneFile, FemAvatarsReadTheirVolumetricSettings) {
@@ -346,11 +352,7 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
   EXPECT_DOUBLE_EQ(rom.cg_relative_tolerance, reducedNewtonDefaults().lagged.cg_relative_tolerance);
   EXPECT_EQ(rom.max_cg_iterations, reducedNewtonDefaults().lagged.max_cg_iterations);
 
-  struct Case {
-    const char* json;
-    const char* expected;
-  };
-  const Case cases[] = {
+  expectInputErrors({
       {R"({"newton": {"soft_tissue_lagged": {"cg_relative_tolerance": 1}}, "avatars": [{}]})",
        "newton.soft_tissue_lagged.cg_relative_tolerance: expected 0 < value < 1, got 1"},
       {R"({"newton": {"reduced_lagged": {"max_cg_iterations": 0}}, "avatars": [{}]})",
@@ -361,19 +363,11 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
        "newton.soft_tissue_lagged.refactor_after: unknown key (known: "},
       {R"({"newton": {"soft_tissue_lagged": 0.05}, "avatars": [{}]})",
        "newton.soft_tissue_lagged: expected a JSON object, got number 0.05"},
-  };
-  for (const Case& c : cases) {
-    SCOPED_TRACE(c.json);
-    EXPECT_THAT(inputError(c.json), HasSubstr(c.expected));
-  }
+  });
 }
 
 TEST(SceneFile, BadRomSettingsAreNamedWithTheirPath) {
-  struct Case {
-    const char* json;
-    const char* expected;
-  };
-  const Case cases[] = {
+  expectInputErrors({
       // ROM-only keys on the other models.
       {R"({"avatars": [{"handles": 10}]})",
        "scene.json: avatars[0].handles: only for \"simulation\": \"rom\" (this avatar is "
@@ -412,19 +406,11 @@ TEST(SceneFile, BadRomSettingsAreNamedWithTheirPath) {
        "newton.reduced_gradient_tolerance: expected a number, got string \"loose\""},
       {R"({"avatars": [{"simulation": "rom", "handle": 5}]})",
        "avatars[0].handle: unknown key (known: "},
-  };
-  for (const Case& c : cases) {
-    SCOPED_TRACE(c.json);
-    EXPECT_THAT(inputError(c.json), HasSubstr(c.expected));
-  }
+  });
 }
 
 TEST(SceneFile, BadFemSettingsAreNamedWithTheirPath) {
-  struct Case {
-    const char* json;
-    const char* expected;
-  };
-  const Case cases[] = {
+  expectInputErrors({
       {R"({"avatars": [{"resolution": 0.5}]})",
        "scene.json: avatars[0].resolution: only for \"simulation\": \"fem\""},
       {R"({"newton": {"soft_tissue_gradient_tolerance": 0}, "avatars": [{}]})",
@@ -449,11 +435,7 @@ TEST(SceneFile, BadFemSettingsAreNamedWithTheirPath) {
       {R"({"avatars": [{}], "cache_dir": 1})", "cache_dir: expected a string, got number 1"},
       {R"({"avatars": [{}], "use_cache": "no"})", "use_cache: expected true or false"},
       {R"({"avatars": [{}], "cache": "x"})", "cache: unknown key (known: "},
-  };
-  for (const Case& c : cases) {
-    SCOPED_TRACE(c.json);
-    EXPECT_THAT(inputError(c.json), HasSubstr(c.expected));
-  }
+  });
 }
 
 TEST(SceneFile, MalformedJsonNamesTheBytePosition) {

@@ -34,9 +34,10 @@ struct SimulableOptions {
   double time_step = 1.0 / 60.0;          ///< h, s
   Vec3 gravity = Vec3(0.0, -9.81, 0.0);   ///< m/s²
   double joint_stiffness = 1.0e5;         ///< k_J, N/m: ½k_J‖R_p(J_b − J_p) + t_p − t_b‖²
-  /// Tracking springs ½k_b‖log(R_target,bᵀ R_rel,b)‖² with k_b = ω_T² · I_b, where I_b =
-  /// Σ m‖X − J_b‖² over the bone's subtree (kg·m²): every joint then tracks with about the
-  /// same natural frequency ω_T = sqrt(tracking_stiffness). Unit 1/s²; default (2π·3 Hz)².
+  /// Tracking springs ½k_b‖log(R_target,bᵀ R_rel,b)‖² with k_b = ω_T² (I_b + I_floor), where
+  /// I_b = Σ m‖X − J_b‖² over the bone's subtree (kg·m²) and I_floor = tracking_inertia_floor:
+  /// the joints then track with about the same natural frequency ω_T = sqrt(tracking_stiffness)
+  /// (the light distal ones faster). Unit 1/s²; default (2π·3 Hz)².
   double tracking_stiffness = 355.0;
   /// I_floor, kg·m²: the tracking spring of every bone but the root has k_b = ω_T² (I_b + I_floor).
   /// Without it the light distal bones get almost no stiffness (toes and hands of an adult:

@@ -12,6 +12,24 @@
 
 namespace flsh::detail {
 
+std::vector<std::vector<int>> boneSubtrees(const std::vector<int>& parents) {
+  std::vector<std::vector<int>> sub(parents.size());
+  for (int c = 0; c < int(parents.size()); ++c)
+    for (int b = c; b >= 0; b = parents[size_t(b)]) sub[size_t(b)].push_back(c);
+  return sub;
+}
+
+double trackingMoment(const MatX3& J, const std::vector<BoneInertia>& inertia,
+                      const SimulableOptions& options, const std::vector<int>& subtree, int b) {
+  double I = b == 0 ? 0.0 : options.tracking_inertia_floor;
+  for (int c : subtree) {
+    const Vec3 d = (J.row(c) - J.row(b)).transpose();
+    const BoneInertia& in = inertia[size_t(c)];
+    I += in.second_moment.trace() + 2.0 * in.first_moment.dot(d) + in.mass * d.squaredNorm();
+  }
+  return I;
+}
+
 namespace {
 
 constexpr int kInertiaValues = 10;  // mass, first moment (3), second moment (6)
@@ -25,28 +43,6 @@ Mat3 secondMomentBasis(int k) {
   E(rows[k], cols[k]) = 1.0;
   E(cols[k], rows[k]) = 1.0;
   return E;
-}
-
-// Subtree of every bone (itself included), from the parent list.
-std::vector<std::vector<int>> subtrees(const SimulableParameterView& v) {
-  std::vector<std::vector<int>> sub(v.num_bones);
-  for (int c = 0; c < v.num_bones; ++c)
-    for (int b = c; b >= 0; b = v.parents[b]) sub[b].push_back(c);
-  return sub;
-}
-
-// The moment a tracking spring's stiffness scales (kg·m²), as the stiffness construction
-// computes it: I_b = Σ_{c ∈ subtree(b)} tr(S_c) + 2 m̄_c·d + M_c‖d‖², d = J_c − J_b, plus
-// SimulableOptions::tracking_inertia_floor for every bone but the root (a constant: it adds
-// nothing to the derivatives with respect to the joints or the inertias).
-double trackingMoment(const SimulableParameterView& v, const std::vector<int>& subtree, int b) {
-  double I = b == 0 ? 0.0 : v.options.tracking_inertia_floor;
-  for (int c : subtree) {
-    const Vec3 d = (v.J.row(c) - v.J.row(b)).transpose();
-    const BoneInertia& in = v.inertia[c];
-    I += in.second_moment.trace() + 2.0 * in.first_moment.dot(d) + in.mass * d.squaredNorm();
-  }
-  return I;
 }
 
 // Gradient of a tracking spring with unit stiffness, over [δω_p, δω_b] (root: [−, δω_0]).
@@ -120,7 +116,7 @@ MatX restJointsJacobian(const SimulableParameterView& v) {
   if (v.tracking) {
     // k_b = stiffness · I_b: ∂I_b/∂J_c = 2(m̄_c + M_c d) for c in the subtree, minus their sum
     // for J_b itself. The root target t_0 = J_0 + trans moves with J_0.
-    const auto sub = subtrees(v);
+    const auto sub = boneSubtrees(v.parents);
     for (int b = 0; b < v.num_bones; ++b) {
       const double scale = b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness;
       Eigen::RowVectorXd dk = Eigen::RowVectorXd::Zero(3 * v.num_bones);
@@ -179,7 +175,7 @@ MatX boneInertiaJacobian(const SimulableParameterView& v) {
     D.block<3, 3>(6 * b + 3, col + 1) += skew(gravity) * v.R[b];
   }
   if (v.tracking) {
-    const auto sub = subtrees(v);
+    const auto sub = boneSubtrees(v.parents);
     for (int b = 0; b < v.num_bones; ++b) {
       const double scale = b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness;
       Eigen::RowVectorXd dk = Eigen::RowVectorXd::Zero(kInertiaValues * v.num_bones);
@@ -205,13 +201,13 @@ MatX boneInertiaJacobian(const SimulableParameterView& v) {
 MatX poseTargetsJacobian(const SimulableParameterView& v) {
   MatX D = MatX::Zero(6 * v.num_bones, 3 * v.num_bones);
   if (!v.tracking) return D;
-  const auto sub = subtrees(v);
+  const auto sub = boneSubtrees(v.parents);
   for (int b = 0; b < v.num_bones; ++b) {
     const int p = v.parents[b];
     const Mat3 R_p = p < 0 ? Mat3::Identity() : v.R[p];
     const double stiffness =
         (b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness) *
-        trackingMoment(v, sub[b], b);
+        trackingMoment(v.J, v.inertia, v.options, sub[b], b);
     const Vec3 theta = logSO3(v.target_R[b]);
     const Vec3 e = logSO3(R_p.transpose() * v.R[b] * v.target_R[b].transpose());
     const Mat3 dw = -stiffness * R_p * leftJacobianInverseSO3(e).transpose() *
@@ -234,10 +230,10 @@ MatX stiffnessesJacobian(const SimulableParameterView& v) {
     D.block<6, 1>(6 * b, 0) += g12.tail<6>();
   }
   if (v.tracking) {
-    const auto sub = subtrees(v);
+    const auto sub = boneSubtrees(v.parents);
     for (int b = 0; b < v.num_bones; ++b) {
       Eigen::RowVectorXd dk = Eigen::RowVectorXd::Zero(1);
-      dk[0] = trackingMoment(v, sub[b], b);
+      dk[0] = trackingMoment(v.J, v.inertia, v.options, sub[b], b);
       addTrackingColumns(v, b, dk, b == 0 ? 2 : 1, D);
     }
     double mass = 0.0;
@@ -342,7 +338,7 @@ struct VJPContext {
   std::vector<Mat3> H;  // exact node Hessians against all colliders
   VJPContext(const SimulableParameterView& view, const VecX& l) : v(view), lambda(l) {
     if (v.tracking) {
-      sub = subtrees(v);
+      sub = boneSubtrees(v.parents);
       tracking.resize(v.num_bones);
       for (int b = 0; b < v.num_bones; ++b) tracking[b] = trackingWeight(v, lambda, b);
     }
@@ -451,7 +447,7 @@ VecX poseTargetsVJP(const VJPContext& c) {
     const Mat3 R_p = p < 0 ? Mat3::Identity() : v.R[p];
     const double stiffness =
         (b == 0 ? v.options.root_stiffness : v.options.tracking_stiffness) *
-        trackingMoment(v, c.sub[b], b);
+        trackingMoment(v.J, v.inertia, v.options, c.sub[b], b);
     const Vec3 theta = logSO3(v.target_R[b]);
     const Vec3 e = logSO3(R_p.transpose() * v.R[b] * v.target_R[b].transpose());
     const Mat3 dw = -stiffness * R_p * leftJacobianInverseSO3(e).transpose() *
@@ -477,7 +473,7 @@ VecX stiffnessesVJP(const VJPContext& c) {
   }
   if (v.tracking) {
     for (int b = 0; b < v.num_bones; ++b)
-      out[b == 0 ? 2 : 1] += trackingMoment(v, c.sub[b], b) * c.tracking[b];
+      out[b == 0 ? 2 : 1] += trackingMoment(v.J, v.inertia, v.options, c.sub[b], b) * c.tracking[b];
     out[2] += totalMass(v) * (v.t.row(0).transpose() - v.target_t0).dot(lambdaT(l, 0));
   }
   const int n = int(v.candidates.size());

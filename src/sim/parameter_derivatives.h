@@ -42,6 +42,16 @@ struct SimulableParameterView {
   const MatX& areas_shape_jacobian;    // #V × K
 };
 
+/// Subtree of every bone (itself included, ascending), from the parent list (root −1).
+std::vector<std::vector<int>> boneSubtrees(const std::vector<int>& parents);
+/// The moment tracking spring b's stiffness scales (kg·m²): I_b = Σ_{c ∈ subtree} tr(S_c) +
+/// 2 m̄_c·d + M_c‖d‖², d = J_c − J_b (each bone's moments shifted to J_b), plus
+/// options.tracking_inertia_floor for every bone but the root (a constant: it adds nothing to
+/// the derivatives with respect to the joints or the inertias). k_b = ω_T² · this (b ≥ 1);
+/// the root's rotation spring is root_stiffness · this (b = 0).
+double trackingMoment(const MatX3& J, const std::vector<BoneInertia>& inertia,
+                      const SimulableOptions& options, const std::vector<int>& subtree, int b);
+
 int simParameterSize(SimParameter p, int num_colliders, int num_betas);
 MatX gradientParameterJacobian(const SimulableParameterView& v, SimParameter p);
 /// `shape_surface_only`: the Shape entry is only the contact-surface part (see the VJPs below).

@@ -19,6 +19,7 @@
 #include "flsh/core/rotation.h"
 #include "flsh/sim/skeleton_energies.h"
 #include "hessian_blocks.h"
+#include "sim/parameter_derivatives.h"
 #include "soft_tissue.h"
 
 namespace flsh {
@@ -283,33 +284,18 @@ void Simulable::Impl::buildClusters() {
   }
 }
 
-// Tracking stiffness k_b = ω_T² (I_b + I_floor), I_floor = options.tracking_inertia_floor, with
-// I_b = Σ m‖X − J_b‖² over bone b's subtree from each bone c's moments about its own joint by
-// the parallel-axis shift d = J_c − J_b: Σ_c m‖(X − J_c) + d‖² = tr(S_c) + 2 m̄_c·d + M_c‖d‖².
-// The root spring uses the whole body (no floor).
+// Tracking stiffness k_b = ω_T² (I_b + I_floor) and the root springs (whole body, no floor):
+// detail::trackingMoment, which the parameter derivatives use too.
 void Simulable::Impl::buildStiffnesses() {
-  std::vector<std::vector<int>> children(num_bones);
-  for (int b = 1; b < num_bones; ++b) children[parents[b]].push_back(b);
-  auto polarMoment = [&](int b) {
-    double I = 0.0;
-    std::vector<int> pending = {b};
-    while (!pending.empty()) {
-      const int c = pending.back();
-      pending.pop_back();
-      const Vec3 d = (J.row(c) - J.row(b)).transpose();
-      I += inertia[c].second_moment.trace() + 2.0 * inertia[c].first_moment.dot(d) +
-           inertia[c].mass * d.squaredNorm();
-      for (int child : children[c]) pending.push_back(child);
-    }
-    return I;
-  };
+  const std::vector<std::vector<int>> sub = detail::boneSubtrees(parents);
   tracking_k.assign(num_bones, 0.0);
   for (int b = 1; b < num_bones; ++b)
-    tracking_k[b] = options.tracking_stiffness * (polarMoment(b) + options.tracking_inertia_floor);
+    tracking_k[b] =
+        options.tracking_stiffness * detail::trackingMoment(J, inertia, options, sub[b], b);
   double mass = 0.0;
   for (const BoneInertia& bone : inertia) mass += bone.mass;
   root_k_pos = options.root_stiffness * mass;
-  root_k_rot = options.root_stiffness * polarMoment(0);
+  root_k_rot = options.root_stiffness * detail::trackingMoment(J, inertia, options, sub[0], 0);
 }
 
 Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar,
@@ -1348,8 +1334,6 @@ SimulableStats Simulable::stats() const {
 }  // namespace flsh
 
 // ---- parameter derivatives (formulas in parameter_derivatives.cpp) ---------------------------
-
-#include "sim/parameter_derivatives.h"
 
 namespace flsh {
 

@@ -427,14 +427,7 @@ void bind_sim(py::module_& m) {
               py::gil_scoped_release release;
               std::vector<FixedHessianBlocks> blocks;
               s.getHessianTripletVector(H, blocks, 0, psd);
-              for (const FixedHessianBlocks& list : blocks)
-                for (size_t k = 0; !list.empty() && k < list.positions->size(); ++k) {
-                  const auto [row, col] = (*list.positions)[k];
-                  for (int j = 0; j < 3; ++j)
-                    for (int i = 0; i < 3; ++i)
-                      H.emplace_back(row + list.offset + i, col + list.offset + j,
-                                     (*list.values)[k](i, j));
-                }
+              appendBlockTriplets(blocks, H);
             }
             return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
           },

@@ -159,12 +159,7 @@ MatX denseFromTriplets(const std::vector<Triplet>& H, int n) {
 
 std::vector<Triplet> expanded(const std::vector<FixedHessianBlocks>& blocks) {
   std::vector<Triplet> out;
-  for (const FixedHessianBlocks& list : blocks)
-    for (size_t k = 0; !list.empty() && k < list.positions->size(); ++k)
-      for (int j = 0; j < 3; ++j)
-        for (int i = 0; i < 3; ++i)
-          out.emplace_back((*list.positions)[k].first + list.offset + i,
-                           (*list.positions)[k].second + list.offset + j, (*list.values)[k](i, j));
+  appendBlockTriplets(blocks, out);
   return out;
 }
 

@@ -116,6 +116,10 @@ struct FixedHessianBlocks {
   bool empty() const { return !positions || positions->empty(); }
 };
 
+/// Appends the blocks of `lists` to H as triplets (9 per block), for callers that want a plain
+/// triplet list (e.g. to build a sparse matrix of the whole Hessian).
+void appendBlockTriplets(const std::vector<FixedHessianBlocks>& lists, std::vector<Triplet>& H);
+
 class Simulable {
  public:
   /// `avatar` must be initialized (initVolumetricData()); `mocap` may be null (no tracking,

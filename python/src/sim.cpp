@@ -386,6 +386,19 @@ void bind_sim(py::module_& m) {
           },
           "(numDofs,) gradient of the potential energy (a new vector), J per m or rad.");
   alias("getPotentialGradientVector", "get_potential_gradient_vector");
+  sim.def("getGradientVector",
+          [](const S& s) {
+            VecX g = VecX::Zero(s.numDofs());
+            {
+              py::gil_scoped_release release;
+              s.getGradientVector(g);
+            }
+            return to_numpy(g);
+          },
+          "(numDofs,) gradient of the whole objective (dynamic + potential, a new vector), in one "
+          "call as a Scene sums it (the ROM evaluates its node terms beside contact on two "
+          "threads). The sum of getDynamicGradientVector and getPotentialGradientVector.");
+  alias("getGradientVector", "get_gradient_vector");
   sim.def("fixVectorKinematic",
           [](const S& s, const py::object& g) {
             VecX v = dof_vector(s, g, "g");
@@ -434,7 +447,7 @@ void bind_sim(py::module_& m) {
           py::arg("psd") = true,
           "Hessian of the whole objective (dynamic + potential), scipy.sparse.csc_matrix "
           "(numDofs, numDofs), in one call as a Scene assembles it (the ROM evaluates its inertia "
-          "beside gravity and elasticity on two threads). The sum of "
+          "beside contact, gravity and elasticity on two threads). The sum of "
           "getDynamicHessianTripletVector and getPotentialHessianTripletVector of the same form.");
   alias("getHessianTripletVector", "get_hessian_triplet_vector");
   sim.def("fixMatrixKinematic",

@@ -1132,7 +1132,7 @@ double Simulable::getPotentialEnergyScalar() const {
   return E + m.contactEnergy();
 }
 
-void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
+void Simulable::boneSpringGradient(VecX& g, int offset) const {
   const Impl& m = *impl_;
   const bool tracking = m.mocap && m.options.track_mocap;
   Vec6 g6;
@@ -1164,6 +1164,11 @@ void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
       g.segment<3>(ib + 3) += g6.tail<3>();
     }
   }
+}
+
+void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
+  const Impl& m = *impl_;
+  boneSpringGradient(g, offset);
   if (m.soft) {
     m.prepareSoft();
     m.soft->gravity(m.options.gravity, &g, nullptr, offset, true);
@@ -1174,6 +1179,26 @@ void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
     return;
   }
   m.addContactGradient(g, offset);
+}
+
+void Simulable::getGradientVector(VecX& g, int offset) const {
+  const Impl& m = *impl_;
+  if (!m.soft || !m.soft->reduced() || m.is_static || omp_get_max_threads() < 2) {
+    getDynamicGradientVector(g, offset);
+    getPotentialGradientVector(g, offset);
+    return;
+  }
+  // ROM: as getHessianTripletVector (contact's surface nodes skinned before the threads).
+  m.prepareSoft();
+  m.ensureContact();
+  const bool contact = !m.colliders.empty() && !m.contact.candidates.empty();
+  if (contact) m.soft->skinSurfaceNodes(m.contact.candidates);
+  m.soft->reducedGradient(m.options.gravity, g, offset, [&](VecX& part) {
+    if (contact)
+      m.soft->contact(m.colliders, m.time, m.options.contact, &part, nullptr, offset, true,
+                      nullptr, &m.contact.candidates, false);
+  });
+  boneSpringGradient(g, offset);
 }
 
 void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset,
@@ -1228,8 +1253,8 @@ void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessi
   }
   if (m.soft) {
     m.prepareSoft();
-    // With soft_done the ROM's gravity and elastic blocks are already in value list 1, their
-    // bone triplets in H (getHessianTripletVector).
+    // With soft_done the ROM's gravity, elastic and contact blocks are already in value list
+    // 1, their bone triplets in getHessianTripletVector's scratch.
     FixedHessianBlocks gravity_blocks, elastic_blocks;
     if (!soft_done) {
       m.soft->beginReduced(1);
@@ -1240,9 +1265,11 @@ void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessi
     if (blocks)
       for (const FixedHessianBlocks& list : {elastic_blocks, gravity_blocks})
         if (!list.empty()) blocks->push_back(list);
-    m.ensureContact();
-    m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
-                    &m.contact.candidates);
+    if (!soft_done) {
+      m.ensureContact();
+      m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
+                      &m.contact.candidates);
+    }
     m.soft->flushReduced(1, H, offset, blocks);
     return;
   }
@@ -1259,33 +1286,27 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
     potentialHessian(H, &blocks, offset, psd);
     return potential_start;
   }
-  // ROM: inertia (value list 0 and its bone triplets) on one thread, gravity and the elastic
-  // term (list 1 and gravity's bone triplets) on the other; they share no scratch. Then
-  // contact and the bones' springs (potentialHessian).
-  m.prepareSoft();  // both threads read the skinned mass nodes
-  m.soft->beginReduced(0);
-  m.soft->beginReduced(1);
-  std::vector<Triplet>& inertia = m.hessian_scratch[0];
-  std::vector<Triplet>& gravity = m.hessian_scratch[1];
-  inertia.clear();
-  gravity.clear();
-  detail::FirstFailure failure;
-#pragma omp parallel sections num_threads(2)
-  {
-#pragma omp section
-    failure.run([&] { m.soft->inertia(nullptr, &inertia, offset, psd); });
-#pragma omp section
-    failure.run([&] {
-      m.soft->gravity(m.options.gravity, nullptr, &gravity, offset, psd);
-      m.soft->elastic(nullptr, &gravity, offset, psd);
-    });
-  }
-  failure.rethrow();
-  H.insert(H.end(), inertia.begin(), inertia.end());
+  // ROM: inertia beside contact and gravity on two threads, the elastic tets split between
+  // them (SoftTissue::reducedHessians); then the bones' springs. Contact's surface nodes are
+  // skinned before (skinning writes node rows inertia reads).
+  m.prepareSoft();
+  std::vector<Triplet>& dynamic = m.hessian_scratch[0];
+  std::vector<Triplet>& potential = m.hessian_scratch[1];
+  dynamic.clear();
+  potential.clear();
+  m.ensureContact();
+  const bool contact = !m.colliders.empty() && !m.contact.candidates.empty();
+  if (contact) m.soft->skinSurfaceNodes(m.contact.candidates);
+  m.soft->reducedHessians(m.options.gravity, dynamic, potential, offset, psd, [&] {
+    if (contact)
+      m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &potential, offset, psd,
+                      nullptr, &m.contact.candidates, false);
+  });
+  H.insert(H.end(), dynamic.begin(), dynamic.end());
   m.soft->flushReduced(0, H, offset, &blocks);
   const size_t potential_start = H.size();
   potentialHessian(H, &blocks, offset, psd, true);
-  H.insert(H.end(), gravity.begin(), gravity.end());
+  H.insert(H.end(), potential.begin(), potential.end());
   return potential_start;
 }
 

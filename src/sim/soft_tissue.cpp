@@ -336,6 +336,12 @@ void SoftTissue::buildReducedPattern() {
     reduced_positions_.emplace_back(col, row);
   }
   for (auto& values : reduced_values_) values.assign(reduced_positions_.size(), Mat3::Zero());
+  // reducedHessians runs this share of the elastic tets beside inertia: on the full synthetic
+  // body (684 mass nodes, ~390 elastic tets) inertia's blocks cost about as much as gravity,
+  // contact and 85 % of the tets (scene Hessian 0.62 ms against 0.65 for 0 % or 25 %).
+  elastic_split_ = int(0.15 * double(tets_.rows()));
+  // reducedGradient: the node forces' mapping is about as costly as contact; half the tets.
+  gradient_split_ = int(tets_.rows()) / 2;
 }
 
 // ---- positions ----------------------------------------------------------------------------
@@ -392,7 +398,11 @@ void SoftTissue::positionsOf(const std::vector<int>& nodes, const BoneFrames& bo
   for (int b = 0; b < num_bones_; ++b)
     shift[b] = bones.t.row(b).transpose() - bones.R[b] * joints_.row(b).transpose();
   if (x.rows() != numNodes()) x.resize(numNodes(), 3);
-  for (int j : nodes) {
+  // Distinct nodes: each writes its own row (and blendOf its own row and stamp).
+  const long count = long(nodes.size());
+#pragma omp parallel for schedule(static) if (count >= 512)
+  for (long idx = 0; idx < count; ++idx) {
+    const int j = nodes[size_t(idx)];
     const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + nodeDisplacement(state, j);
     Vec3 p = Vec3::Zero();
     for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
@@ -520,15 +530,23 @@ void SoftTissue::beginReduced(int list) const {
   if (!reduced_) return;
   std::vector<Mat3>& values = reduced_values_[size_t(list)];
   std::fill(values.begin(), values.end(), Mat3::Zero());
+  mirrored_[size_t(list)] = false;
+}
+
+void SoftTissue::mirrorReduced(int list, int part, int parts) const {
+  std::vector<Mat3>& values = reduced_values_[size_t(list)];
+  const size_t mirrors = zz_mirror_.size();
+  for (size_t k = part * mirrors / parts; k < (part + 1) * mirrors / parts; ++k)
+    values[size_t(zz_mirror_[k].first)] = values[size_t(zz_mirror_[k].second)].transpose();
+  for (int k = part * num_bz_ / parts; k < (part + 1) * num_bz_ / parts; ++k)
+    values[size_t(num_zz_ + num_bz_ + k)] = values[size_t(num_zz_ + k)].transpose();
 }
 
 void SoftTissue::flushReduced(int list, std::vector<Triplet>& H, int offset,
                               std::vector<FixedHessianBlocks>* blocks) const {
   if (!reduced_) return;
   std::vector<Mat3>& values = reduced_values_[size_t(list)];
-  for (const auto& [lower, upper] : zz_mirror_) values[size_t(lower)] = values[size_t(upper)].transpose();
-  for (int k = 0; k < num_bz_; ++k)
-    values[size_t(num_zz_ + num_bz_ + k)] = values[size_t(num_zz_ + k)].transpose();
+  if (!mirrored_[size_t(list)]) mirrorReduced(list, 0, 1);
   if (blocks) {
     blocks->push_back({&reduced_positions_, &values, offset});
     return;
@@ -743,50 +761,64 @@ double SoftTissue::elastic(VecX* g, std::vector<Triplet>* H, int offset, bool ps
   return E;
 }
 
-double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, bool psd) const {
+double SoftTissue::elasticTets(int first, int last, double* gz, Mat3* values, bool psd) const {
   // Per elastic tet, F = I + Z G̃ᵀ on the tet's handles (reducedTetElasticEnergy): gradient
   // and Hessian come straight in the handles' coordinates, one 3 × 3 block per handle pair.
+  const size_t handles = size_t(num_handles_);
+  const bool hessian = values != nullptr;
+  double E = 0.0;
+  Mat3X Z(3, max_tet_handles_);
+  VecX ge(3 * max_tet_handles_);
+  MatX He(hessian ? 3 * max_tet_handles_ : 0, hessian ? 3 * max_tet_handles_ : 0);
+  for (int e = first; e < last; ++e) {
+    const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
+    if (count == 0) continue;
+    const int* tet_handles = &tet_handles_[size_t(begin)];
+    for (int s = 0; s < count; ++s) Z.col(s) = u.segment<3>(3 * tet_handles[s]);
+    Eigen::Ref<VecX> gradient = ge.head(3 * count);
+    Eigen::Ref<MatX> tet_hessian =
+        He.topLeftCorner(hessian ? 3 * count : 0, hessian ? 3 * count : 0);
+    const double w = element_weight_[e];
+    E += w * reducedTetElasticEnergy(elements_[size_t(e)].volume, materials_[size_t(e)],
+                                     tet_gradients_.middleCols(begin, count), Z.leftCols(count),
+                                     gz ? &gradient : nullptr, hessian ? &tet_hessian : nullptr,
+                                     psd);
+    if (gz)
+      for (int s = 0; s < count; ++s)
+        Eigen::Map<Vec3>(gz + 3 * tet_handles[s]) += w * gradient.segment<3>(3 * s);
+    if (hessian)  // upper triangle of handle pairs (tet_handles_ ascending)
+      for (int s = 0; s < count; ++s) {
+        const size_t row = size_t(tet_handles[s]) * handles;
+        for (int r = s; r < count; ++r)
+          values[zz_slot_[row + size_t(tet_handles[r])]] +=
+              w * tet_hessian.block<3, 3>(3 * s, 3 * r);
+      }
+  }
+  return E;
+}
+
+double SoftTissue::elasticCorrection(VecX* g, Mat3* values, int offset) const {
+  if (correction_.size() == 0) return 0.0;
+  // ½ zᵀ C z; C is positive semi-definite (ReducedData): the same in the PSD and exact forms.
+  const VecX Cz = correction_ * u;
+  if (g) g->segment(offset + bone_dofs_, Cz.size()) += Cz;
+  if (values)
+    for (const auto& [a, b] : correction_blocks_)
+      if (a <= b)
+        values[zz_slot_[size_t(a) * size_t(num_handles_) + size_t(b)]] +=
+            correction_.block<3, 3>(3 * a, 3 * b);
+  return 0.5 * u.dot(Cz);
+}
+
+double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, bool psd) const {
   const int T = int(tets_.rows());
   const int base = offset + bone_dofs_;
-  const size_t handles = size_t(num_handles_);
   const bool hessian = list != nullptr;
-  Mat3* values = hessian ? list->data() : nullptr;
-  // Tets [first, last): energy returned, gradient added into gz (the handles' 3H entries).
-  const auto tetRange = [&](int first, int last, double* gz) {
-    double E = 0.0;
-    Mat3X Z(3, max_tet_handles_);
-    VecX ge(3 * max_tet_handles_);
-    MatX He(hessian ? 3 * max_tet_handles_ : 0, hessian ? 3 * max_tet_handles_ : 0);
-    for (int e = first; e < last; ++e) {
-      const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
-      if (count == 0) continue;
-      const int* tet_handles = &tet_handles_[size_t(begin)];
-      for (int s = 0; s < count; ++s) Z.col(s) = u.segment<3>(3 * tet_handles[s]);
-      Eigen::Ref<VecX> gradient = ge.head(3 * count);
-      Eigen::Ref<MatX> tet_hessian = He.topLeftCorner(hessian ? 3 * count : 0, hessian ? 3 * count : 0);
-      const double w = element_weight_[e];
-      E += w * reducedTetElasticEnergy(elements_[size_t(e)].volume, materials_[size_t(e)],
-                                       tet_gradients_.middleCols(begin, count), Z.leftCols(count),
-                                       gz ? &gradient : nullptr, hessian ? &tet_hessian : nullptr,
-                                       psd);
-      if (gz)
-        for (int s = 0; s < count; ++s)
-          Eigen::Map<Vec3>(gz + 3 * tet_handles[s]) += w * gradient.segment<3>(3 * s);
-      if (hessian)  // upper triangle of handle pairs (tet_handles_ ascending)
-        for (int s = 0; s < count; ++s) {
-          const size_t row = size_t(tet_handles[s]) * handles;
-          for (int r = s; r < count; ++r)
-            values[zz_slot_[row + size_t(tet_handles[r])]] +=
-                w * tet_hessian.block<3, 3>(3 * s, 3 * r);
-        }
-    }
-    return E;
-  };
   double E = 0.0;
   const int threads = std::min(2, omp_get_max_threads());
   if (hessian || T < 256 || threads < 2 || omp_in_parallel()) {
-    // The Hessian's block sums stay on one thread (it runs beside inertia's, see Simulable).
-    E = tetRange(0, T, g ? g->data() + base : nullptr);
+    // The Hessian's block sums stay on one thread (Simulable runs them beside inertia's).
+    E = elasticTets(0, T, g ? g->data() + base : nullptr, hessian ? list->data() : nullptr, psd);
   } else {
     // Energy or gradient alone: the tets in two halves, the second half's gradient apart.
     VecX second = g ? VecX::Zero(3 * num_handles_) : VecX();
@@ -796,36 +828,106 @@ double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, 
     {
       const int t = omp_get_thread_num();
       failure.run([&] {
-        energies[t] = t == 0 ? tetRange(0, T / 2, g ? g->data() + base : nullptr)
-                             : tetRange(T / 2, T, g ? second.data() : nullptr);
+        energies[t] = t == 0 ? elasticTets(0, T / 2, g ? g->data() + base : nullptr, nullptr, psd)
+                             : elasticTets(T / 2, T, g ? second.data() : nullptr, nullptr, psd);
       });
     }
     failure.rethrow();
     E = energies[0] + energies[1];
     if (g) g->segment(base, second.size()) += second;
   }
-  if (correction_.size() > 0) {  // ½ zᵀ C z
-    const VecX Cz = correction_ * u;
-    E += 0.5 * u.dot(Cz);
-    if (g) g->segment(base, Cz.size()) += Cz;
-    // C is positive semi-definite (ReducedData): the same in the PSD and exact forms.
-    if (hessian)
-      for (const auto& [a, b] : correction_blocks_)
-        if (a <= b)
-          values[zz_slot_[size_t(a) * handles + size_t(b)]] += correction_.block<3, 3>(3 * a, 3 * b);
+  return E + elasticCorrection(g, hessian ? list->data() : nullptr, offset);
+}
+
+void SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
+                                 const std::function<void(VecX&)>& potential_first) const {
+  if (!reduced_) throw Error("SoftTissue::reducedGradient: the ROM only");
+  const int T = int(tets_.rows());
+  const int base = offset + bone_dofs_;
+  const double k = 1.0 / (h_ * h_);
+  const size_t count = mass_nodes_.size();
+  node_forces_[0].resize(count);
+  gradient_scratch_.setZero(g.size());
+  FirstFailure failure;
+#pragma omp parallel num_threads(2)
+  {
+    const int threads = omp_get_num_threads(), t = omp_get_thread_num();
+    for (int part = t; part < 2; part += threads)
+      failure.run([&] {
+        if (part == 0) {
+          // ∂/∂x_j of inertia plus gravity: m_j ((x_j − x̂_j) / h² − g).
+          for (size_t idx = 0; idx < count; ++idx) {
+            const int j = mass_nodes_[idx];
+            node_forces_[0][idx] =
+                inertia_mass_[j] * (k * (x_.row(j) - x_hat_.row(j)).transpose() - gravity);
+          }
+          mapForces(mass_nodes_, node_forces_[0], g, offset);
+          elasticTets(0, gradient_split_, g.data() + base, nullptr, true);
+        } else {
+          if (potential_first) potential_first(gradient_scratch_);
+          elasticTets(gradient_split_, T, gradient_scratch_.data() + base, nullptr, true);
+          elasticCorrection(&gradient_scratch_, nullptr, offset);
+        }
+      });
   }
-  return E;
+  failure.rethrow();
+  g += gradient_scratch_;
+}
+
+void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dynamic,
+                                 std::vector<Triplet>& H_potential, int offset, bool psd,
+                                 const std::function<void()>& potential_first) const {
+  if (!reduced_) throw Error("SoftTissue::reducedHessians: the ROM only");
+  const int T = int(tets_.rows());
+  const int zz_bz = num_zz_ + num_bz_;  // the slots the terms sum into (the rest are mirrors)
+  mirrored_[0] = mirrored_[1] = false;
+  FirstFailure failure;
+#pragma omp parallel num_threads(2)
+  {
+    // Every part runs whatever the team size (1 in a nested region).
+    const int threads = omp_get_num_threads(), t = omp_get_thread_num();
+    for (int part = t; part < 2; part += threads)
+      failure.run([&] {
+        if (part == 0) {
+          beginReduced(0);
+          std::vector<Mat3>& scratch = reduced_values_[2];
+          std::fill(scratch.begin(), scratch.begin() + zz_bz, Mat3::Zero());
+          inertia(nullptr, &H_dynamic, offset, psd);
+          elasticTets(0, elastic_split_, nullptr, scratch.data(), psd);
+        } else {
+          beginReduced(1);
+          if (potential_first) potential_first();
+          Mat3* values = reduced_values_[1].data();
+          this->gravity(gravity, nullptr, &H_potential, offset, psd);
+          elasticTets(elastic_split_, T, nullptr, values, psd);
+          elasticCorrection(nullptr, values, 0);
+        }
+      });
+#pragma omp barrier
+    // The elastic scratch into list 1, then the mirrored blocks of both lists, in slot ranges
+    // (harmless after a failure, which is rethrown below).
+    std::vector<Mat3>& potential = reduced_values_[1];
+    const std::vector<Mat3>& scratch = reduced_values_[2];
+    for (int part = t; part < 2; part += threads) {
+      const int first = part * zz_bz / 2, last = (part + 1) * zz_bz / 2;
+      for (int k = first; k < last; ++k) potential[size_t(k)] += scratch[size_t(k)];
+    }
+#pragma omp barrier
+    for (int list = t; list < 2; list += threads) mirrorReduced(list, 0, 1);
+  }
+  failure.rethrow();
+  mirrored_[0] = mirrored_[1] = true;
 }
 
 double SoftTissue::contact(const std::vector<Collider>& colliders, double time,
                            const ContactOptions& options, VecX* g, std::vector<Triplet>* H,
                            int offset, bool psd, int* active,
-                           const std::vector<int>* candidates) const {
+                           const std::vector<int>* candidates, bool skin) const {
   if (active) *active = 0;
   if (colliders.empty()) return 0.0;
   const std::vector<int>& list = candidates ? *candidates : surface_nodes_;
   if (list.empty()) return 0.0;
-  if (reduced_) skinNodes(list);  // the ROM skins only the mass nodes in prepare()
+  if (reduced_ && skin) skinNodes(list);  // the ROM skins only the mass nodes in prepare()
   const int V = int(list.size());
   contact_x_.resize(V, 3);
   contact_areas_.resize(V);

@@ -21,6 +21,7 @@
 // pose blend offsets are evaluated when first read.
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include "flsh/contact/collider.h"
@@ -103,7 +104,12 @@ class SoftTissue {
   double contact(const std::vector<Collider>& colliders, double time,
                  const ContactOptions& options, VecX* g, std::vector<Triplet>* H, int offset,
                  bool psd, int* active = nullptr,
-                 const std::vector<int>* candidates = nullptr) const;
+                 const std::vector<int>* candidates = nullptr, bool skin = true) const;
+  /// ROM: skins surface nodes for a later contact(..., skin = false) (no-op for the FEM, whose
+  /// prepare() skins every node).
+  void skinSurfaceNodes(const std::vector<int>& nodes) const {
+    if (reduced_) skinNodes(nodes);
+  }
   /// ROM (no-op for the FEM): the Hessian terms' bone–z and z–z blocks are summed at fixed
   /// positions (every pair the basis, the skinning and the elastic tets can couple) into value
   /// list 0 (inertia: the dynamic Hessian) or 1 (gravity, elasticity, contact: the potential
@@ -115,6 +121,23 @@ class SoftTissue {
   void beginReduced(int list) const;
   void flushReduced(int list, std::vector<Triplet>& H, int offset,
                     std::vector<FixedHessianBlocks>* blocks = nullptr) const;
+  /// ROM: inertia's, gravity's and the elastic term's gradients, and `potential_first`'s
+  /// (e.g. contact, on nodes skinned before, with skin = false), added into g on two threads:
+  /// inertia and gravity (one mapping of their summed node forces) with the first elastic tets
+  /// into g, beside potential_first and the other tets into a scratch vector of g's size (added
+  /// into g after).
+  void reducedGradient(const Vec3& gravity, VecX& g, int offset,
+                       const std::function<void(VecX&)>& potential_first) const;
+  /// ROM: both Hessian parts' node and tet terms on two threads (Simulable::
+  /// getHessianTripletVector): inertia (value list 0, bone triplets into H_dynamic) beside
+  /// `potential_first` (may be empty: e.g. contact, on nodes skinned before, with skin = false),
+  /// then gravity (list 1, bone triplets into H_potential); the elastic tets are split between
+  /// the two to balance them (the first ones into a scratch list then added into list 1, the
+  /// others and the rest-stiffness correction into list 1). Both lists come back mirrored
+  /// (flushReduced then only hands them over).
+  void reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dynamic,
+                       std::vector<Triplet>& H_potential, int offset, bool psd,
+                       const std::function<void()>& potential_first) const;
 
   /// Bounds for a contact broad phase: ‖Y_i − X̄_i‖ ≤ blendBound(i) · poseFeatureNorm() +
   /// displacementWeight(i) · largestSoftState() for surface node i (pose blend plus
@@ -208,7 +231,13 @@ class SoftTissue {
   int num_zz_ = 0, num_bz_ = 0;
   std::vector<std::pair<int, int>> zz_mirror_;  // (slot of (h, k), slot of (k, h)) for h > k
   std::vector<std::pair<int, int>> reduced_positions_;
-  mutable std::vector<Mat3> reduced_values_[2];
+  mutable std::vector<Mat3> reduced_values_[3];  // 2: reducedHessians' elastic scratch
+  mutable bool mirrored_[3] = {false, false, false};  // the lower blocks are current
+  int elastic_split_ = 0;  // reducedHessians: the tets [0, elastic_split_) run beside inertia
+  int gradient_split_ = 0;  // reducedGradient: the tets [0, gradient_split_) run beside it
+  mutable VecX gradient_scratch_;
+  /// Lower z–z and z–bone blocks from the summed ones, in the part-th of parts ranges.
+  void mirrorReduced(int list, int part, int parts) const;
   // Bones of the prepared state (the simulable's, which outlive every evaluation).
   mutable const std::vector<Mat3>* cur_R_ = nullptr;
   mutable const MatX3* cur_t_ = nullptr;
@@ -216,6 +245,11 @@ class SoftTissue {
   Eigen::Matrix<double, 3, 4> elementDisplacement(int e) const;
   void buildReducedPattern();
   double elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, bool psd) const;
+  /// Elastic tets [first, last): energy returned, gradient added into gz (the handles' 3H
+  /// entries; may be null), Hessian blocks summed into `values` (a value list; may be null).
+  double elasticTets(int first, int last, double* gz, Mat3* values, bool psd) const;
+  /// ½ zᵀ C z (0 without the rest-stiffness correction), its gradient and Hessian blocks.
+  double elasticCorrection(VecX* g, Mat3* values, int offset) const;
   Vec3 nodeDisplacement(const VecX& state, int j) const {
     if (!reduced_)
       return node_dof_[j] < 0 ? Vec3::Zero() : Vec3(state.segment<3>(node_dof_[j]));
@@ -224,6 +258,7 @@ class SoftTissue {
       d += phi_[k].second * state.segment<3>(3 * phi_[k].first);
     return d;
   }
+  /// x rows of `nodes` (distinct; split over the threads from 512) for bones and a state.
   void positionsOf(const std::vector<int>& nodes, const BoneFrames& bones, const VecX& state,
                    MatX3& x) const;
   Vec3 blendOf(int j) const;

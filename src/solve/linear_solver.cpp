@@ -49,10 +49,16 @@ class DenseCholeskySolver final : public LinearSolver {
       dense_.resize(n, n);
       ++analyses_;  // the "analysis" of a dense solver is sizing its storage
     }
-    dense_.setZero();
-    for (int k = 0; k < A.outerSize(); ++k)
-      for (SpMat::InnerIterator it(A, k); it; ++it)
-        if (it.row() >= it.col()) dense_(it.row(), it.col()) = it.value();
+    if (A.isCompressed() && A.nonZeros() == n * n) {
+      // Full n × n pattern (Scene's dense storage): compressed columns hold the rows 0..n−1 in
+      // order, so the values are the column-major dense matrix.
+      dense_ = Eigen::Map<const MatX>(A.valuePtr(), n, n);
+    } else {
+      dense_.setZero();
+      for (int k = 0; k < A.outerSize(); ++k)
+        for (SpMat::InnerIterator it(A, k); it; ++it)
+          if (it.row() >= it.col()) dense_(it.row(), it.col()) = it.value();
+    }
     if (!dense_.allFinite()) return false;
     llt_.compute(dense_);  // reads the lower triangle only
     float_factor_.resize(0, 0);  // made again on the next preconditionInPlace

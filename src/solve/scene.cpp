@@ -5,11 +5,13 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <omp.h>
 #include <string>
 
 #include "flsh/contact/contact_energy.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
+#include "core/first_failure.h"
 
 namespace flsh {
 
@@ -162,23 +164,26 @@ struct Scene::BlockAccumulator {
 
 namespace {
 
-// Throws InputError if a block of fixed-block list `b` reaches outside the n × n matrix
-// (checked wherever a list's positions are first read: slot lookup, dense fill).
-void checkBlockPositions(const FixedHessianBlocks& list, size_t b, int n) {
-  for (const auto& [r, c] : *list.positions) {
-    const long long row = (long long)r + list.offset, col = (long long)c + list.offset;
-    if (row < 0 || col < 0 || row + 3 > n || col + 3 > n)
-      throw InputError("HessianAssembler::assemble: fixed block at (" + std::to_string(row) +
-                       ", " + std::to_string(col) + ") of list " + std::to_string(b) +
-                       " is outside the " + std::to_string(n) + " × " + std::to_string(n) +
-                       " matrix");
-  }
+// Throws InputError if the block at (row, col) of fixed-block list `b` reaches outside the
+// n × n matrix.
+void checkBlockPosition(long long row, long long col, size_t b, int n) {
+  if (row < 0 || col < 0 || row + 3 > n || col + 3 > n)
+    throw InputError("HessianAssembler::assemble: fixed block at (" + std::to_string(row) + ", " +
+                     std::to_string(col) + ") of list " + std::to_string(b) + " is outside the " +
+                     std::to_string(n) + " × " + std::to_string(n) + " matrix");
 }
 
-// H takes P's pattern (kept, with its storage, when it already has it) with zero values. With
+// Checks every block of a list (wherever a list's positions are first read: slot lookup).
+void checkBlockPositions(const FixedHessianBlocks& list, size_t b, int n) {
+  for (const auto& [r, c] : *list.positions)
+    checkBlockPosition((long long)r + list.offset, (long long)c + list.offset, b, n);
+}
+
+// H takes P's pattern (kept, with its storage, when it already has it) with zero values (or,
+// zero = false, values left to the caller). With
 // the full n × n pattern the column starts decide (a compressed column holds sorted distinct
 // rows): no comparison of the n² row indices.
-void resetToPattern(const SpMat& P, SpMat& H) {
+void resetToPattern(const SpMat& P, SpMat& H, bool zero = true) {
   const int n = int(P.rows());
   const Eigen::Index nnz = P.nonZeros();
   const bool full = nnz == Eigen::Index(n) * n;
@@ -187,7 +192,7 @@ void resetToPattern(const SpMat& P, SpMat& H) {
                     (full ||
                      std::equal(P.innerIndexPtr(), P.innerIndexPtr() + nnz, H.innerIndexPtr()));
   if (!same) H = P;
-  std::fill(H.valuePtr(), H.valuePtr() + nnz, 0.0);
+  if (zero) std::fill(H.valuePtr(), H.valuePtr() + nnz, 0.0);
 }
 
 }  // namespace
@@ -304,30 +309,49 @@ void HessianAssembler::fillDense(const std::vector<Triplet>& triplets,
     std::fill(pattern_.valuePtr(), pattern_.valuePtr() + pattern_.nonZeros(), 0.0);
     ++pattern_builds_;
   }
-  resetToPattern(pattern_, H);
+  resetToPattern(pattern_, H, false);
   double* values = H.valuePtr();
   last_lookups_ = 0;
-  for (size_t k = 0; k < triplets.size(); ++k) {
-    const Triplet& t = triplets[k];
-    const int r = t.row(), c = t.col();
-    if (unsigned(r) >= unsigned(n) || unsigned(c) >= unsigned(n))
-      throw InputError("HessianAssembler::assemble: triplet " + std::to_string(k) + " at (" +
-                       std::to_string(r) + ", " + std::to_string(c) + ") is outside the " +
-                       std::to_string(n) + " × " + std::to_string(n) + " matrix");
-    values[size_t(c) * n + r] += t.value();
+  // Two threads from 256 DoFs, each owning a range of columns (contiguous in column-major
+  // storage): it zeroes them, then adds the entries of every triplet and block that fall in
+  // them, in the serial order (the same sums, bit for bit). Both threads check every position.
+  const int threads = n >= 256 ? 2 : 1;
+  detail::FirstFailure failure;
+#pragma omp parallel num_threads(threads) if (threads > 1)
+  {
+    const int parts = omp_get_num_threads(), t = omp_get_thread_num();
+    const int c0 = int(long(t) * n / parts), c1 = int(long(t + 1) * n / parts);
+    failure.run([&] {
+      std::fill(values + size_t(c0) * n, values + size_t(c1) * n, 0.0);
+      for (size_t k = 0; k < triplets.size(); ++k) {
+        const Triplet& tr = triplets[k];
+        const int r = tr.row(), c = tr.col();
+        if (unsigned(r) >= unsigned(n) || unsigned(c) >= unsigned(n))
+          throw InputError("HessianAssembler::assemble: triplet " + std::to_string(k) +
+                           " at (" + std::to_string(r) + ", " + std::to_string(c) +
+                           ") is outside the " + std::to_string(n) + " × " + std::to_string(n) +
+                           " matrix");
+        if (c >= c0 && c < c1) values[size_t(c) * n + r] += tr.value();
+      }
+      for (size_t b = 0; b < blocks.size(); ++b) {
+        const FixedHessianBlocks& list = blocks[b];
+        if (list.empty()) continue;
+        for (size_t k = 0; k < list.positions->size(); ++k) {
+          const long long r = (long long)(*list.positions)[k].first + list.offset;
+          const long long c = (long long)(*list.positions)[k].second + list.offset;
+          checkBlockPosition(r, c, b, n);
+          if (c + 3 <= c0 || c >= c1) continue;
+          const Mat3& B = (*list.values)[k];
+          for (int j = 0; j < 3; ++j) {
+            if (c + j < c0 || c + j >= c1) continue;
+            double* column = values + size_t(c + j) * n + r;
+            for (int i = 0; i < 3; ++i) column[i] += B(i, j);
+          }
+        }
+      }
+    });
   }
-  for (size_t b = 0; b < blocks.size(); ++b) {
-    const FixedHessianBlocks& list = blocks[b];
-    if (list.empty()) continue;
-    checkBlockPositions(list, b, n);
-    for (size_t k = 0; k < list.positions->size(); ++k) {
-      const int r = (*list.positions)[k].first + list.offset;
-      const int c = (*list.positions)[k].second + list.offset;
-      const Mat3& B = (*list.values)[k];
-      for (int j = 0; j < 3; ++j)
-        for (int i = 0; i < 3; ++i) values[size_t(c + j) * n + r + i] += B(i, j);
-    }
-  }
+  failure.rethrow();
 }
 
 // Sums the triplets into H on pattern_; false (and the missing blocks in pending_blocks_) if
@@ -702,8 +726,7 @@ double Scene::energy() {
 void Scene::gradient(VecX& g) {
   g.setZero(num_dofs_);
   for (size_t i = 0; i < simulables_.size(); ++i) {
-    simulables_[i]->getDynamicGradientVector(g, offsets_[i]);
-    simulables_[i]->getPotentialGradientVector(g, offsets_[i]);
+    simulables_[i]->getGradientVector(g, offsets_[i]);
   }
   if (avatarContactActive()) avatarContactEnergy(&g, nullptr, true);
 }

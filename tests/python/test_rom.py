@@ -204,6 +204,18 @@ def test_both_hessian_parts_in_one_call_are_their_sum(rom, psd):
     assert rom.get_hessian_triplet_vector(psd=psd).shape == total.shape
 
 
+def test_both_gradients_in_one_call_are_their_sum(rom):
+    rng = np.random.default_rng(8)
+    rom.updateState(rng.normal(scale=0.01, size=rom.numDofs()))
+    total = rom.getGradientVector()
+    parts = rom.getDynamicGradientVector() + rom.getPotentialGradientVector()
+    assert total.shape == (rom.numDofs(),)
+    scale = np.abs(parts).max()
+    assert scale > 0.0 and np.abs(parts[NUM_BONE_DOFS:]).max() > 0.0
+    assert np.abs(total - parts).max() <= 1e-12 * scale
+    assert np.array_equal(rom.get_gradient_vector(), total)
+
+
 def test_a_few_steps_move_the_soft_tissue(avatar):
     motion = flsh.make_builtin_motion("jumping_jacks", seconds=0.5, fps=30.0)
     sim = flsh.Simulable(avatar, motion, flsh.SimulableOptions(time_step=1.0 / 30.0))

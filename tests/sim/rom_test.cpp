@@ -254,9 +254,10 @@ TEST(ReducedModel, HessianBlocksComeAsOneFixedListPerPart) {
   }
 }
 
-// getHessianTripletVector (ROM: inertia on one thread, gravity and elasticity on another) returns
-// the two block overloads' lists, bit for bit, and their triplets (the dynamic ones in order,
-// the potential ones summing to the same).
+// getHessianTripletVector (ROM: inertia on one thread beside contact, gravity and most of the
+// elastic tets on another, the rest of the tets split off to balance them) returns the two block
+// overloads' lists and triplets: the dynamic ones bit for bit and in order, the potential ones
+// summing to the same up to round-off (the elastic blocks are summed in two parts).
 TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
   for (int kind : {0, 1, 2}) {
     const auto moved = movedOnTheGround(kind, 8);
@@ -297,10 +298,52 @@ TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
         EXPECT_EQ(both_blocks[k].positions, part_blocks[k].positions);
         EXPECT_EQ(both_blocks[k].offset, 3);
         ASSERT_EQ(both_blocks[k].values->size(), part_values[k].size());
-        for (size_t b = 0; b < part_values[k].size(); ++b)
-          ASSERT_EQ((*both_blocks[k].values)[b], part_values[k][b]) << "list " << k << " block " << b;
+        double largest = 0.0;  // 0 for the FEM's gravity list in the PSD form
+        for (const Mat3& B : part_values[k]) largest = std::max(largest, B.cwiseAbs().maxCoeff());
+        if (k < 2) ASSERT_GT(largest, 0.0) << "list " << k;
+        for (size_t b = 0; b < part_values[k].size(); ++b) {
+          const Mat3& got_block = (*both_blocks[k].values)[b];
+          if (k < dynamic_lists)
+            ASSERT_EQ(got_block, part_values[k][b]) << "list " << k << " block " << b;
+          else
+            ASSERT_LE((got_block - part_values[k][b]).cwiseAbs().maxCoeff(), 1e-14 * largest)
+                << "list " << k << " block " << b;
+        }
       }
     }
+  }
+}
+
+// getGradientVector (ROM: inertia and gravity beside contact on two threads, the elastic tets
+// split between them) is the sum of the two parts' gradients, added at an offset, contact
+// included.
+TEST(ReducedModel, BothGradientsAtOnceAreTheirSum) {
+  for (int kind : {1, 2}) {  // (the FEM's is the two calls)
+    SCOPED_TRACE("kind " + std::to_string(kind));
+    const auto moved = movedOnTheGround(kind, 9);
+    Simulable& sim = *moved;
+    // Lower the ground to 3 mm into the body: moderate contact forces.
+    sim.setColliders(
+        {Collider::plane(Vec3(0, sim.getNodes().col(1).minCoeff() + 0.003, 0), Vec3::UnitY())});
+    const int n = sim.numDofs(), offset = 5;
+    VecX parts = VecX::Zero(n + offset);
+    sim.getDynamicGradientVector(parts, offset);
+    sim.getPotentialGradientVector(parts, offset);
+    VecX both = VecX::Constant(n + offset, 0.5);  // added to what is there
+    sim.getGradientVector(both, offset);
+    both.array() -= 0.5;
+    const double scale = parts.cwiseAbs().maxCoeff();
+    ASSERT_GT(parts.tail(n - 144).cwiseAbs().maxCoeff(), 0.0);
+    EXPECT_LE((both - parts).cwiseAbs().maxCoeff(), 1e-13 * scale);
+    EXPECT_EQ(both.head(offset).cwiseAbs().maxCoeff(), 0.0);
+    // With the ground in contact (the gradient changes without it).
+    Simulable alone(avatar(kind), test::smallScene(800).walk);
+    alone.initialize();
+    alone.preUpdate();
+    alone.setState(sim.getState());
+    VecX free = VecX::Zero(n + offset);
+    alone.getGradientVector(free, offset);
+    EXPECT_GT((free - parts).cwiseAbs().maxCoeff(), 1.0);  // N: 3 mm deep over the sole
   }
 }
 
@@ -320,6 +363,7 @@ TEST(ReducedModel, NonFiniteSoftStateIsAnInputErrorFromEveryEvaluation) {
     EXPECT_THROW(sim.getPotentialEnergyScalar(), InputError);
     VecX g = VecX::Zero(sim.numDofs());
     EXPECT_THROW(sim.getPotentialGradientVector(g), InputError);
+    EXPECT_THROW(sim.getGradientVector(g), InputError);
     std::vector<Triplet> H;
     std::vector<FixedHessianBlocks> blocks;
     EXPECT_THROW(sim.getHessianTripletVector(H, blocks, 0, true), InputError);

@@ -224,6 +224,51 @@ TEST(HessianAssembler, FixedBlocksSumLikeTheirTriplets) {
   EXPECT_NE(message.find("4 positions but 1 values"), std::string::npos) << message;
 }
 
+// From 256 DoFs the dense fill runs on two threads, each owning half of the columns: blocks
+// that straddle the split, lists that share positions and repeated triplets sum as on one
+// thread, and bad positions are still reported (from inside the parallel region).
+TEST(HessianAssembler, DenseFillOnTwoThreadsSumsLikeTheTriplets) {
+  std::vector<int> group_start{0};
+  for (int b = 0; b < 10; ++b) group_start.push_back(group_start.back() + 6);
+  while (group_start.back() < 300) group_start.push_back(group_start.back() + 3);
+  const int n = group_start.back();
+  ASSERT_GE(n, 256);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> value(-1.0, 1.0);
+  std::uniform_int_distribution<int> position(0, n - 3);
+  std::vector<std::pair<int, int>> positions{{0, n / 2 - 2}, {n / 2 - 1, n / 2 - 1}, {n - 3, 0}};
+  for (int k = 0; k < 200; ++k) positions.emplace_back(position(rng), position(rng));
+  std::vector<Mat3> values_a(positions.size()), values_b(positions.size());
+  for (auto* values : {&values_a, &values_b})
+    for (Mat3& B : *values) B = Mat3::NullaryExpr([&] { return value(rng); });
+  const std::vector<FixedHessianBlocks> blocks{{&positions, &values_a, 0},
+                                               {&positions, &values_b, 0}};
+  std::vector<Triplet> triplets = randomBlockTriplets(group_start, 60, 7);
+  triplets.emplace_back(5, n / 2, 0.25);
+  triplets.emplace_back(5, n / 2, 0.5);  // repeated
+  std::vector<Triplet> all = triplets;
+  const std::vector<Triplet> b = expanded(blocks);
+  all.insert(all.end(), b.begin(), b.end());
+  HessianAssembler dense;
+  dense.setDense(true);
+  SpMat H;
+  dense.assemble(triplets, {}, blocks, n, H);
+  ASSERT_GT(maxAbs(H), 0.0);
+  EXPECT_LE(maxAbs(H - summed(all, n)), 1e-14 * maxAbs(H));
+  // Again (storage kept, values zeroed by the threads): the same matrix.
+  const SpMat first = H;
+  dense.assemble(triplets, {}, blocks, n, H);
+  EXPECT_EQ(maxAbs(H - first), 0.0);
+  // Bad input named from inside the parallel fill.
+  std::vector<std::pair<int, int>> outside{{1, n - 2}};
+  std::vector<Mat3> one(1, Mat3::Identity());
+  std::string message = test::messageOf<InputError>(
+      [&] { dense.assemble(triplets, {}, {{&outside, &one, 0}}, n, H); });
+  EXPECT_NE(message.find("(1, " + std::to_string(n - 2) + ")"), std::string::npos) << message;
+  message = test::messageOf<InputError>([&] { dense.assemble({Triplet(2, n, 1.0)}, {}, n, H); });
+  EXPECT_NE(message.find("(2, " + std::to_string(n) + ")"), std::string::npos) << message;
+}
+
 TEST(HessianAssembler, RejectsBadInput) {
   HessianAssembler assembler;
   SpMat H;

@@ -233,6 +233,10 @@ class Simulable {
   /// Gradients are ADDED into g at `offset` (g must be large enough).
   void getDynamicGradientVector(VecX& g, int offset = 0) const;
   void getPotentialGradientVector(VecX& g, int offset = 0) const;
+  /// Both gradients at once (their sum ADDED at offset), as a scene sums them. The ROM evaluates
+  /// its node terms (inertia and gravity) beside contact on two OpenMP threads, the elastic
+  /// tets split between them: the same sum up to round-off.
+  void getGradientVector(VecX& g, int offset = 0) const;
   /// Zeroes the entries of kinematic DoFs.
   void fixVectorKinematic(VecX& g, int offset = 0) const;
   /// Hessian triplets are APPENDED (both triangles) with indices shifted by `offset`. `psd`:
@@ -322,10 +326,12 @@ class Simulable {
   /// (blocks null: every term as triplets).
   void dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
                       int offset, bool psd) const;
-  /// soft_done (ROM): gravity's and the elastic term's Hessians are already summed (the ROM's
-  /// value list; gravity's bone triplets are the caller's to append).
+  /// soft_done (ROM): gravity's, the elastic term's and contact's Hessians are already summed
+  /// (the ROM's value list; their bone triplets are the caller's to append).
   void potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
                         int offset, bool psd, bool soft_done = false) const;
+  /// The bones' springs (and, without soft tissue, the bones' gravity): gradient added.
+  void boneSpringGradient(VecX& g, int offset) const;
   std::unique_ptr<Impl> impl_;
 };
 

@@ -261,6 +261,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
   areas_ = avatar.vertexAreas();
   x_hat_ = rest_;
   for (BonePairBlocks& blocks : pair_blocks_) blocks.resize(num_bones_);
+  for (auto& moments : pair_moments_) moments.assign(size_t(num_bones_) * num_bones_, PairMoments{});
   all_nodes_.resize(n);
   for (int j = 0; j < n; ++j) all_nodes_[j] = j;
   surface_nodes_.assign(all_nodes_.begin(), all_nodes_.begin() + num_surface_);
@@ -337,9 +338,9 @@ void SoftTissue::buildReducedPattern() {
   }
   for (auto& values : reduced_values_) values.assign(reduced_positions_.size(), Mat3::Zero());
   // reducedHessians runs this share of the elastic tets beside inertia: on the full synthetic
-  // body (684 mass nodes, ~390 elastic tets) inertia's blocks cost about as much as gravity,
-  // contact and 85 % of the tets (scene Hessian 0.62 ms against 0.65 for 0 % or 25 %).
-  elastic_split_ = int(0.15 * double(tets_.rows()));
+  // body (684 mass nodes, ~390 elastic tets) inertia's blocks cost about as much as contact,
+  // gravity and 75 % of the tets (scene Hessian 0.55 ms against 0.57 for 15 % or 35 %).
+  elastic_split_ = int(0.25 * double(tets_.rows()));
   // reducedGradient: the node forces' mapping is about as costly as contact; half the tets.
   gradient_split_ = int(tets_.rows()) / 2;
 }
@@ -526,10 +527,18 @@ void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const M
   }
 }
 
+namespace {
+// Zeroes `count` 3 × 3 blocks stored back to back (one vectorized pass).
+void zeroBlocks(Mat3* blocks, int count) {
+  static_assert(sizeof(Mat3) == 9 * sizeof(double), "Mat3 must be 9 packed doubles");
+  Eigen::Map<VecX>(blocks->data(), 9 * Eigen::Index(count)).setZero();
+}
+}  // namespace
+
 void SoftTissue::beginReduced(int list) const {
   if (!reduced_) return;
-  std::vector<Mat3>& values = reduced_values_[size_t(list)];
-  std::fill(values.begin(), values.end(), Mat3::Zero());
+  // The summed slots only (z–z and bone–z; the z–bone ones are written by the mirroring).
+  zeroBlocks(reduced_values_[size_t(list)].data(), num_zz_ + num_bz_);
   mirrored_[size_t(list)] = false;
 }
 
@@ -580,11 +589,21 @@ void SoftTissue::mapForces(const std::vector<int>& nodes, const std::vector<Vec3
 
 void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                             const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset,
-                            bool psd, int list, std::vector<Mat3>* fixed) const {
+                            bool psd, int list, std::vector<Mat3>* fixed,
+                            const std::vector<double>* K_scalar) const {
   if (fixed) fixed->assign(coupling_dofs_.size(), Mat3::Zero());
   const std::vector<Mat3>& R = *cur_R_;
   BonePairBlocks& pair_blocks = pair_blocks_[size_t(list)];
   auto block = [&](int b, int c) -> Mat6& { return pair_blocks.block(b, c); };
+  // K_j = κ_j I: J_aᵀ J_c = w_a w_c [I, −[r_c]×; [r_a]×, (r_a·r_c) I − r_c r_aᵀ] is summed over
+  // the nodes as moments per bone pair (κ w w, its r_c- and r_a-weighted sums and Σ κ w w r_c
+  // r_aᵀ), 16 products per pair and node instead of a 6 × 3 × 6 product; blocks at the end.
+  std::vector<PairMoments>& moments = pair_moments_[size_t(list)];
+  std::vector<int>& touched = pair_moments_touched_[size_t(list)];
+  if (K_scalar) {
+    moments.resize(size_t(num_bones_) * num_bones_);
+    touched.clear();
+  }
   Mat3 curvature[kNumJoints];
   bool has_curvature[kNumJoints] = {};
   Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
@@ -605,10 +624,42 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
     // Bone–soft coupling per influence, one 6 × 3 block: Jbᵀ K M from K and, in the exact
     // form, ∂²(f·x)/∂δω_b∂δu_j = −w [f]× R_b from the force (rows 3..5).
     const bool force = forces && !(*forces)[idx].isZero(0.0);
-    const bool k_coupling = K && dof >= 0, f_coupling = force && !psd && dof >= 0;
+    const bool k_coupling = (K || K_scalar) && dof >= 0, f_coupling = force && !psd && dof >= 0;
     Eigen::Matrix<double, 6, 3> coupling[kNumJoints];
     for (int a = 0; a < count && (k_coupling || f_coupling); ++a) coupling[a].setZero();
-    if (K) {
+    if (K_scalar) {
+      const double kappa = (*K_scalar)[idx];
+      for (int a = 0; a < count; ++a) {
+        const double ka = kappa * influences_[influence_start_[j] + a].weight;
+        for (int c = 0; c < count; ++c) {
+          const double s = ka * influences_[influence_start_[j] + c].weight;
+          const int key = bones[a] * num_bones_ + bones[c];
+          PairMoments& m = moments[size_t(key)];
+          if (!m.touched) {
+            m = PairMoments{};
+            m.touched = true;
+            touched.push_back(key);
+          }
+          m.s += s;
+          m.p += s * lever[c];
+          m.q += s * lever[a];
+          m.W.noalias() += (s * lever[c]) * lever[a].transpose();
+        }
+      }
+      if (dof >= 0) {
+        const Mat3& M = node_M_[j];
+        for (int a = 0; a < count; ++a) {
+          const double ka = kappa * influences_[influence_start_[j] + a].weight;
+          coupling[a].topRows<3>() += ka * M;
+          coupling[a].bottomRows<3>().noalias() += ka * (skew(lever[a]) * M);
+        }
+        const Mat3 MtKM = kappa * (M.transpose() * M);
+        if (fixed)
+          (*fixed)[size_t(coupling_start_[idx + 1]) - 1] = MtKM;
+        else
+          addSoftSoft(H, offset, j, MtKM, list);
+      }
+    } else if (K) {
       const Mat3& Kj = (*K)[idx];
       for (int a = 0; a < count; ++a) {
         const Eigen::Matrix<double, 6, 3> JaT_K = Jb[a].transpose() * Kj;
@@ -651,6 +702,16 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval(), list);
     }
   }
+  for (int key : touched) {
+    PairMoments& m = moments[size_t(key)];
+    Mat6& B = block(key / num_bones_, key % num_bones_);
+    B.topLeftCorner<3, 3>().diagonal().array() += m.s;
+    B.topRightCorner<3, 3>() -= skew(m.p);
+    B.bottomLeftCorner<3, 3>() += skew(m.q);
+    B.bottomRightCorner<3, 3>() += m.W.trace() * Mat3::Identity() - m.W;
+    m.touched = false;
+  }
+  touched.clear();
   for (int b = 0; b < num_bones_; ++b)
     if (has_curvature[b])
       block(b, b).bottomRightCorner<3, 3>() += psd ? projectToPSD<3>(curvature[b]) : curvature[b];
@@ -673,13 +734,12 @@ double SoftTissue::inertia(VecX* g, std::vector<Triplet>* H, int offset, bool ps
   }
   if (g) mapForces(mass_nodes_, node_forces_[0], *g, offset);
   if (H) {
-    node_blocks_.resize(count);
-    for (size_t idx = 0; idx < count; ++idx)
-      node_blocks_[idx] = k * inertia_mass_[mass_nodes_[idx]] * Mat3::Identity();
+    node_scalars_.resize(count);
+    for (size_t idx = 0; idx < count; ++idx) node_scalars_[idx] = k * inertia_mass_[mass_nodes_[idx]];
     // psd: Gauss–Newton Σ m JᵀJ; exact: plus the curvature of the rotating nodes.
     const bool fixed = blocks && !reduced_;
-    mapHessian(mass_nodes_, &node_blocks_, psd ? nullptr : &node_forces_[0], *H, offset, psd, 0,
-               fixed ? &inertia_fixed_ : nullptr);
+    mapHessian(mass_nodes_, nullptr, psd ? nullptr : &node_forces_[0], *H, offset, psd, 0,
+               fixed ? &inertia_fixed_ : nullptr, &node_scalars_);
     if (fixed) *blocks = {&coupling_dofs_, &inertia_fixed_, offset};
   }
   return E;
@@ -891,7 +951,7 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
         if (part == 0) {
           beginReduced(0);
           std::vector<Mat3>& scratch = reduced_values_[2];
-          std::fill(scratch.begin(), scratch.begin() + zz_bz, Mat3::Zero());
+          zeroBlocks(scratch.data(), zz_bz);
           inertia(nullptr, &H_dynamic, offset, psd);
           elasticTets(0, elastic_split_, nullptr, scratch.data(), psd);
         } else {

@@ -223,6 +223,17 @@ class SoftTissue {
   mutable std::vector<Mat12> element_hessians_;
   mutable std::vector<Mat3> blocks_;
   mutable BonePairBlocks pair_blocks_[2];  // mapHessian's, per value list
+  // mapHessian with K_j = κ_j I: per ordered bone pair (b, c) (key b · #bones + c), Σ κ w_b w_c
+  // (s), its sums weighted by r_c (p) and r_b (q), and Σ κ w_b w_c r_c r_bᵀ (W); per value list.
+  struct PairMoments {
+    double s = 0.0;
+    Vec3 p = Vec3::Zero(), q = Vec3::Zero();
+    Mat3 W = Mat3::Zero();
+    bool touched = false;
+  };
+  mutable std::vector<PairMoments> pair_moments_[2];
+  mutable std::vector<int> pair_moments_touched_[2];
+  mutable std::vector<double> node_scalars_;  // inertia's κ_j = m_j / h²
   // ROM Hessian blocks at fixed positions (buildReducedPattern): z–z blocks (zz_slot_[h · H +
   // k], H handles), bone–z blocks (bz_slot_[r · H + h], r = 2b for bone b's t rows, 2b + 1 for
   // its ω rows), then the bone–z blocks' transposes; positions relative to the first DoF. Two
@@ -282,9 +293,11 @@ class SoftTissue {
   /// `fixed` (FEM, nodes = mass_nodes_ only; may be null): the bone–tissue coupling and
   /// node-diagonal blocks go into it, laid out as coupling_dofs_, instead of into H.
   /// `list`: the ROM value list and the scratch to use (0: inertia, 1: the potential terms).
+  /// `K_scalar` (instead of K, which is then null): K_j = K_scalar[idx] · I (inertia).
   void mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                   const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset,
-                  bool psd, int list, std::vector<Mat3>* fixed = nullptr) const;
+                  bool psd, int list, std::vector<Mat3>* fixed = nullptr,
+                  const std::vector<double>* K_scalar = nullptr) const;
   // FEM: the fixed positions (relative to the simulable's first DoF) of the blocks mapHessian
   // writes for the mass nodes: per mass node with a DoF, from coupling_start_[idx], four per
   // influence a of bone b — (6b, u), (6b + 3, u), (u, 6b), (u, 6b + 3) — then (u, u).

@@ -333,21 +333,33 @@ void HessianAssembler::fillDense(const std::vector<Triplet>& triplets,
                            " matrix");
         if (c >= c0 && c < c1) values[size_t(c) * n + r] += tr.value();
       }
-      for (size_t b = 0; b < blocks.size(); ++b) {
+      // Consecutive lists on the same positions and offset (the ROM's two parts) are summed
+      // block by block and added once.
+      for (size_t b = 0; b < blocks.size();) {
         const FixedHessianBlocks& list = blocks[b];
-        if (list.empty()) continue;
-        for (size_t k = 0; k < list.positions->size(); ++k) {
+        size_t end = b + 1;
+        while (end < blocks.size() && blocks[end].positions == list.positions &&
+               blocks[end].offset == list.offset && !blocks[end].empty())
+          ++end;
+        if (list.empty()) {
+          b = end;
+          continue;
+        }
+        const size_t count = list.positions->size();
+        for (size_t k = 0; k < count; ++k) {
           const long long r = (long long)(*list.positions)[k].first + list.offset;
           const long long c = (long long)(*list.positions)[k].second + list.offset;
-          checkBlockPosition(r, c, b, n);
+          if (r < 0 || c < 0 || r + 3 > n || c + 3 > n) checkBlockPosition(r, c, b, n);
           if (c + 3 <= c0 || c >= c1) continue;
-          const Mat3& B = (*list.values)[k];
+          Mat3 B = (*list.values)[k];
+          for (size_t other = b + 1; other < end; ++other) B += (*blocks[other].values)[k];
           for (int j = 0; j < 3; ++j) {
             if (c + j < c0 || c + j >= c1) continue;
             double* column = values + size_t(c + j) * n + r;
             for (int i = 0; i < 3; ++i) column[i] += B(i, j);
           }
         }
+        b = end;
       }
     });
   }

@@ -41,7 +41,7 @@ void bind_solve(py::module_& m) {
       "Hessian, refactoring only when that stops paying off (NewtonOptions.lagged).")
       .def(py::init([](bool enabled, double cg_relative_tolerance, bool adaptive_forcing,
                        int max_cg_iterations, int refactor_after_cg_iterations,
-                       bool fast_preconditioner) {
+                       bool fast_preconditioner, double reuse_hessian_below) {
              LaggedFactorOptions o;
              o.enabled = enabled;
              o.cg_relative_tolerance = cg_relative_tolerance;
@@ -49,6 +49,7 @@ void bind_solve(py::module_& m) {
              o.max_cg_iterations = max_cg_iterations;
              o.refactor_after_cg_iterations = refactor_after_cg_iterations;
              o.fast_preconditioner = fast_preconditioner;
+             o.reuse_hessian_below = reuse_hessian_below;
              return o;
            }),
            py::kw_only(), py::arg("enabled") = ld.enabled,
@@ -57,6 +58,7 @@ void bind_solve(py::module_& m) {
            py::arg("max_cg_iterations") = ld.max_cg_iterations,
            py::arg("refactor_after_cg_iterations") = ld.refactor_after_cg_iterations,
            py::arg("fast_preconditioner") = ld.fast_preconditioner,
+           py::arg("reuse_hessian_below") = ld.reuse_hessian_below,
            "Keyword arguments; values are checked when a solve starts (ValueError).")
       .def_readwrite("enabled", &LaggedFactorOptions::enabled,
                      "False: every Newton iteration factors its Hessian")
@@ -71,6 +73,9 @@ void bind_solve(py::module_& m) {
                      "a solve needing more CG iterations than this (≥ 0) marks the factor stale")
       .def_readwrite("fast_preconditioner", &LaggedFactorOptions::fast_preconditioner,
                      "apply the factor in single precision (CHOLMOD: split over the threads)")
+      .def_readwrite("reuse_hessian_below", &LaggedFactorOptions::reuse_hessian_below,
+                     "≥ 0: once ‖g‖∞ ≤ this · max(1, ‖g₀‖∞), PCG may run on the previous "
+                     "iterate's Hessian (a chord step, at most one in a row); 0: never")
       .def("__repr__", [](const LaggedFactorOptions& o) {
         return "LaggedFactorOptions(enabled=" + std::string(o.enabled ? "True" : "False") +
                ", cg_relative_tolerance=" +
@@ -140,6 +145,9 @@ void bind_solve(py::module_& m) {
                     "asked (not positive definite, or a refresh of the lagged factor)")
       .def_readonly("hessian_evaluations", &NewtonResult::hessian_evaluations,
                     "Hessian assemblies (either form)")
+      .def_readonly("hessian_reuses", &NewtonResult::hessian_reuses,
+                    "iterations whose PCG ran on the previous iterate's Hessian "
+                    "(LaggedFactorOptions.reuse_hessian_below)")
       .def_readonly("factorizations", &NewtonResult::factorizations,
                     "numeric factorizations (regularization retries included)")
       .def_readonly("cg_iterations", &NewtonResult::cg_iterations,

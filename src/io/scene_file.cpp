@@ -321,7 +321,7 @@ class SceneReader {
     requireObject(node, path);
     checkKeys(node, path,
               {"enabled", "cg_relative_tolerance", "adaptive_forcing", "max_cg_iterations",
-               "refactor_after_cg_iterations", "fast_preconditioner"});
+               "refactor_after_cg_iterations", "fast_preconditioner", "reuse_hessian_below"});
     if (node.contains("enabled")) lagged.enabled = toBool(node["enabled"], child(path, "enabled"));
     if (node.contains("cg_relative_tolerance")) {
       const std::string p = child(path, "cg_relative_tolerance");
@@ -341,6 +341,12 @@ class SceneReader {
     if (node.contains("fast_preconditioner"))
       lagged.fast_preconditioner =
           toBool(node["fast_preconditioner"], child(path, "fast_preconditioner"));
+    if (node.contains("reuse_hessian_below")) {
+      const std::string p = child(path, "reuse_hessian_below");
+      const double below = toDouble(node["reuse_hessian_below"], p);
+      if (!(below >= 0.0)) fail(p, "expected a value ≥ 0 (0: never), got " + number(below));
+      lagged.reuse_hessian_below = below;
+    }
   }
 
   AvatarSpec readAvatar(const json& node, const std::string& path, size_t index,

@@ -48,6 +48,8 @@ void validate(const NewtonOptions& o) {
   if (lag.max_cg_iterations < 1) bad("lagged.max_cg_iterations", "≥ 1", lag.max_cg_iterations);
   if (lag.refactor_after_cg_iterations < 0)
     bad("lagged.refactor_after_cg_iterations", "≥ 0", lag.refactor_after_cg_iterations);
+  if (!(lag.reuse_hessian_below >= 0.0) || !std::isfinite(lag.reuse_hessian_below))
+    bad("lagged.reuse_hessian_below", "finite and ≥ 0", lag.reuse_hessian_below);
 }
 
 using Clock = std::chrono::steady_clock;
@@ -180,6 +182,7 @@ void NewtonResult::addCounts(const NewtonResult& other) {
   regularizations += other.regularizations;
   psd_fallbacks += other.psd_fallbacks;
   hessian_evaluations += other.hessian_evaluations;
+  hessian_reuses += other.hessian_reuses;
   factorizations += other.factorizations;
   cg_iterations += other.cg_iterations;
   seconds_energy += other.seconds_energy;
@@ -227,6 +230,7 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
   // The Hessian form held in H, unshifted (−1: none or shifted), so that a failed PCG solve
   // factors the matrix it already assembled.
   int assembled_form = -1;
+  bool reused_hessian = false;  // this iteration's PCG ran on the previous iterate's Hessian
 
   const auto evaluateHessian = [&](bool psd) {
     {
@@ -283,7 +287,13 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
       break;
     }
     const double gradient_norm2 = g.norm();
-    assembled_form = -1;  // the state moved: H, if any, is of an earlier iterate
+    // The state moved: H, if any, is of the previous iterate (its form, −1: none or shifted).
+    const int previous_form = assembled_form;
+    assembled_form = -1;
+    // Near convergence PCG may run on that previous Hessian (a chord step), once in a row.
+    const bool may_reuse = lag.reuse_hessian_below > 0.0 && !reused_hessian && iteration > 0 &&
+                           gradient_norm <= lag.reuse_hessian_below * std::max(1.0, initial_gradient_norm);
+    reused_hessian = false;
     // An iteration that uses the PSD form although the exact one was asked counts once.
     bool counted_psd_fallback = false;
     const auto notePsdForm = [&](bool psd) {
@@ -322,7 +332,12 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
         // The exact form first; if PCG meets non-positive curvature on it, the PSD form.
         for (bool psd = !options.exact_hessian;; psd = true) {
           notePsdForm(psd);
-          evaluateHessian(psd);
+          if (may_reuse && !reused_hessian && previous_form == (psd ? 1 : 0)) {
+            reused_hessian = true;  // H stays; a failed PCG assembles this iterate's (form −1)
+            ++result.hessian_reuses;
+          } else {
+            evaluateHessian(psd);
+          }
           scaleOfDiagonal();
           int iterations = 0;
           CgOutcome outcome;

@@ -606,6 +606,10 @@ NewtonOptions softTissueNewtonDefaults() {
   // iterations and accuracy (see scene.h).
   options.lagged.cg_relative_tolerance = 5e-2;
   options.gradient_tolerance = 1e-5;  // measured trade-off: see scene.h
+  // Chord steps near convergence: FEM walk, 30 steps: 3.70 instead of 4.10 assemblies per
+  // step for the same Newton and PCG counts, 0.0097 mm from a 1e-8 solve (0.0070 without);
+  // 1e-3: 4.33 Newton iterations per step.
+  options.lagged.reuse_hessian_below = 1e-4;
   return options;
 }
 
@@ -617,6 +621,10 @@ NewtonOptions reducedNewtonDefaults() {
   options.exact_hessian = true;
   options.lagged.enabled = true;
   options.gradient_tolerance = 1e-6;
+  // Chord steps near convergence: walk, 300 steps: 3.57 instead of 4.07 assemblies per step,
+  // 4.07 instead of 4.04 Newton iterations, the same 0.0017 mm from a 1e-9 solve; 1e-3: 4.13
+  // iterations, 3.53 assemblies.
+  options.lagged.reuse_hessian_below = 1e-4;
   return options;
 }
 

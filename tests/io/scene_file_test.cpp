@@ -337,7 +337,8 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
     "newton": {"soft_tissue_lagged": {"cg_relative_tolerance": 0.02, "max_cg_iterations": 40,
                                       "refactor_after_cg_iterations": 15,
                                       "fast_preconditioner": false},
-               "reduced_lagged": {"enabled": false, "adaptive_forcing": false}},
+               "reduced_lagged": {"enabled": false, "adaptive_forcing": false,
+                                  "reuse_hessian_below": 0}},
     "avatars": [{}]})");
   const LaggedFactorOptions& fem = scene.soft_tissue_lagged;
   EXPECT_DOUBLE_EQ(fem.cg_relative_tolerance, 0.02);
@@ -346,9 +347,12 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
   EXPECT_FALSE(fem.fast_preconditioner);
   EXPECT_TRUE(fem.enabled);            // not given: the FEM solver's default
   EXPECT_TRUE(fem.adaptive_forcing);
+  EXPECT_DOUBLE_EQ(fem.reuse_hessian_below, softTissueNewtonDefaults().lagged.reuse_hessian_below);
+  EXPECT_GT(fem.reuse_hessian_below, 0.0);
   const LaggedFactorOptions& rom = scene.reduced_lagged;
   EXPECT_FALSE(rom.enabled);
   EXPECT_FALSE(rom.adaptive_forcing);
+  EXPECT_EQ(rom.reuse_hessian_below, 0.0);
   EXPECT_DOUBLE_EQ(rom.cg_relative_tolerance, reducedNewtonDefaults().lagged.cg_relative_tolerance);
   EXPECT_EQ(rom.max_cg_iterations, reducedNewtonDefaults().lagged.max_cg_iterations);
 
@@ -357,6 +361,8 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
        "newton.soft_tissue_lagged.cg_relative_tolerance: expected 0 < value < 1, got 1"},
       {R"({"newton": {"reduced_lagged": {"max_cg_iterations": 0}}, "avatars": [{}]})",
        "newton.reduced_lagged.max_cg_iterations: expected an integer in [1, 100000], got 0"},
+      {R"({"newton": {"reduced_lagged": {"reuse_hessian_below": -1e-4}}, "avatars": [{}]})",
+       "newton.reduced_lagged.reuse_hessian_below: expected a value ≥ 0 (0: never), got -0.0001"},
       {R"({"newton": {"reduced_lagged": {"enabled": 1}}, "avatars": [{}]})",
        "newton.reduced_lagged.enabled: expected true or false, got number 1"},
       {R"({"newton": {"soft_tissue_lagged": {"refactor_after": 3}}, "avatars": [{}]})",

@@ -290,6 +290,21 @@ def test_lagged_factor_options_reach_the_solver(avatar):
     with pytest.raises(ValueError, match="cg_relative_tolerance"):
         run(flsh.LaggedFactorOptions(enabled=True, cg_relative_tolerance=2.0))
     assert "LaggedFactorOptions(enabled=True" in repr(flsh.LaggedFactorOptions(enabled=True))
+    # Chord steps near convergence: the scene default, and the reuses reported per step.
+    assert defaults.reuse_hessian_below > 0.0
+    assert flsh.LaggedFactorOptions().reuse_hessian_below == 0.0
+    with pytest.raises(ValueError, match="reuse_hessian_below"):
+        run(flsh.LaggedFactorOptions(enabled=True, reuse_hessian_below=-1.0))
+    motion = flsh.make_builtin_motion("jumping_jacks", seconds=0.5, fps=30.0)
+    sim = flsh.Simulable(avatar, motion, flsh.SimulableOptions(time_step=1.0 / 30.0))
+    scene = flsh.Scene()
+    scene.add_simulable(sim)
+    scene.initialize()
+    steps = [scene.step().newton for _ in range(3)]
+    assert all(n.converged for n in steps)
+    assert sum(n.hessian_reuses for n in steps) > 0
+    assert sum(n.hessian_evaluations + n.hessian_reuses for n in steps) >= sum(
+        n.iterations for n in steps)
 
 
 def test_errors(small_body, avatar, rom, tmp_path):

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <random>
 #include <string>
 #include <utility>
@@ -233,6 +234,41 @@ TEST(LaggedNewton, ReachesPlainNewtonsMinimizersWithFewerFactorizations) {
   EXPECT_GT(lagged.calls_without_factorization, 0);
 }
 
+// lagged.reuse_hessian_below: near convergence PCG runs on the previous iterate's Hessian (a
+// chord step) instead of assembling one; the calls reach the same minimizers with fewer
+// assemblies, never two reuses in a row.
+TEST(LaggedNewton, ReusesThePreviousHessianNearConvergence) {
+  NewtonOptions fresh_options = laggedOptions();
+  fresh_options.gradient_tolerance = 1e-9;
+  NewtonOptions reuse_options = fresh_options;
+  reuse_options.lagged.reuse_hessian_below = 1e-5;
+
+  SpringNetwork fresh_network(kGrid, kGrid, kGrid, kInertiaWeight, kStiffness);
+  SpringNetwork reuse_network(kGrid, kGrid, kGrid, kInertiaWeight, kStiffness);
+  auto fresh_solver = makeLinearSolver(LinearSolverType::Cholmod, fresh_network.numDofs());
+  auto reuse_solver = makeLinearSolver(LinearSolverType::Cholmod, reuse_network.numDofs());
+  int fresh_assemblies = 0, reuse_assemblies = 0, reuses = 0;
+  for (int t = 1; t <= kCalls; ++t) {
+    fresh_network.target = reuse_network.target = fresh_network.deformedRest(0.1 * t, 1.0);
+    VecX g0;
+    reuse_network.gradient(g0);
+    const NewtonResult fresh = newtonSolve(fresh_network, fresh_options, fresh_solver.get());
+    const NewtonResult reuse = newtonSolve(reuse_network, reuse_options, reuse_solver.get());
+    ASSERT_TRUE(fresh.converged && reuse.converged) << fresh.message << " / " << reuse.message;
+    EXPECT_EQ(fresh.hessian_reuses, 0);
+    // Every iteration has a Hessian, assembled or reused; reuses never come twice in a row.
+    EXPECT_GE(reuse.hessian_evaluations + reuse.hessian_reuses, reuse.iterations);
+    EXPECT_LE(2 * reuse.hessian_reuses, reuse.iterations);
+    EXPECT_LE(reuse.gradient_norm, 1e-9 * std::max(1.0, g0.lpNorm<Eigen::Infinity>()));
+    EXPECT_LE((fresh_network.x - reuse_network.x).lpNorm<Eigen::Infinity>(), 1e-6) << "call " << t;
+    fresh_assemblies += fresh.hessian_evaluations;
+    reuse_assemblies += reuse.hessian_evaluations;
+    reuses += reuse.hessian_reuses;
+  }
+  EXPECT_GT(reuses, 0);
+  EXPECT_LT(reuse_assemblies, fresh_assemblies);
+}
+
 TEST(LaggedNewton, CountersAndTimingsAreConsistent) {
   SpringNetwork network(kGrid, kGrid, kGrid, kInertiaWeight, kStiffness);
   auto solver = makeLinearSolver(LinearSolverType::Cholmod, network.numDofs());
@@ -393,6 +429,11 @@ TEST(LaggedNewton, RejectsInvalidLaggedOptionsNamingTheField) {
     options = laggedOptions();
     options.lagged.cg_relative_tolerance = bad;
     expectError(options, "lagged.cg_relative_tolerance");
+  }
+  for (const double bad : {-1e-4, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    options = laggedOptions();
+    options.lagged.reuse_hessian_below = bad;
+    expectError(options, "lagged.reuse_hessian_below");
   }
   // Validated even while the lag is off, so that a bad configuration never waits to be used.
   options = NewtonOptions{};

@@ -88,6 +88,11 @@ struct LaggedFactorOptions {
   /// float copy of its LLᵀ factor: the same PCG iteration counts, solves ~1.5 → ~1.2 ms per
   /// walking step.
   bool fast_preconditioner = true;
+  /// Near convergence, PCG may run on the previous iterate's Hessian instead of assembling this
+  /// one's (a chord step; at most one in a row, and only in the form that Hessian has): when
+  /// ‖g‖∞ ≤ reuse_hessian_below · max(1, ‖g₀‖∞) (dimensionless, ≥ 0; 0: never). If that PCG
+  /// fails or its step is rejected, the iteration assembles its own Hessian as usual.
+  double reuse_hessian_below = 0.0;
 };
 
 struct NewtonOptions {
@@ -126,6 +131,8 @@ struct NewtonResult {
   /// factor, which is then always of the PSD form.
   int psd_fallbacks = 0;
   int hessian_evaluations = 0;  ///< Objective::hessian calls (either form)
+  /// Iterations whose PCG ran on the previous iterate's Hessian (lagged.reuse_hessian_below).
+  int hessian_reuses = 0;
   /// Numeric factorizations in this call (regularization retries included).
   int factorizations = 0;
   int cg_iterations = 0;  ///< PCG iterations in total (lagged factor only)

@@ -110,7 +110,9 @@ struct SceneOptions {
   /// step against 1.13 and 39 at 1e-2, for the same Newton iterations, ~10 % faster), and
   /// gradient_tolerance = 1e-5: on the full-size walking body at h = 1/30 s it stays within
   /// 0.03 mm of a 1e-8 solve over 30 steps (displacements up to 29 mm), where 1e-4 ends 0.9 mm
-  /// off for 8 % fewer iterations (docs/benchmarks.md).
+  /// off for 8 % fewer iterations (docs/benchmarks.md). lagged.reuse_hessian_below = 1e-4: the
+  /// last iterations' PCG may run on the previous iterate's Hessian (10 % fewer assemblies on
+  /// the walk, same iterations, 0.0097 instead of 0.0070 mm from a 1e-8 solve).
   NewtonOptions soft_tissue_newton = softTissueNewtonDefaults();
   /// Newton of scenes whose soft-tissue simulables all use the reduced model (ROM), used
   /// instead of `newton` and `soft_tissue_newton`. Defaults (reducedNewtonDefaults()): the exact
@@ -118,7 +120,8 @@ struct SceneOptions {
   /// Auto, which here means the dense LLT up to 1500 DoFs (the handle block is dense: a few
   /// hundred DoFs per avatar) and CHOLMOD above. On the walking full body the PSD form at 1e-5
   /// ends 1.2 mm (10 % of the displacement) from a 1e-9 solve at the same speed where this ends
-  /// 0.025 mm from it (docs/benchmarks.md).
+  /// 0.025 mm from it (docs/benchmarks.md). lagged.reuse_hessian_below = 1e-4: 12 % fewer
+  /// Hessian assemblies on the walk for 1 % more iterations, the same distance from a 1e-9 solve.
   NewtonOptions reduced_newton = reducedNewtonDefaults();
   /// Assemble the Hessian on the general pattern (HessianAssembler) even when no simulable has
   /// soft tissue. The skeleton then gets bitwise the same Hessians and states (its general

@@ -528,6 +528,19 @@ void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const M
 }
 
 namespace {
+// Runs part(0) and part(1) on a team of two OpenMP threads (both on one thread when the team has
+// one, e.g. in a nested region); the first exception either throws is rethrown after both.
+template <class Part>
+void onTwoThreads(Part&& part) {
+  FirstFailure failure;
+#pragma omp parallel num_threads(2)
+  {
+    const int threads = omp_get_num_threads(), t = omp_get_thread_num();
+    for (int p = t; p < 2; p += threads) failure.run([&] { part(p); });
+  }
+  failure.rethrow();
+}
+
 // Zeroes `count` 3 × 3 blocks stored back to back (one vectorized pass).
 void zeroBlocks(Mat3* blocks, int count) {
   static_assert(sizeof(Mat3) == 9 * sizeof(double), "Mat3 must be 9 packed doubles");
@@ -883,16 +896,11 @@ double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, 
     // Energy or gradient alone: the tets in two halves, the second half's gradient apart.
     VecX second = g ? VecX::Zero(3 * num_handles_) : VecX();
     double energies[2] = {0.0, 0.0};
-    FirstFailure failure;
-#pragma omp parallel num_threads(2)
-    {
-      const int t = omp_get_thread_num();
-      failure.run([&] {
-        energies[t] = t == 0 ? elasticTets(0, T / 2, g ? g->data() + base : nullptr, nullptr, psd)
-                             : elasticTets(T / 2, T, g ? second.data() : nullptr, nullptr, psd);
-      });
-    }
-    failure.rethrow();
+    onTwoThreads([&](int part) {
+      energies[part] = part == 0
+                           ? elasticTets(0, T / 2, g ? g->data() + base : nullptr, nullptr, psd)
+                           : elasticTets(T / 2, T, g ? second.data() : nullptr, nullptr, psd);
+    });
     E = energies[0] + energies[1];
     if (g) g->segment(base, second.size()) += second;
   }
@@ -908,29 +916,22 @@ void SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
   const size_t count = mass_nodes_.size();
   node_forces_[0].resize(count);
   gradient_scratch_.setZero(g.size());
-  FirstFailure failure;
-#pragma omp parallel num_threads(2)
-  {
-    const int threads = omp_get_num_threads(), t = omp_get_thread_num();
-    for (int part = t; part < 2; part += threads)
-      failure.run([&] {
-        if (part == 0) {
-          // ∂/∂x_j of inertia plus gravity: m_j ((x_j − x̂_j) / h² − g).
-          for (size_t idx = 0; idx < count; ++idx) {
-            const int j = mass_nodes_[idx];
-            node_forces_[0][idx] =
-                inertia_mass_[j] * (k * (x_.row(j) - x_hat_.row(j)).transpose() - gravity);
-          }
-          mapForces(mass_nodes_, node_forces_[0], g, offset);
-          elasticTets(0, gradient_split_, g.data() + base, nullptr, true);
-        } else {
-          if (potential_first) potential_first(gradient_scratch_);
-          elasticTets(gradient_split_, T, gradient_scratch_.data() + base, nullptr, true);
-          elasticCorrection(&gradient_scratch_, nullptr, offset);
-        }
-      });
-  }
-  failure.rethrow();
+  onTwoThreads([&](int part) {
+    if (part == 0) {
+      // ∂/∂x_j of inertia plus gravity: m_j ((x_j − x̂_j) / h² − g).
+      for (size_t idx = 0; idx < count; ++idx) {
+        const int j = mass_nodes_[idx];
+        node_forces_[0][idx] =
+            inertia_mass_[j] * (k * (x_.row(j) - x_hat_.row(j)).transpose() - gravity);
+      }
+      mapForces(mass_nodes_, node_forces_[0], g, offset);
+      elasticTets(0, gradient_split_, g.data() + base, nullptr, true);
+    } else {
+      if (potential_first) potential_first(gradient_scratch_);
+      elasticTets(gradient_split_, T, gradient_scratch_.data() + base, nullptr, true);
+      elasticCorrection(&gradient_scratch_, nullptr, offset);
+    }
+  });
   g += gradient_scratch_;
 }
 
@@ -941,41 +942,29 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
   const int T = int(tets_.rows());
   const int zz_bz = num_zz_ + num_bz_;  // the slots the terms sum into (the rest are mirrors)
   mirrored_[0] = mirrored_[1] = false;
-  FirstFailure failure;
-#pragma omp parallel num_threads(2)
-  {
-    // Every part runs whatever the team size (1 in a nested region).
-    const int threads = omp_get_num_threads(), t = omp_get_thread_num();
-    for (int part = t; part < 2; part += threads)
-      failure.run([&] {
-        if (part == 0) {
-          beginReduced(0);
-          std::vector<Mat3>& scratch = reduced_values_[2];
-          zeroBlocks(scratch.data(), zz_bz);
-          inertia(nullptr, &H_dynamic, offset, psd);
-          elasticTets(0, elastic_split_, nullptr, scratch.data(), psd);
-        } else {
-          beginReduced(1);
-          if (potential_first) potential_first();
-          Mat3* values = reduced_values_[1].data();
-          this->gravity(gravity, nullptr, &H_potential, offset, psd);
-          elasticTets(elastic_split_, T, nullptr, values, psd);
-          elasticCorrection(nullptr, values, 0);
-        }
-      });
-#pragma omp barrier
-    // The elastic scratch into list 1, then the mirrored blocks of both lists, in slot ranges
-    // (harmless after a failure, which is rethrown below).
+  onTwoThreads([&](int part) {
+    if (part == 0) {
+      beginReduced(0);
+      zeroBlocks(reduced_values_[2].data(), zz_bz);
+      inertia(nullptr, &H_dynamic, offset, psd);
+      elasticTets(0, elastic_split_, nullptr, reduced_values_[2].data(), psd);
+    } else {
+      beginReduced(1);
+      if (potential_first) potential_first();
+      Mat3* values = reduced_values_[1].data();
+      this->gravity(gravity, nullptr, &H_potential, offset, psd);
+      elasticTets(elastic_split_, T, nullptr, values, psd);
+      elasticCorrection(nullptr, values, 0);
+    }
+  });
+  // The elastic scratch into list 1 (in two slot ranges), then the lower blocks of each list.
+  onTwoThreads([&](int part) {
     std::vector<Mat3>& potential = reduced_values_[1];
     const std::vector<Mat3>& scratch = reduced_values_[2];
-    for (int part = t; part < 2; part += threads) {
-      const int first = part * zz_bz / 2, last = (part + 1) * zz_bz / 2;
-      for (int k = first; k < last; ++k) potential[size_t(k)] += scratch[size_t(k)];
-    }
-#pragma omp barrier
-    for (int list = t; list < 2; list += threads) mirrorReduced(list, 0, 1);
-  }
-  failure.rethrow();
+    for (int k = part * zz_bz / 2; k < (part + 1) * zz_bz / 2; ++k)
+      potential[size_t(k)] += scratch[size_t(k)];
+  });
+  onTwoThreads([&](int list) { mirrorReduced(list, 0, 1); });
   mirrored_[0] = mirrored_[1] = true;
 }
 

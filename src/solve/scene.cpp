@@ -312,10 +312,11 @@ void HessianAssembler::fillDense(const std::vector<Triplet>& triplets,
   resetToPattern(pattern_, H, false);
   double* values = H.valuePtr();
   last_lookups_ = 0;
-  // Two threads from 256 DoFs, each owning a range of columns (contiguous in column-major
-  // storage): it zeroes them, then adds the entries of every triplet and block that fall in
-  // them, in the serial order (the same sums, bit for bit). Both threads check every position.
-  const int threads = n >= 256 ? 2 : 1;
+  // Two threads from 256 DoFs (when OpenMP may use two), each owning a range of columns
+  // (contiguous in column-major storage): it zeroes them, then adds the entries of every
+  // triplet and block that fall in them, in list order (the same sums as on one thread, bit for
+  // bit). Both threads check every position.
+  const int threads = n >= 256 && omp_get_max_threads() >= 2 ? 2 : 1;
   detail::FirstFailure failure;
 #pragma omp parallel num_threads(threads) if (threads > 1)
   {

@@ -262,8 +262,9 @@ class Simulable {
   /// Both parts at once, as a scene assembles them: the triplets and lists of the dynamic
   /// block overload followed by those of the potential one (same values, same order). Returns
   /// the index in H where the potential part's triplets start. The ROM evaluates its inertia
-  /// concurrently with gravity and elasticity here (two OpenMP threads); its potential
-  /// triplets then come in another order (the same sum).
+  /// concurrently with contact, gravity and elasticity here (two OpenMP threads, the elastic
+  /// tets split between them); its potential triplets then come in another order and its
+  /// potential list's values differ by round-off (the same sum).
   size_t getHessianTripletVector(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>& blocks,
                                  int offset, bool psd) const;
   /// Makes kinematic rows/columns of the assembled H identity (drops their triplets and adds

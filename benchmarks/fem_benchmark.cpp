@@ -171,10 +171,11 @@ int main(int argc, char** argv) {
     const double n = steps;
     std::printf("steps: %d in %.2f s -> %.2f steps/s (%d not converged)\n", steps, total,
                 steps / total, unconverged);
-    std::printf("per step: %.2f Newton iterations, %.2f Hessian assemblies (%.2f iterations "
-                "fell back to the PSD form), %.2f factorizations, %.1f PCG iterations\n",
-                sum.iterations / n, sum.hessian_evaluations / n, sum.psd_fallbacks / n,
-                sum.factorizations / n, sum.cg_iterations / n);
+    std::printf("per step: %.2f Newton iterations, %.2f Hessian assemblies (%.2f reused; %.2f "
+                "iterations fell back to the PSD form), %.2f factorizations, %.1f PCG "
+                "iterations\n",
+                sum.iterations / n, sum.hessian_evaluations / n, sum.hessian_reuses / n,
+                sum.psd_fallbacks / n, sum.factorizations / n, sum.cg_iterations / n);
     std::printf("per step seconds: energy %.3f, gradient %.3f, Hessian %.3f, factorization "
                 "%.3f, solves %.3f, other %.3f\n",
                 sum.seconds_energy / n, sum.seconds_gradient / n, sum.seconds_hessian / n,

@@ -421,10 +421,10 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   const double n = steps;
   std::printf("steps: %d in %.3f s -> %.1f steps/s (%d not converged)\n", steps, total,
               steps / total, unconverged);
-  std::printf("per step: %.2f Newton iterations, %.2f Hessian assemblies, %.2f factorizations, "
-              "%.1f PCG iterations\n",
-              sum.iterations / n, sum.hessian_evaluations / n, sum.factorizations / n,
-              sum.cg_iterations / n);
+  std::printf("per step: %.2f Newton iterations, %.2f Hessian assemblies (%.2f reused), %.2f "
+              "factorizations, %.1f PCG iterations\n",
+              sum.iterations / n, sum.hessian_evaluations / n, sum.hessian_reuses / n,
+              sum.factorizations / n, sum.cg_iterations / n);
   std::printf("per step ms: energy %.3f, gradient %.3f, Hessian %.3f, factorization %.3f, "
               "solves %.3f, other %.3f\n",
               1e3 * sum.seconds_energy / n, 1e3 * sum.seconds_gradient / n,

@@ -1,6 +1,7 @@
 // Hessian assembly helpers shared by the skeleton and soft-tissue terms of Simulable (private).
 #pragma once
 
+#include <memory>
 #include <vector>
 
 #include "flsh/core/types.h"
@@ -19,6 +20,39 @@ void addBlock(std::vector<Triplet>& H, int row0, int col0, const Eigen::MatrixBa
     for (int r = 0; r < block.rows(); ++r) *out++ = Triplet(row0 + r, col0 + c, block(r, c));
 }
 
+/// One value per key of a fixed range [0, size), accumulated over many points and read once:
+/// at(key) resets a value to `zero` on its first touch; touched() lists the touched keys in
+/// first-touch order; forget() makes them untouched again. Storage stays allocated.
+template <class Value, class Allocator = std::allocator<Value>>
+class TouchedValues {
+ public:
+  void resize(size_t size, const Value& zero) {
+    zero_ = zero;
+    values_.assign(size, zero);
+    touched_.assign(size, 0);
+    list_.clear();
+  }
+  Value& at(int key) {
+    if (!touched_[key]) {
+      touched_[key] = 1;
+      values_[key] = zero_;
+      list_.push_back(key);
+    }
+    return values_[key];
+  }
+  const std::vector<int>& touched() const { return list_; }
+  void forget() {
+    for (int key : list_) touched_[key] = 0;
+    list_.clear();
+  }
+
+ private:
+  Value zero_{};
+  std::vector<Value, Allocator> values_;
+  std::vector<char> touched_;
+  std::vector<int> list_;
+};
+
 /// N × N blocks of a (row blocks × column blocks) matrix accumulated over many points and
 /// emitted once: block(r, c) zeroes a block on first touch; emit() appends the touched ones at
 /// (row0 + N r, col0 + N c) and forgets them. Storage stays allocated between evaluations.
@@ -28,32 +62,18 @@ class TouchedBlocks {
   using Block = Eigen::Matrix<double, N, N>;
   void resize(int row_blocks, int col_blocks) {
     cols_ = col_blocks;
-    blocks_.assign(size_t(row_blocks) * col_blocks, Block::Zero());
-    touched_.assign(size_t(row_blocks) * col_blocks, 0);
-    list_.clear();
+    blocks_.resize(size_t(row_blocks) * col_blocks, Block::Zero());
   }
-  Block& block(int r, int c) {
-    const int key = r * cols_ + c;
-    if (!touched_[key]) {
-      touched_[key] = 1;
-      blocks_[key].setZero();
-      list_.push_back(key);
-    }
-    return blocks_[key];
-  }
+  Block& block(int r, int c) { return blocks_.at(r * cols_ + c); }
   void emit(std::vector<Triplet>& H, int row0, int col0) {
-    for (int key : list_) {
-      addBlock(H, row0 + N * (key / cols_), col0 + N * (key % cols_), blocks_[key]);
-      touched_[key] = 0;
-    }
-    list_.clear();
+    for (int key : blocks_.touched())
+      addBlock(H, row0 + N * (key / cols_), col0 + N * (key % cols_), blocks_.at(key));
+    blocks_.forget();
   }
 
  private:
   int cols_ = 0;
-  std::vector<Block, Eigen::aligned_allocator<Block>> blocks_;
-  std::vector<char> touched_;
-  std::vector<int> list_;
+  TouchedValues<Block, Eigen::aligned_allocator<Block>> blocks_;
 };
 
 /// 6 × 6 Hessian blocks per ordered bone pair (b, c), emitted at (offset + 6b, offset + 6c).

@@ -152,6 +152,16 @@ struct Simulable::Impl {
   detail::BoneFrames frames(const BoneStates& s) const { return {s.R, s.t}; }
   // Node positions of the current state (soft tissue only).
   void prepareSoft() const { soft->prepare(state_version, frames(q)); }
+  /// prepareSoft, the contact broad phase and the skinning of its candidates, before terms run
+  /// on two threads (skinning writes node rows inertia reads); true if contact has candidates
+  /// (then call SoftTissue::contact with skin = false).
+  bool prepareSoftForThreads() const {
+    prepareSoft();
+    ensureContact();
+    const bool any = !colliders.empty() && !contact.candidates.empty();
+    if (any) soft->skinSurfaceNodes(contact.candidates);
+    return any;
+  }
   void setSoftPrediction() {
     soft->setPrediction(frames(q_n), frames(q_nm1));
   }
@@ -1188,11 +1198,8 @@ void Simulable::getGradientVector(VecX& g, int offset) const {
     getPotentialGradientVector(g, offset);
     return;
   }
-  // ROM: as getHessianTripletVector (contact's surface nodes skinned before the threads).
-  m.prepareSoft();
-  m.ensureContact();
-  const bool contact = !m.colliders.empty() && !m.contact.candidates.empty();
-  if (contact) m.soft->skinSurfaceNodes(m.contact.candidates);
+  // ROM: as getHessianTripletVector.
+  const bool contact = m.prepareSoftForThreads();
   m.soft->reducedGradient(m.options.gravity, g, offset, [&](VecX& part) {
     if (contact)
       m.soft->contact(m.colliders, m.time, m.options.contact, &part, nullptr, offset, true,
@@ -1287,16 +1294,12 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
     return potential_start;
   }
   // ROM: inertia beside contact and gravity on two threads, the elastic tets split between
-  // them (SoftTissue::reducedHessians); then the bones' springs. Contact's surface nodes are
-  // skinned before (skinning writes node rows inertia reads).
-  m.prepareSoft();
+  // them (SoftTissue::reducedHessians); then the bones' springs.
+  const bool contact = m.prepareSoftForThreads();
   std::vector<Triplet>& dynamic = m.hessian_scratch[0];
   std::vector<Triplet>& potential = m.hessian_scratch[1];
   dynamic.clear();
   potential.clear();
-  m.ensureContact();
-  const bool contact = !m.colliders.empty() && !m.contact.candidates.empty();
-  if (contact) m.soft->skinSurfaceNodes(m.contact.candidates);
   m.soft->reducedHessians(m.options.gravity, dynamic, potential, offset, psd, [&] {
     if (contact)
       m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &potential, offset, psd,

@@ -261,7 +261,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
   areas_ = avatar.vertexAreas();
   x_hat_ = rest_;
   for (BonePairBlocks& blocks : pair_blocks_) blocks.resize(num_bones_);
-  for (auto& moments : pair_moments_) moments.assign(size_t(num_bones_) * num_bones_, PairMoments{});
+  for (auto& moments : pair_moments_) moments.resize(size_t(num_bones_) * num_bones_, PairMoments{});
   all_nodes_.resize(n);
   for (int j = 0; j < n; ++j) all_nodes_[j] = j;
   surface_nodes_.assign(all_nodes_.begin(), all_nodes_.begin() + num_surface_);
@@ -337,12 +337,6 @@ void SoftTissue::buildReducedPattern() {
     reduced_positions_.emplace_back(col, row);
   }
   for (auto& values : reduced_values_) values.assign(reduced_positions_.size(), Mat3::Zero());
-  // reducedHessians runs this share of the elastic tets beside inertia: on the full synthetic
-  // body (684 mass nodes, ~390 elastic tets) inertia's blocks cost about as much as contact,
-  // gravity and 75 % of the tets (scene Hessian 0.55 ms against 0.57 for 15 % or 35 %).
-  elastic_split_ = int(0.25 * double(tets_.rows()));
-  // reducedGradient: the node forces' mapping is about as costly as contact; half the tets.
-  gradient_split_ = int(tets_.rows()) / 2;
 }
 
 // ---- positions ----------------------------------------------------------------------------
@@ -528,6 +522,12 @@ void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const M
 }
 
 namespace {
+// reducedHessians runs this share of the elastic tets beside inertia: on the full synthetic body
+// (684 mass nodes, ~390 elastic tets) inertia's blocks cost about as much as contact, gravity and
+// 75 % of the tets (scene Hessian 0.55 ms against 0.57 for 15 % or 35 %). reducedGradient runs
+// half of them beside inertia's and gravity's force mapping (about as costly as contact).
+constexpr double kHessianTetsBesideInertia = 0.25, kGradientTetsBesideInertia = 0.5;
+
 // Runs part(0) and part(1) on a team of two OpenMP threads (both on one thread when the team has
 // one, e.g. in a nested region); the first exception either throws is rethrown after both.
 template <class Part>
@@ -611,12 +611,7 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
   // K_j = κ_j I: J_aᵀ J_c = w_a w_c [I, −[r_c]×; [r_a]×, (r_a·r_c) I − r_c r_aᵀ] is summed over
   // the nodes as moments per bone pair (κ w w, its r_c- and r_a-weighted sums and Σ κ w w r_c
   // r_aᵀ), 16 products per pair and node instead of a 6 × 3 × 6 product; blocks at the end.
-  std::vector<PairMoments>& moments = pair_moments_[size_t(list)];
-  std::vector<int>& touched = pair_moments_touched_[size_t(list)];
-  if (K_scalar) {
-    moments.resize(size_t(num_bones_) * num_bones_);
-    touched.clear();
-  }
+  TouchedValues<PairMoments>& moments = pair_moments_[size_t(list)];
   Mat3 curvature[kNumJoints];
   bool has_curvature[kNumJoints] = {};
   Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
@@ -646,13 +641,7 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         const double ka = kappa * influences_[influence_start_[j] + a].weight;
         for (int c = 0; c < count; ++c) {
           const double s = ka * influences_[influence_start_[j] + c].weight;
-          const int key = bones[a] * num_bones_ + bones[c];
-          PairMoments& m = moments[size_t(key)];
-          if (!m.touched) {
-            m = PairMoments{};
-            m.touched = true;
-            touched.push_back(key);
-          }
+          PairMoments& m = moments.at(bones[a] * num_bones_ + bones[c]);
           m.s += s;
           m.p += s * lever[c];
           m.q += s * lever[a];
@@ -715,16 +704,15 @@ void SoftTissue::mapHessian(const std::vector<int>& nodes, const std::vector<Mat
         addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval(), list);
     }
   }
-  for (int key : touched) {
-    PairMoments& m = moments[size_t(key)];
+  for (int key : moments.touched()) {
+    const PairMoments& m = moments.at(key);
     Mat6& B = block(key / num_bones_, key % num_bones_);
     B.topLeftCorner<3, 3>().diagonal().array() += m.s;
     B.topRightCorner<3, 3>() -= skew(m.p);
     B.bottomLeftCorner<3, 3>() += skew(m.q);
     B.bottomRightCorner<3, 3>() += m.W.trace() * Mat3::Identity() - m.W;
-    m.touched = false;
   }
-  touched.clear();
+  moments.forget();
   for (int b = 0; b < num_bones_; ++b)
     if (has_curvature[b])
       block(b, b).bottomRightCorner<3, 3>() += psd ? projectToPSD<3>(curvature[b]) : curvature[b];
@@ -914,6 +902,7 @@ void SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
   const int base = offset + bone_dofs_;
   const double k = 1.0 / (h_ * h_);
   const size_t count = mass_nodes_.size();
+  const int split = int(kGradientTetsBesideInertia * T);
   node_forces_[0].resize(count);
   gradient_scratch_.setZero(g.size());
   onTwoThreads([&](int part) {
@@ -925,10 +914,10 @@ void SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
             inertia_mass_[j] * (k * (x_.row(j) - x_hat_.row(j)).transpose() - gravity);
       }
       mapForces(mass_nodes_, node_forces_[0], g, offset);
-      elasticTets(0, gradient_split_, g.data() + base, nullptr, true);
+      elasticTets(0, split, g.data() + base, nullptr, true);
     } else {
       if (potential_first) potential_first(gradient_scratch_);
-      elasticTets(gradient_split_, T, gradient_scratch_.data() + base, nullptr, true);
+      elasticTets(split, T, gradient_scratch_.data() + base, nullptr, true);
       elasticCorrection(&gradient_scratch_, nullptr, offset);
     }
   });
@@ -941,19 +930,20 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
   if (!reduced_) throw Error("SoftTissue::reducedHessians: the ROM only");
   const int T = int(tets_.rows());
   const int zz_bz = num_zz_ + num_bz_;  // the slots the terms sum into (the rest are mirrors)
+  const int split = int(kHessianTetsBesideInertia * T);
   mirrored_[0] = mirrored_[1] = false;
   onTwoThreads([&](int part) {
     if (part == 0) {
       beginReduced(0);
       zeroBlocks(reduced_values_[2].data(), zz_bz);
       inertia(nullptr, &H_dynamic, offset, psd);
-      elasticTets(0, elastic_split_, nullptr, reduced_values_[2].data(), psd);
+      elasticTets(0, split, nullptr, reduced_values_[2].data(), psd);
     } else {
       beginReduced(1);
       if (potential_first) potential_first();
       Mat3* values = reduced_values_[1].data();
       this->gravity(gravity, nullptr, &H_potential, offset, psd);
-      elasticTets(elastic_split_, T, nullptr, values, psd);
+      elasticTets(split, T, nullptr, values, psd);
       elasticCorrection(nullptr, values, 0);
     }
   });

@@ -229,10 +229,8 @@ class SoftTissue {
     double s = 0.0;
     Vec3 p = Vec3::Zero(), q = Vec3::Zero();
     Mat3 W = Mat3::Zero();
-    bool touched = false;
   };
-  mutable std::vector<PairMoments> pair_moments_[2];
-  mutable std::vector<int> pair_moments_touched_[2];
+  mutable TouchedValues<PairMoments> pair_moments_[2];
   mutable std::vector<double> node_scalars_;  // inertia's κ_j = m_j / h²
   // ROM Hessian blocks at fixed positions (buildReducedPattern): z–z blocks (zz_slot_[h · H +
   // k], H handles), bone–z blocks (bz_slot_[r · H + h], r = 2b for bone b's t rows, 2b + 1 for
@@ -244,8 +242,6 @@ class SoftTissue {
   std::vector<std::pair<int, int>> reduced_positions_;
   mutable std::vector<Mat3> reduced_values_[3];  // 2: reducedHessians' elastic scratch
   mutable bool mirrored_[3] = {false, false, false};  // the lower blocks are current
-  int elastic_split_ = 0;  // reducedHessians: the tets [0, elastic_split_) run beside inertia
-  int gradient_split_ = 0;  // reducedGradient: the tets [0, gradient_split_) run beside it
   mutable VecX gradient_scratch_;
   /// Lower z–z and z–bone blocks from the summed ones, in the part-th of parts ranges.
   void mirrorReduced(int list, int part, int parts) const;

@@ -399,6 +399,20 @@ void bind_sim(py::module_& m) {
           "call as a Scene sums it (the ROM evaluates its node terms beside contact on two "
           "threads). The sum of getDynamicGradientVector and getPotentialGradientVector.");
   alias("getGradientVector", "get_gradient_vector");
+  sim.def("getEnergyAndGradientVector",
+          [](const S& s) {
+            VecX g = VecX::Zero(s.numDofs());
+            double energy = 0.0;
+            {
+              py::gil_scoped_release release;
+              energy = s.getEnergyAndGradientVector(g);
+            }
+            return py::make_tuple(energy, to_numpy(g));
+          },
+          "(energy, gradient): the whole objective's energy (J) and its (numDofs,) gradient from "
+          "the same passes, what a line search needs at a trial state; the energy equals "
+          "getDynamicEnergyScalar() + getPotentialEnergyScalar() up to round-off.");
+  alias("getEnergyAndGradientVector", "get_energy_and_gradient_vector");
   sim.def("fixVectorKinematic",
           [](const S& s, const py::object& g) {
             VecX v = dof_vector(s, g, "g");

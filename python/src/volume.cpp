@@ -241,7 +241,7 @@ void bind_volume(py::module_& m) {
                        const py::object& cache_dir, bool use_cache, int handles,
                        int elastic_cubature_points, int inertial_cubature_points,
                        int cubature_training_samples, double cubature_training_amplitude,
-                       std::uint64_t cubature_seed) {
+                       std::uint64_t cubature_seed, double basis_drop_below) {
              if (!body) throw py::value_error("body: expected a BodyModel, got None");
              const VecX b = betas.is_none() ? VecX(VecX::Zero(body->numBetas()))
                                             : to_vector(betas, "betas", -1, "(K,)");
@@ -271,6 +271,10 @@ void bind_volume(py::module_& m) {
                    std::to_string(cubature_training_amplitude));
              r.training_amplitude = cubature_training_amplitude;
              r.seed = cubature_seed;
+             if (!(basis_drop_below >= 0.0 && basis_drop_below <= 0.01))
+               throw py::value_error("basis_drop_below: expected a value in [0, 0.01], got " +
+                                     std::to_string(basis_drop_below));
+             r.basis_drop_below = basis_drop_below;
              return std::make_shared<SoftAvatar>(std::move(body), b, settings);
            }),
            py::arg("body"), py::arg("betas") = py::none(), py::kw_only(),
@@ -282,7 +286,7 @@ void bind_volume(py::module_& m) {
            py::arg("inertial_cubature_points") = rd.inertial_cubature_points,
            py::arg("cubature_training_samples") = rd.training_samples,
            py::arg("cubature_training_amplitude") = rd.training_amplitude,
-           py::arg("cubature_seed") = rd.seed,
+           py::arg("cubature_seed") = rd.seed, py::arg("basis_drop_below") = rd.basis_drop_below,
            "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³ and voxel_size "
            "m (the skeleton's bone inertias). Soft tissue: resolution (interior node density of the "
            "tet mesh, 1 ≈ 10 000 nodes for SMPL), material_file (JSON, '' = built-in defaults), "
@@ -291,7 +295,7 @@ void bind_volume(py::module_& m) {
            "elastic_cubature_points / inertial_cubature_points (sample tets of each cubature when "
            "enabled, ≥ 1), cubature_training_samples (random training samples per cubature), "
            "cubature_training_amplitude (largest handle displacement of a training sample, m), "
-           "cubature_seed.")
+           "cubature_seed, basis_drop_below (basis weights below it are dropped, in [0, 0.01]).")
       .def("init_volumetric_data",
            [](SoftAvatar& a) {
              py::gil_scoped_release release;

@@ -1065,21 +1065,24 @@ double Simulable::getDynamicEnergyScalar() const {
   return E;
 }
 
-void Simulable::getDynamicGradientVector(VecX& g, int offset) const {
+void Simulable::getDynamicGradientVector(VecX& g, int offset) const { dynamicGradient(g, offset); }
+
+double Simulable::dynamicGradient(VecX& g, int offset) const {
   const Impl& m = *impl_;
-  if (m.is_static) return;
+  if (m.is_static) return 0.0;
   if (m.soft) {
     m.prepareSoft();
-    m.soft->inertia(&g, nullptr, offset, true);
-    return;
+    return m.soft->inertia(&g, nullptr, offset, true);
   }
   Vec6 gb;
+  double E = 0.0;
   for (int b = 0; b < m.num_bones; ++b) {
-    rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(), m.q_n.R[b],
-                       m.q_nm1.t.row(b).transpose(), m.q_nm1.R[b], m.inertia[b],
-                       m.options.time_step, &gb);
+    E += rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(),
+                            m.q_n.R[b], m.q_nm1.t.row(b).transpose(), m.q_nm1.R[b], m.inertia[b],
+                            m.options.time_step, &gb);
     g.segment<6>(offset + 6 * b) += gb;
   }
+  return E;
 }
 
 void Simulable::getDynamicHessianTripletVector(std::vector<Triplet>& H, int offset,
@@ -1142,70 +1145,75 @@ double Simulable::getPotentialEnergyScalar() const {
   return E + m.contactEnergy();
 }
 
-void Simulable::boneSpringGradient(VecX& g, int offset) const {
+double Simulable::boneSpringGradient(VecX& g, int offset) const {
   const Impl& m = *impl_;
   const bool tracking = m.mocap && m.options.track_mocap;
   Vec6 g6;
   Vec12 g12;
+  double E = 0.0;
   for (int b = 0; b < m.num_bones; ++b) {
     const Vec3 t_b = m.q.t.row(b).transpose();
     const int ib = offset + 6 * b;
     if (!m.soft) {
-      gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, &g6);
+      E += gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, &g6);
       g.segment<6>(ib) += g6;
     }
     const int p = m.parents[b];
     if (p < 0) {
       if (tracking) {
-        rootSpringEnergy(t_b, m.q.R[b], m.target_t0, m.target_R[b], m.root_k_pos, m.root_k_rot,
-                         &g6);
+        E += rootSpringEnergy(t_b, m.q.R[b], m.target_t0, m.target_R[b], m.root_k_pos,
+                              m.root_k_rot, &g6);
         g.segment<6>(ib) += g6;
       }
       continue;
     }
     const int ip = offset + 6 * p;
-    jointSpringEnergy(m.q.t.row(p).transpose(), m.q.R[p], t_b, m.q.R[b], m.J.row(p).transpose(),
-                      m.J.row(b).transpose(), m.options.joint_stiffness, &g12);
+    E += jointSpringEnergy(m.q.t.row(p).transpose(), m.q.R[p], t_b, m.q.R[b],
+                           m.J.row(p).transpose(), m.J.row(b).transpose(),
+                           m.options.joint_stiffness, &g12);
     g.segment<6>(ip) += g12.head<6>();
     g.segment<6>(ib) += g12.tail<6>();
     if (tracking) {
-      trackingSpringEnergy(m.q.R[p], m.q.R[b], m.target_R[b], m.tracking_k[b], &g6);
+      E += trackingSpringEnergy(m.q.R[p], m.q.R[b], m.target_R[b], m.tracking_k[b], &g6);
       g.segment<3>(ip + 3) += g6.head<3>();
       g.segment<3>(ib + 3) += g6.tail<3>();
     }
   }
+  return E;
 }
 
-void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
+double Simulable::potentialGradient(VecX& g, int offset) const {
   const Impl& m = *impl_;
-  boneSpringGradient(g, offset);
+  double E = boneSpringGradient(g, offset);
   if (m.soft) {
     m.prepareSoft();
-    m.soft->gravity(m.options.gravity, &g, nullptr, offset, true);
-    m.soft->elastic(&g, nullptr, offset, true);
+    E += m.soft->gravity(m.options.gravity, &g, nullptr, offset, true) +
+         m.soft->elastic(&g, nullptr, offset, true);
     m.ensureContact();
-    m.soft->contact(m.colliders, m.time, m.options.contact, &g, nullptr, offset, true, nullptr,
-                    &m.contact.candidates);
-    return;
+    return E + m.soft->contact(m.colliders, m.time, m.options.contact, &g, nullptr, offset, true,
+                               nullptr, &m.contact.candidates);
   }
   m.addContactGradient(g, offset);
+  return E + m.contactEnergy();
 }
 
-void Simulable::getGradientVector(VecX& g, int offset) const {
+void Simulable::getPotentialGradientVector(VecX& g, int offset) const { potentialGradient(g, offset); }
+
+void Simulable::getGradientVector(VecX& g, int offset) const { getEnergyAndGradientVector(g, offset); }
+
+double Simulable::getEnergyAndGradientVector(VecX& g, int offset) const {
   const Impl& m = *impl_;
-  if (!m.soft || !m.soft->reduced() || m.is_static || omp_get_max_threads() < 2) {
-    getDynamicGradientVector(g, offset);
-    getPotentialGradientVector(g, offset);
-    return;
-  }
+  if (!m.soft || !m.soft->reduced() || m.is_static || omp_get_max_threads() < 2)
+    return dynamicGradient(g, offset) + potentialGradient(g, offset);
   // ROM: as getHessianTripletVector.
   const bool contact = m.prepareSoftForThreads();
-  m.soft->reducedGradient(m.options.gravity, g, offset, [&](VecX& part) {
+  double contact_energy = 0.0;
+  const double E = m.soft->reducedGradient(m.options.gravity, g, offset, [&](VecX& part) {
     if (contact)
-      m.soft->contact(m.colliders, m.time, m.options.contact, &part, nullptr, offset, true,
-                      nullptr, &m.contact.candidates, false);
+      contact_energy = m.soft->contact(m.colliders, m.time, m.options.contact, &part, nullptr,
+                                       offset, true, nullptr, &m.contact.candidates, false);
   });
-  boneSpringGradient(g, offset);
+  return E + contact_energy + boneSpringGradient(g, offset);
 }
 
 void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset,

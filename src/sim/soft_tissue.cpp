@@ -287,6 +287,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     for (int i = 0; i < num_surface_; ++i)
       for (int k = phi_start_[i]; k < phi_start_[i + 1]; ++k) phi_sum_[i] += phi_[k].second;
     buildReducedPattern();
+    splitMassNodes();
   }
 }
 
@@ -337,6 +338,18 @@ void SoftTissue::buildReducedPattern() {
     reduced_positions_.emplace_back(col, row);
   }
   for (auto& values : reduced_values_) values.assign(reduced_positions_.size(), Mat3::Zero());
+  // Gravity's rotation–handle blocks: D_bh = Σ_j m_j w_jb φ_jh over the mass nodes.
+  std::vector<double> D(size_t(num_bones_) * H, 0.0);
+  for (int j : mass_nodes_)
+    for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k)
+      for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a)
+        D[size_t(influences_[k].bone) * H + phi_[a].first] +=
+            inertia_mass_[j] * influences_[k].weight * phi_[a].second;
+  gravity_handles_.clear();
+  for (int b = 0; b < num_bones_; ++b)
+    for (int h = 0; h < H; ++h)
+      if (D[size_t(b) * H + h] != 0.0)
+        gravity_handles_.push_back({bz_slot_[size_t(2 * b + 1) * H + h], b, D[size_t(b) * H + h]});
 }
 
 // ---- positions ----------------------------------------------------------------------------
@@ -522,11 +535,13 @@ void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const M
 }
 
 namespace {
-// reducedHessians runs this share of the elastic tets beside inertia: on the full synthetic body
-// (684 mass nodes, ~390 elastic tets) inertia's blocks cost about as much as contact, gravity and
-// 75 % of the tets (scene Hessian 0.55 ms against 0.57 for 15 % or 35 %). reducedGradient runs
-// half of them beside inertia's and gravity's force mapping (about as costly as contact).
-constexpr double kHessianTetsBesideInertia = 0.25, kGradientTetsBesideInertia = 0.5;
+// reducedHessians maps this share of inertia's mass nodes beside the potential terms: on the full
+// synthetic body (684 mass nodes, ~390 elastic tets) the other 90 % of inertia's blocks cost about
+// as much as contact, gravity, every elastic tet and the rest correction (265 against 260–290 µs
+// per Hessian; scene Hessian 0.42–0.46 ms against 0.50 with the elastic tets split instead).
+// reducedGradient runs half of the tets beside inertia's and gravity's force mapping (about as
+// costly as contact).
+constexpr double kHessianMassNodesBesideElastic = 0.1, kGradientTetsBesideInertia = 0.5;
 
 // Runs part(0) and part(1) on a team of two OpenMP threads (both on one thread when the team has
 // one, e.g. in a nested region); the first exception either throws is rethrown after both.
@@ -757,15 +772,72 @@ double SoftTissue::gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H
     node_forces_[1][idx] = -inertia_mass_[j] * gravity;
   }
   if (g) mapForces(mass_nodes_, node_forces_[1], *g, offset);
-  if (H) {
+  if (H && reduced_) {
+    reducedGravityHessian(gravity, *H, offset, psd);
+  } else if (H) {
     // The PSD form has no coupling blocks: the fixed list is then all zeros, so that its
     // positions (and an assembler's cached slots) stay the same in both forms.
-    const bool fixed = blocks && !reduced_;
     mapHessian(mass_nodes_, nullptr, &node_forces_[1], *H, offset, psd, 1,
-               fixed ? &gravity_fixed_ : nullptr);
-    if (fixed) *blocks = {&coupling_dofs_, &gravity_fixed_, offset};
+               blocks ? &gravity_fixed_ : nullptr);
+    if (blocks) *blocks = {&coupling_dofs_, &gravity_fixed_, offset};
   }
   return E;
+}
+
+void SoftTissue::splitMassNodes() {
+  const size_t first =
+      size_t((1.0 - kHessianMassNodesBesideElastic) * double(mass_nodes_.size()));
+  mass_node_parts_[0].assign(mass_nodes_.begin(), mass_nodes_.begin() + long(first));
+  mass_node_parts_[1].assign(mass_nodes_.begin() + long(first), mass_nodes_.end());
+}
+
+void SoftTissue::inertiaHessianPart(int part, std::vector<Triplet>& H, int offset,
+                                    bool psd) const {
+  // inertia()'s Hessian on this part's nodes, into value list `part`.
+  const double k = 1.0 / (h_ * h_);
+  const std::vector<int>& nodes = mass_node_parts_[part];
+  std::vector<double>& kappa = part_scalars_[part];
+  std::vector<Vec3>& forces = part_forces_[part];
+  kappa.resize(nodes.size());
+  if (!psd) forces.resize(nodes.size());
+  for (size_t idx = 0; idx < nodes.size(); ++idx) {
+    const int j = nodes[idx];
+    kappa[idx] = k * inertia_mass_[j];
+    if (!psd) forces[idx] = kappa[idx] * (x_.row(j) - x_hat_.row(j)).transpose();
+  }
+  mapHessian(nodes, nullptr, psd ? nullptr : &forces, H, offset, psd, part, nullptr, &kappa);
+}
+
+void SoftTissue::reducedGravityHessian(const Vec3& gravity, std::vector<Triplet>& H, int offset,
+                                       bool psd) const {
+  // The node forces f_j = −m_j g are constant, so mapHessian's per-node sums collapse to per-bone
+  // ones: the rotation curvature Σ_j w_jb C(f_j, R_b (Y_j − J_b)) = C(−g, R_b v_b) with v_b =
+  // Σ_j m_j w_jb (Y_j − J_b) (C is bilinear), and, in the exact form, the rotation–handle blocks
+  // Σ_j −w_jb φ_jh [f_j]× R_b = D_bh [g]× R_b (D_bh constant, buildReducedPattern).
+  const std::vector<Mat3>& R = *cur_R_;
+  Vec3 v[kNumJoints];
+  double mass[kNumJoints];
+  for (int b = 0; b < num_bones_; ++b) {
+    v[b].setZero();
+    mass[b] = 0.0;
+  }
+  for (int j : mass_nodes_) {
+    const Vec3 Y = Y_.row(j).transpose();
+    for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
+      const double mw = inertia_mass_[j] * influences_[k].weight;
+      v[influences_[k].bone] += mw * Y;
+      mass[influences_[k].bone] += mw;
+    }
+  }
+  for (int b = 0; b < num_bones_; ++b) {
+    if (mass[b] == 0.0) continue;
+    const Mat3 C = rotationCurvature(-gravity, R[b] * (v[b] - mass[b] * joints_.row(b).transpose()));
+    addBlock(H, offset + 6 * b + 3, offset + 6 * b + 3, psd ? projectToPSD<3>(C) : C);
+  }
+  if (psd) return;
+  Mat3* values = reduced_values_[1].data();
+  const Mat3 G = skew(gravity);
+  for (const GravityHandle& gh : gravity_handles_) values[gh.slot] += gh.weight * (G * R[gh.bone]);
 }
 
 Eigen::Matrix<double, 3, 4> SoftTissue::elementDisplacement(int e) const {
@@ -895,8 +967,8 @@ double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, 
   return E + elasticCorrection(g, hessian ? list->data() : nullptr, offset);
 }
 
-void SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
-                                 const std::function<void(VecX&)>& potential_first) const {
+double SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
+                                   const std::function<void(VecX&)>& potential_first) const {
   if (!reduced_) throw Error("SoftTissue::reducedGradient: the ROM only");
   const int T = int(tets_.rows());
   const int base = offset + bone_dofs_;
@@ -905,23 +977,28 @@ void SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
   const int split = int(kGradientTetsBesideInertia * T);
   node_forces_[0].resize(count);
   gradient_scratch_.setZero(g.size());
+  double energies[2] = {0.0, 0.0};
   onTwoThreads([&](int part) {
     if (part == 0) {
-      // ∂/∂x_j of inertia plus gravity: m_j ((x_j − x̂_j) / h² − g).
+      // ∂/∂x_j of inertia plus gravity: m_j ((x_j − x̂_j) / h² − g); their energies
+      // m_j (‖x_j − x̂_j‖² / (2h²) − g · x_j).
+      double E = 0.0;
       for (size_t idx = 0; idx < count; ++idx) {
         const int j = mass_nodes_[idx];
-        node_forces_[0][idx] =
-            inertia_mass_[j] * (k * (x_.row(j) - x_hat_.row(j)).transpose() - gravity);
+        const Vec3 x = x_.row(j).transpose(), d = x - x_hat_.row(j).transpose();
+        E += inertia_mass_[j] * (0.5 * k * d.squaredNorm() - gravity.dot(x));
+        node_forces_[0][idx] = inertia_mass_[j] * (k * d - gravity);
       }
       mapForces(mass_nodes_, node_forces_[0], g, offset);
-      elasticTets(0, split, g.data() + base, nullptr, true);
+      energies[0] = E + elasticTets(0, split, g.data() + base, nullptr, true);
     } else {
       if (potential_first) potential_first(gradient_scratch_);
-      elasticTets(split, T, gradient_scratch_.data() + base, nullptr, true);
-      elasticCorrection(&gradient_scratch_, nullptr, offset);
+      energies[1] = elasticTets(split, T, gradient_scratch_.data() + base, nullptr, true) +
+                    elasticCorrection(&gradient_scratch_, nullptr, offset);
     }
   });
   g += gradient_scratch_;
+  return energies[0] + energies[1];
 }
 
 void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dynamic,
@@ -929,30 +1006,19 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
                                  const std::function<void()>& potential_first) const {
   if (!reduced_) throw Error("SoftTissue::reducedHessians: the ROM only");
   const int T = int(tets_.rows());
-  const int zz_bz = num_zz_ + num_bz_;  // the slots the terms sum into (the rest are mirrors)
-  const int split = int(kHessianTetsBesideInertia * T);
   mirrored_[0] = mirrored_[1] = false;
   onTwoThreads([&](int part) {
+    beginReduced(part);
     if (part == 0) {
-      beginReduced(0);
-      zeroBlocks(reduced_values_[2].data(), zz_bz);
-      inertia(nullptr, &H_dynamic, offset, psd);
-      elasticTets(0, split, nullptr, reduced_values_[2].data(), psd);
+      inertiaHessianPart(0, H_dynamic, offset, psd);
     } else {
-      beginReduced(1);
       if (potential_first) potential_first();
       Mat3* values = reduced_values_[1].data();
       this->gravity(gravity, nullptr, &H_potential, offset, psd);
-      elasticTets(split, T, nullptr, values, psd);
+      elasticTets(0, T, nullptr, values, psd);
       elasticCorrection(nullptr, values, 0);
+      inertiaHessianPart(1, H_potential, offset, psd);
     }
-  });
-  // The elastic scratch into list 1 (in two slot ranges), then the lower blocks of each list.
-  onTwoThreads([&](int part) {
-    std::vector<Mat3>& potential = reduced_values_[1];
-    const std::vector<Mat3>& scratch = reduced_values_[2];
-    for (int k = part * zz_bz / 2; k < (part + 1) * zz_bz / 2; ++k)
-      potential[size_t(k)] += scratch[size_t(k)];
   });
   onTwoThreads([&](int list) { mirrorReduced(list, 0, 1); });
   mirrored_[0] = mirrored_[1] = true;

@@ -125,15 +125,16 @@ class SoftTissue {
   /// (e.g. contact, on nodes skinned before, with skin = false), added into g on two threads:
   /// inertia and gravity (one mapping of their summed node forces) with the first elastic tets
   /// into g, beside potential_first and the other tets into a scratch vector of g's size (added
-  /// into g after).
-  void reducedGradient(const Vec3& gravity, VecX& g, int offset,
-                       const std::function<void(VecX&)>& potential_first) const;
+  /// into g after). Returns the energy of inertia, gravity and the elastic term (not
+  /// potential_first's), which the same passes give.
+  double reducedGradient(const Vec3& gravity, VecX& g, int offset,
+                         const std::function<void(VecX&)>& potential_first) const;
   /// ROM: both Hessian parts' node and tet terms on two threads (Simulable::
   /// getHessianTripletVector): inertia (value list 0, bone triplets into H_dynamic) beside
   /// `potential_first` (may be empty: e.g. contact, on nodes skinned before, with skin = false),
-  /// then gravity (list 1, bone triplets into H_potential); the elastic tets are split between
-  /// the two to balance them (the first ones into a scratch list then added into list 1, the
-  /// others and the rest-stiffness correction into list 1). Both lists come back mirrored
+  /// then gravity, the elastic tets and the rest-stiffness correction (list 1, bone triplets
+  /// into H_potential); a share of inertia's mass nodes is mapped on the second thread too
+  /// (into list 1 and H_potential), to balance the two. Both lists come back mirrored
   /// (flushReduced then only hands them over).
   void reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dynamic,
                        std::vector<Triplet>& H_potential, int offset, bool psd,
@@ -240,8 +241,8 @@ class SoftTissue {
   int num_zz_ = 0, num_bz_ = 0;
   std::vector<std::pair<int, int>> zz_mirror_;  // (slot of (h, k), slot of (k, h)) for h > k
   std::vector<std::pair<int, int>> reduced_positions_;
-  mutable std::vector<Mat3> reduced_values_[3];  // 2: reducedHessians' elastic scratch
-  mutable bool mirrored_[3] = {false, false, false};  // the lower blocks are current
+  mutable std::vector<Mat3> reduced_values_[2];
+  mutable bool mirrored_[2] = {false, false};  // the lower blocks are current
   mutable VecX gradient_scratch_;
   /// Lower z–z and z–bone blocks from the summed ones, in the part-th of parts ranges.
   void mirrorReduced(int list, int part, int parts) const;
@@ -300,6 +301,23 @@ class SoftTissue {
   std::vector<std::pair<int, int>> coupling_dofs_;
   std::vector<int> coupling_start_;
   mutable std::vector<Mat3> inertia_fixed_, gravity_fixed_;
+  // ROM: gravity's rotation–handle blocks, D_bh [g]× R_b into value list 1 at `slot`
+  // (reducedGravityHessian), D_bh = Σ_j m_j w_jb φ_jh over the mass nodes.
+  struct GravityHandle {
+    int slot, bone;
+    double weight;
+  };
+  std::vector<GravityHandle> gravity_handles_;
+  void reducedGravityHessian(const Vec3& gravity, std::vector<Triplet>& H, int offset,
+                             bool psd) const;
+  // ROM: the mass nodes in two parts for reducedHessians' two threads (the last share beside
+  // the potential terms, soft_tissue.cpp), with each part's κ_j = m_j / h² and node forces;
+  // inertiaHessianPart maps one part into value list `part`.
+  std::vector<int> mass_node_parts_[2];
+  mutable std::vector<double> part_scalars_[2];
+  mutable std::vector<Vec3> part_forces_[2];
+  void splitMassNodes();
+  void inertiaHessianPart(int part, std::vector<Triplet>& H, int offset, bool psd) const;
   std::vector<int> all_nodes_, surface_nodes_;
   mutable MatX3 contact_x_;
   mutable VecX contact_areas_;

@@ -203,8 +203,16 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
   }
   const LaggedFactorOptions& lag = options.lagged;
 
+  VecX g(n), trial_gradient;
   double energy = 0.0;
+  // The gradient at the current state is in g already (Objective::energyAndGradient).
+  bool have_gradient = false;
   {
+    ScopedSeconds timer(result.seconds_gradient);
+    have_gradient = objective.energyAndGradient(energy, g);
+  }
+  const bool fused = have_gradient;
+  if (!fused) {
     ScopedSeconds timer(result.seconds_energy);
     energy = objective.energy();
   }
@@ -219,7 +227,7 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     return result;
   }
 
-  VecX g(n), rhs(n), dq(n), trial_step(n);
+  VecX rhs(n), dq(n), trial_step(n);
   SpMat H;
   std::vector<double*> diagonal;
   VecX diagonal_values;
@@ -255,7 +263,8 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
   for (int iteration = 0;; ++iteration) {
     {
       ScopedSeconds timer(result.seconds_gradient);
-      objective.gradient(g);
+      if (!have_gradient) objective.gradient(g);
+      have_gradient = false;
       if (g.size() != n)
         throw Error("newtonSolve: Objective::gradient returned " + std::to_string(g.size()) +
                     " entries, expected numDofs() = " + std::to_string(n));
@@ -410,7 +419,10 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
         objective.push();
         objective.step(trial_step);
         double trial_energy = 0.0;
-        {
+        if (fused) {
+          ScopedSeconds timer(result.seconds_gradient);
+          objective.energyAndGradient(trial_energy, trial_gradient);
+        } else {
           ScopedSeconds timer(result.seconds_energy);
           trial_energy = objective.energy();
         }
@@ -421,6 +433,10 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
             objective.step(trial_step);
           }
           energy = trial_energy;
+          if (fused) {
+            g.swap(trial_gradient);
+            have_gradient = true;
+          }
           accepted = true;
           break;
         }

@@ -752,6 +752,15 @@ void Scene::gradient(VecX& g) {
   if (avatarContactActive()) avatarContactEnergy(&g, nullptr, true);
 }
 
+bool Scene::energyAndGradient(double& energy, VecX& g) {
+  g.setZero(num_dofs_);
+  energy = 0.0;
+  for (size_t i = 0; i < simulables_.size(); ++i)
+    energy += simulables_[i]->getEnergyAndGradientVector(g, offsets_[i]);
+  if (avatarContactActive()) energy += avatarContactEnergy(&g, nullptr, true);
+  return true;
+}
+
 void Scene::hessian(SpMat& H, bool psd) {
   triplets_.clear();
   if (usesGeneralPattern()) {

@@ -87,6 +87,9 @@ void checkSettings(const ReducedSettings& s) {
                      ", expected finite and > 0");
   if (b.threads < 0)
     throw InputError(fn + "basis.threads = " + std::to_string(b.threads) + ", expected ≥ 0");
+  if (!(s.basis_drop_below >= 0 && s.basis_drop_below <= 0.01))
+    throw InputError(fn + "basis_drop_below = " + str(s.basis_drop_below) +
+                     ", expected in [0, 0.01]");
 }
 
 // Everything the level depends on. basis.threads is left out: the weights do not depend on the
@@ -114,6 +117,7 @@ std::string reducedKey(const VolumetricData& data, const ReducedSettings& s, boo
                 sizeof(s.basis.initial_radius_factor));
   const char pou = s.surface_partition_of_unity ? 1 : 0;
   h.updateField("surface_partition_of_unity", &pou, 1);
+  h.updateField("basis_drop_below", &s.basis_drop_below, sizeof(s.basis_drop_below));
   const char flags[2] = {char(elastic ? 1 : 0), char(inertial ? 1 : 0)};
   h.updateField("cubature flags", flags, sizeof(flags));
   return h.hexDigest();
@@ -200,12 +204,14 @@ VecXi chooseHandles(const VolumetricData& data, const BodyModel& body, int count
                                      bone_of_vertex);
 }
 
-// #N × H compressed basis from the dense weights, without the negligible entries.
-SpMat sparseBasis(const MatX& weights) {
+// #N × H compressed basis from the dense weights, without the entries below `drop_below` (and
+// the negligible ones).
+SpMat sparseBasis(const MatX& weights, double drop_below) {
+  const double threshold = std::max(drop_below, kBasisDropThreshold);
   std::vector<Triplet> entries;
   for (Eigen::Index h = 0; h < weights.cols(); ++h)
     for (Eigen::Index j = 0; j < weights.rows(); ++j)
-      if (std::abs(weights(j, h)) >= kBasisDropThreshold)
+      if (std::abs(weights(j, h)) >= threshold)
         entries.emplace_back(int(j), int(h), weights(j, h));
   SpMat basis(weights.rows(), weights.cols());
   basis.setFromTriplets(entries.begin(), entries.end());
@@ -653,9 +659,14 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
   t0 = Clock::now();
   const BoundedBiharmonicWeights bbw = computeBoundedBiharmonicWeights(
       data.templ->mesh, data.rest_nodes, d.handles, data.bone_of_node, settings.basis);
-  d.basis = sparseBasis(settings.surface_partition_of_unity
-                            ? surfacePartitionOfUnity(data, bbw.weights)
-                            : bbw.weights);
+  if (settings.surface_partition_of_unity) {
+    // Dropped before the rows are rescaled, so that the soft surface rows still sum to 1.
+    MatX weights = bbw.weights;
+    weights = (weights.array().abs() >= settings.basis_drop_below).select(weights, 0.0);
+    d.basis = sparseBasis(surfacePartitionOfUnity(data, weights), 0.0);
+  } else {
+    d.basis = sparseBasis(bbw.weights, settings.basis_drop_below);
+  }
   d.basis_max_bound_violation = bbw.report.max_bound_violation;
   d.basis_max_constraint_error = bbw.report.max_constraint_error;
   d.basis_converged = bbw.report.converged;

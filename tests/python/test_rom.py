@@ -81,6 +81,8 @@ def test_settings_are_keyword_arguments_with_the_documented_defaults(small_body)
     ({"cubature_training_samples": 0}, "cubature_training_samples: expected an integer ≥ 1"),
     ({"cubature_training_amplitude": 0.0}, "cubature_training_amplitude: expected a finite"),
     ({"cubature_training_amplitude": float("nan")}, "cubature_training_amplitude"),
+    ({"basis_drop_below": 0.5}, r"basis_drop_below: expected a value in \[0, 0.01\]"),
+    ({"basis_drop_below": float("nan")}, "basis_drop_below"),
 ])
 def test_bad_reduced_settings_are_value_errors_naming_the_argument(small_body, kwargs, message):
     with pytest.raises(ValueError, match=message):
@@ -214,6 +216,22 @@ def test_both_gradients_in_one_call_are_their_sum(rom):
     assert scale > 0.0 and np.abs(parts[NUM_BONE_DOFS:]).max() > 0.0
     assert np.abs(total - parts).max() <= 1e-12 * scale
     assert np.array_equal(rom.get_gradient_vector(), total)
+
+
+def test_energy_and_gradient_in_one_call(rom):
+    rng = np.random.default_rng(9)
+    rom.updateState(rng.normal(scale=0.01, size=rom.numDofs()))
+    energy, gradient = rom.getEnergyAndGradientVector()
+    parts = rom.getDynamicGradientVector() + rom.getPotentialGradientVector()
+    expected = rom.getDynamicEnergyScalar() + rom.getPotentialEnergyScalar()
+    assert gradient.shape == (rom.numDofs(),)
+    scale = np.abs(parts).max()
+    assert scale > 0.0 and expected != 0.0
+    assert np.abs(gradient - parts).max() <= 1e-12 * scale
+    assert abs(energy - expected) <= 1e-12 * (abs(rom.getDynamicEnergyScalar())
+                                             + abs(rom.getPotentialEnergyScalar()))
+    energy_again, gradient_again = rom.get_energy_and_gradient_vector()
+    assert energy_again == energy and np.array_equal(gradient_again, gradient)
 
 
 def test_a_few_steps_move_the_soft_tissue(avatar):

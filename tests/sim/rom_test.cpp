@@ -254,14 +254,17 @@ TEST(ReducedModel, HessianBlocksComeAsOneFixedListPerPart) {
   }
 }
 
-// getHessianTripletVector (ROM: inertia on one thread beside contact, gravity and most of the
-// elastic tets on another, the rest of the tets split off to balance them) returns the two block
-// overloads' lists and triplets: the dynamic ones bit for bit and in order, the potential ones
-// summing to the same up to round-off (the elastic blocks are summed in two parts).
+// getHessianTripletVector (both parts at once) returns the two block overloads' lists (same
+// positions) and triplets. The FEM's: the dynamic ones bit for bit and in order, the potential
+// ones summing to the same up to round-off. The ROM's (inertia on one thread beside contact,
+// gravity and the elastic tets on another, a tenth of inertia's mass nodes moved to the second
+// to balance them): the parts differ from the overloads' (that share of inertia comes with the
+// potential part) but the whole Hessian is the same up to round-off.
 TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
   for (int kind : {0, 1, 2}) {
     const auto moved = movedOnTheGround(kind, 8);
     const Simulable& sim = *moved;
+    const int n = sim.numDofs() + 3;
     for (bool psd : {false, true}) {
       SCOPED_TRACE("kind " + std::to_string(kind) + (psd ? ", psd" : ", exact form"));
       std::vector<Triplet> parts;
@@ -271,33 +274,53 @@ TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
       std::vector<std::vector<Mat3>> part_values;
       for (const auto& list : part_blocks) part_values.push_back(*list.values);
       const size_t dynamic_lists = part_blocks.size();
+      std::vector<Triplet> dynamic_whole = parts;  // with its lists, before they are reused
+      for (const Triplet& t : test::expanded(part_blocks)) dynamic_whole.push_back(t);
       sim.getPotentialHessianTripletVector(parts, part_blocks, 3, psd);
       for (size_t k = dynamic_lists; k < part_blocks.size(); ++k)
         part_values.push_back(*part_blocks[k].values);
+      std::vector<Triplet> potential_whole(parts.begin() + long(dynamic_count), parts.end());
+      for (const Triplet& t : test::expanded({part_blocks.begin() + long(dynamic_lists),
+                                              part_blocks.end()}))
+        potential_whole.push_back(t);
+      const MatX expected =
+          test::denseFromTriplets(dynamic_whole, n) + test::denseFromTriplets(potential_whole, n);
+      ASSERT_GT(expected.cwiseAbs().maxCoeff(), 0.0);
 
       std::vector<Triplet> both = {Triplet(0, 0, 1.0)};  // appended after what is there
       std::vector<FixedHessianBlocks> both_blocks;
-      EXPECT_EQ(sim.getHessianTripletVector(both, both_blocks, 3, psd), 1 + dynamic_count);
-      ASSERT_EQ(both.size(), 1 + parts.size());
-      for (size_t k = 0; k < dynamic_count; ++k) {  // the dynamic part in its order
-        ASSERT_EQ(both[k + 1].row(), parts[k].row());
-        ASSERT_EQ(both[k + 1].col(), parts[k].col());
-        ASSERT_EQ(both[k + 1].value(), parts[k].value());
-      }
-      // The potential part's triplets: the same sum (the ROM appends gravity's last).
-      const int n = sim.numDofs() + 3;
-      const MatX expected = test::denseFromTriplets(
-          std::vector<Triplet>(parts.begin() + long(dynamic_count), parts.end()), n);
-      const MatX got = test::denseFromTriplets(
-          std::vector<Triplet>(both.begin() + long(1 + dynamic_count), both.end()), n);
-      ASSERT_GT(expected.cwiseAbs().maxCoeff(), 0.0);
-      EXPECT_LE((got - expected).cwiseAbs().maxCoeff(), 1e-14 * expected.cwiseAbs().maxCoeff());
+      const size_t potential_start = sim.getHessianTripletVector(both, both_blocks, 3, psd);
       ASSERT_EQ(both_blocks.size(), part_blocks.size());
       ASSERT_EQ(both_blocks.size(), kind == 0 ? 3u : 2u);
       for (size_t k = 0; k < both_blocks.size(); ++k) {
         EXPECT_EQ(both_blocks[k].positions, part_blocks[k].positions);
         EXPECT_EQ(both_blocks[k].offset, 3);
         ASSERT_EQ(both_blocks[k].values->size(), part_values[k].size());
+      }
+      // The whole Hessian (the first triplet was there before).
+      std::vector<Triplet> whole(both.begin() + 1, both.end());
+      for (const Triplet& t : test::expanded(both_blocks)) whole.push_back(t);
+      EXPECT_LE((test::denseFromTriplets(whole, n) - expected).cwiseAbs().maxCoeff(),
+                1e-14 * expected.cwiseAbs().maxCoeff());
+      if (kind > 0) {
+        // The ROM's split: both parts carry inertia's blocks (list 0 and the bone pairs).
+        EXPECT_GT(potential_start, 1u);
+        EXPECT_LT(potential_start, both.size());
+        continue;
+      }
+      EXPECT_EQ(potential_start, 1 + dynamic_count);
+      ASSERT_EQ(both.size(), 1 + parts.size());
+      for (size_t k = 0; k < dynamic_count; ++k) {  // the dynamic part in its order
+        ASSERT_EQ(both[k + 1].row(), parts[k].row());
+        ASSERT_EQ(both[k + 1].col(), parts[k].col());
+        ASSERT_EQ(both[k + 1].value(), parts[k].value());
+      }
+      const MatX potential = test::denseFromTriplets(
+          std::vector<Triplet>(parts.begin() + long(dynamic_count), parts.end()), n);
+      const MatX got = test::denseFromTriplets(
+          std::vector<Triplet>(both.begin() + long(1 + dynamic_count), both.end()), n);
+      EXPECT_LE((got - potential).cwiseAbs().maxCoeff(), 1e-14 * potential.cwiseAbs().maxCoeff());
+      for (size_t k = 0; k < both_blocks.size(); ++k) {
         double largest = 0.0;  // 0 for the FEM's gravity list in the PSD form
         for (const Mat3& B : part_values[k]) largest = std::max(largest, B.cwiseAbs().maxCoeff());
         if (k < 2) ASSERT_GT(largest, 0.0) << "list " << k;
@@ -316,9 +339,9 @@ TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
 
 // getGradientVector (ROM: inertia and gravity beside contact on two threads, the elastic tets
 // split between them) is the sum of the two parts' gradients, added at an offset, contact
-// included.
+// included; getEnergyAndGradientVector gives the same gradient and the sum of the two energies.
 TEST(ReducedModel, BothGradientsAtOnceAreTheirSum) {
-  for (int kind : {1, 2}) {  // (the FEM's is the two calls)
+  for (int kind : {0, 1, 2}) {  // (the FEM's are the separate calls, with their energies)
     SCOPED_TRACE("kind " + std::to_string(kind));
     const auto moved = movedOnTheGround(kind, 9);
     Simulable& sim = *moved;
@@ -336,6 +359,14 @@ TEST(ReducedModel, BothGradientsAtOnceAreTheirSum) {
     ASSERT_GT(parts.tail(n - 144).cwiseAbs().maxCoeff(), 0.0);
     EXPECT_LE((both - parts).cwiseAbs().maxCoeff(), 1e-13 * scale);
     EXPECT_EQ(both.head(offset).cwiseAbs().maxCoeff(), 0.0);
+    VecX fused = VecX::Constant(n + offset, 0.5);
+    const double energy = sim.getEnergyAndGradientVector(fused, offset);
+    fused.array() -= 0.5;
+    EXPECT_LE((fused - parts).cwiseAbs().maxCoeff(), 1e-13 * scale);
+    const double dynamic = sim.getDynamicEnergyScalar(), potential = sim.getPotentialEnergyScalar();
+    ASSERT_GT(std::abs(dynamic), 0.0);
+    ASSERT_GT(std::abs(potential), 0.0);
+    EXPECT_NEAR(energy, dynamic + potential, 1e-12 * (std::abs(dynamic) + std::abs(potential)));
     // With the ground in contact (the gradient changes without it).
     Simulable alone(avatar(kind), test::smallScene(800).walk);
     alone.initialize();
@@ -344,6 +375,11 @@ TEST(ReducedModel, BothGradientsAtOnceAreTheirSum) {
     VecX free = VecX::Zero(n + offset);
     alone.getGradientVector(free, offset);
     EXPECT_GT((free - parts).cwiseAbs().maxCoeff(), 1.0);  // N: 3 mm deep over the sole
+    VecX free_fused = VecX::Zero(n + offset);
+    const double free_energy = alone.getEnergyAndGradientVector(free_fused, offset);
+    EXPECT_NEAR(free_energy, alone.getDynamicEnergyScalar() + alone.getPotentialEnergyScalar(),
+                1e-12 * std::abs(free_energy));
+    EXPECT_LE((free_fused - free).cwiseAbs().maxCoeff(), 1e-13 * scale);
   }
 }
 

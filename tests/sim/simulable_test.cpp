@@ -138,6 +138,31 @@ TEST(Simulable, ContactOnlyDerivativesMatchFiniteDifferences) {
   }
 }
 
+// The energy and gradient from one pass (what Newton's line search asks of a Scene) equal the
+// separate calls: both gradients added at an offset, the energy their sum, contact included.
+TEST(Simulable, EnergyAndGradientInOnePassMatchTheSeparateCalls) {
+  auto sim = walkingAvatarOnGround(4);
+  sim->getPotentialEnergyScalar();
+  ASSERT_GT(sim->stats().active_contacts, 0);
+  const int n = sim->numDofs(), offset = 3;
+  VecX parts = VecX::Zero(n + offset);
+  sim->getDynamicGradientVector(parts, offset);
+  sim->getPotentialGradientVector(parts, offset);
+  ASSERT_GT(parts.cwiseAbs().maxCoeff(), 0.0);
+  VecX fused = VecX::Constant(n + offset, 0.25);  // added to what is there
+  const double energy = sim->getEnergyAndGradientVector(fused, offset);
+  fused.array() -= 0.25;
+  EXPECT_LE((fused - parts).cwiseAbs().maxCoeff(), 1e-13 * parts.cwiseAbs().maxCoeff());
+  EXPECT_EQ(fused.head(offset).cwiseAbs().maxCoeff(), 0.0);
+  const double dynamic = sim->getDynamicEnergyScalar(), potential = sim->getPotentialEnergyScalar();
+  ASSERT_GT(std::abs(dynamic), 0.0);
+  EXPECT_NEAR(energy, dynamic + potential, 1e-12 * (std::abs(dynamic) + std::abs(potential)));
+  VecX both = VecX::Constant(n + offset, 0.25);
+  sim->getGradientVector(both, offset);
+  both.array() -= 0.25;
+  EXPECT_TRUE(both == fused);  // the same passes
+}
+
 TEST(Simulable, PsdHessiansArePsd) {
   auto sim = walkingAvatarOnGround(4);
   const int n = sim->numDofs();

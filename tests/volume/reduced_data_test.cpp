@@ -128,6 +128,34 @@ TEST(ReducedData, BasisIsBoundedInterpolatingAndZeroOnBone) {
     EXPECT_GE((phi.col(h).array() > 0).count(), 10) << "column " << h;
 }
 
+// basis_drop_below removes exactly the entries below it (the default's basis against one that
+// keeps every entry above 1e-12), which leaves the interpolation and the zeros on bone nodes.
+TEST(ReducedData, BasisDropsExactlyTheEntriesBelowTheThreshold) {
+  const ReducedData& dropped = fullData();
+  ASSERT_GT(smallSettings().basis_drop_below, 0.0);
+  ReducedSettings keep_all = smallSettings();
+  keep_all.basis_drop_below = 0.0;
+  const ReducedData all = buildReducedData(volume(), body(), keep_all, false, false, nullptr);
+  const double threshold = smallSettings().basis_drop_below;
+  const MatX phi = MatX(dropped.basis), full = MatX(all.basis);
+  ASSERT_EQ(phi.rows(), full.rows());
+  ASSERT_EQ(phi.cols(), full.cols());
+  // The tails are there to drop (measured: ~1/4 of the entries on this body) …
+  EXPECT_LT(dropped.basis.nonZeros(), all.basis.nonZeros());
+  int below = 0;
+  for (Eigen::Index h = 0; h < full.cols(); ++h)
+    for (Eigen::Index j = 0; j < full.rows(); ++j) {
+      if (full(j, h) >= threshold)
+        EXPECT_EQ(phi(j, h), full(j, h)) << "node " << j << ", handle " << h;
+      else
+        EXPECT_EQ(phi(j, h), 0.0) << "node " << j << ", handle " << h;
+      below += full(j, h) > 0.0 && full(j, h) < threshold;
+    }
+  EXPECT_EQ(below, all.basis.nonZeros() - dropped.basis.nonZeros());
+  for (int k = 0; k < dropped.basis.nonZeros(); ++k)
+    EXPECT_GE(dropped.basis.valuePtr()[k], threshold);
+}
+
 // Smoothness: every column's biharmonic energy is below that of the hat function (1 at the
 // handle, 0 elsewhere; measured ratios 0.10–0.67 on this coarse mesh, whose interior has few
 // nodes), and below that of the same column made rough (each free entry scaled by a random
@@ -303,7 +331,7 @@ TEST(ReducedData, KeyDependsOnEverySetting) {
   // Cheap builds (2 handles, no cubature): only their keys are compared, and every field change
   // must give a new one.
   std::vector<ReducedSettings> variants;
-  for (int k = 0; k < 9; ++k) {
+  for (int k = 0; k < 10; ++k) {
     ReducedSettings s = smallSettings();
     s.num_handles = 2;
     s.training_samples = 3;
@@ -333,6 +361,9 @@ TEST(ReducedData, KeyDependsOnEverySetting) {
         break;
       case 8:
         s.basis.initial_radius_factor = 2.0;
+        break;
+      case 9:
+        s.basis_drop_below = 1e-3;
         break;
       default:
         break;
@@ -371,6 +402,10 @@ TEST(ReducedData, SettingsErrorsNameTheField) {
   EXPECT_NE(msg.find("training_amplitude = nan"), std::string::npos) << msg;
   msg = messageFor([](ReducedSettings& s) { s.basis.kkt_tolerance = -1; });
   EXPECT_NE(msg.find("basis.kkt_tolerance = -1"), std::string::npos) << msg;
+  msg = messageFor([](ReducedSettings& s) { s.basis_drop_below = 0.02; });
+  EXPECT_NE(msg.find("basis_drop_below = 0.02, expected in [0, 0.01]"), std::string::npos) << msg;
+  msg = messageFor([](ReducedSettings& s) { s.basis_drop_below = std::nan(""); });
+  EXPECT_NE(msg.find("basis_drop_below = nan"), std::string::npos) << msg;
   msg = messageFor([](ReducedSettings& s) { s.num_handles = 1000000; });
   EXPECT_NE(msg.find("num_handles = 1000000"), std::string::npos) << msg;
   EXPECT_NE(msg.find("soft-tissue surface nodes"), std::string::npos) << msg;

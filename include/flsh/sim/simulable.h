@@ -237,6 +237,12 @@ class Simulable {
   /// its node terms (inertia and gravity) beside contact on two OpenMP threads, the elastic
   /// tets split between them: the same sum up to round-off.
   void getGradientVector(VecX& g, int offset = 0) const;
+  /// getGradientVector and, from the same passes, the whole energy (getDynamicEnergyScalar() +
+  /// getPotentialEnergyScalar(), up to round-off) as the result: every term's gradient pass also
+  /// gives its energy, so this costs about what the gradient alone does. Newton's line search
+  /// asks it at trial states (Scene::energyAndGradient), whose gradient it needs next when the
+  /// trial is accepted.
+  double getEnergyAndGradientVector(VecX& g, int offset = 0) const;
   /// Zeroes the entries of kinematic DoFs.
   void fixVectorKinematic(VecX& g, int offset = 0) const;
   /// Hessian triplets are APPENDED (both triangles) with indices shifted by `offset`. `psd`:
@@ -262,9 +268,10 @@ class Simulable {
   /// Both parts at once, as a scene assembles them: the triplets and lists of the dynamic
   /// block overload followed by those of the potential one (same values, same order). Returns
   /// the index in H where the potential part's triplets start. The ROM evaluates its inertia
-  /// concurrently with contact, gravity and elasticity here (two OpenMP threads, the elastic
-  /// tets split between them); its potential triplets then come in another order and its
-  /// potential list's values differ by round-off (the same sum).
+  /// concurrently with contact, gravity and elasticity here (two OpenMP threads, a tenth of
+  /// inertia's mass nodes with the potential terms to balance them): its two parts then differ
+  /// from the separate overloads' (that share of inertia's blocks comes in the potential part's
+  /// triplets and list, in another order) while their sum is the same up to round-off.
   size_t getHessianTripletVector(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>& blocks,
                                  int offset, bool psd) const;
   /// Makes kinematic rows/columns of the assembled H identity (drops their triplets and adds
@@ -331,8 +338,13 @@ class Simulable {
   /// (the ROM's value list; their bone triplets are the caller's to append).
   void potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
                         int offset, bool psd, bool soft_done = false) const;
-  /// The bones' springs (and, without soft tissue, the bones' gravity): gradient added.
-  void boneSpringGradient(VecX& g, int offset) const;
+  /// The bones' springs (and, without soft tissue, the bones' gravity): gradient added, energy
+  /// returned.
+  double boneSpringGradient(VecX& g, int offset) const;
+  /// getDynamicGradientVector / getPotentialGradientVector, returning the energy their passes
+  /// give.
+  double dynamicGradient(VecX& g, int offset) const;
+  double potentialGradient(VecX& g, int offset) const;
   std::unique_ptr<Impl> impl_;
 };
 

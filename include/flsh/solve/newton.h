@@ -18,6 +18,12 @@ class Objective {
   virtual int numDofs() const = 0;
   virtual double energy() = 0;
   virtual void gradient(VecX& g) = 0;  ///< resized to numDofs()
+  /// The energy and, from the same pass, the gradient (g resized to numDofs()), for objectives
+  /// whose gradient pass gives the energy almost for free. Returns false if not supported (the
+  /// default; nothing is evaluated). Newton then asks it at the initial state and at line-search
+  /// trial states, whose gradient is the next iteration's when the trial is accepted (a rejected
+  /// trial's gradient is wasted), instead of energy() there and gradient() at each iteration.
+  virtual bool energyAndGradient(double& energy, VecX& g) { return false; }
   /// Symmetric Hessian (full storage). `psd` asks for the positive-semidefinite approximation
   /// (per-term projection / Gauss–Newton contact); false = exact. Newton asks for the exact one
   /// first (NewtonOptions::exact_hessian) and for the PSD one when that is not positive definite.
@@ -137,7 +143,8 @@ struct NewtonResult {
   int factorizations = 0;
   int cg_iterations = 0;  ///< PCG iterations in total (lagged factor only)
   /// Wall-clock seconds (steady clock) in this call: objective energies (line search included),
-  /// gradients, Hessians (assembly; fixKinematic counts with its form), numeric
+  /// gradients (Objective::energyAndGradient's passes count here, with the energy they give),
+  /// Hessians (assembly; fixKinematic counts with its form), numeric
   /// factorizations (symbolic analyses included), and solves (triangular solves + PCG).
   double seconds_energy = 0.0;
   double seconds_gradient = 0.0;

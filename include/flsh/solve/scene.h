@@ -179,6 +179,8 @@ class Scene : public Objective {
   int numDofs() const override;
   double energy() override;
   void gradient(VecX& g) override;
+  /// Both in one pass per simulable (Simulable::getEnergyAndGradientVector).
+  bool energyAndGradient(double& energy, VecX& g) override;
   void hessian(SpMat& H, bool psd) override;
   void step(const VecX& dq) override;
   void push() override;

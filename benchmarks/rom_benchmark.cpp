@@ -7,11 +7,16 @@
 // Usage: rom_benchmark [STEPS=300] [--handles H] [--elastic N] [--inertial N] [--exact]
 //                      [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME]
 //                      [--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I]
+//                      [--basis-drop T] [--max-iterations N]
 //        rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
 //   --exact: no cubature (every tet and node integrated);
 //   --surface-pou: ReducedSettings::surface_partition_of_unity (experimental basis);
+//   --basis-drop: ReducedSettings::basis_drop_below (basis weights below it dropped; 0: none);
+//   --max-iterations: Newton iterations per step at most (a step that reaches it counts as not
+//                     converged and keeps its last iterate): the real-time trade of a fixed
+//                     budget, whose cost --reference measures;
 //   --tolerance: Newton's gradient tolerance (default: the scene default);
 //   --reference: also run the scene at tolerance T_REF in lockstep (untimed) and print the
 //                largest surface vertex distance from it (the cost of the tolerance);
@@ -71,6 +76,7 @@ struct ModelSpec {
   Kind kind = Kind::Rom;
   int handles = 87, elastic = 500, inertial = 500;  // 0 cubature tets: exact integration
   bool pou = false;  // ReducedSettings::surface_partition_of_unity
+  double basis_drop = -1.0;  // ReducedSettings::basis_drop_below (negative: its default)
   std::string name() const {
     if (kind == Kind::Skeleton) return "skeleton";
     if (kind == Kind::Fem) return "FEM";
@@ -88,6 +94,7 @@ std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, co
   if (m.kind == Kind::Rom) {
     settings.reduced.num_handles = m.handles;
     settings.reduced.surface_partition_of_unity = m.pou;
+    if (m.basis_drop >= 0) settings.reduced.basis_drop_below = m.basis_drop;
     if (m.elastic > 0) settings.reduced.elastic_cubature_points = m.elastic;
     if (m.inertial > 0) settings.reduced.inertial_cubature_points = m.inertial;
   }
@@ -120,6 +127,8 @@ struct Run {
 
 // --inertia-floor (negative: the SimulableOptions default).
 double inertia_floor_option = -1.0;
+// --max-iterations (negative: the NewtonOptions default).
+int max_iterations_option = -1;
 
 Run makeRun(std::shared_ptr<SoftAvatar> avatar, const Scenario& sc, const SceneOptions& options,
             bool ground = true) {
@@ -379,6 +388,7 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   if (tolerance > 0) scene_options.reduced_newton.gradient_tolerance = tolerance;
   if (hessian >= 0) scene_options.reduced_newton.exact_hessian = hessian == 1;
   if (!lag) scene_options.reduced_newton.lagged.enabled = false;
+  if (max_iterations_option > 0) scene_options.reduced_newton.max_iterations = max_iterations_option;
   Scenario sc{motion_name, std::make_shared<Motion>(makeBuiltinMotion(motion_name, 60.0, 30.0)),
               false};
   Run r = makeRun(avatar, sc, scene_options, ground);
@@ -457,6 +467,8 @@ int main(int argc, char** argv) {
     else if (a == "--inertial" && i + 1 < argc) m.inertial = std::atoi(argv[++i]);
     else if (a == "--exact") m.elastic = m.inertial = 0;
     else if (a == "--surface-pou") m.pou = true;
+    else if (a == "--basis-drop" && i + 1 < argc) m.basis_drop = std::atof(argv[++i]);
+    else if (a == "--max-iterations" && i + 1 < argc) max_iterations_option = std::atoi(argv[++i]);
     else if (a == "--tolerance" && i + 1 < argc) tolerance = std::atof(argv[++i]);
     else if (a == "--motion" && i + 1 < argc) motion = argv[++i];
     else if (a == "--no-ground") ground = false;
@@ -476,7 +488,8 @@ int main(int argc, char** argv) {
       std::fprintf(stderr,
                    "usage: rom_benchmark [STEPS] [--handles H] [--elastic N] [--inertial N] "
                    "[--exact] [--surface-pou] [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME] "
-                   "[--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I]\n"
+                   "[--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I] "
+                   "[--basis-drop T] [--max-iterations N]\n"
                    "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]\n"
                    "       rom_benchmark --plot-csv CSV [--png PATH]\n");
       return 2;

@@ -388,7 +388,8 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   if (tolerance > 0) scene_options.reduced_newton.gradient_tolerance = tolerance;
   if (hessian >= 0) scene_options.reduced_newton.exact_hessian = hessian == 1;
   if (!lag) scene_options.reduced_newton.lagged.enabled = false;
-  if (max_iterations_option > 0) scene_options.reduced_newton.max_iterations = max_iterations_option;
+  if (max_iterations_option > 0)
+    scene_options.reduced_newton.max_iterations = max_iterations_option;
   Scenario sc{motion_name, std::make_shared<Motion>(makeBuiltinMotion(motion_name, 60.0, 30.0)),
               false};
   Run r = makeRun(avatar, sc, scene_options, ground);

@@ -1197,9 +1197,13 @@ double Simulable::potentialGradient(VecX& g, int offset) const {
   return E + m.contactEnergy();
 }
 
-void Simulable::getPotentialGradientVector(VecX& g, int offset) const { potentialGradient(g, offset); }
+void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
+  potentialGradient(g, offset);
+}
 
-void Simulable::getGradientVector(VecX& g, int offset) const { getEnergyAndGradientVector(g, offset); }
+void Simulable::getGradientVector(VecX& g, int offset) const {
+  getEnergyAndGradientVector(g, offset);
+}
 
 double Simulable::getEnergyAndGradientVector(VecX& g, int offset) const {
   const Impl& m = *impl_;

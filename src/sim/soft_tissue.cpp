@@ -831,7 +831,8 @@ void SoftTissue::reducedGravityHessian(const Vec3& gravity, std::vector<Triplet>
   }
   for (int b = 0; b < num_bones_; ++b) {
     if (mass[b] == 0.0) continue;
-    const Mat3 C = rotationCurvature(-gravity, R[b] * (v[b] - mass[b] * joints_.row(b).transpose()));
+    const Vec3 lever = R[b] * (v[b] - mass[b] * joints_.row(b).transpose());
+    const Mat3 C = rotationCurvature(-gravity, lever);
     addBlock(H, offset + 6 * b + 3, offset + 6 * b + 3, psd ? projectToPSD<3>(C) : C);
   }
   if (psd) return;

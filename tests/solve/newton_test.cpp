@@ -119,6 +119,54 @@ TEST(Newton, MinimizesRosenbrockWithTheLineSearch) {
   }
 }
 
+/// Rosenbrock that also evaluates its energy and gradient in one pass (Objective::
+/// energyAndGradient) and counts the calls of each kind.
+class FusedRosenbrock : public FunctionObjective {
+ public:
+  explicit FusedRosenbrock(bool can_discard) : FunctionObjective(rosenbrock(can_discard)) {}
+  void gradient(VecX& g) override {
+    ++gradient_calls;
+    FunctionObjective::gradient(g);
+  }
+  bool energyAndGradient(double& energy, VecX& g) override {
+    ++fused_calls;
+    energy = FunctionObjective::energy();
+    --energy_calls;  // counted as a fused call
+    FunctionObjective::gradient(g);
+    return true;
+  }
+  int gradient_calls = 0, fused_calls = 0;
+};
+
+// With energyAndGradient Newton takes the same steps (the accepted trial's gradient is the next
+// iteration's; rejected trials, which Rosenbrock has, leave the current gradient alone) and
+// never calls energy() or gradient() apart.
+TEST(Newton, FusedEnergyAndGradientTakeTheSameSteps) {
+  for (bool can_discard : {true, false}) {
+    SCOPED_TRACE(can_discard ? "discard" : "pop and step again");
+    NewtonOptions options;
+    options.max_iterations = 100;
+    options.gradient_tolerance = 1e-10;
+    FunctionObjective plain = rosenbrock(can_discard);
+    const NewtonResult a = newtonSolve(plain, options);
+    FusedRosenbrock fused(can_discard);
+    const NewtonResult b = newtonSolve(fused, options);
+    ASSERT_TRUE(a.converged) << a.message;
+    ASSERT_GT(a.line_search_steps, 0);
+    EXPECT_TRUE(b.converged) << b.message;
+    EXPECT_EQ(b.iterations, a.iterations);
+    EXPECT_EQ(b.line_search_steps, a.line_search_steps);
+    EXPECT_EQ(fused.x, plain.x);
+    EXPECT_EQ(b.energy, a.energy);
+    EXPECT_EQ(fused.energy_calls, 0);
+    EXPECT_EQ(fused.gradient_calls, 0);
+    // One pass at the start and one per trial state (accepted or not).
+    EXPECT_EQ(fused.fused_calls, 1 + b.iterations + b.line_search_steps);
+    EXPECT_EQ(plain.energy_calls, fused.fused_calls);
+    EXPECT_EQ(fused.stackDepth(), 0u);
+  }
+}
+
 /// ‖R − R*‖²_F over SO(3) with R ← exp([δ]×) R. With M = R R*ᵀ:
 /// E(δ) = const − 2 tr(R*ᵀ exp([δ]×) R), gradient −2 vee(M − Mᵀ), Hessian 2 tr(M) I − (M + Mᵀ).
 class RotationObjective : public Objective {

@@ -4,6 +4,7 @@
 #include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -38,6 +39,11 @@ constexpr double kRelativePivotFloor = 1e-14;
 
 /// Dense Cholesky of the lower triangle. The dense copy and the factor keep their storage
 /// between calls of the same size (Newton calls it with one n every iteration).
+/// The factor is computed in single precision where that suffices (twice the SIMD width: 0.60
+/// against 0.85 ms for 405 DoFs) and exact solves refine it against the double matrix (a few
+/// products with A) to double accuracy; where single precision does not suffice (the float
+/// Cholesky fails, its pivots span more than kFloatPivotRatio, or the refinement stalls) the
+/// factor is computed in double, as before.
 class DenseCholeskySolver final : public LinearSolver {
  public:
   bool factorize(const SpMat& A) override {
@@ -60,28 +66,37 @@ class DenseCholeskySolver final : public LinearSolver {
           if (it.row() >= it.col()) dense_(it.row(), it.col()) = it.value();
     }
     if (!dense_.allFinite()) return false;
-    llt_.compute(dense_);  // reads the lower triangle only
-    float_factor_.resize(0, 0);  // made again on the next preconditionInPlace
-    if (llt_.info() != Eigen::Success) return false;
-    const auto pivots = llt_.matrixLLT().diagonal();
-    if (!(pivots.minCoeff() > std::sqrt(kRelativePivotFloor) * pivots.maxCoeff())) return false;
-    has_factor_ = true;
-    return true;
+    largest_diagonal_ = dense_.diagonal().cwiseAbs().maxCoeff();
+    single_ = false;
+    float_factor_.resize(0, 0);
+    float_llt_.compute(dense_.cast<float>());  // reads the lower triangle only
+    if (float_llt_.info() == Eigen::Success) {
+      const Eigen::VectorXf pivots = float_llt_.matrixLLT().diagonal();
+      single_ = pivots.minCoeff() > kFloatPivotRatio * pivots.maxCoeff();
+    }
+    has_factor_ = single_ || factorDouble();
+    return has_factor_;
   }
 
-  /// The factor's triangular solves in single precision (a float copy of L made on the first
-  /// use after each factorization): half the memory traffic and twice the SIMD width of the
-  /// double solves, for a preconditioner ~1e-7 relative from the exact solve.
+  /// The factor's triangular solves in single precision (the float factor, or a float copy of
+  /// the double one made on the first use after each factorization): half the memory traffic
+  /// and twice the SIMD width of the double solves, for a preconditioner ~1e-7 relative from
+  /// the exact solve.
   void preconditionInPlace(VecX& b) const override {
     if (!has_factor_ || b.size() != dense_.rows()) {
       solveInPlace(b);  // throws the same errors
       return;
     }
-    if (float_factor_.rows() != dense_.rows())
-      float_factor_ = llt_.matrixLLT().triangularView<Eigen::Lower>().toDenseMatrix().cast<float>();
     float_rhs_ = b.cast<float>();
-    float_factor_.triangularView<Eigen::Lower>().solveInPlace(float_rhs_);
-    float_factor_.transpose().triangularView<Eigen::Upper>().solveInPlace(float_rhs_);
+    if (single_) {
+      float_llt_.solveInPlace(float_rhs_);
+    } else {
+      if (float_factor_.rows() != dense_.rows())
+        float_factor_ =
+            llt_.matrixLLT().triangularView<Eigen::Lower>().toDenseMatrix().cast<float>();
+      float_factor_.triangularView<Eigen::Lower>().solveInPlace(float_rhs_);
+      float_factor_.transpose().triangularView<Eigen::Upper>().solveInPlace(float_rhs_);
+    }
     b = float_rhs_.cast<double>();
   }
 
@@ -93,13 +108,20 @@ class DenseCholeskySolver final : public LinearSolver {
     if (b.size() != dense_.rows())
       throw InputError("DenseCholeskySolver::solve: b must have " + std::to_string(dense_.rows()) +
                        " entries, got " + std::to_string(b.size()));
-    return llt_.solve(b);
+    VecX x = b;
+    solveInPlace(x);
+    return x;
   }
 
   void solveInPlace(VecX& b) const override {
     if (!has_factor_ || b.size() != dense_.rows()) {
       b = solve(b);  // throws the same errors as solve()
       return;
+    }
+    if (single_ && refine(b)) return;
+    if (single_) {  // the refinement stalled: the double factor from here on
+      single_ = false;
+      if (!factorDouble()) throw Error("DenseCholeskySolver::solve: the double factor failed");
     }
     llt_.solveInPlace(b);
   }
@@ -110,11 +132,56 @@ class DenseCholeskySolver final : public LinearSolver {
   std::string name() const override { return "dense-llt"; }
 
  private:
+  // Float pivots spanning more than this (condition ≳ 1e8 relative to float's 1e-7 precision)
+  // leave the refinement too little to work with: the factor is then computed in double.
+  static constexpr float kFloatPivotRatio = 1e-3f;
+
+  bool factorDouble() const {
+    float_factor_.resize(0, 0);
+    llt_.compute(dense_);  // reads the lower triangle only
+    if (llt_.info() != Eigen::Success) return false;
+    const auto pivots = llt_.matrixLLT().diagonal();
+    return pivots.minCoeff() > std::sqrt(kRelativePivotFloor) * pivots.maxCoeff();
+  }
+
+  // Iterative refinement of the float solve against the double matrix: x ← x + M⁻¹(b − A x)
+  // until the residual is at double round-off (relative to |b| + ‖A‖ |x|); false (b kept) if it
+  // stops shrinking first.
+  bool refine(VecX& b) const {
+    const auto A = dense_.selfadjointView<Eigen::Lower>();
+    refined_ = b;
+    preconditionInPlace(refined_);
+    double previous = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < kMaxRefinements; ++k) {
+      residual_.noalias() = b - A * refined_;
+      const double r = residual_.lpNorm<Eigen::Infinity>();
+      const double scale = b.lpNorm<Eigen::Infinity>() +
+                           double(dense_.rows()) * largest_diagonal_ *
+                               refined_.lpNorm<Eigen::Infinity>();
+      if (!std::isfinite(r)) return false;
+      if (r <= kRefinedResidual * scale) {
+        b = refined_;
+        return true;
+      }
+      if (!(r < 0.5 * previous)) return false;
+      previous = r;
+      preconditionInPlace(residual_);
+      refined_ += residual_;
+    }
+    return false;
+  }
+  static constexpr int kMaxRefinements = 12;
+  static constexpr double kRefinedResidual = 1e-15;
+
   MatX dense_;
-  Eigen::LLT<MatX> llt_;
+  double largest_diagonal_ = 0.0;
+  mutable Eigen::LLT<MatX> llt_;
+  Eigen::LLT<Eigen::MatrixXf> float_llt_;
+  mutable bool single_ = false;  // the float factor is the one in use
   bool has_factor_ = false;
-  mutable Eigen::MatrixXf float_factor_;  // L in single precision (empty: not made yet)
+  mutable Eigen::MatrixXf float_factor_;  // the double L in single precision (empty: not made)
   mutable Eigen::VectorXf float_rhs_;
+  mutable VecX refined_, residual_;
 };
 
 /// Eigen's simplicial LLᵀ with the permuted copy P A Pᵀ kept between factorizations: Eigen's own

@@ -13,7 +13,9 @@ namespace flsh {
 
 enum class LinearSolverType {
   Auto,     ///< dense below `dense_threshold` unknowns, CHOLMOD above
-  Dense,    ///< Eigen's blocked LLT (Cholesky) on the dense matrix (positive definite only)
+  /// Dense Cholesky (positive definite only): the factor in single precision with exact solves
+  /// refined to double accuracy, or in double where single precision does not suffice.
+  Dense,
   Cholmod,  ///< CHOLMOD supernodal Cholesky (positive definite only)
   /// Eigen's simplicial (up-looking) Cholesky with AMD ordering: for small sparse systems such
   /// as the skeleton's block-tree Hessians, where dense or supernodal factors waste work.

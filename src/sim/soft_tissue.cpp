@@ -1015,7 +1015,7 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
     } else {
       if (potential_first) potential_first();
       Mat3* values = reduced_values_[1].data();
-      this->gravity(gravity, nullptr, &H_potential, offset, psd);
+      reducedGravityHessian(gravity, H_potential, offset, psd);  // gravity()'s node loop unneeded
       elasticTets(0, T, nullptr, values, psd);
       elasticCorrection(nullptr, values, 0);
       inertiaHessianPart(1, H_potential, offset, psd);

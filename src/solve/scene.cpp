@@ -745,11 +745,8 @@ double Scene::energy() {
 }
 
 void Scene::gradient(VecX& g) {
-  g.setZero(num_dofs_);
-  for (size_t i = 0; i < simulables_.size(); ++i) {
-    simulables_[i]->getGradientVector(g, offsets_[i]);
-  }
-  if (avatarContactActive()) avatarContactEnergy(&g, nullptr, true);
+  double energy = 0.0;  // the same passes give it (Simulable::getGradientVector does the same)
+  energyAndGradient(energy, g);
 }
 
 bool Scene::energyAndGradient(double& energy, VecX& g) {

@@ -204,14 +204,12 @@ VecXi chooseHandles(const VolumetricData& data, const BodyModel& body, int count
                                      bone_of_vertex);
 }
 
-// #N × H compressed basis from the dense weights, without the entries below `drop_below` (and
-// the negligible ones).
-SpMat sparseBasis(const MatX& weights, double drop_below) {
-  const double threshold = std::max(drop_below, kBasisDropThreshold);
+// #N × H compressed basis from the dense weights, without the negligible entries.
+SpMat sparseBasis(const MatX& weights) {
   std::vector<Triplet> entries;
   for (Eigen::Index h = 0; h < weights.cols(); ++h)
     for (Eigen::Index j = 0; j < weights.rows(); ++j)
-      if (std::abs(weights(j, h)) >= threshold)
+      if (std::abs(weights(j, h)) >= kBasisDropThreshold)
         entries.emplace_back(int(j), int(h), weights(j, h));
   SpMat basis(weights.rows(), weights.cols());
   basis.setFromTriplets(entries.begin(), entries.end());
@@ -659,14 +657,13 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
   t0 = Clock::now();
   const BoundedBiharmonicWeights bbw = computeBoundedBiharmonicWeights(
       data.templ->mesh, data.rest_nodes, d.handles, data.bone_of_node, settings.basis);
-  if (settings.surface_partition_of_unity) {
-    // Dropped before the rows are rescaled, so that the soft surface rows still sum to 1.
-    MatX weights = bbw.weights;
-    weights = (weights.array().abs() >= settings.basis_drop_below).select(weights, 0.0);
-    d.basis = sparseBasis(surfacePartitionOfUnity(data, weights), 0.0);
-  } else {
-    d.basis = sparseBasis(bbw.weights, settings.basis_drop_below);
-  }
+  // The far tails are dropped before the optional rescaling of the rows (whose soft surface rows
+  // then still sum to 1).
+  const MatX weights =
+      (bbw.weights.array().abs() >= settings.basis_drop_below).select(bbw.weights, 0.0);
+  d.basis = sparseBasis(settings.surface_partition_of_unity
+                            ? surfacePartitionOfUnity(data, weights)
+                            : weights);
   d.basis_max_bound_violation = bbw.report.max_bound_violation;
   d.basis_max_constraint_error = bbw.report.max_constraint_error;
   d.basis_converged = bbw.report.converged;

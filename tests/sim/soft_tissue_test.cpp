@@ -306,6 +306,63 @@ TEST_P(SoftTissueModel, PotentialEnergyDerivativesMatchFiniteDifferences) {
   checkPart(*sim, false);
 }
 
+// Gravity alone (the potential energy with gravity minus the same without it, no colliders; the
+// ROM sums its Hessian per bone, not per node): value, gradient and exact Hessian against
+// differences, its rotation curvature and rotation–tissue blocks first asserted nonzero.
+TEST_P(SoftTissueModel, GravityDerivativesMatchFiniteDifferences) {
+  SimulableOptions weightless;
+  weightless.gravity.setZero();
+  Simulable with(avatar(), walk()), without(avatar(), walk(), weightless);
+  for (Simulable* sim : {&with, &without}) {
+    sim->initialize();
+    sim->preUpdate();
+  }
+  with.updateState(randomIncrement(with, 0.03, 0.001, 15));
+  without.setState(with.getState());
+  const int n = with.numDofs(), nb = with.numBoneDofs();
+  const auto potential = [](const Simulable& sim) { return sim.getPotentialEnergyScalar(); };
+  const auto gradient_of = [&](const Simulable& sim) {
+    VecX g = VecX::Zero(n);
+    sim.getPotentialGradientVector(g);
+    return g;
+  };
+  std::vector<Triplet> T, T0;
+  with.getPotentialHessianTripletVector(T, 0, false);
+  without.getPotentialHessianTripletVector(T0, 0, false);
+  const MatX H = dense(T, n) - dense(T0, n);
+  const VecX g = gradient_of(with) - gradient_of(without);
+  const std::vector<int> idx = checkedCoordinates(with, 120, 5);
+  const int m = int(idx.size());
+  VecX g_sub(m);
+  MatX H_sub(m, m);
+  for (int a = 0; a < m; ++a) {
+    g_sub[a] = g[idx[a]];
+    for (int b = 0; b < m; ++b) H_sub(a, b) = H(idx[a], idx[b]);
+  }
+  ASSERT_GT(g_sub.tail(m - nb).norm(), 0.0) << "no gravity on the soft tissue";
+  ASSERT_GT(H.block(3, 3, 3, 3).norm(), 0.0) << "no rotation curvature of the root";
+  ASSERT_GT(H_sub.topRightCorner(nb, m - nb).norm(), 0.0) << "no rotation–tissue blocks";
+  const auto both = [&](const VecX& sub, const auto& f) {
+    const VecX d = expand(sub, idx, n);
+    return atMovedState(with, d, [&] { return atMovedState(without, d, [&] { return f(d); }); });
+  };
+  const auto energy = [&](const VecX& sub) {
+    return both(sub, [&](const VecX&) {
+      return VecX::Constant(1, potential(with) - potential(without));
+    });
+  };
+  const auto gradient = [&](const VecX& sub) {
+    return both(sub, [&](const VecX& d) {
+      const VecX gd = pullBack(gradient_of(with) - gradient_of(without), d, nb);
+      VecX out(m);
+      for (int a = 0; a < m; ++a) out[a] = gd[idx[a]];
+      return out;
+    });
+  };
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(energy, VecX::Zero(m), g_sub.transpose(), 1e-6));
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(gradient, VecX::Zero(m), H_sub, 1e-5));
+}
+
 TEST_P(SoftTissueModel, PsdHessianIsPositiveSemidefinite) {
   auto sim = movedSoftAvatar(avatar(), 13);
   // Compress some tets so that the tissue has compressive stress somewhere.

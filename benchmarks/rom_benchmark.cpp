@@ -7,8 +7,8 @@
 // Usage: rom_benchmark [STEPS=300] [--handles H] [--elastic N] [--inertial N] [--exact]
 //                      [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME]
 //                      [--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I]
-//                      [--basis-drop T] [--max-iterations N]
-//        rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]
+//                      [--basis-drop T] [--max-iterations N] [--materials PATH]
+//        rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] [--materials PATH]
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
 //   --exact: no cubature (every tet and node integrated);
@@ -21,6 +21,7 @@
 //   --reference: also run the scene at tolerance T_REF in lockstep (untimed) and print the
 //                largest surface vertex distance from it (the cost of the tolerance);
 //   --no-lag: factor every Newton iteration (no lagged-factor PCG) for comparison;
+//   --materials: the soft models' material file (docs/materials.md; default: the built-in one);
 //   --inertia-floor: SimulableOptions::tracking_inertia_floor (kg·m²; 0 = the former model), for
 //                    every model of the run (--compare too).
 // Prints generation time, steps/s over the timed steps (after 3 warm-up steps) and the per-step
@@ -72,6 +73,8 @@ double seconds(Clock::time_point a, Clock::time_point b) {
 
 enum class Kind { Skeleton, Rom, Fem };
 
+std::string g_material_file;  // --materials: every soft model's material file (empty: defaults)
+
 struct ModelSpec {
   Kind kind = Kind::Rom;
   int handles = 87, elastic = 500, inertial = 500;  // 0 cubature tets: exact integration
@@ -91,6 +94,7 @@ std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, co
                                        double* build_seconds) {
   const auto t0 = Clock::now();
   SoftAvatarSettings settings;
+  settings.volumetric.material_file = g_material_file;
   if (m.kind == Kind::Rom) {
     settings.reduced.num_handles = m.handles;
     settings.reduced.surface_partition_of_unity = m.pou;
@@ -479,6 +483,7 @@ int main(int argc, char** argv) {
     else if (a == "--reference" && i + 1 < argc) reference = std::atof(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) omp_set_num_threads(std::atoi(argv[++i]));
     else if (a == "--compare") comparison = true;
+    else if (a == "--materials" && i + 1 < argc) g_material_file = argv[++i];
     else if (a == "--inertia-floor" && i + 1 < argc) inertia_floor_option = std::atof(argv[++i]);
     else if (a == "--frames" && i + 1 < argc) frames = std::max(1, std::atoi(argv[++i]));
     else if (a == "--png" && i + 1 < argc) png = argv[++i];

@@ -422,4 +422,52 @@ double reducedTetElasticEnergy(double volume, const FemMaterialPoint& material,
   return gradientFormEnergy(volume, material, F, Mat3X(G), gradient, hessian, psd);
 }
 
+double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
+                       const Eigen::Ref<const MatX>& rest_hessian, double weight,
+                       Eigen::Ref<VecX>* gradient, Eigen::Ref<MatX>* hessian, bool psd,
+                       bool* bounded) {
+  const Eigen::Index m = z.size();
+  if (rest_hessian.rows() != m || rest_hessian.cols() != m)
+    throw InputError("restSplitExcess: rest Hessian is " + std::to_string(rest_hessian.rows()) +
+                     " × " + std::to_string(rest_hessian.cols()) + ", expected " +
+                     std::to_string(m) + " square (the size of z)");
+  if (hessian && !gradient)
+    throw InputError("restSplitExcess: the Hessian needs the gradient (pass both)");
+  if ((gradient && gradient->size() != m) ||
+      (hessian && (hessian->rows() != m || hessian->cols() != m)))
+    throw InputError("restSplitExcess: gradient / Hessian sizes do not match z (" +
+                     std::to_string(m) + ")");
+  if (!(weight > 0.0) || !std::isfinite(weight))
+    throw InputError("restSplitExcess: weight must be finite and > 0, got " + numberText(weight));
+  const VecX b = rest_hessian * z;  // ∇q
+  const double q = 0.5 * z.dot(b), r = psi - q;
+  // x ≤ 1 ⇔ w r ≥ −q; always so for w ≤ 1, since Ψ ≥ 0 ⇔ r ≥ −q.
+  const double x = q > 0.0 ? -weight * r / q : -1.0;
+  if (bounded) *bounded = x > 1.0;
+  if (x <= 1.0) {
+    if (hessian) {
+      if (psd) (*hessian) *= weight;  // w H_psd: PSD (subtracting K̃ would make it indefinite)
+      else (*hessian) = weight * ((*hessian) - rest_hessian);
+    }
+    if (gradient) (*gradient) = weight * ((*gradient) - b);
+    return weight * r;
+  }
+  // f = −q h(x), h = 2 − e^{1−x} (h′ = e^{1−x}, h″ = −e^{1−x}), x = −w r / q:
+  // f_r = w h′, f_q = x h′ − h, and the second-order terms −(h″/q) v vᵀ with v = w ∇r + x ∇q.
+  const double decay = std::exp(1.0 - x), h = 2.0 - decay;
+  const double f_r = weight * decay, f_q = x * decay - h;
+  if (gradient) {
+    const VecX v = weight * ((*gradient) - b) + x * b;
+    if (hessian) {
+      // PSD form: f_r H_psd (f_r > 0) and the rank-one term; f_q ≤ 0 here, so its K̃ term and
+      // f_r's −K̃ (both negative semi-definite) are dropped.
+      if (psd) (*hessian) *= f_r;
+      else (*hessian) = f_r * ((*hessian) - rest_hessian) + f_q * rest_hessian;
+      hessian->noalias() += (decay / q) * v * v.transpose();
+    }
+    (*gradient) = f_r * ((*gradient) - b) + f_q * b;
+  }
+  return -q * h;
+}
+
 }  // namespace flsh

@@ -6,6 +6,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <cmath>
 #include <string>
 
@@ -160,16 +161,17 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     elements_.push_back(tetElementRest(X, e));
     materials_.push_back(femMaterialPoint(data.materials, e));
   }
-  if (rom && rom->elastic_rest_correction.size() > 0) {
-    correction_ = rom->elastic_rest_correction;
-    if (correction_.rows() != 3 * num_handles_ || correction_.cols() != 3 * num_handles_)
-      throw InputError("Simulable: the avatar's elastic rest correction is " +
-                       std::to_string(correction_.rows()) + " × " +
-                       std::to_string(correction_.cols()) + ", expected 3·#handles square (" +
+  if (rom && rom->elastic_rest_stiffness.size() > 0) {
+    rest_stiffness_ = rom->elastic_rest_stiffness;
+    if (rest_stiffness_.rows() != 3 * num_handles_ || rest_stiffness_.cols() != 3 * num_handles_)
+      throw InputError("Simulable: the avatar's elastic rest stiffness is " +
+                       std::to_string(rest_stiffness_.rows()) + " × " +
+                       std::to_string(rest_stiffness_.cols()) + ", expected 3·#handles square (" +
                        std::to_string(3 * num_handles_) + ")");
     for (int a = 0; a < num_handles_; ++a)
       for (int b = 0; b < num_handles_; ++b)
-        if (!correction_.block<3, 3>(3 * a, 3 * b).isZero(0.0)) correction_blocks_.emplace_back(a, b);
+        if (!rest_stiffness_.block<3, 3>(3 * a, 3 * b).isZero(0.0))
+          rest_stiffness_blocks_.emplace_back(a, b);
   }
   if (reduced_) {  // each elastic tet's handles and its shape gradients through the basis
     tet_handle_start_.assign(1, 0);
@@ -197,6 +199,24 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
     tet_gradients_.resize(3, columns);
     for (size_t e = 0; e < gradients.size(); ++e)
       tet_gradients_.middleCols(tet_handle_start_[e], gradients[e].cols()) = gradients[e];
+    if (rest_stiffness_.size() > 0) {  // each sample tet's own rest quadratic K̃_e
+      rest_hessian_start_.assign(1, 0);
+      for (size_t e = 0; e < gradients.size(); ++e) {
+        const int m = 3 * int(gradients[e].cols());
+        rest_hessian_start_.push_back(rest_hessian_start_.back() + m * m);
+      }
+      rest_hessians_.resize(rest_hessian_start_.back());
+      for (size_t e = 0; e < gradients.size(); ++e) {
+        const int count = int(gradients[e].cols()), m = 3 * count;
+        if (count == 0) continue;
+        Eigen::Map<MatX> K(rest_hessians_.data() + rest_hessian_start_[e], m, m);
+        MatX Ke(m, m);
+        Eigen::Ref<MatX> view = Ke;
+        reducedTetElasticEnergy(elements_[e].volume, materials_[e], gradients[e],
+                                Mat3X::Zero(3, count), nullptr, &view, false);
+        K = Ke;
+      }
+    }
   }
 
   // Inertia and gravity: every node with its lumped mass, or the inertial cubature's nodes.
@@ -292,7 +312,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
 }
 
 void SoftTissue::buildReducedPattern() {
-  // Every (handle, handle) pair some node or elastic tet couples, plus the rest correction's;
+  // Every (handle, handle) pair some node or elastic tet couples, plus the rest stiffness's;
   // every (bone row block, handle) pair some node's skinning couples.
   const int H = num_handles_, rows = 2 * num_bones_;
   std::vector<char> zz(size_t(H) * H, 0), bz(size_t(rows) * H, 0);
@@ -309,7 +329,7 @@ void SoftTissue::buildReducedPattern() {
     for (int s = tet_handle_start_[e]; s < tet_handle_start_[e + 1]; ++s)
       for (int r = tet_handle_start_[e]; r < tet_handle_start_[e + 1]; ++r)
         zz[size_t(tet_handles_[s]) * H + tet_handles_[r]] = 1;
-  for (const auto& [a, b] : correction_blocks_) zz[size_t(a) * H + b] = 1;
+  for (const auto& [a, b] : rest_stiffness_blocks_) zz[size_t(a) * H + b] = 1;
   // Slots: the z–z blocks, then the bone–z blocks, then their transposes (z–bone).
   zz_slot_.assign(zz.size(), -1);
   bz_slot_.assign(bz.size(), -1);
@@ -537,7 +557,7 @@ void SoftTissue::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const M
 namespace {
 // reducedHessians maps this share of inertia's mass nodes beside the potential terms: on the full
 // synthetic body (684 mass nodes, ~390 elastic tets) the other 90 % of inertia's blocks cost about
-// as much as contact, gravity, every elastic tet and the rest correction (265 against 260–290 µs
+// as much as contact, gravity, every elastic tet and the rest-stiffness term (265 against 260–290 µs
 // per Hessian; scene Hessian 0.42–0.46 ms against 0.50 with the elastic tets split instead).
 // reducedGradient runs half of the tets beside inertia's and gravity's force mapping (about as
 // costly as contact).
@@ -912,11 +932,17 @@ double SoftTissue::elasticTets(int first, int last, double* gz, Mat3* values, bo
     Eigen::Ref<VecX> gradient = ge.head(3 * count);
     Eigen::Ref<MatX> tet_hessian =
         He.topLeftCorner(hessian ? 3 * count : 0, hessian ? 3 * count : 0);
-    const double w = element_weight_[e];
-    E += w * reducedTetElasticEnergy(elements_[size_t(e)].volume, materials_[size_t(e)],
-                                     tet_gradients_.middleCols(begin, count), Z.leftCols(count),
-                                     gz ? &gradient : nullptr, hessian ? &tet_hessian : nullptr,
-                                     psd);
+    double w = element_weight_[e];
+    if (rest_stiffness_.size() == 0) {
+      E += w * reducedTetElasticEnergy(elements_[size_t(e)].volume, materials_[size_t(e)],
+                                       tet_gradients_.middleCols(begin, count), Z.leftCols(count),
+                                       gz ? &gradient : nullptr, hessian ? &tet_hessian : nullptr,
+                                       psd);
+    } else {
+      E += restSplitExcess(e, count, w, Z.leftCols(count), gz != nullptr, hessian, psd, gradient,
+                           tet_hessian);
+      w = 1.0;  // the excess comes weighted
+    }
     if (gz)
       for (int s = 0; s < count; ++s)
         Eigen::Map<Vec3>(gz + 3 * tet_handles[s]) += w * gradient.segment<3>(3 * s);
@@ -931,17 +957,30 @@ double SoftTissue::elasticTets(int first, int last, double* gz, Mat3* values, bo
   return E;
 }
 
-double SoftTissue::elasticCorrection(VecX* g, Mat3* values, int offset) const {
-  if (correction_.size() == 0) return 0.0;
-  // ½ zᵀ C z; C is positive semi-definite (ReducedData): the same in the PSD and exact forms.
-  const VecX Cz = correction_ * u;
-  if (g) g->segment(offset + bone_dofs_, Cz.size()) += Cz;
+double SoftTissue::restSplitExcess(int e, int count, double w, const Eigen::Ref<const Mat3X>& Z,
+                                   bool want_gradient, bool want_hessian, bool psd,
+                                   Eigen::Ref<VecX> gradient, Eigen::Ref<MatX> hessian) const {
+  const int m = 3 * count, begin = tet_handle_start_[e];
+  const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[e], m, m);
+  const bool derivatives = want_gradient || want_hessian;  // the Hessian needs the gradient
+  const double psi = reducedTetElasticEnergy(
+      elements_[size_t(e)].volume, materials_[size_t(e)], tet_gradients_.middleCols(begin, count),
+      Z, derivatives ? &gradient : nullptr, want_hessian ? &hessian : nullptr, psd);
+  return flsh::restSplitExcess(psi, Eigen::Map<const VecX>(Z.data(), m), K, w,
+                         derivatives ? &gradient : nullptr, want_hessian ? &hessian : nullptr, psd);
+}
+
+double SoftTissue::restStiffnessTerm(VecX* g, Mat3* values, int offset) const {
+  if (rest_stiffness_.size() == 0) return 0.0;
+  // ½ zᵀ K z, K the exact rest stiffness of the subspace (positive definite).
+  const VecX Kz = rest_stiffness_ * u;
+  if (g) g->segment(offset + bone_dofs_, Kz.size()) += Kz;
   if (values)
-    for (const auto& [a, b] : correction_blocks_)
+    for (const auto& [a, b] : rest_stiffness_blocks_)
       if (a <= b)
         values[zz_slot_[size_t(a) * size_t(num_handles_) + size_t(b)]] +=
-            correction_.block<3, 3>(3 * a, 3 * b);
-  return 0.5 * u.dot(Cz);
+            rest_stiffness_.block<3, 3>(3 * a, 3 * b);
+  return 0.5 * u.dot(Kz);
 }
 
 double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, bool psd) const {
@@ -965,7 +1004,7 @@ double SoftTissue::elasticReduced(VecX* g, std::vector<Mat3>* list, int offset, 
     E = energies[0] + energies[1];
     if (g) g->segment(base, second.size()) += second;
   }
-  return E + elasticCorrection(g, hessian ? list->data() : nullptr, offset);
+  return E + restStiffnessTerm(g, hessian ? list->data() : nullptr, offset);
 }
 
 double SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
@@ -995,7 +1034,7 @@ double SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
     } else {
       if (potential_first) potential_first(gradient_scratch_);
       energies[1] = elasticTets(split, T, gradient_scratch_.data() + base, nullptr, true) +
-                    elasticCorrection(&gradient_scratch_, nullptr, offset);
+                    restStiffnessTerm(&gradient_scratch_, nullptr, offset);
     }
   });
   g += gradient_scratch_;
@@ -1017,7 +1056,7 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
       Mat3* values = reduced_values_[1].data();
       reducedGravityHessian(gravity, H_potential, offset, psd);  // gravity()'s node loop unneeded
       elasticTets(0, T, nullptr, values, psd);
-      elasticCorrection(nullptr, values, 0);
+      restStiffnessTerm(nullptr, values, 0);
       inertiaHessianPart(1, H_potential, offset, psd);
     }
   });

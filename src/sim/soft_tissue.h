@@ -132,7 +132,7 @@ class SoftTissue {
   /// ROM: both Hessian parts' node and tet terms on two threads (Simulable::
   /// getHessianTripletVector): inertia (value list 0, bone triplets into H_dynamic) beside
   /// `potential_first` (may be empty: e.g. contact, on nodes skinned before, with skin = false),
-  /// then gravity, the elastic tets and the rest-stiffness correction (list 1, bone triplets
+  /// then gravity, the elastic tets and the exact rest-stiffness term (list 1, bone triplets
   /// into H_potential); a share of inertia's mass nodes is mapped on the second thread too
   /// (into list 1 and H_potential), to balance the two. Both lists come back mirrored
   /// (flushReduced then only hands them over).
@@ -196,10 +196,14 @@ class SoftTissue {
   std::vector<int> tet_handle_start_, tet_handles_;
   Mat3X tet_gradients_;
   int max_tet_handles_ = 0;
-  // ROM with the elastic cubature: the rest-stiffness correction ½ zᵀ C z (ReducedData) and the
-  // handle pairs whose 3 × 3 block is nonzero.
-  MatX correction_;
-  std::vector<std::pair<int, int>> correction_blocks_;
+  // ROM with the elastic cubature (the rest-stiffness split, ReducedData::elastic_rest_stiffness):
+  // the exact rest stiffness K of ½ zᵀ K z and the handle pairs whose 3 × 3 block is nonzero;
+  // each elastic tet's own rest Hessian K̃_e in its handles' coordinates ((3 n_e)² values,
+  // column-major, from rest_hessian_start_[e]).
+  MatX rest_stiffness_;
+  std::vector<std::pair<int, int>> rest_stiffness_blocks_;
+  std::vector<int> rest_hessian_start_;
+  VecX rest_hessians_;
   std::vector<int> influence_start_;
   std::vector<Influence> influences_;
   MatX3 x_hat_;
@@ -256,8 +260,15 @@ class SoftTissue {
   /// Elastic tets [first, last): energy returned, gradient added into gz (the handles' 3H
   /// entries; may be null), Hessian blocks summed into `values` (a value list; may be null).
   double elasticTets(int first, int last, double* gz, Mat3* values, bool psd) const;
-  /// ½ zᵀ C z (0 without the rest-stiffness correction), its gradient and Hessian blocks.
-  double elasticCorrection(VecX* g, Mat3* values, int offset) const;
+  /// ½ zᵀ K z (0 without the elastic cubature), its gradient and Hessian blocks.
+  double restStiffnessTerm(VecX* g, Mat3* values, int offset) const;
+  /// Elastic tet e (count handles, cubature weight w, their displacements Z) under the
+  /// rest-stiffness split: its weighted excess over its rest quadratic, bounded below
+  /// (ReducedData::elastic_rest_stiffness); gradient and Hessian (in the handles' coordinates,
+  /// weighted) written into the views when asked.
+  double restSplitExcess(int e, int count, double w, const Eigen::Ref<const Mat3X>& Z,
+                         bool want_gradient, bool want_hessian, bool psd, Eigen::Ref<VecX> gradient,
+                         Eigen::Ref<MatX> hessian) const;
   Vec3 nodeDisplacement(const VecX& state, int j) const {
     if (!reduced_)
       return node_dof_[j] < 0 ? Vec3::Zero() : Vec3(state.segment<3>(node_dof_[j]));

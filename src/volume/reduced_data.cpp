@@ -34,8 +34,9 @@ double secondsSince(Clock::time_point t0) {
 
 // Revision of the rules of this level (handle choice, sample distributions, basis drop
 // threshold): bump it when they change so that data cached under older rules are rebuilt.
-constexpr int kReducedRules = 4;  // 1: first version; 2: rest-stiffness correction; 3: elastic
-                                  // selection to the full count; 4: its positive part
+constexpr int kReducedRules = 5;  // 1: first version; 2: rest-stiffness correction; 3: elastic
+                                  // selection to the full count; 4: its positive part; 5: the
+                                  // exact rest stiffness instead (the rest-stiffness split)
 // Basis entries below this are dropped (they only cost memory and time in the simulation).
 constexpr double kBasisDropThreshold = 1e-12;
 // Smallest handle displacement amplitude of an elastic training sample, m (the samples spread
@@ -292,6 +293,45 @@ ElasticElements elasticElements(const VolumetricData& data) {
   return out;
 }
 
+// Σ_e Φ̂_eᵀ K_e Φ̂_e over the elastic elements, K_e the element's elastic Hessian at rest
+// (12 × 12) and Φ̂_e its nodes' basis rows (3H × 3H, N/m), exactly symmetric.
+MatX subspaceRestStiffness(const VolumetricData& data, const SpMat& basis,
+                           const ElasticElements& elements) {
+  const int H = int(basis.cols()), E = int(elements.tets.size());
+  const MatX4i& tets = data.templ->mesh.tets;
+  const SpMat rows = basis.transpose();  // column j = node j's weights
+  int threads = 1;
+#ifdef _OPENMP
+  threads = omp_get_max_threads();
+#endif
+  std::vector<MatX> partial(size_t(threads), MatX::Zero(3 * H, 3 * H));
+  detail::FirstFailure failure;
+#pragma omp parallel for schedule(dynamic, 64)
+  for (int c = 0; c < E; ++c) {
+    failure.run([&] {
+      int thread = 0;
+#ifdef _OPENMP
+      thread = omp_get_thread_num();
+#endif
+      const int t = elements.tets[size_t(c)];
+      Mat12 K;
+      tetElasticEnergy(elements.rest[size_t(c)], elements.materials[size_t(c)],
+                       Eigen::Matrix<double, 3, 4>::Zero(), nullptr, &K, false);
+      MatX& C = partial[size_t(thread)];
+      for (int a = 0; a < 4; ++a)
+        for (SpMat::InnerIterator ia(rows, tets(t, a)); ia; ++ia)
+          for (int b = 0; b < 4; ++b)
+            for (SpMat::InnerIterator ib(rows, tets(t, b)); ib; ++ib)
+              C.block<3, 3>(3 * ia.row(), 3 * ib.row()) +=
+                  (ia.value() * ib.value()) * K.block<3, 3>(3 * a, 3 * b);
+    });
+  }
+  failure.rethrow();
+  MatX C = MatX::Zero(3 * H, 3 * H);
+  for (const MatX& p : partial) C += p;
+  return 0.5 * (C + C.transpose());  // symmetric up to rounding: make it exactly so
+}
+
 // samples × #elastic elements: the elastic energy (J) of each tet under u = Φ z for random z:
 // every handle moves in a random direction by a random fraction of the sample's amplitude
 // (log-uniform in [1 mm, training_amplitude]), at most its reach (handle_reach, H, m).
@@ -320,62 +360,6 @@ MatX elasticSamples(const VolumetricData& data, const SpMat& basis, const Elasti
     }
   });
   return A;
-}
-
-// C = Σ_e (1 − w_e) Φ̂_eᵀ K_e Φ̂_e over the elastic elements (w_e: the cubature weight, 0 off the
-// sample), K_e the element's elastic Hessian at rest (12 × 12) and Φ̂_e its nodes' basis rows:
-// the exact rest stiffness of the subspace minus the cubature's (3H × 3H, N/m); returned is its
-// positive semi-definite part (negative eigenvalues set to 0).
-MatX elasticRestCorrection(const VolumetricData& data, const SpMat& basis,
-                           const ElasticElements& elements, const Cubature& cubature) {
-  const int H = int(basis.cols()), E = int(elements.tets.size());
-  const MatX4i& tets = data.templ->mesh.tets;
-  std::vector<double> weight(size_t(E), 0.0);
-  for (Eigen::Index k = 0; k < cubature.elements.size(); ++k) {
-    const auto it = std::lower_bound(elements.tets.begin(), elements.tets.end(),
-                                     cubature.elements[k]);
-    if (it != elements.tets.end() && *it == cubature.elements[k])
-      weight[size_t(it - elements.tets.begin())] = cubature.weights[k];
-  }
-  const SpMat rows = basis.transpose();  // column j = node j's weights
-  int threads = 1;
-#ifdef _OPENMP
-  threads = omp_get_max_threads();
-#endif
-  std::vector<MatX> partial(size_t(threads), MatX::Zero(3 * H, 3 * H));
-  detail::FirstFailure failure;
-#pragma omp parallel for schedule(dynamic, 64)
-  for (int c = 0; c < E; ++c) {
-    failure.run([&] {
-      const double scale = 1.0 - weight[size_t(c)];
-      if (scale == 0.0) return;
-      int thread = 0;
-#ifdef _OPENMP
-      thread = omp_get_thread_num();
-#endif
-      const int t = elements.tets[size_t(c)];
-      Mat12 K;
-      tetElasticEnergy(elements.rest[size_t(c)], elements.materials[size_t(c)],
-                       Eigen::Matrix<double, 3, 4>::Zero(), nullptr, &K, false);
-      MatX& C = partial[size_t(thread)];
-      for (int a = 0; a < 4; ++a)
-        for (SpMat::InnerIterator ia(rows, tets(t, a)); ia; ++ia)
-          for (int b = 0; b < 4; ++b)
-            for (SpMat::InnerIterator ib(rows, tets(t, b)); ib; ++ib)
-              C.block<3, 3>(3 * ia.row(), 3 * ib.row()) +=
-                  (scale * ia.value() * ib.value()) * K.block<3, 3>(3 * a, 3 * b);
-    });
-  }
-  failure.rethrow();
-  MatX C = MatX::Zero(3 * H, 3 * H);
-  for (const MatX& p : partial) C += p;
-  C = 0.5 * (C + C.transpose());  // symmetric up to rounding: make it exactly so
-  // Only the positive part: where the samples overestimate the stiffness, subtracting it would
-  // make the energy unbounded below once a heavily weighted sample tet inverts (StVK's energy
-  // vanishes at a reflection), and the simulation collapses (measured with 150 handles).
-  Eigen::SelfAdjointEigenSolver<MatX> eigen(C);
-  return eigen.eigenvectors() * eigen.eigenvalues().cwiseMax(0.0).asDiagonal() *
-         eigen.eigenvectors().transpose();
 }
 
 // samples × #T: Σ_{a∈e} (m_e/4)‖v_a‖² (twice the lumped kinetic energy, J) of each tet for random
@@ -509,8 +493,8 @@ io::NpzWriter cacheArrays(const ReducedData& d) {
                                  .finished()));
   storeCubature(w, "elastic", d.elastic, d.elastic_test_error);
   storeCubature(w, "inertial", d.inertial, d.inertial_test_error);
-  if (d.elastic_rest_correction.size() > 0)
-    w.add("elastic_rest_correction", d.elastic_rest_correction);
+  if (d.elastic_rest_stiffness.size() > 0)
+    w.add("elastic_rest_stiffness", d.elastic_rest_stiffness);
   return w;
 }
 
@@ -602,9 +586,9 @@ ReducedData loadReducedData(const io::NpzFile& f, const VolumetricData& data, co
   d.inertial = loadCubature(f, "inertial", inertial, settings.inertial_cubature_points, T,
                             &d.inertial_test_error);
   if (elastic) {
-    d.elastic_rest_correction = f.matrix("elastic_rest_correction", 3 * H, 3 * H);
-    if (!d.elastic_rest_correction.allFinite())
-      throw InputError(f.path() + ": key 'elastic_rest_correction': NaN or Inf");
+    d.elastic_rest_stiffness = f.matrix("elastic_rest_stiffness", 3 * H, 3 * H);
+    if (!d.elastic_rest_stiffness.allFinite())
+      throw InputError(f.path() + ": key 'elastic_rest_stiffness': NaN or Inf");
   }
   return d;
 }
@@ -694,7 +678,7 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
         &d.elastic_test_error,
         &r.seconds_training, &r.seconds_cubature);
     t0 = Clock::now();
-    d.elastic_rest_correction = elasticRestCorrection(data, d.basis, elements, d.elastic);
+    d.elastic_rest_stiffness = subspaceRestStiffness(data, d.basis, elements);
     r.seconds_cubature += secondsSince(t0);
   }
   if (inertial_cubature) {
@@ -721,6 +705,13 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
   }
   r.seconds_total = secondsSince(start);
   return d;
+}
+
+MatX elasticRestStiffness(const VolumetricData& data, const SpMat& basis) {
+  if (basis.rows() != data.numNodes())
+    throw InputError("elasticRestStiffness: the basis has " + std::to_string(basis.rows()) +
+                     " rows, expected one per node (" + std::to_string(data.numNodes()) + ")");
+  return subspaceRestStiffness(data, basis, elasticElements(data));
 }
 
 VecX inertialNodeMasses(const VolumetricData& data, const Cubature& inertial) {

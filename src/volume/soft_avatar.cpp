@@ -202,9 +202,9 @@ void SoftAvatar::setReducedData(std::shared_ptr<const ReducedData> data) {
   };
   checkCubature(data->elastic, "elastic");
   checkCubature(data->inertial, "inertial");
-  const MatX& C = data->elastic_rest_correction;
+  const MatX& C = data->elastic_rest_stiffness;
   if (C.size() > 0 && (C.rows() != 3 * H || C.cols() != 3 * H || !C.allFinite()))
-    throw InputError(fn + "elastic_rest_correction is " + std::to_string(C.rows()) + " × " +
+    throw InputError(fn + "elastic_rest_stiffness is " + std::to_string(C.rows()) + " × " +
                      std::to_string(C.cols()) + (C.allFinite() ? "" : " with NaN or Inf") +
                      ", expected empty or 3·#handles × 3·#handles = " + std::to_string(3 * H) +
                      " × " + std::to_string(3 * H) + " finite");

@@ -629,6 +629,110 @@ TEST(ReducedTetElement, GradientAndHessianMatchFiniteDifferences) {
       flat(Z), hessian, 1e-7, 1e-7));
 }
 
+// The rest-stiffness split of a cubature sample tet (restSplitExcess): w (Ψ − q) while that is
+// ≥ −q, a bounded C¹ continuation below. Value, gradient and Hessian against finite differences in
+// both branches (a moderate state at unit and heavy weight; a compressed tet at heavy weight,
+// which takes the bounded branch), the bound f ≥ −2q, and PSD forms that are PSD.
+TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
+  Random random(24);
+  const FemMaterialPoint m = tissue(random.rotation(), 3.0);
+  const Mat34 X = restTet(random);
+  const TetElementRest rest = tetElementRest(X, 0);
+  const int n = 5;
+  Mat4X Phi(4, n);
+  for (int i = 0; i < Phi.size(); ++i) Phi.data()[i] = random.uniform(0.0, 1.0);
+  const MatX right = (Phi * Phi.transpose()).inverse() * Phi;  // U ↦ Z with Z Φᵀ = U
+  const Mat3X G = reducedShapeGradients(rest, Phi);
+  MatX K(3 * n, 3 * n);
+  {
+    Eigen::Ref<MatX> view = K;
+    reducedTetElasticEnergy(rest.volume, m, G, Mat3X::Zero(3, n), nullptr, &view, false);
+  }
+  ASSERT_GT(K.cwiseAbs().maxCoeff(), 0.0);
+  const auto unflat = [n](const VecX& x) { return Mat3X(Eigen::Map<const Mat3X>(x.data(), 3, n)); };
+  // f, and its gradient / Hessian when asked, at flattened z.
+  const auto excess = [&](const VecX& z, double w, VecX* g, MatX* H, bool psd, bool* bounded) {
+    VecX gradient(3 * n);
+    MatX hessian(3 * n, 3 * n);
+    Eigen::Ref<VecX> g_view = gradient;
+    Eigen::Ref<MatX> h_view = hessian;
+    const double psi = reducedTetElasticEnergy(rest.volume, m, G, unflat(z),
+                                               g || H ? &g_view : nullptr, H ? &h_view : nullptr,
+                                               psd);
+    const double f = restSplitExcess(psi, z, K, w, g || H ? &g_view : nullptr,
+                                     H ? &h_view : nullptr, psd, bounded);
+    if (g) *g = gradient;
+    if (H) *H = hessian;
+    return f;
+  };
+  Mat34 moderate, compressed;
+  for (int a = 0; a < 4; ++a) moderate.col(a) = random.vec(0.003);
+  const Vec3 centroid = X.rowwise().mean(), axis = random.vec(1.0).normalized();
+  for (int a = 0; a < 4; ++a)  // 35 % shorter along `axis`
+    compressed.col(a) = -0.35 * axis * axis.dot(X.col(a) - centroid);
+  // The compressed tet is softer than its rest quadratic (r = Ψ − q < 0; StVK softens in
+  // compression): at weight w, x = −w r / q; the heavy weight puts x at 2.5 (bounded branch).
+  const Mat3X Zc = compressed * right;
+  const VecX zc = Eigen::Map<const VecX>(Zc.data(), Zc.size());
+  const double qc = 0.5 * zc.dot(K * zc);
+  const double x_unit = -(reducedTetElasticEnergy(rest.volume, m, G, Zc) - qc) / qc;
+  ASSERT_GT(x_unit, 0.0);
+  ASSERT_LT(x_unit, 1.0);
+  struct Case {
+    const char* name;
+    Mat34 U;
+    double weight;
+    bool bounded;
+  };
+  for (const Case& c : {Case{"moderate, w = 1", moderate, 1.0, false},
+                        Case{"moderate, w = 200", moderate, 200.0, false},
+                        Case{"compressed, w = 1", compressed, 1.0, false},
+                        Case{"compressed, heavy", compressed, 2.5 / x_unit, true}}) {
+    SCOPED_TRACE(c.name);
+    const Mat3X Z = c.U * right;
+    const VecX z = Eigen::Map<const VecX>(Z.data(), Z.size());
+    const double q = 0.5 * z.dot(K * z);
+    VecX g;
+    MatX H;
+    bool bounded = !c.bounded;
+    const double f = excess(z, c.weight, &g, &H, false, &bounded);
+    EXPECT_EQ(bounded, c.bounded);
+    const double psi = reducedTetElasticEnergy(rest.volume, m, G, Z);
+    if (c.bounded) {
+      EXPECT_LT(c.weight * (psi - q), -q);  // the plain excess would go below −q …
+      EXPECT_GT(f, -2.0 * q);               // … the bounded one stays above −2q
+      EXPECT_NEAR(f, -q * (2.0 - std::exp(1.0 - 2.5)), 1e-9 * q);
+      EXPECT_LT(f, -q);
+    } else {
+      EXPECT_NEAR(f, c.weight * (psi - q), 1e-12 * c.weight * (psi + q));
+    }
+    ASSERT_GT(g.cwiseAbs().maxCoeff(), 0.0);
+    ASSERT_GT(H.cwiseAbs().maxCoeff(), 0.0);
+    EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+        [&](const VecX& x) { return VecX::Constant(1, excess(x, c.weight, nullptr, nullptr, false, nullptr)); },
+        z, MatX(g.transpose()), 1e-6, 1e-7));
+    EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+        [&](const VecX& x) {
+          VecX gx;
+          excess(x, c.weight, &gx, nullptr, false, nullptr);
+          return gx;
+        },
+        z, H, 1e-6, 1e-7));
+    MatX H_psd;
+    excess(z, c.weight, nullptr, &H_psd, true, nullptr);
+    EXPECT_GE(Eigen::SelfAdjointEigenSolver<MatX>(H_psd).eigenvalues().minCoeff(),
+              -1e-10 * H_psd.cwiseAbs().maxCoeff());
+  }
+  EXPECT_NE(messageOf<InputError>([&] {
+              restSplitExcess(0.0, VecX::Zero(3 * n), K, 0.0);
+            }).find("weight must be finite and > 0"),
+            std::string::npos);
+  EXPECT_NE(messageOf<InputError>([&] {
+              restSplitExcess(0.0, VecX::Zero(3 * n - 1), K, 1.0);
+            }).find("expected " + std::to_string(3 * n - 1) + " square"),
+            std::string::npos);
+}
+
 TEST(ReducedTetElement, SizeMismatchAndNonFiniteInputAreInputErrors) {
   Random random(23);
   const FemMaterialPoint m = tissue(Mat3::Identity(), 0.0);

@@ -155,8 +155,51 @@ TEST(ReducedModel, CubatureApproximatesExactIntegration) {
   EXPECT_NEAR(kinetic_cub, kinetic_exact, tolerance * kinetic_exact);
 }
 
-// A "cubature" of every tet with weight 1 is exact integration: the same energies, gradients and
-// Hessians as the ROM without cubature, to rounding.
+// The rest-stiffness split: whatever tets the elastic cubature drew, its stiffness at rest is the
+// exact one (small deformations such as gravity's sag see the exactly integrated subspace), and
+// far from rest it still follows the cubature (not the exact energy, nor the quadratic alone).
+TEST(ReducedModel, ElasticCubatureHasTheExactRestStiffness) {
+  const ReducedData& data = avatar(2)->reducedData();
+  const int T = avatar(2)->volumetricData().numTets();
+  ASSERT_GT(data.elastic.elements.size(), 0);
+  ASSERT_LT(data.elastic.elements.size(), T / 4);  // a real subset of the tets
+  ASSERT_EQ(data.elastic_rest_stiffness.rows(), 3 * data.numHandles());
+  SimulableOptions options;
+  options.gravity.setZero();  // the z–z potential Hessian is then elastic only
+  const auto walk = test::smallScene(800).walk;
+  Simulable exact(avatar(1), walk, options), cubature(avatar(2), walk, options);
+  for (Simulable* s : {&exact, &cubature}) {
+    s->initialize();
+    s->preUpdate();
+  }
+  const int n = exact.numDofs(), m = n - 144;
+  const auto elastic = [&](Simulable& s) {
+    std::vector<Triplet> T;
+    s.getPotentialHessianTripletVector(T, 0, false);
+    return MatX(test::denseFromTriplets(T, n).bottomRightCorner(m, m));
+  };
+  const MatX He = elastic(exact), Hc = elastic(cubature);
+  ASSERT_GT(He.norm(), 0.0);
+  EXPECT_LT((Hc - He).cwiseAbs().maxCoeff(), 1e-9 * He.cwiseAbs().maxCoeff());
+  // The same matrix as the stored K (the bones at rest do not enter the elastic energy).
+  EXPECT_LT((data.elastic_rest_stiffness - He).cwiseAbs().maxCoeff(),
+            1e-9 * He.cwiseAbs().maxCoeff());
+  // 2 cm of random handle displacement: the energies differ from each other and from ½ zᵀ K z.
+  VecX d = VecX::Zero(n);
+  d.tail(m) = randomVector(m, 0.02, 9);
+  exact.updateState(d);
+  cubature.updateState(d);
+  const double quadratic = 0.5 * d.tail(m).dot(data.elastic_rest_stiffness * d.tail(m));
+  const double Ee = exact.getPotentialEnergyScalar(), Ec = cubature.getPotentialEnergyScalar();
+  ASSERT_GT(quadratic, 0.0);
+  EXPECT_GT(std::abs(Ec - quadratic), 1e-3 * quadratic);
+  EXPECT_GT(std::abs(Ec - Ee), 1e-6 * Ee);
+  EXPECT_GT(Ec, 0.0);
+}
+
+// A "cubature" of every tet with weight 1 (and the exact rest stiffness of the split) is exact
+// integration: the same energies, gradients and Hessians as the ROM without cubature, to
+// rounding.
 TEST(ReducedModel, CubatureOfEveryTetWithUnitWeightsIsExactIntegration) {
   auto custom = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), settings());
   custom->enableSoftTissue();
@@ -168,6 +211,10 @@ TEST(ReducedModel, CubatureOfEveryTetWithUnitWeightsIsExactIntegration) {
     c->elements = VecXi::LinSpaced(T, 0, T - 1);
     c->weights = VecX::Ones(T);
   }
+  // With the rest-stiffness split, as the elastic cubature uses it: unit weights never reach
+  // its bounded branch, and ½ zᵀ K z plus every tet's excess over its rest quadratic is the sum.
+  data->elastic_rest_stiffness = elasticRestStiffness(custom->volumetricData(), data->basis);
+  ASSERT_GT(data->elastic_rest_stiffness.norm(), 0.0);
   custom->setReducedData(data);
   const auto walk = test::smallScene(800).walk;
   Simulable exact(avatar(1), walk), cubature(custom, walk);

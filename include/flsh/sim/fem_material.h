@@ -143,4 +143,22 @@ double reducedTetElasticEnergy(double volume, const FemMaterialPoint& material,
                                Eigen::Ref<VecX>* gradient = nullptr,
                                Eigen::Ref<MatX>* hessian = nullptr, bool psd = false);
 
+/// The rest-stiffness split of a sample tet of the ROM's elastic cubature
+/// (ReducedData::elastic_rest_stiffness; docs/rom.md): with psi = V Ψ(I + Z G̃ᵀ) of the reduced
+/// tet at z (= Z flattened column by column, 3n), `rest_hessian` K̃ its Hessian at z = 0 and
+/// q = ½ zᵀ K̃ z, the weighted excess of the energy over its rest quadratic,
+///   f = w (psi − q)            while x = −w (psi − q)/q ≤ 1 (always for w ≤ 1, since psi ≥ 0),
+///   f = −q (2 − e^{1−x})       beyond (f ≥ −2q: a heavily weighted tet in compression or
+///                              inversion lowers the energy by at most twice its own rest
+///                              quadratic), C¹ where the branches meet.
+/// `gradient` / `hessian` hold psi's on entry (reducedTetElasticEnergy's, of the same form) and
+/// f's on return; the Hessian needs the gradient. The PSD form is PSD when psi's is: w H_psd in
+/// the first branch, w e^{1−x} H_psd plus a rank-one PSD term in the second (the negative
+/// semi-definite K̃ terms dropped). `bounded` (if not null) tells whether the second branch was
+/// taken. InputError on sizes that do not match or a weight that is not finite and > 0.
+double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
+                       const Eigen::Ref<const MatX>& rest_hessian, double weight,
+                       Eigen::Ref<VecX>* gradient = nullptr, Eigen::Ref<MatX>* hessian = nullptr,
+                       bool psd = false, bool* bounded = nullptr);
+
 }  // namespace flsh

@@ -68,14 +68,16 @@ struct ReducedData {
   /// not built. Held-out relative error of the elastic energy, 0 when not built.
   Cubature elastic;
   double elastic_test_error = 0;
-  /// With the elastic cubature, the rest-stiffness correction C = [Φ̂ᵀ (K − K_S) Φ̂]₊ (3H × 3H,
-  /// symmetric positive semi-definite, N/m; Φ̂ = Φ ⊗ I₃, K the exact elastic Hessian at rest,
-  /// K_S the cubature's, [·]₊ the positive part): the reduced elastic energy is
-  /// E_S(z) + ½ zᵀ C z, so that no subspace direction the sample tets miss is left without
-  /// stiffness (at rest the stiffness is at least the exact one in every direction), and the
-  /// energy stays bounded below. Empty without the elastic cubature (or for data without a
-  /// correction).
-  MatX elastic_rest_correction;
+  /// With the elastic cubature, the exact rest stiffness of the subspace K = Σ_e Φ̂_eᵀ K_e Φ̂_e
+  /// over every elastic tet (3H × 3H, symmetric positive definite, N/m; K_e the tet's elastic
+  /// Hessian at rest, Φ̂_e its nodes' basis rows ⊗ I₃; elasticRestStiffness). The reduced
+  /// elastic energy is then split into this quadratic, integrated exactly, and the sample tets'
+  /// excess over it (docs/rom.md, "Elastic cubature"):
+  ///   E(z) = ½ zᵀ K z + Σ_{e∈S} f_e,  f_e = w_e (Ψ_e − q_e) bounded below by −2 q_e,
+  /// q_e = ½ zᵀ K̃_e z the tet's own rest quadratic. Small deformations (gravity's sag, small
+  /// jiggle) thus get the exact stiffness whatever tets the cubature drew, and the energy stays
+  /// bounded below. Empty without the elastic cubature.
+  MatX elastic_rest_stiffness;
   /// Inertial cubature, same conventions (kinetic energy).
   Cubature inertial;
   double inertial_test_error = 0;
@@ -99,6 +101,11 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
                              const ReducedSettings& settings, bool elastic_cubature,
                              bool inertial_cubature, const AvatarCache* cache,
                              ReducedBuildReport* report = nullptr);
+
+/// K = Σ_e Φ̂_eᵀ K_e Φ̂_e over the elastic tets (those with a soft node) at rest: the exact
+/// elastic stiffness of the subspace spanned by `basis` (#N × H) at z = 0, 3H × 3H, N/m, exactly
+/// symmetric (ReducedData::elastic_rest_stiffness).
+MatX elasticRestStiffness(const VolumetricData& data, const SpMat& basis);
 
 /// The inertial cubature as node masses (#N, kg): m̃_j = Σ_{e∈S, j∈e} w_e ρ_e vol_e / 4 at X̄(β).
 /// Zero outside the sample tets' nodes.

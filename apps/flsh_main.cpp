@@ -155,6 +155,7 @@ struct AvatarArgs {
   int handles = ReducedSettings().num_handles;
   int elastic_cubature = ReducedSettings().elastic_cubature_points;   ///< 0 = off
   int inertial_cubature = ReducedSettings().inertial_cubature_points; ///< 0 = off
+  bool partition_of_unity = false;  ///< ReducedSettings::surface_partition_of_unity
   bool reduced_options_given = false;
 };
 
@@ -205,8 +206,8 @@ int cmdAvatar(const AvatarArgs& args) {
   if (!(args.resolution > 0) || !std::isfinite(args.resolution))
     throw InputError("--resolution: expected a number > 0, got " + std::to_string(args.resolution));
   if (args.reduced_options_given && args.soft != "rom")
-    throw InputError("--handles, --elastic-cubature and --inertial-cubature are only for --soft "
-                     "rom, got --soft " + args.soft);
+    throw InputError("--handles, --elastic-cubature, --inertial-cubature and "
+                     "--partition-of-unity are only for --soft rom, got --soft " + args.soft);
   if (args.handles < 1)
     throw InputError("--handles: expected an integer >= 1, got " + std::to_string(args.handles));
   if (args.elastic_cubature < 0)
@@ -222,6 +223,7 @@ int cmdAvatar(const AvatarArgs& args) {
   settings.volumetric.cache_dir = args.cache;
   settings.volumetric.use_cache = !args.no_cache;
   setReducedSizes(settings.reduced, args.handles, args.elastic_cubature, args.inertial_cubature);
+  settings.reduced.surface_partition_of_unity = args.partition_of_unity;
   SoftAvatar avatar(body, betas, settings);
   avatar.enableSoftTissue(args.soft != "none");
   if (args.soft == "rom") enableReducedModel(avatar, args.elastic_cubature, args.inertial_cubature);
@@ -287,6 +289,7 @@ int cmdAvatar(const AvatarArgs& args) {
     reduced["handles"] = d.numHandles();
     reduced["dofs"] = 6 * kNumJoints + 3 * d.numHandles();
     reduced["basis_nonzeros"] = long(d.basis.nonZeros());
+    reduced["surface_partition_of_unity"] = settings.reduced.surface_partition_of_unity;
     reduced["basis_max_bound_violation"] = d.basis_max_bound_violation;
     reduced["basis_max_constraint_error"] = d.basis_max_constraint_error;
     reduced["basis_converged"] = d.basis_converged;
@@ -580,9 +583,11 @@ std::vector<AvatarRun> buildAvatars(const SceneSpec& scene) {
       settings.volumetric.cache_dir = scene.cache_dir;
       settings.volumetric.use_cache = scene.use_cache;
     }
-    if (run.rom)
+    if (run.rom) {
       setReducedSizes(settings.reduced, spec.handles, spec.elastic_cubature,
                       spec.inertial_cubature);
+      settings.reduced.surface_partition_of_unity = spec.surface_partition_of_unity;
+    }
     run.avatar = std::make_shared<SoftAvatar>(body, betas, settings);
     if (run.soft) {
       std::fprintf(stderr, "simulate: building the volumetric body%s of avatar '%s'...\n",
@@ -1009,6 +1014,9 @@ int main(int argc, char** argv) {
       avatar->add_option("--inertial-cubature", avatar_args.inertial_cubature,
                          "--soft rom: sample tets of the inertial cubature (0 = off, exact)")
           ->capture_default_str();
+  auto* pou_option = avatar->add_flag(
+      "--partition-of-unity", avatar_args.partition_of_unity,
+      "--soft rom: basis rescaled to sum to 1 on the soft surface (docs/rom.md)");
 
   CLI11_PARSE(app, argc, argv);
   const std::string command = app.get_subcommands().front()->get_name();
@@ -1019,7 +1027,8 @@ int main(int argc, char** argv) {
     if (command == "demo") return cmdDemo(demo_out, vertices, name, seconds);
     if (command == "avatar") {
       avatar_args.reduced_options_given =
-          handles_option->count() + elastic_option->count() + inertial_option->count() > 0;
+          handles_option->count() + elastic_option->count() + inertial_option->count() +
+              pou_option->count() > 0;
       return cmdAvatar(avatar_args);
     }
     if (command == "simulate") {

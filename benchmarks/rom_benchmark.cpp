@@ -12,7 +12,7 @@
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
 //   --exact: no cubature (every tet and node integrated);
-//   --surface-pou: ReducedSettings::surface_partition_of_unity (experimental basis);
+//   --surface-pou: ReducedSettings::surface_partition_of_unity (the partition-of-unity basis);
 //   --basis-drop: ReducedSettings::basis_drop_below (basis weights below it dropped; 0: none);
 //   --max-iterations: Newton iterations per step at most (a step that reaches it counts as not
 //                     converged and keeps its last iterate): the real-time trade of a fixed

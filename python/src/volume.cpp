@@ -185,6 +185,11 @@ void bind_volume(py::module_& m) {
       .def_property_readonly("elastic_test_error",
                              [](const ReducedData& d) { return d.elastic_test_error; },
                              "held-out relative error of the elastic energy (0 when off)")
+      .def_property_readonly("elastic_rest_stiffness",
+                             [](const ReducedData& d) { return to_numpy(RowMatX(d.elastic_rest_stiffness)); },
+                             "(3H, 3H) exact rest stiffness of the subspace, N/m: the quadratic "
+                             "the elastic cubature's sample tets add their excess to (docs/rom.md; "
+                             "empty when the elastic cubature is off)")
       .def_property_readonly("inertial_cubature", [](const ReducedData& d) { return d.inertial; },
                              "Cubature of the kinetic energy (empty when switched off)")
       .def_property_readonly("inertial_test_error",
@@ -241,7 +246,8 @@ void bind_volume(py::module_& m) {
                        const py::object& cache_dir, bool use_cache, int handles,
                        int elastic_cubature_points, int inertial_cubature_points,
                        int cubature_training_samples, double cubature_training_amplitude,
-                       std::uint64_t cubature_seed, double basis_drop_below) {
+                       std::uint64_t cubature_seed, double basis_drop_below,
+                       bool surface_partition_of_unity) {
              if (!body) throw py::value_error("body: expected a BodyModel, got None");
              const VecX b = betas.is_none() ? VecX(VecX::Zero(body->numBetas()))
                                             : to_vector(betas, "betas", -1, "(K,)");
@@ -275,6 +281,7 @@ void bind_volume(py::module_& m) {
                throw py::value_error("basis_drop_below: expected a value in [0, 0.01], got " +
                                      std::to_string(basis_drop_below));
              r.basis_drop_below = basis_drop_below;
+             r.surface_partition_of_unity = surface_partition_of_unity;
              return std::make_shared<SoftAvatar>(std::move(body), b, settings);
            }),
            py::arg("body"), py::arg("betas") = py::none(), py::kw_only(),
@@ -287,6 +294,7 @@ void bind_volume(py::module_& m) {
            py::arg("cubature_training_samples") = rd.training_samples,
            py::arg("cubature_training_amplitude") = rd.training_amplitude,
            py::arg("cubature_seed") = rd.seed, py::arg("basis_drop_below") = rd.basis_drop_below,
+           py::arg("surface_partition_of_unity") = rd.surface_partition_of_unity,
            "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³ and voxel_size "
            "m (the skeleton's bone inertias). Soft tissue: resolution (interior node density of the "
            "tet mesh, 1 ≈ 10 000 nodes for SMPL), material_file (JSON, '' = built-in defaults), "
@@ -295,7 +303,9 @@ void bind_volume(py::module_& m) {
            "elastic_cubature_points / inertial_cubature_points (sample tets of each cubature when "
            "enabled, ≥ 1), cubature_training_samples (random training samples per cubature), "
            "cubature_training_amplitude (largest handle displacement of a training sample, m), "
-           "cubature_seed, basis_drop_below (basis weights below it are dropped, in [0, 0.01]).")
+           "cubature_seed, basis_drop_below (basis weights below it are dropped, in [0, 0.01]), "
+           "surface_partition_of_unity (the basis rescaled to sum to 1 on the soft surface: about "
+           "half the error against the FEM, slower; docs/rom.md).")
       .def("init_volumetric_data",
            [](SoftAvatar& a) {
              py::gil_scoped_release release;

@@ -354,7 +354,8 @@ class SceneReader {
     requireObject(node, path);
     checkKeys(node, path,
               {"name", "model", "vertices", "betas", "simulation", "resolution", "materials",
-               "handles", "elastic_cubature", "inertial_cubature", "motion", "motion_seconds",
+               "handles", "elastic_cubature", "inertial_cubature", "surface_partition_of_unity",
+               "motion", "motion_seconds",
                "offset", "yaw_degrees", "options"});
     AvatarSpec avatar;
     avatar.name = node.contains("name") ? toName(node["name"], child(path, "name"))
@@ -419,6 +420,11 @@ class SceneReader {
                 "integration), got " + std::to_string(points));
       (std::string(key) == "elastic_cubature" ? avatar.elastic_cubature
                                                : avatar.inertial_cubature) = points;
+    }
+    if (node.contains("surface_partition_of_unity")) {
+      const std::string p = child(path, "surface_partition_of_unity");
+      if (avatar.simulation != "rom") fail(p, only_rom);
+      avatar.surface_partition_of_unity = toBool(node["surface_partition_of_unity"], p);
     }
     bool builtin_motion = false;
     if (node.contains("motion")) {

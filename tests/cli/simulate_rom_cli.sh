@@ -116,7 +116,22 @@ for name in ("elastic_cubature", "inertial_cubature"):
     assert 0 <= c["held_out_error"] < 1 and c["weight_sum"] > 0, (name, c)
 assert s["cache"]["shape"] == "hit" and s["cache"]["reduced"] == "miss", s["cache"]
 assert s["seconds"]["reduced_total"] > 0, s["seconds"]
+assert r["surface_partition_of_unity"] is False, r
 PY
+# --partition-of-unity: another basis (its own cache entry) of the same size.
+"$flsh" avatar --model synthetic:600 --soft rom --resolution 0.3 --handles 12 \
+  --elastic-cubature 40 --inertial-cubature 30 --partition-of-unity --cache cache \
+  >avatar_pou.json 2>avatar_pou.err || { cat avatar_pou.err; fail "flsh avatar --partition-of-unity"; }
+$py - <<'PY'
+import json
+r = json.load(open("avatar_pou.json"))["reduced"]
+assert r["surface_partition_of_unity"] is True and r["handles"] == 12, r
+assert json.load(open("avatar_pou.json"))["cache"]["reduced"] == "miss", r
+PY
+if "$flsh" avatar --model synthetic:600 --soft fem --partition-of-unity >/dev/null 2>bad.err; then
+  fail "--partition-of-unity accepted with --soft fem"
+fi
+grep -q "only for --soft rom" bad.err || { cat bad.err; fail "--partition-of-unity with fem: message"; }
 if "$flsh" avatar --model synthetic:600 --soft fem --handles 5 >/dev/null 2>bad.err; then
   fail "--handles accepted with --soft fem"
 fi

@@ -300,6 +300,8 @@ TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
   EXPECT_EQ(a.handles, ReducedSettings().num_handles);
   EXPECT_EQ(a.elastic_cubature, ReducedSettings().elastic_cubature_points);
   EXPECT_EQ(a.inertial_cubature, ReducedSettings().inertial_cubature_points);
+  EXPECT_FALSE(a.surface_partition_of_unity);
+  EXPECT_EQ(a.surface_partition_of_unity, ReducedSettings().surface_partition_of_unity);
   EXPECT_LT(plain.reduced_gradient_tolerance, 0.0);  // absent: the scene's default
 
   const std::string dir = test::freshTempDir("scene_rom");
@@ -308,7 +310,7 @@ TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
     "newton": {"soft_tissue_gradient_tolerance": 2e-4, "reduced_gradient_tolerance": 3e-6},
     "avatars": [{"name": "r", "vertices": 600, "simulation": "rom", "resolution": 0.3,
                  "materials": "soft.json", "handles": 12, "elastic_cubature": 40,
-                 "inertial_cubature": 0},
+                 "inertial_cubature": 0, "surface_partition_of_unity": true},
                 {"name": "f", "simulation": "fem", "resolution": 0.5}]})",
                                 dir);
   ASSERT_EQ(scene.avatars.size(), 2u);
@@ -319,6 +321,7 @@ TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
   EXPECT_EQ(r.handles, 12);
   EXPECT_EQ(r.elastic_cubature, 40);
   EXPECT_EQ(r.inertial_cubature, 0);  // off
+  EXPECT_TRUE(r.surface_partition_of_unity);
   EXPECT_DOUBLE_EQ(scene.reduced_gradient_tolerance, 3e-6);
   EXPECT_DOUBLE_EQ(scene.soft_tissue_gradient_tolerance, 2e-4);
   // Absent lagged-factor keys: each solver's defaults.
@@ -384,6 +387,10 @@ TEST(SceneFile, BadRomSettingsAreNamedWithTheirPath) {
        "avatars[0].elastic_cubature: only for \"simulation\": \"rom\""},
       {R"({"avatars": [{"simulation": "skeleton", "inertial_cubature": 0}]})",
        "avatars[0].inertial_cubature: only for \"simulation\": \"rom\""},
+      {R"({"avatars": [{"simulation": "fem", "surface_partition_of_unity": true}]})",
+       "avatars[0].surface_partition_of_unity: only for \"simulation\": \"rom\""},
+      {R"({"avatars": [{"simulation": "rom", "surface_partition_of_unity": 1}]})",
+       "avatars[0].surface_partition_of_unity: expected true or false, got number 1"},
       // Volumetric keys are for both soft-tissue models, not the skeleton.
       {R"({"avatars": [{"resolution": 0.5}]})",
        "avatars[0].resolution: only for \"simulation\": \"fem\" or \"rom\" (the skeleton "

@@ -19,11 +19,11 @@ HANDLES = 12
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "python"
 
 
-def _rom_avatar(body, cache_dir, elastic=True, inertial=True, handles=HANDLES):
+def _rom_avatar(body, cache_dir, elastic=True, inertial=True, handles=HANDLES, pou=False):
     """A ROM avatar on a coarse tet mesh with small cubatures (fast to build)."""
     avatar = flsh.SoftAvatar(body, resolution=0.3, cache_dir=str(cache_dir), handles=handles,
                              elastic_cubature_points=40, inertial_cubature_points=30,
-                             cubature_training_samples=60)
+                             cubature_training_samples=60, surface_partition_of_unity=pou)
     avatar.enable_soft_tissue()
     avatar.enable_reduced_model()
     avatar.enable_elastic_cubature(elastic)
@@ -129,6 +129,36 @@ def test_reduced_data_shapes_and_bounds(avatar):
         assert 0 <= cubature.training_error < 1 and cubature.rounds >= 1
         assert 0 < error < 1  # measured on held-out samples: nonzero, below 100 %
     assert isinstance(rd.key, str) and len(rd.key) > 0
+
+
+def test_elastic_rest_stiffness_is_symmetric_positive_definite(avatar):
+    K = avatar.reduced_data.elastic_rest_stiffness
+    assert K.shape == (3 * HANDLES, 3 * HANDLES) and K.dtype == np.float64
+    np.testing.assert_array_equal(K, K.T)
+    assert np.linalg.eigvalsh(K).min() > 0
+
+
+def test_surface_partition_of_unity_basis(small_body, avatar, cache_dir):
+    """The keyword rescales the basis so that it sums to 1 on the soft surface (where any handle
+    reaches), keeping the constraints (1 at its handle, 0 at the others and on bone nodes) and
+    the bounds."""
+    pou = _rom_avatar(small_body, cache_dir, pou=True)
+    data = pou.volumetric_data
+    V = data.num_surface_nodes
+    soft_surface = np.flatnonzero(data.bone_of_node[:V] < 0)
+    plain = avatar.reduced_data.basis.toarray()
+    dense = pou.reduced_data.basis.toarray()
+    assert pou.reduced_data.key != avatar.reduced_data.key
+    sums, plain_sums = dense[soft_surface].sum(axis=1), plain[soft_surface].sum(axis=1)
+    reached = plain_sums > 1e-9  # soft patches no handle reaches (12 handles) stay 0
+    assert reached.mean() > 0.5
+    assert plain_sums[reached].min() < 0.9  # the prescribed weights fade between handles …
+    np.testing.assert_allclose(sums[reached], 1.0, atol=1e-9)  # … these do not
+    assert not sums[~reached].any()
+    handles = pou.reduced_data.handles
+    np.testing.assert_allclose(dense[handles], np.eye(HANDLES), atol=1e-9)
+    assert not dense[data.bone_of_node >= 0].any()
+    assert dense.min() >= 0 and dense.max() <= 1 + 1e-12
 
 
 def test_the_reduced_level_is_cached_and_its_flags_are_part_of_the_key(avatar, small_body,

@@ -34,6 +34,9 @@ struct AvatarSpec {
   /// elastic energy / the inertia integrated exactly over every tet / node).
   int elastic_cubature = ReducedSettings().elastic_cubature_points;
   int inertial_cubature = ReducedSettings().inertial_cubature_points;
+  /// "rom" only: ReducedSettings::surface_partition_of_unity (the basis rescaled to sum to 1 on
+  /// the soft surface; about half the error against the FEM, docs/rom.md).
+  bool surface_partition_of_unity = ReducedSettings().surface_partition_of_unity;
   std::string motion;                   ///< AMASS .npz path or builtin:NAME; empty = none
   double motion_seconds = 0.0;          ///< length of a built-in motion, s; 0 = the duration
   Vec3 offset = Vec3::Zero();           ///< added to the motion's root translation, m

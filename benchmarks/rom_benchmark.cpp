@@ -8,11 +8,13 @@
 //                      [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME]
 //                      [--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I]
 //                      [--basis-drop T] [--max-iterations N] [--materials PATH]
+//                      [--training-samples N]
 //        rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] [--materials PATH]
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
 //   --exact: no cubature (every tet and node integrated);
 //   --surface-pou: ReducedSettings::surface_partition_of_unity (the partition-of-unity basis);
+//   --training-samples: ReducedSettings::training_samples (random samples per cubature);
 //   --basis-drop: ReducedSettings::basis_drop_below (basis weights below it dropped; 0: none);
 //   --max-iterations: Newton iterations per step at most (a step that reaches it counts as not
 //                     converged and keeps its last iterate): the real-time trade of a fixed
@@ -80,6 +82,7 @@ struct ModelSpec {
   int handles = 87, elastic = 500, inertial = 500;  // 0 cubature tets: exact integration
   bool pou = false;  // ReducedSettings::surface_partition_of_unity
   double basis_drop = -1.0;  // ReducedSettings::basis_drop_below (negative: its default)
+  int training_samples = 0;  // ReducedSettings::training_samples (0: its default)
   std::string name() const {
     if (kind == Kind::Skeleton) return "skeleton";
     if (kind == Kind::Fem) return "FEM";
@@ -99,6 +102,7 @@ std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, co
     settings.reduced.num_handles = m.handles;
     settings.reduced.surface_partition_of_unity = m.pou;
     if (m.basis_drop >= 0) settings.reduced.basis_drop_below = m.basis_drop;
+    if (m.training_samples > 0) settings.reduced.training_samples = m.training_samples;
     if (m.elastic > 0) settings.reduced.elastic_cubature_points = m.elastic;
     if (m.inertial > 0) settings.reduced.inertial_cubature_points = m.inertial;
   }
@@ -473,6 +477,7 @@ int main(int argc, char** argv) {
     else if (a == "--exact") m.elastic = m.inertial = 0;
     else if (a == "--surface-pou") m.pou = true;
     else if (a == "--basis-drop" && i + 1 < argc) m.basis_drop = std::atof(argv[++i]);
+    else if (a == "--training-samples" && i + 1 < argc) m.training_samples = std::atoi(argv[++i]);
     else if (a == "--max-iterations" && i + 1 < argc) max_iterations_option = std::atoi(argv[++i]);
     else if (a == "--tolerance" && i + 1 < argc) tolerance = std::atof(argv[++i]);
     else if (a == "--motion" && i + 1 < argc) motion = argv[++i];

@@ -47,7 +47,8 @@ struct ReducedSettings {
   /// 4.3), see docs/rom.md; 0 keeps every entry above 1e-12. (With surface_partition_of_unity
   /// the weights are dropped before their rows are rescaled.)
   double basis_drop_below = 1e-4;
-  /// Off: the bounded biharmonic weights as ARCHITECTURE.md §4 defines them. On: φ̃_h(j) = f_j φ_h(j) / Σ_k φ_k(j), with f harmonic, 1 on the soft surface and 0 on bone
+  /// Off: the bounded biharmonic weights as ARCHITECTURE.md §4 defines them. On:
+  /// φ̃_h(j) = f_j φ_h(j) / Σ_k φ_k(j), with f harmonic, 1 on the soft surface and 0 on bone
   /// nodes: a partition of unity on the soft surface (the weights as given fade to 0 towards the
   /// bones between handles: Σ_h φ_h has median 0.27 on the default body's surface), still 0 on
   /// bone nodes, 1 at the own handle, 0 at the others, within [0, 1] (rows no handle reaches stay
@@ -77,8 +78,10 @@ struct ReducedData {
   /// excess over it (docs/rom.md, "Elastic cubature"):
   ///   E(z) = ½ zᵀ K z + Σ_{e∈S} f_e,  f_e = w_e (Ψ_e − q_e) bounded below by −2 q_e,
   /// q_e = ½ zᵀ K̃_e z the tet's own rest quadratic. Small deformations (gravity's sag, small
-  /// jiggle) thus get the exact stiffness whatever tets the cubature drew, and the energy stays
-  /// bounded below. Empty without the elastic cubature.
+  /// jiggle) thus get the exact stiffness whatever tets the cubature drew, and E ≥ ½ zᵀ (K −
+  /// 2 K_S1) z with K_S1 = Σ_{e∈S} Φ̂_eᵀ K_e Φ̂_e (unweighted): bounded below while the sample
+  /// tets hold less than half of K in every direction (λ_max(K⁻¹ K_S1) < ½; measured 0.16–0.44
+  /// on the default body, docs/rom.md). Empty without the elastic cubature.
   MatX elastic_rest_stiffness;
   /// Inertial cubature, same conventions (kinetic energy).
   Cubature inertial;

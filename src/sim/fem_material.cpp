@@ -425,7 +425,7 @@ double reducedTetElasticEnergy(double volume, const FemMaterialPoint& material,
 double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
                        const Eigen::Ref<const MatX>& rest_hessian, double weight,
                        Eigen::Ref<VecX>* gradient, Eigen::Ref<MatX>* hessian, bool psd,
-                       bool* bounded) {
+                       bool* bounded, double lowest) {
   const Eigen::Index m = z.size();
   if (rest_hessian.rows() != m || rest_hessian.cols() != m)
     throw InputError("restSplitExcess: rest Hessian is " + std::to_string(rest_hessian.rows()) +
@@ -439,6 +439,8 @@ double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
                      std::to_string(m) + ")");
   if (!(weight > 0.0) || !std::isfinite(weight))
     throw InputError("restSplitExcess: weight must be finite and > 0, got " + numberText(weight));
+  if (!(lowest > 1.0) || !std::isfinite(lowest))
+    throw InputError("restSplitExcess: lowest (the floor c) must be finite and > 1, got " + numberText(lowest));
   const VecX b = rest_hessian * z;  // ∇q
   const double q = 0.5 * z.dot(b), r = psi - q;
   // x ≤ 1 ⇔ w r ≥ −q; always so for w ≤ 1, since Ψ ≥ 0 ⇔ r ≥ −q.
@@ -452,9 +454,11 @@ double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
     if (gradient) (*gradient) = weight * ((*gradient) - b);
     return weight * r;
   }
-  // f = −q h(x), h = 2 − e^{1−x} (h′ = e^{1−x}, h″ = −e^{1−x}), x = −w r / q:
-  // f_r = w h′, f_q = x h′ − h, and the second-order terms −(h″/q) v vᵀ with v = w ∇r + x ∇q.
-  const double decay = std::exp(1.0 - x), h = 2.0 - decay;
+  // f = −q h(x), h = c − (c − 1) e^{−(x−1)/(c−1)} with c the floor (h′ = e^{−(x−1)/(c−1)},
+  // h″ = −h′/(c − 1)), x = −w r / q: f_r = w h′, f_q = x h′ − h, and the second-order terms
+  // −(h″/q) v vᵀ with v = w ∇r + x ∇q.
+  const double decay = std::exp(-(x - 1.0) / (lowest - 1.0));
+  const double h = lowest - (lowest - 1.0) * decay;
   const double f_r = weight * decay, f_q = x * decay - h;
   if (gradient) {
     const VecX v = weight * ((*gradient) - b) + x * b;
@@ -463,7 +467,7 @@ double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
       // f_r's −K̃ (both negative semi-definite) are dropped.
       if (psd) (*hessian) *= f_r;
       else (*hessian) = f_r * ((*hessian) - rest_hessian) + f_q * rest_hessian;
-      hessian->noalias() += (decay / q) * v * v.transpose();
+      hessian->noalias() += (decay / ((lowest - 1.0) * q)) * v * v.transpose();
     }
     (*gradient) = f_r * ((*gradient) - b) + f_q * b;
   }

@@ -632,7 +632,8 @@ TEST(ReducedTetElement, GradientAndHessianMatchFiniteDifferences) {
 // The rest-stiffness split of a cubature sample tet (restSplitExcess): w (Ψ − q) while that is
 // ≥ −q, a bounded C¹ continuation below. Value, gradient and Hessian against finite differences in
 // both branches (a moderate state at unit and heavy weight; a compressed tet at heavy weight,
-// which takes the bounded branch), the bound f ≥ −2q, and PSD forms that are PSD.
+// which takes the bounded branch, with the default floor 2 and with 1.5), the bound f ≥ −c q,
+// and PSD forms that are PSD.
 TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
   Random random(24);
   const FemMaterialPoint m = tissue(random.rotation(), 3.0);
@@ -651,7 +652,8 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
   ASSERT_GT(K.cwiseAbs().maxCoeff(), 0.0);
   const auto unflat = [n](const VecX& x) { return Mat3X(Eigen::Map<const Mat3X>(x.data(), 3, n)); };
   // f, and its gradient / Hessian when asked, at flattened z.
-  const auto excess = [&](const VecX& z, double w, VecX* g, MatX* H, bool psd, bool* bounded) {
+  const auto excess = [&](const VecX& z, double w, VecX* g, MatX* H, bool psd, bool* bounded,
+                          double lowest) {
     VecX gradient(3 * n);
     MatX hessian(3 * n, 3 * n);
     Eigen::Ref<VecX> g_view = gradient;
@@ -660,7 +662,7 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
                                                g || H ? &g_view : nullptr, H ? &h_view : nullptr,
                                                psd);
     const double f = restSplitExcess(psi, z, K, w, g || H ? &g_view : nullptr,
-                                     H ? &h_view : nullptr, psd, bounded);
+                                     H ? &h_view : nullptr, psd, bounded, lowest);
     if (g) *g = gradient;
     if (H) *H = hessian;
     return f;
@@ -683,11 +685,13 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
     Mat34 U;
     double weight;
     bool bounded;
+    double lowest;  // the floor c: f ≥ −c q
   };
-  for (const Case& c : {Case{"moderate, w = 1", moderate, 1.0, false},
-                        Case{"moderate, w = 200", moderate, 200.0, false},
-                        Case{"compressed, w = 1", compressed, 1.0, false},
-                        Case{"compressed, heavy", compressed, 2.5 / x_unit, true}}) {
+  for (const Case& c : {Case{"moderate, w = 1", moderate, 1.0, false, 2.0},
+                        Case{"moderate, w = 200", moderate, 200.0, false, 2.0},
+                        Case{"compressed, w = 1", compressed, 1.0, false, 2.0},
+                        Case{"compressed, heavy", compressed, 2.5 / x_unit, true, 2.0},
+                        Case{"compressed, heavy, floor 1.5", compressed, 2.5 / x_unit, true, 1.5}}) {
     SCOPED_TRACE(c.name);
     const Mat3X Z = c.U * right;
     const VecX z = Eigen::Map<const VecX>(Z.data(), Z.size());
@@ -695,13 +699,14 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
     VecX g;
     MatX H;
     bool bounded = !c.bounded;
-    const double f = excess(z, c.weight, &g, &H, false, &bounded);
+    const double f = excess(z, c.weight, &g, &H, false, &bounded, c.lowest);
     EXPECT_EQ(bounded, c.bounded);
     const double psi = reducedTetElasticEnergy(rest.volume, m, G, Z);
     if (c.bounded) {
       EXPECT_LT(c.weight * (psi - q), -q);  // the plain excess would go below −q …
-      EXPECT_GT(f, -2.0 * q);               // … the bounded one stays above −2q
-      EXPECT_NEAR(f, -q * (2.0 - std::exp(1.0 - 2.5)), 1e-9 * q);
+      EXPECT_GT(f, -c.lowest * q);          // … the bounded one stays above −c q
+      EXPECT_NEAR(f, -q * (c.lowest - (c.lowest - 1.0) * std::exp(-1.5 / (c.lowest - 1.0))),
+                  1e-9 * q);
       EXPECT_LT(f, -q);
     } else {
       EXPECT_NEAR(f, c.weight * (psi - q), 1e-12 * c.weight * (psi + q));
@@ -709,17 +714,19 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
     ASSERT_GT(g.cwiseAbs().maxCoeff(), 0.0);
     ASSERT_GT(H.cwiseAbs().maxCoeff(), 0.0);
     EXPECT_TRUE(jacobianMatchesFiniteDifferences(
-        [&](const VecX& x) { return VecX::Constant(1, excess(x, c.weight, nullptr, nullptr, false, nullptr)); },
+        [&](const VecX& x) {
+          return VecX::Constant(1, excess(x, c.weight, nullptr, nullptr, false, nullptr, c.lowest));
+        },
         z, MatX(g.transpose()), 1e-6, 1e-7));
     EXPECT_TRUE(jacobianMatchesFiniteDifferences(
         [&](const VecX& x) {
           VecX gx;
-          excess(x, c.weight, &gx, nullptr, false, nullptr);
+          excess(x, c.weight, &gx, nullptr, false, nullptr, c.lowest);
           return gx;
         },
         z, H, 1e-6, 1e-7));
     MatX H_psd;
-    excess(z, c.weight, nullptr, &H_psd, true, nullptr);
+    excess(z, c.weight, nullptr, &H_psd, true, nullptr, c.lowest);
     EXPECT_GE(Eigen::SelfAdjointEigenSolver<MatX>(H_psd).eigenvalues().minCoeff(),
               -1e-10 * H_psd.cwiseAbs().maxCoeff());
   }
@@ -730,6 +737,11 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
   EXPECT_NE(messageOf<InputError>([&] {
               restSplitExcess(0.0, VecX::Zero(3 * n - 1), K, 1.0);
             }).find("expected " + std::to_string(3 * n - 1) + " square"),
+            std::string::npos);
+  EXPECT_NE(messageOf<InputError>([&] {
+              restSplitExcess(0.0, VecX::Zero(3 * n), K, 1.0, nullptr, nullptr, false, nullptr,
+                              1.0);
+            }).find("lowest (the floor c) must be finite and > 1"),
             std::string::npos);
 }
 

@@ -147,18 +147,21 @@ double reducedTetElasticEnergy(double volume, const FemMaterialPoint& material,
 /// (ReducedData::elastic_rest_stiffness; docs/rom.md): with psi = V Ψ(I + Z G̃ᵀ) of the reduced
 /// tet at z (= Z flattened column by column, 3n), `rest_hessian` K̃ its Hessian at z = 0 and
 /// q = ½ zᵀ K̃ z, the weighted excess of the energy over its rest quadratic,
-///   f = w (psi − q)            while x = −w (psi − q)/q ≤ 1 (always for w ≤ 1, since psi ≥ 0),
-///   f = −q (2 − e^{1−x})       beyond (f ≥ −2q: a heavily weighted tet in compression or
-///                              inversion lowers the energy by at most twice its own rest
-///                              quadratic), C¹ where the branches meet.
+///   f = w (psi − q)                     while x = −w (psi − q)/q ≤ 1 (always for w ≤ 1, since
+///                                       psi ≥ 0),
+///   f = −q (c − (c−1) e^{−(x−1)/(c−1)}) beyond, with the floor c > 1 (f ≥ −c q: a heavily
+///                                       weighted tet in compression or inversion lowers the
+///                                       energy by at most c times its own rest quadratic), C¹
+///                                       where the branches meet.
 /// `gradient` / `hessian` hold psi's on entry (reducedTetElasticEnergy's, of the same form) and
 /// f's on return; the Hessian needs the gradient. The PSD form is PSD when psi's is: w H_psd in
-/// the first branch, w e^{1−x} H_psd plus a rank-one PSD term in the second (the negative
+/// the first branch, w h′(x) H_psd plus a rank-one PSD term in the second (the negative
 /// semi-definite K̃ terms dropped). `bounded` (if not null) tells whether the second branch was
-/// taken. InputError on sizes that do not match or a weight that is not finite and > 0.
+/// taken. InputError on sizes that do not match, a weight that is not finite and > 0 or a floor
+/// that is not finite and > 1 (`lowest`, the floor c).
 double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
                        const Eigen::Ref<const MatX>& rest_hessian, double weight,
                        Eigen::Ref<VecX>* gradient = nullptr, Eigen::Ref<MatX>* hessian = nullptr,
-                       bool psd = false, bool* bounded = nullptr);
+                       bool psd = false, bool* bounded = nullptr, double lowest = 2.0);
 
 }  // namespace flsh

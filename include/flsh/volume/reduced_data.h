@@ -81,7 +81,8 @@ struct ReducedData {
   /// jiggle) thus get the exact stiffness whatever tets the cubature drew, and E ≥ ½ zᵀ (K −
   /// 2 K_S1) z with K_S1 = Σ_{e∈S} Φ̂_eᵀ K_e Φ̂_e (unweighted): bounded below while the sample
   /// tets hold less than half of K in every direction (λ_max(K⁻¹ K_S1) < ½; measured 0.16–0.44
-  /// on the default body, docs/rom.md). Empty without the elastic cubature.
+  /// on the default body, docs/rom.md); where they hold more, the simulable lowers the floor 2
+  /// to 0.95/λ_max (at least 1.05). Empty without the elastic cubature.
   MatX elastic_rest_stiffness;
   /// Inertial cubature, same conventions (kinetic energy).
   Cubature inertial;

@@ -175,12 +175,8 @@ void checkPart(Simulable& sim, bool dynamic) {
   const VecX g = grad();
   const std::vector<int> idx = checkedCoordinates(sim, 120, dynamic ? 3 : 4);
   const int m = int(idx.size());
-  VecX g_sub(m);
-  MatX H_sub(m, m);
-  for (int a = 0; a < m; ++a) {
-    g_sub[a] = g[idx[a]];
-    for (int b = 0; b < m; ++b) H_sub(a, b) = H(idx[a], idx[b]);
-  }
+  const VecX g_sub = g(idx);
+  const MatX H_sub = H(idx, idx);
   ASSERT_GT(g_sub.tail(m - nb).norm(), 0.0) << "displacement gradient is zero";
   ASSERT_GT(H_sub.bottomRightCorner(m - nb, m - nb).norm(), 0.0);
   ASSERT_GT(H_sub.topRightCorner(nb, m - nb).norm(), 0.0) << "no bone–tissue coupling";
@@ -333,12 +329,8 @@ TEST_P(SoftTissueModel, GravityDerivativesMatchFiniteDifferences) {
   const VecX g = gradient_of(with) - gradient_of(without);
   const std::vector<int> idx = checkedCoordinates(with, 120, 5);
   const int m = int(idx.size());
-  VecX g_sub(m);
-  MatX H_sub(m, m);
-  for (int a = 0; a < m; ++a) {
-    g_sub[a] = g[idx[a]];
-    for (int b = 0; b < m; ++b) H_sub(a, b) = H(idx[a], idx[b]);
-  }
+  const VecX g_sub = g(idx);
+  const MatX H_sub = H(idx, idx);
   ASSERT_GT(g_sub.tail(m - nb).norm(), 0.0) << "no gravity on the soft tissue";
   ASSERT_GT(H.block(3, 3, 3, 3).norm(), 0.0) << "no rotation curvature of the root";
   ASSERT_GT(H_sub.topRightCorner(nb, m - nb).norm(), 0.0) << "no rotation–tissue blocks";

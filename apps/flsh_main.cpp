@@ -159,16 +159,18 @@ struct AvatarArgs {
   bool reduced_options_given = false;
 };
 
-// The ROM's sizes as the scene keys handles / elastic_cubature / inertial_cubature and the
-// `flsh avatar` flags give them: 0 sample tets switches that cubature off (exact integration),
-// and its count then keeps the (unused) default.
-void setReducedSizes(ReducedSettings& reduced, int handles, int elastic, int inertial) {
+// The ROM's settings as the scene keys handles / elastic_cubature / inertial_cubature /
+// surface_partition_of_unity and the `flsh avatar` flags give them: 0 sample tets switches that
+// cubature off (exact integration), and its count then keeps the (unused) default.
+void setReducedSettings(ReducedSettings& reduced, int handles, int elastic, int inertial,
+                        bool partition_of_unity) {
   reduced.num_handles = handles;
   if (elastic > 0) reduced.elastic_cubature_points = elastic;
   if (inertial > 0) reduced.inertial_cubature_points = inertial;
+  reduced.surface_partition_of_unity = partition_of_unity;
 }
 
-// Soft tissue, the reduced model and the cubatures that are on (as setReducedSizes).
+// Soft tissue, the reduced model and the cubatures that are on (as setReducedSettings).
 void enableReducedModel(SoftAvatar& avatar, int elastic, int inertial) {
   avatar.enableSoftTissue();
   avatar.enableReducedModel();
@@ -222,8 +224,8 @@ int cmdAvatar(const AvatarArgs& args) {
   settings.volumetric.material_file = args.materials;
   settings.volumetric.cache_dir = args.cache;
   settings.volumetric.use_cache = !args.no_cache;
-  setReducedSizes(settings.reduced, args.handles, args.elastic_cubature, args.inertial_cubature);
-  settings.reduced.surface_partition_of_unity = args.partition_of_unity;
+  setReducedSettings(settings.reduced, args.handles, args.elastic_cubature,
+                     args.inertial_cubature, args.partition_of_unity);
   SoftAvatar avatar(body, betas, settings);
   avatar.enableSoftTissue(args.soft != "none");
   if (args.soft == "rom") enableReducedModel(avatar, args.elastic_cubature, args.inertial_cubature);
@@ -583,11 +585,9 @@ std::vector<AvatarRun> buildAvatars(const SceneSpec& scene) {
       settings.volumetric.cache_dir = scene.cache_dir;
       settings.volumetric.use_cache = scene.use_cache;
     }
-    if (run.rom) {
-      setReducedSizes(settings.reduced, spec.handles, spec.elastic_cubature,
-                      spec.inertial_cubature);
-      settings.reduced.surface_partition_of_unity = spec.surface_partition_of_unity;
-    }
+    if (run.rom)
+      setReducedSettings(settings.reduced, spec.handles, spec.elastic_cubature,
+                         spec.inertial_cubature, spec.surface_partition_of_unity);
     run.avatar = std::make_shared<SoftAvatar>(body, betas, settings);
     if (run.soft) {
       std::fprintf(stderr, "simulate: building the volumetric body%s of avatar '%s'...\n",

@@ -422,26 +422,16 @@ double reducedTetElasticEnergy(double volume, const FemMaterialPoint& material,
   return gradientFormEnergy(volume, material, F, Mat3X(G), gradient, hessian, psd);
 }
 
-double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
-                       const Eigen::Ref<const MatX>& rest_hessian, double weight,
-                       Eigen::Ref<VecX>* gradient, Eigen::Ref<MatX>* hessian, bool psd,
-                       bool* bounded, double lowest) {
-  const Eigen::Index m = z.size();
-  if (rest_hessian.rows() != m || rest_hessian.cols() != m)
-    throw InputError("restSplitExcess: rest Hessian is " + std::to_string(rest_hessian.rows()) +
-                     " × " + std::to_string(rest_hessian.cols()) + ", expected " +
-                     std::to_string(m) + " square (the size of z)");
-  if (hessian && !gradient)
-    throw InputError("restSplitExcess: the Hessian needs the gradient (pass both)");
-  if ((gradient && gradient->size() != m) ||
-      (hessian && (hessian->rows() != m || hessian->cols() != m)))
-    throw InputError("restSplitExcess: gradient / Hessian sizes do not match z (" +
-                     std::to_string(m) + ")");
-  if (!(weight > 0.0) || !std::isfinite(weight))
-    throw InputError("restSplitExcess: weight must be finite and > 0, got " + numberText(weight));
-  if (!(lowest > 1.0) || !std::isfinite(lowest))
-    throw InputError("restSplitExcess: lowest (the floor c) must be finite and > 1, got " + numberText(lowest));
-  const VecX b = rest_hessian * z;  // ∇q
+namespace {
+
+/// restSplitExcess after its checks; Vec holds the 3n-vectors (fixed-capacity stack storage up to
+/// kMaxBoundedReducedColumns handles: this runs per sample tet and evaluation).
+template <class Vec>
+double splitExcess(double psi, const Eigen::Ref<const VecX>& z,
+                   const Eigen::Ref<const MatX>& rest_hessian, double weight,
+                   Eigen::Ref<VecX>* gradient, Eigen::Ref<MatX>* hessian, bool psd, bool* bounded,
+                   double lowest) {
+  const Vec b = rest_hessian * z;  // ∇q
   const double q = 0.5 * z.dot(b), r = psi - q;
   // x ≤ 1 ⇔ w r ≥ −q; always so for w ≤ 1, since Ψ ≥ 0 ⇔ r ≥ −q.
   const double x = q > 0.0 ? -weight * r / q : -1.0;
@@ -461,7 +451,7 @@ double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
   const double h = lowest - (lowest - 1.0) * decay;
   const double f_r = weight * decay, f_q = x * decay - h;
   if (gradient) {
-    const VecX v = weight * ((*gradient) - b) + x * b;
+    const Vec v = weight * ((*gradient) - b) + x * b;
     if (hessian) {
       // PSD form: f_r H_psd (f_r > 0) and the rank-one term; f_q ≤ 0 here, so its K̃ term and
       // f_r's −K̃ (both negative semi-definite) are dropped.
@@ -472,6 +462,35 @@ double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
     (*gradient) = f_r * ((*gradient) - b) + f_q * b;
   }
   return -q * h;
+}
+
+}  // namespace
+
+double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
+                       const Eigen::Ref<const MatX>& rest_hessian, double weight,
+                       Eigen::Ref<VecX>* gradient, Eigen::Ref<MatX>* hessian, bool psd,
+                       bool* bounded, double lowest) {
+  const Eigen::Index m = z.size();
+  if (rest_hessian.rows() != m || rest_hessian.cols() != m)
+    throw InputError("restSplitExcess: rest Hessian is " + std::to_string(rest_hessian.rows()) +
+                     " × " + std::to_string(rest_hessian.cols()) + ", expected " +
+                     std::to_string(m) + " square (the size of z)");
+  if (hessian && !gradient)
+    throw InputError("restSplitExcess: the Hessian needs the gradient (pass both)");
+  if ((gradient && gradient->size() != m) ||
+      (hessian && (hessian->rows() != m || hessian->cols() != m)))
+    throw InputError("restSplitExcess: gradient / Hessian sizes do not match z (" +
+                     std::to_string(m) + ")");
+  if (!(weight > 0.0) || !std::isfinite(weight))
+    throw InputError("restSplitExcess: weight must be finite and > 0, got " + numberText(weight));
+  if (!(lowest > 1.0) || !std::isfinite(lowest))
+    throw InputError("restSplitExcess: lowest (the floor c) must be finite and > 1, got " +
+                     numberText(lowest));
+  using Bounded = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 3 * kMaxBoundedReducedColumns, 1>;
+  if (m <= 3 * kMaxBoundedReducedColumns)
+    return splitExcess<Bounded>(psi, z, rest_hessian, weight, gradient, hessian, psd, bounded,
+                                lowest);
+  return splitExcess<VecX>(psi, z, rest_hessian, weight, gradient, hessian, psd, bounded, lowest);
 }
 
 }  // namespace flsh

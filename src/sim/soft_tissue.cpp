@@ -209,11 +209,9 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
         const int count = int(gradients[e].cols()), m = 3 * count;
         if (count == 0) continue;
         Eigen::Map<MatX> K(rest_hessians_.data() + rest_hessian_start_[e], m, m);
-        MatX Ke(m, m);
-        Eigen::Ref<MatX> view = Ke;
+        Eigen::Ref<MatX> view = K;
         reducedTetElasticEnergy(elements_[e].volume, materials_[e], gradients[e],
                                 Mat3X::Zero(3, count), nullptr, &view, false);
-        K = Ke;
       }
       rest_floor_ = restSplitFloor();
     }
@@ -939,7 +937,7 @@ double SoftTissue::elasticTets(int first, int last, double* gz, Mat3* values, bo
                                        gz ? &gradient : nullptr, hessian ? &tet_hessian : nullptr,
                                        psd);
     } else {
-      E += restSplitExcess(e, count, w, Z.leftCols(count), gz != nullptr, hessian, psd, gradient,
+      E += sampleTetExcess(e, count, w, Z.leftCols(count), gz != nullptr, hessian, psd, gradient,
                            tet_hessian);
       w = 1.0;  // the excess comes weighted
     }
@@ -957,18 +955,19 @@ double SoftTissue::elasticTets(int first, int last, double* gz, Mat3* values, bo
   return E;
 }
 
-double SoftTissue::restSplitExcess(int e, int count, double w, const Eigen::Ref<const Mat3X>& Z,
+double SoftTissue::sampleTetExcess(int e, int count, double w, const Eigen::Ref<const Mat3X>& Z,
                                    bool want_gradient, bool want_hessian, bool psd,
                                    Eigen::Ref<VecX> gradient, Eigen::Ref<MatX> hessian) const {
+  // restSplitExcess (fem_material.h) of the tet's energy, with its stored rest Hessian.
   const int m = 3 * count, begin = tet_handle_start_[e];
   const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[e], m, m);
   const bool derivatives = want_gradient || want_hessian;  // the Hessian needs the gradient
   const double psi = reducedTetElasticEnergy(
       elements_[size_t(e)].volume, materials_[size_t(e)], tet_gradients_.middleCols(begin, count),
       Z, derivatives ? &gradient : nullptr, want_hessian ? &hessian : nullptr, psd);
-  return flsh::restSplitExcess(psi, Eigen::Map<const VecX>(Z.data(), m), K, w,
-                               derivatives ? &gradient : nullptr,
-                               want_hessian ? &hessian : nullptr, psd, nullptr, rest_floor_);
+  return restSplitExcess(psi, Eigen::Map<const VecX>(Z.data(), m), K, w,
+                         derivatives ? &gradient : nullptr, want_hessian ? &hessian : nullptr, psd,
+                         nullptr, rest_floor_);
 }
 
 double SoftTissue::restSplitFloor() const {

@@ -270,7 +270,7 @@ class SoftTissue {
   /// rest-stiffness split: its weighted excess over its rest quadratic, bounded below
   /// (ReducedData::elastic_rest_stiffness); gradient and Hessian (in the handles' coordinates,
   /// weighted) written into the views when asked.
-  double restSplitExcess(int e, int count, double w, const Eigen::Ref<const Mat3X>& Z,
+  double sampleTetExcess(int e, int count, double w, const Eigen::Ref<const Mat3X>& Z,
                          bool want_gradient, bool want_hessian, bool psd, Eigen::Ref<VecX> gradient,
                          Eigen::Ref<MatX> hessian) const;
   Vec3 nodeDisplacement(const VecX& state, int j) const {

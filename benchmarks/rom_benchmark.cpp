@@ -11,6 +11,7 @@
 //                      [--training-samples N]
 //        rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] [--materials PATH]
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
+//        rom_benchmark --sag [--frames F]   (gravity's sag of a standing body: FEM and ROMs)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
 //   --exact: no cubature (every tet and node integrated);
 //   --surface-pou: ReducedSettings::surface_partition_of_unity (the partition-of-unity basis);
@@ -460,11 +461,41 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
 
 }  // namespace
 
+// --sag: gravity's sag of a standing body (the built-in "stand" motion on the ground) after F
+// steps, for the FEM and the ROM with 87 handles (both bases; exactly integrated and with the
+// default cubatures): RMS ‖u‖ over the surface, and against the FEM's u the relative RMS
+// distance and the cosine of the two fields. The sag is most of every scenario's displacement
+// (docs/benchmarks.md).
+int sag(int frames) {
+  auto body = std::make_shared<BodyModel>(makeSyntheticBody({}));
+  const Scenario stand{"stand", std::make_shared<Motion>(makeBuiltinMotion("stand", 20.0, 30.0)),
+                       false};
+  std::vector<ModelSpec> models = {{Kind::Fem}};
+  for (bool pou : {false, true}) {
+    models.push_back({Kind::Rom, 87, 0, 0, pou});
+    models.push_back({Kind::Rom, 87, 500, 500, pou});
+  }
+  MatX3 fem_u;
+  std::printf("gravity's sag of a standing body after %d steps (h = 1/30 s):\n", frames);
+  for (const ModelSpec& m : models) {
+    const Trajectory t = simulate(makeAvatar(body, m, nullptr), stand, frames);
+    const MatX3& u = t.u.back();
+    if (m.kind == Kind::Fem) fem_u = u;
+    const double rms = std::sqrt(u.rowwise().squaredNorm().mean());
+    const double fem_rms = std::sqrt(fem_u.rowwise().squaredNorm().mean());
+    const double error = std::sqrt((u - fem_u).rowwise().squaredNorm().mean()) / fem_rms;
+    const double cosine = (u.array() * fem_u.array()).sum() / (u.norm() * fem_u.norm());
+    std::printf("  %-22s RMS sag %6.3f mm (%5.1f %% of the FEM's), error %5.1f %%, cosine %.3f\n",
+                m.name().c_str(), 1e3 * rms, 100 * rms / fem_rms, 100 * error, cosine);
+  }
+  return 0;
+}
+
 int main(int argc, char** argv) {
   int steps = 300, frames = 45;
   ModelSpec m;
   double tolerance = -1.0;
-  bool ground = true, comparison = false;
+  bool ground = true, comparison = false, sag_only = false;
   int hessian = -1;  // −1: the scene default, 0: PSD, 1: exact
   bool lag = true;
   double reference = -1.0;
@@ -488,6 +519,7 @@ int main(int argc, char** argv) {
     else if (a == "--reference" && i + 1 < argc) reference = std::atof(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) omp_set_num_threads(std::atoi(argv[++i]));
     else if (a == "--compare") comparison = true;
+    else if (a == "--sag") sag_only = true;
     else if (a == "--materials" && i + 1 < argc) g_material_file = argv[++i];
     else if (a == "--inertia-floor" && i + 1 < argc) inertia_floor_option = std::atof(argv[++i]);
     else if (a == "--frames" && i + 1 < argc) frames = std::max(1, std::atoi(argv[++i]));
@@ -502,6 +534,7 @@ int main(int argc, char** argv) {
                    "[--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I] "
                    "[--basis-drop T] [--max-iterations N]\n"
                    "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]\n"
+                   "       rom_benchmark --sag [--frames F]\n"
                    "       rom_benchmark --plot-csv CSV [--png PATH]\n");
       return 2;
     }
@@ -512,6 +545,7 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (comparison) return compare(frames, png, csv);
+    if (sag_only) return sag(frames);
     return speed(steps, m, tolerance, motion, ground, hessian, lag, reference);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "rom_benchmark: %s\n", e.what());

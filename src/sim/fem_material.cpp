@@ -493,4 +493,45 @@ double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
   return splitExcess<VecX>(psi, z, rest_hessian, weight, gradient, hessian, psd, bounded, lowest);
 }
 
+namespace {
+// λ_max(L⁻¹ A L⁻ᵀ) with K = L Lᵀ: the largest generalized eigenvalue of (A, K).
+double largestRelativeEigenvalue(const Eigen::LLT<MatX>& K, const MatX& A) {
+  MatX M = K.matrixL().solve(A);
+  M = K.matrixL().solve(MatX(M.transpose()));
+  return Eigen::SelfAdjointEigenSolver<MatX>(0.5 * (M + M.transpose()), Eigen::EigenvaluesOnly)
+      .eigenvalues()
+      .maxCoeff();
+}
+}  // namespace
+
+VecX restSplitFloors(const MatX& rest_stiffness, const MatX& unit_rest_stiffness,
+                     const MatX& weighted_rest_stiffness, const VecX& weights, double kept) {
+  const std::string fn = "restSplitFloors: ";
+  const Eigen::Index m = rest_stiffness.rows();
+  const auto square = [&](const MatX& A, const char* name) {
+    if (A.rows() != m || A.cols() != m)
+      throw InputError(fn + name + " is " + std::to_string(A.rows()) + " × " +
+                       std::to_string(A.cols()) + ", expected " + std::to_string(m) + " × " +
+                       std::to_string(m) + " (the rest stiffness K's size)");
+    if (!A.allFinite()) throw InputError(fn + name + " has a non-finite entry");
+  };
+  square(rest_stiffness, "K");
+  square(unit_rest_stiffness, "K_unit");
+  square(weighted_rest_stiffness, "K_weighted");
+  if (!(kept > 0.0 && kept < 1.0))
+    throw InputError(fn + "kept (α) must be in (0, 1), got " + numberText(kept));
+  for (Eigen::Index e = 0; e < weights.size(); ++e)
+    if (!(weights[e] > 0.0) || !std::isfinite(weights[e]))
+      throw InputError(fn + "weights[" + std::to_string(e) + "] = " + numberText(weights[e]) +
+                       ", expected finite and > 0");
+  const Eigen::LLT<MatX> llt(rest_stiffness);
+  if (m == 0 || llt.info() != Eigen::Success)
+    throw InputError(fn + "the rest stiffness K is not symmetric positive definite");
+  const double unit = largestRelativeEigenvalue(llt, unit_rest_stiffness);
+  const double weighted = largestRelativeEigenvalue(llt, weighted_rest_stiffness);
+  const double budget = 1.0 - kept - unit;
+  if (budget > 0.0 && weighted > 0.0) return (1.0 + (budget / weighted) * weights.array()).matrix();
+  return VecX::Constant(weights.size(), unit > 0.0 ? std::max(1.05, 0.95 / unit) : 2.0);
+}
+
 }  // namespace flsh

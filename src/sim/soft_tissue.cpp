@@ -213,7 +213,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
         reducedTetElasticEnergy(elements_[e].volume, materials_[e], gradients[e],
                                 Mat3X::Zero(3, count), nullptr, &view, false);
       }
-      rest_floor_ = restSplitFloor();
+      rest_floors_ = restSplitFloors();
     }
   }
 
@@ -967,34 +967,32 @@ double SoftTissue::sampleTetExcess(int e, int count, double w, const Eigen::Ref<
       Z, derivatives ? &gradient : nullptr, want_hessian ? &hessian : nullptr, psd);
   return restSplitExcess(psi, Eigen::Map<const VecX>(Z.data(), m), K, w,
                          derivatives ? &gradient : nullptr, want_hessian ? &hessian : nullptr, psd,
-                         nullptr, rest_floor_);
+                         nullptr, rest_floors_[size_t(e)]);
 }
 
-double SoftTissue::restSplitFloor() const {
-  // E ≥ ½ zᵀ (K − c K_S1) z, K_S1 the sample tets' rest stiffness without their weights: bounded
-  // below while c λ_max(K⁻¹ K_S1) ≤ 1. The floor c is 2 unless the samples hold more than 47.5 %
-  // of K in some direction (then 0.95/λ_max, at least 1.05).
-  const int H = num_handles_;
-  MatX KS = MatX::Zero(3 * H, 3 * H);
-  for (size_t e = 0; e + 1 < tet_handle_start_.size(); ++e) {
+std::vector<double> SoftTissue::restSplitFloors() const {
+  // The sample tets' rest Hessians assembled in the subspace, without and with their weights.
+  const int H = num_handles_, T = int(tets_.rows());
+  MatX unit = MatX::Zero(3 * H, 3 * H), weighted = MatX::Zero(3 * H, 3 * H);
+  VecX weights(T);
+  for (int e = 0; e < T; ++e) {
+    weights[e] = element_weight_[e];
     const int begin = tet_handle_start_[e], count = tet_handle_start_[e + 1] - begin;
-    const int m = 3 * count;
-    const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[e], m, m);
+    const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[e], 3 * count,
+                                   3 * count);
     for (int s = 0; s < count; ++s)
-      for (int r = 0; r < count; ++r)
-        KS.block<3, 3>(3 * tet_handles_[size_t(begin + s)], 3 * tet_handles_[size_t(begin + r)]) +=
-            K.block<3, 3>(3 * s, 3 * r);
+      for (int r = 0; r < count; ++r) {
+        const int a = tet_handles_[size_t(begin + s)], b = tet_handles_[size_t(begin + r)];
+        unit.block<3, 3>(3 * a, 3 * b) += K.block<3, 3>(3 * s, 3 * r);
+        weighted.block<3, 3>(3 * a, 3 * b) += weights[e] * K.block<3, 3>(3 * s, 3 * r);
+      }
   }
-  const Eigen::LLT<MatX> llt(rest_stiffness_);
-  if (llt.info() != Eigen::Success)
+  try {
+    const VecX floors = flsh::restSplitFloors(rest_stiffness_, unit, weighted, weights);
+    return std::vector<double>(floors.data(), floors.data() + floors.size());
+  } catch (const InputError&) {
     throw InputError("Simulable: the avatar's elastic rest stiffness is not positive definite");
-  MatX M = llt.matrixL().solve(KS);
-  M = llt.matrixL().solve(MatX(M.transpose()));  // L⁻¹ K_S1 L⁻ᵀ
-  const double largest = Eigen::SelfAdjointEigenSolver<MatX>(0.5 * (M + M.transpose()),
-                                                             Eigen::EigenvaluesOnly)
-                             .eigenvalues()
-                             .maxCoeff();
-  return largest > 0.475 ? std::max(1.05, 0.95 / largest) : 2.0;
+  }
 }
 
 double SoftTissue::restStiffnessTerm(VecX* g, Mat3* values, int offset) const {

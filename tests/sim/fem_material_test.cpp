@@ -7,6 +7,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>
@@ -632,7 +633,7 @@ TEST(ReducedTetElement, GradientAndHessianMatchFiniteDifferences) {
 // The rest-stiffness split of a cubature sample tet (restSplitExcess): w (Ψ − q) while that is
 // ≥ −q, a bounded C¹ continuation below. Value, gradient and Hessian against finite differences in
 // both branches (a moderate state at unit and heavy weight; a compressed tet at heavy weight,
-// which takes the bounded branch, with the default floor 2 and with 1.5), the bound f ≥ −c q,
+// which takes the bounded branch, with the default floor 2, with 1.5 and with 25), the bound f ≥ −c q,
 // and PSD forms that are PSD.
 TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
   Random random(24);
@@ -691,7 +692,9 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
                         Case{"moderate, w = 200", moderate, 200.0, false, 2.0},
                         Case{"compressed, w = 1", compressed, 1.0, false, 2.0},
                         Case{"compressed, heavy", compressed, 2.5 / x_unit, true, 2.0},
-                        Case{"compressed, heavy, floor 1.5", compressed, 2.5 / x_unit, true, 1.5}}) {
+                        Case{"compressed, heavy, floor 1.5", compressed, 2.5 / x_unit, true, 1.5},
+                        // restSplitFloors' floors grow with the weight (1 + s w).
+                        Case{"compressed, heavy, floor 25", compressed, 2.5 / x_unit, true, 25.0}}) {
     SCOPED_TRACE(c.name);
     const Mat3X Z = c.U * right;
     const VecX z = Eigen::Map<const VecX>(Z.data(), Z.size());
@@ -742,6 +745,104 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
               restSplitExcess(0.0, VecX::Zero(3 * n), K, 1.0, nullptr, nullptr, false, nullptr,
                               1.0);
             }).find("lowest (the floor c) must be finite and > 1"),
+            std::string::npos);
+}
+
+// restSplitFloors on a random subspace: rest Hessians K̃_e of sample "tets" on 2–4 of 8 handles
+// (random PSD, 3n × 3n) with weights from 1 to 300; K half their weighted sum plus three times
+// their unit-weight sum plus a random SPD rest. The floors are 1 + s w_e with s = (1 − α − λ₁) / λ_w, λ₁ and λ_w recomputed here as
+// generalized eigenvalues; Σ c_e K̃_e ≼ (1 − α) K, so ½ zᵀ K z − Σ c_e q_e ≥ α ½ zᵀ K z; the
+// fallback when the unweighted samples hold more than 1 − α of K; errors.
+TEST(ReducedTetElement, RestSplitFloorsKeepTheAskedShareOfTheRestStiffness) {
+  Random random(31);
+  const int H = 8, m = 3 * H, count = 12;
+  struct Sample {
+    std::vector<int> handles;
+    MatX K;
+  };
+  std::vector<Sample> samples;
+  VecX weights(count);
+  for (int e = 0; e < count; ++e) {
+    Sample s;
+    const int n = 2 + e % 3;
+    while (int(s.handles.size()) < n) {
+      const int h = int(random.uniform(0.0, H - 1e-9));
+      if (std::find(s.handles.begin(), s.handles.end(), h) == s.handles.end()) s.handles.push_back(h);
+    }
+    MatX A(3 * n, 3 * n);
+    for (int i = 0; i < A.size(); ++i) A.data()[i] = random.uniform(-1.0, 1.0);
+    s.K = A * A.transpose() / 3.0;
+    samples.push_back(s);
+    weights[e] = random.uniform(1.0, 300.0);
+  }
+  const auto assemble = [&](const VecX& scale) {
+    MatX out = MatX::Zero(m, m);
+    for (int e = 0; e < count; ++e)
+      for (size_t a = 0; a < samples[e].handles.size(); ++a)
+        for (size_t b = 0; b < samples[e].handles.size(); ++b)
+          out.block<3, 3>(3 * samples[e].handles[a], 3 * samples[e].handles[b]) +=
+              scale[e] * samples[e].K.block<3, 3>(3 * a, 3 * b);
+    return out;
+  };
+  const MatX unit = assemble(VecX::Ones(count)), weighted = assemble(weights);
+  MatX B(m, m);
+  for (int i = 0; i < B.size(); ++i) B.data()[i] = random.uniform(-1.0, 1.0);
+  // As a fitted cubature: the weighted sum about K, but above it in some directions.
+  const MatX K = 0.5 * weighted + 3.0 * unit + B * B.transpose() + MatX::Identity(m, m);
+  const auto largest = [&](const MatX& A) {
+    return Eigen::GeneralizedSelfAdjointEigenSolver<MatX>(A, K, Eigen::EigenvaluesOnly)
+        .eigenvalues()
+        .maxCoeff();
+  };
+  const double alpha = 0.5, lambda_unit = largest(unit), lambda_weighted = largest(weighted);
+  ASSERT_GT(lambda_unit, 0.01);
+  ASSERT_LT(lambda_unit, 1.0 - alpha);
+  ASSERT_GT(lambda_weighted, 1.0);  // the weights alone would overshoot K
+  const VecX floors = restSplitFloors(K, unit, weighted, weights, alpha);
+  ASSERT_EQ(floors.size(), count);
+  const double s = (1.0 - alpha - lambda_unit) / lambda_weighted;
+  for (int e = 0; e < count; ++e) EXPECT_NEAR(floors[e], 1.0 + s * weights[e], 1e-9 * floors[e]);
+  EXPECT_GT(floors.maxCoeff(), 2.0);  // heavy samples get more than the former fixed floor 2
+  // The guarantee: Σ c_e K̃_e ≼ (1 − α) K, hence the bound on random states.
+  EXPECT_LE(largest(assemble(floors)), 1.0 - alpha + 1e-9);
+  for (int trial = 0; trial < 20; ++trial) {
+    VecX z(m);
+    for (int i = 0; i < m; ++i) z[i] = random.uniform(-1.0, 1.0);
+    double lowest = 0.5 * z.dot(K * z);
+    for (int e = 0; e < count; ++e) {
+      VecX ze(samples[e].K.rows());
+      for (size_t a = 0; a < samples[e].handles.size(); ++a)
+        ze.segment<3>(3 * a) = z.segment<3>(3 * samples[e].handles[a]);
+      lowest -= floors[e] * 0.5 * ze.dot(samples[e].K * ze);
+    }
+    EXPECT_GE(lowest, alpha * 0.5 * z.dot(K * z) * (1.0 - 1e-9));
+  }
+  // The unweighted samples hold more than 1 − α of K: every floor max(1.05, 0.95 / λ₁).
+  const MatX K_small = unit + 0.2 * MatX::Identity(m, m);
+  const double lambda_small = Eigen::GeneralizedSelfAdjointEigenSolver<MatX>(
+                                  unit, K_small, Eigen::EigenvaluesOnly)
+                                  .eigenvalues()
+                                  .maxCoeff();
+  ASSERT_GT(lambda_small, 1.0 - alpha);
+  const VecX fallback = restSplitFloors(K_small, unit, weighted, weights, alpha);
+  for (int e = 0; e < count; ++e)
+    EXPECT_NEAR(fallback[e], std::max(1.05, 0.95 / lambda_small), 1e-9);
+  // Errors.
+  EXPECT_NE(messageOf<InputError>([&] {
+              restSplitFloors(K, unit.topLeftCorner(m - 3, m - 3), weighted, weights);
+            }).find("K_unit is " + std::to_string(m - 3)),
+            std::string::npos);
+  VecX bad = weights;
+  bad[3] = 0.0;
+  EXPECT_NE(messageOf<InputError>([&] { restSplitFloors(K, unit, weighted, bad); })
+                .find("weights[3] = 0"),
+            std::string::npos);
+  EXPECT_NE(messageOf<InputError>([&] { restSplitFloors(K, unit, weighted, weights, 1.0); })
+                .find("kept (α) must be in (0, 1)"),
+            std::string::npos);
+  EXPECT_NE(messageOf<InputError>([&] {
+              restSplitFloors(-K, unit, weighted, weights);
+            }).find("not symmetric positive definite"),
             std::string::npos);
 }
 

@@ -164,4 +164,26 @@ double restSplitExcess(double psi, const Eigen::Ref<const VecX>& z,
                        Eigen::Ref<VecX>* gradient = nullptr, Eigen::Ref<MatX>* hessian = nullptr,
                        bool psd = false, bool* bounded = nullptr, double lowest = 2.0);
 
+/// The share of the subspace's rest stiffness that restSplitFloors keeps in every direction.
+constexpr double kRestSplitStiffnessKept = 0.5;
+
+/// Floors c_e of restSplitExcess for the sample tets of an elastic cubature, from the subspace's
+/// exact rest stiffness K (ReducedData::elastic_rest_stiffness), K_unit = Σ_e K̃_e and
+/// K_weighted = Σ_e w_e K̃_e (the sample tets' rest Hessians assembled in the subspace, without
+/// and with their weights) and the weights w_e. With λ₁ = λ_max(K⁻¹ K_unit), λ_w =
+/// λ_max(K⁻¹ K_weighted) and α = `kept`:
+///   c_e = 1 + s w_e, s = (1 − α − λ₁) / λ_w      when λ₁ < 1 − α,
+/// so that Σ_e c_e K̃_e ≼ (λ₁ + s λ_w) K = (1 − α) K and the split energy ½ zᵀ K z + Σ_e f_e is
+/// at least α ½ zᵀ K z: the cubature may soften the subspace to α of its rest stiffness, never
+/// further, whatever the state. A floor that grows with the weight spreads a heavy tet's
+/// saturation over a range of its excess as wide as that of a light one (a fixed floor
+/// saturates a tet of weight w within about 1/w of its rest quadratic, a kink Newton meets at
+/// every step). Otherwise (the unweighted samples alone hold 1 − α of K in some direction, e.g.
+/// every tet with unit weights) every floor is max(1.05, 0.95/λ₁): bounded below when λ₁ < 0.95.
+/// InputError on sizes that do not match, non-finite or non-positive weights, α outside (0, 1) or
+/// a K that is not symmetric positive definite.
+VecX restSplitFloors(const MatX& rest_stiffness, const MatX& unit_rest_stiffness,
+                     const MatX& weighted_rest_stiffness, const VecX& weights,
+                     double kept = kRestSplitStiffnessKept);
+
 }  // namespace flsh

@@ -53,8 +53,8 @@ struct ReducedSettings {
   /// bones between handles: Σ_h φ_h has median 0.27 on the default body's surface), still 0 on
   /// bone nodes, 1 at the own handle, 0 at the others, within [0, 1] (rows no handle reaches stay
   /// 0). With the elastic cubature's rest-stiffness split it halves the displacement error
-  /// against the FEM (87 handles: 33 / 58 / 32 % against 69 / 69 / 67 % on walk / jumping jacks /
-  /// ball) for 70–80 % of the speed on the walk. See docs/rom.md.
+  /// against the FEM (87 handles: 32 / 57 / 31 % against 68 / 69 / 67 % on walk / jumping jacks /
+  /// ball) at the same speed on the walk (about 80 % of it on jumping jacks). See docs/rom.md.
   bool surface_partition_of_unity = false;
 };
 
@@ -76,13 +76,11 @@ struct ReducedData {
   /// Hessian at rest, Φ̂_e its nodes' basis rows ⊗ I₃; elasticRestStiffness). The reduced
   /// elastic energy is then split into this quadratic, integrated exactly, and the sample tets'
   /// excess over it (docs/rom.md, "Elastic cubature"):
-  ///   E(z) = ½ zᵀ K z + Σ_{e∈S} f_e,  f_e = w_e (Ψ_e − q_e) bounded below by −2 q_e,
+  ///   E(z) = ½ zᵀ K z + Σ_{e∈S} f_e,  f_e = w_e (Ψ_e − q_e) bounded below by −c_e q_e,
   /// q_e = ½ zᵀ K̃_e z the tet's own rest quadratic. Small deformations (gravity's sag, small
-  /// jiggle) thus get the exact stiffness whatever tets the cubature drew, and E ≥ ½ zᵀ (K −
-  /// 2 K_S1) z with K_S1 = Σ_{e∈S} Φ̂_eᵀ K_e Φ̂_e (unweighted): bounded below while the sample
-  /// tets hold less than half of K in every direction (λ_max(K⁻¹ K_S1) < ½; measured 0.16–0.44
-  /// on the default body, docs/rom.md); where they hold more, the simulable lowers the floor 2
-  /// to 0.95/λ_max (at least 1.05). Empty without the elastic cubature.
+  /// jiggle) thus get the exact stiffness whatever tets the cubature drew. The simulable sets the
+  /// floors c_e = 1 + s w_e once (restSplitFloors in flsh/sim/fem_material.h) so that
+  /// Σ_S c_e K̃_e ≼ ½ K: E ≥ ½ · ½ zᵀ K z in every state. Empty without the elastic cubature.
   MatX elastic_rest_stiffness;
   /// Inertial cubature, same conventions (kinetic energy).
   Cubature inertial;

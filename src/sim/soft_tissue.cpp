@@ -990,8 +990,9 @@ std::vector<double> SoftTissue::restSplitFloors() const {
   try {
     const VecX floors = flsh::restSplitFloors(rest_stiffness_, unit, weighted, weights);
     return std::vector<double>(floors.data(), floors.data() + floors.size());
-  } catch (const InputError&) {
-    throw InputError("Simulable: the avatar's elastic rest stiffness is not positive definite");
+  } catch (const InputError& error) {
+    throw InputError(std::string("Simulable: the avatar's elastic cubature (ReducedData): ") +
+                     error.what());
   }
 }
 

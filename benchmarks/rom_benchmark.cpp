@@ -10,6 +10,7 @@
 //                      [--basis-drop T] [--max-iterations N] [--materials PATH]
 //                      [--training-samples N]
 //        rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] [--materials PATH]
+//                                [--models LIST]
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
 //        rom_benchmark --sag [--frames F]   (gravity's sag of a standing body: FEM and ROMs)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
@@ -42,6 +43,9 @@
 // speed-up over the FEM, per scenario) and plots the mean displacement error against steps/s
 // into a PNG. For each ROM also the basis best fit: the least-squares fit of the FEM's u in the
 // span of its basis (surface rows), relative to ‖u_FEM‖: what no dynamics in that basis can beat.
+// --models LIST: the ROMs to run instead of the default set, comma-separated, each H (H handles,
+// 500 + 500 cubature tets), H/E/I or Hexact, optionally followed by "pou" (the partition-of-unity
+// basis): e.g. --models 87pou,150pou,300pou (the skeleton and the FEM always run).
 #include <omp.h>
 
 #include <algorithm>
@@ -53,6 +57,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -93,6 +98,39 @@ struct ModelSpec {
     return std::string(buf) + (pou ? " PoU" : "");
   }
 };
+
+// One --models entry: H (87/500/500), H/E/I, Hexact, with a trailing "pou" for the
+// partition-of-unity basis: "150", "87/250/250", "87exact", "300pou", "150/500/500pou".
+ModelSpec parseModel(const std::string& text) {
+  std::string rest = text;
+  ModelSpec m;
+  const auto ends = [&](const std::string& tail) {
+    if (rest.size() < tail.size() || rest.compare(rest.size() - tail.size(), tail.size(), tail))
+      return false;
+    rest.resize(rest.size() - tail.size());
+    return true;
+  };
+  m.pou = ends("pou");
+  const bool exact = ends("exact");
+  int h = 0, e = 0, i = 0, consumed = 0;
+  const int fields = std::sscanf(rest.c_str(), "%d/%d/%d%n", &h, &e, &i, &consumed);
+  const bool whole = fields == 3 && consumed == int(rest.size());
+  int consumed_h = 0;
+  const bool handles_only = std::sscanf(rest.c_str(), "%d%n", &h, &consumed_h) == 1 &&
+                            consumed_h == int(rest.size());
+  if (!(whole && !exact) && !handles_only)
+    throw std::runtime_error("--models: '" + text +
+                             "' is not H, H/E/I or Hexact (each optionally followed by pou)");
+  if (h < 1 || (whole && (e < 1 || i < 1)))
+    throw std::runtime_error("--models: '" + text + "': counts must be ≥ 1");
+  m.handles = h;
+  if (whole) {
+    m.elastic = e;
+    m.inertial = i;
+  }
+  if (exact) m.elastic = m.inertial = 0;
+  return m;
+}
 
 std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, const ModelSpec& m,
                                        double* build_seconds) {
@@ -287,14 +325,19 @@ std::vector<Row> readCsv(const std::string& path) {
   return rows;
 }
 
-int compare(int frames, const std::string& png, const std::string& csv) {
+int compare(int frames, const std::string& png, const std::string& csv,
+            const std::vector<ModelSpec>& roms) {
   auto body = std::make_shared<BodyModel>(makeSyntheticBody({}));
   std::vector<ModelSpec> models = {{Kind::Skeleton}};
-  for (int h : {43, 87, 150}) models.push_back({Kind::Rom, h, 500, 500});
-  models.push_back({Kind::Rom, 87, 250, 250});
-  models.push_back({Kind::Rom, 87, 1000, 1000});
-  models.push_back({Kind::Rom, 87, 0, 0});
-  for (int h : {87, 150}) models.push_back({Kind::Rom, h, 500, 500, true});
+  if (roms.empty()) {
+    for (int h : {43, 87, 150}) models.push_back({Kind::Rom, h, 500, 500});
+    models.push_back({Kind::Rom, 87, 250, 250});
+    models.push_back({Kind::Rom, 87, 1000, 1000});
+    models.push_back({Kind::Rom, 87, 0, 0});
+    for (int h : {87, 150}) models.push_back({Kind::Rom, h, 500, 500, true});
+  } else {
+    models.insert(models.end(), roms.begin(), roms.end());
+  }
   models.push_back({Kind::Fem});
   std::vector<Scenario> scenarios = {
       {"walk", std::make_shared<Motion>(makeBuiltinMotion("walk", 20.0, 30.0)), false},
@@ -499,7 +542,7 @@ int main(int argc, char** argv) {
   int hessian = -1;  // −1: the scene default, 0: PSD, 1: exact
   bool lag = true;
   double reference = -1.0;
-  std::string motion = "walk", png = "rom_tradeoff.png", csv, plot_csv;
+  std::string motion = "walk", png = "rom_tradeoff.png", csv, plot_csv, models_option;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--handles" && i + 1 < argc) m.handles = std::atoi(argv[++i]);
@@ -519,6 +562,7 @@ int main(int argc, char** argv) {
     else if (a == "--reference" && i + 1 < argc) reference = std::atof(argv[++i]);
     else if (a == "--threads" && i + 1 < argc) omp_set_num_threads(std::atoi(argv[++i]));
     else if (a == "--compare") comparison = true;
+    else if (a == "--models" && i + 1 < argc) models_option = argv[++i];
     else if (a == "--sag") sag_only = true;
     else if (a == "--materials" && i + 1 < argc) g_material_file = argv[++i];
     else if (a == "--inertia-floor" && i + 1 < argc) inertia_floor_option = std::atof(argv[++i]);
@@ -533,7 +577,7 @@ int main(int argc, char** argv) {
                    "[--exact] [--surface-pou] [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME] "
                    "[--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I] "
                    "[--basis-drop T] [--max-iterations N]\n"
-                   "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH]\n"
+                   "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] [--models LIST]\n"
                    "       rom_benchmark --sag [--frames F]\n"
                    "       rom_benchmark --plot-csv CSV [--png PATH]\n");
       return 2;
@@ -544,7 +588,15 @@ int main(int argc, char** argv) {
       plotRows(readCsv(plot_csv), png);
       return 0;
     }
-    if (comparison) return compare(frames, png, csv);
+    if (comparison) {
+      std::vector<ModelSpec> roms;
+      for (size_t start = 0; start < models_option.size();) {
+        const size_t comma = std::min(models_option.find(',', start), models_option.size());
+        roms.push_back(parseModel(models_option.substr(start, comma - start)));
+        start = comma + 1;
+      }
+      return compare(frames, png, csv, roms);
+    }
     if (sag_only) return sag(frames);
     return speed(steps, m, tolerance, motion, ground, hessian, lag, reference);
   } catch (const std::exception& e) {

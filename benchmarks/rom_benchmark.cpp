@@ -577,7 +577,8 @@ int main(int argc, char** argv) {
                    "[--exact] [--surface-pou] [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME] "
                    "[--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I] "
                    "[--basis-drop T] [--max-iterations N]\n"
-                   "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] [--models LIST]\n"
+                   "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] "
+                   "[--models LIST]\n"
                    "       rom_benchmark --sag [--frames F]\n"
                    "       rom_benchmark --plot-csv CSV [--png PATH]\n");
       return 2;

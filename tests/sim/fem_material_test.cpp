@@ -633,8 +633,8 @@ TEST(ReducedTetElement, GradientAndHessianMatchFiniteDifferences) {
 // The rest-stiffness split of a cubature sample tet (restSplitExcess): w (Ψ − q) while that is
 // ≥ −q, a bounded C¹ continuation below. Value, gradient and Hessian against finite differences in
 // both branches (a moderate state at unit and heavy weight; a compressed tet at heavy weight,
-// which takes the bounded branch, with the default floor 2, with 1.5 and with 25), the bound f ≥ −c q,
-// and PSD forms that are PSD.
+// which takes the bounded branch, with the default floor 2, with 1.5 and with 25), the bound
+// f ≥ −c q, and PSD forms that are PSD.
 TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
   Random random(24);
   const FemMaterialPoint m = tissue(random.rotation(), 3.0);
@@ -694,7 +694,8 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
                         Case{"compressed, heavy", compressed, 2.5 / x_unit, true, 2.0},
                         Case{"compressed, heavy, floor 1.5", compressed, 2.5 / x_unit, true, 1.5},
                         // restSplitFloors' floors grow with the weight (1 + s w).
-                        Case{"compressed, heavy, floor 25", compressed, 2.5 / x_unit, true, 25.0}}) {
+                        Case{"compressed, heavy, floor 25", compressed, 2.5 / x_unit, true,
+                             25.0}}) {
     SCOPED_TRACE(c.name);
     const Mat3X Z = c.U * right;
     const VecX z = Eigen::Map<const VecX>(Z.data(), Z.size());
@@ -750,9 +751,10 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
 
 // restSplitFloors on a random subspace: rest Hessians K̃_e of sample "tets" on 2–4 of 8 handles
 // (random PSD, 3n × 3n) with weights from 1 to 300; K half their weighted sum plus three times
-// their unit-weight sum plus a random SPD rest. The floors are 1 + s w_e with s = (1 − α − λ₁) / λ_w, λ₁ and λ_w recomputed here as
-// generalized eigenvalues; Σ c_e K̃_e ≼ (1 − α) K, so ½ zᵀ K z − Σ c_e q_e ≥ α ½ zᵀ K z; the
-// fallback when the unweighted samples hold more than 1 − α of K; errors.
+// their unit-weight sum plus a random SPD rest. The floors are 1 + s w_e with
+// s = (1 − α − λ₁) / λ_w, λ₁ and λ_w recomputed here as generalized eigenvalues;
+// Σ c_e K̃_e ≼ (1 − α) K, so ½ zᵀ K z − Σ c_e q_e ≥ α ½ zᵀ K z; the fallback when the
+// unweighted samples hold more than 1 − α of K; errors.
 TEST(ReducedTetElement, RestSplitFloorsKeepTheAskedShareOfTheRestStiffness) {
   Random random(31);
   const int H = 8, m = 3 * H, count = 12;
@@ -767,7 +769,8 @@ TEST(ReducedTetElement, RestSplitFloorsKeepTheAskedShareOfTheRestStiffness) {
     const int n = 2 + e % 3;
     while (int(s.handles.size()) < n) {
       const int h = int(random.uniform(0.0, H - 1e-9));
-      if (std::find(s.handles.begin(), s.handles.end(), h) == s.handles.end()) s.handles.push_back(h);
+      if (std::find(s.handles.begin(), s.handles.end(), h) == s.handles.end())
+        s.handles.push_back(h);
     }
     MatX A(3 * n, 3 * n);
     for (int i = 0; i < A.size(); ++i) A.data()[i] = random.uniform(-1.0, 1.0);

@@ -44,8 +44,9 @@
 // into a PNG. For each ROM also the basis best fit: the least-squares fit of the FEM's u in the
 // span of its basis (surface rows), relative to ‖u_FEM‖: what no dynamics in that basis can beat.
 // --models LIST: the ROMs to run instead of the default set, comma-separated, each H (H handles,
-// 500 + 500 cubature tets), H/E/I or Hexact, optionally followed by "pou" (the partition-of-unity
-// basis): e.g. --models 87pou,150pou,300pou (the skeleton and the FEM always run).
+// 500 + 500 cubature tets), H/E/I (0: that cubature off) or Hexact, optionally followed by "pou"
+// (the partition-of-unity basis): e.g. --models 87pou,150pou,300pou or 87/500/0,87/0/500 (the
+// skeleton and the FEM always run).
 #include <omp.h>
 
 #include <algorithm>
@@ -93,14 +94,15 @@ struct ModelSpec {
     if (kind == Kind::Skeleton) return "skeleton";
     if (kind == Kind::Fem) return "FEM";
     char buf[64];
-    if (elastic == 0) std::snprintf(buf, sizeof(buf), "ROM %d exact", handles);
+    if (elastic == 0 && inertial == 0) std::snprintf(buf, sizeof(buf), "ROM %d exact", handles);
     else std::snprintf(buf, sizeof(buf), "ROM %d/%d/%d", handles, elastic, inertial);
     return std::string(buf) + (pou ? " PoU" : "");
   }
 };
 
-// One --models entry: H (87/500/500), H/E/I, Hexact, with a trailing "pou" for the
-// partition-of-unity basis: "150", "87/250/250", "87exact", "300pou", "150/500/500pou".
+// One --models entry: H (87/500/500), H/E/I (0 tets: that cubature off, its energy integrated
+// exactly), Hexact, with a trailing "pou" for the partition-of-unity basis: "150", "87/250/250",
+// "87/500/0", "87exact", "300pou", "150/500/500pou".
 ModelSpec parseModel(const std::string& text) {
   std::string rest = text;
   ModelSpec m;
@@ -121,8 +123,8 @@ ModelSpec parseModel(const std::string& text) {
   if (!(whole && !exact) && !handles_only)
     throw std::runtime_error("--models: '" + text +
                              "' is not H, H/E/I or Hexact (each optionally followed by pou)");
-  if (h < 1 || (whole && (e < 1 || i < 1)))
-    throw std::runtime_error("--models: '" + text + "': counts must be ≥ 1");
+  if (h < 1 || (whole && (e < 0 || i < 0)))
+    throw std::runtime_error("--models: '" + text + "': handles must be ≥ 1, tets ≥ 0");
   m.handles = h;
   if (whole) {
     m.elastic = e;

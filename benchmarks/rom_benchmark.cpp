@@ -591,6 +591,8 @@ int main(int argc, char** argv) {
       plotRows(readCsv(plot_csv), png);
       return 0;
     }
+    if (!models_option.empty() && !comparison)
+      throw std::runtime_error("--models chooses the ROMs of --compare; pass --compare too");
     if (comparison) {
       std::vector<ModelSpec> roms;
       for (size_t start = 0; start < models_option.size();) {

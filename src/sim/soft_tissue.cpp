@@ -967,10 +967,10 @@ double SoftTissue::sampleTetExcess(int e, int count, double w, const Eigen::Ref<
       Z, derivatives ? &gradient : nullptr, want_hessian ? &hessian : nullptr, psd);
   return restSplitExcess(psi, Eigen::Map<const VecX>(Z.data(), m), K, w,
                          derivatives ? &gradient : nullptr, want_hessian ? &hessian : nullptr, psd,
-                         nullptr, rest_floors_[size_t(e)]);
+                         nullptr, rest_floors_[e]);
 }
 
-std::vector<double> SoftTissue::restSplitFloors() const {
+VecX SoftTissue::restSplitFloors() const {
   // The sample tets' rest Hessians assembled in the subspace, without and with their weights.
   const int H = num_handles_, T = int(tets_.rows());
   MatX unit = MatX::Zero(3 * H, 3 * H), weighted = MatX::Zero(3 * H, 3 * H);
@@ -988,8 +988,7 @@ std::vector<double> SoftTissue::restSplitFloors() const {
       }
   }
   try {
-    const VecX floors = flsh::restSplitFloors(rest_stiffness_, unit, weighted, weights);
-    return std::vector<double>(floors.data(), floors.data() + floors.size());
+    return flsh::restSplitFloors(rest_stiffness_, unit, weighted, weights);
   } catch (const InputError& error) {
     throw InputError(std::string("Simulable: the avatar's elastic cubature (ReducedData): ") +
                      error.what());

@@ -204,7 +204,7 @@ class SoftTissue {
   std::vector<std::pair<int, int>> rest_stiffness_blocks_;
   std::vector<int> rest_hessian_start_;
   VecX rest_hessians_;
-  std::vector<double> rest_floors_;  // the split's floor c_e per elastic tet (restSplitFloors)
+  VecX rest_floors_;  // the split's floor c_e per elastic tet (restSplitFloors)
   std::vector<int> influence_start_;
   std::vector<Influence> influences_;
   MatX3 x_hat_;
@@ -264,7 +264,7 @@ class SoftTissue {
   /// The floors c_e of the split's excess (f_e ≥ −c_e q_e) per elastic tet: restSplitFloors
   /// (fem_material.h) of K and the sample tets' rest Hessians, so that the energy keeps at least
   /// half of K in every direction.
-  std::vector<double> restSplitFloors() const;
+  VecX restSplitFloors() const;
   /// ½ zᵀ K z (0 without the elastic cubature), its gradient and Hessian blocks.
   double restStiffnessTerm(VecX* g, Mat3* values, int offset) const;
   /// Elastic tet e (count handles, cubature weight w, their displacements Z) under the

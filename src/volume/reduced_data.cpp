@@ -34,9 +34,10 @@ double secondsSince(Clock::time_point t0) {
 
 // Revision of the rules of this level (handle choice, sample distributions, basis drop
 // threshold): bump it when they change so that data cached under older rules are rebuilt.
-constexpr int kReducedRules = 5;  // 1: first version; 2: rest-stiffness correction; 3: elastic
+constexpr int kReducedRules = 6;  // 1: first version; 2: rest-stiffness correction; 3: elastic
                                   // selection to the full count; 4: its positive part; 5: the
-                                  // exact rest stiffness instead (the rest-stiffness split)
+                                  // exact rest stiffness instead (the rest-stiffness split);
+                                  // 6: rigid-motion rows in the inertial training
 // Basis entries below this are dropped (they only cost memory and time in the simulation).
 constexpr double kBasisDropThreshold = 1e-12;
 // Smallest handle displacement amplitude of an elastic training sample, m (the samples spread
@@ -412,6 +413,88 @@ MatX inertialSamples(const VolumetricData& data, const SpMat& basis, const VecX&
   return A;
 }
 
+// Twice the lumped kinetic energy of each tet (rows × #T) for the skeleton's unit articulated
+// motions — the root joint's translation and each bone's rotation about its joint, which carries
+// the joints below it along (they translate, the bones below keep their orientation) — and for
+// the sums of the pairs of them whose motions share kinetic energy (|Q_ik| > kRigidCoupling ·
+// sqrt(Q_ii Q_kk), Q the articulated mass matrix). A cubature exact on these rows reproduces the
+// skeleton's rigid inertia: the random velocities of inertialSamples leave it off by up to 2×
+// in the light distal bones' directions (toes, wrists, hands), whose energy is a small part of
+// any random sample.
+constexpr double kRigidCoupling = 0.05;
+MatX rigidMotionRows(const VolumetricData& data, const std::vector<int>& parents,
+                     const VecX& tet_masses) {
+  const MatX& W = data.templ->fields.weights;  // #N × bones
+  const int B = int(W.cols()), N = data.numNodes(), D = 3 + 3 * B;
+  const MatX4i& tets = data.templ->mesh.tets;
+  const int T = int(tets.rows());
+  const MatX3& X = data.rest_nodes;
+  const MatX3& J = data.rest_joints;
+  // Per articulated DoF k: each bone's joint velocity and angular velocity (B × 6).
+  std::vector<MatX> bone_motion(size_t(D), MatX::Zero(B, 6));
+  for (int k = 0; k < D; ++k) {
+    MatX& m = bone_motion[size_t(k)];
+    for (int b = 0; b < B; ++b) {
+      if (k >= 3 && (k - 3) / 3 == b) m(b, 3 + (k - 3) % 3) = 1.0;
+      if (b == 0) {
+        if (k < 3) m(0, k) = 1.0;
+        continue;
+      }
+      const int p = parents[size_t(b)];
+      const Vec3 omega = m.row(p).tail<3>().transpose();
+      m.row(b).head<3>() = m.row(p).head<3>() + omega.cross(Vec3(J.row(b) - J.row(p))).transpose();
+    }
+  }
+  // Node velocities per DoF (N × 3 each): v_j = Σ_b w_jb (v_b + ω_b × (X̄_j − J_b)).
+  std::vector<MatX3> velocity(static_cast<size_t>(D));
+  parallelFor(D, [&](int k) {
+    const MatX& m = bone_motion[size_t(k)];
+    MatX3 v(N, 3);
+    for (int j = 0; j < N; ++j) {
+      Vec3 vj = Vec3::Zero();
+      for (int b = 0; b < B; ++b)
+        if (W(j, b) != 0.0) {
+          const Vec3 omega = m.row(b).tail<3>().transpose();
+          vj += W(j, b) * (Vec3(m.row(b).head<3>().transpose()) +
+                           omega.cross(Vec3(X.row(j) - J.row(b))));
+        }
+      v.row(j) = vj.transpose();
+    }
+    velocity[size_t(k)] = v;
+  });
+  VecX node_mass = VecX::Zero(N);
+  for (int t = 0; t < T; ++t)
+    for (int a = 0; a < 4; ++a) node_mass[tets(t, a)] += tet_masses[t] / 4;
+  MatX Q(D, D);
+  for (int i = 0; i < D; ++i)
+    for (int k = i; k < D; ++k)
+      Q(i, k) = Q(k, i) =
+          (velocity[size_t(i)].cwiseProduct(velocity[size_t(k)]).rowwise().sum().array() *
+           node_mass.array())
+              .sum();
+  std::vector<std::pair<int, int>> motions;
+  for (int i = 0; i < D; ++i) {
+    if (Q(i, i) > 0.0) motions.emplace_back(i, -1);
+    for (int k = i + 1; k < D; ++k)
+      if (std::abs(Q(i, k)) > kRigidCoupling * std::sqrt(Q(i, i) * Q(k, k)))
+        motions.emplace_back(i, Q(i, k) > 0 ? k : -2 - k);  // the pair, or i minus k
+  }
+  MatX A(Eigen::Index(motions.size()), T);
+  parallelFor(int(motions.size()), [&](int r) {
+    const auto [i, code] = motions[size_t(r)];
+    MatX3 v = velocity[size_t(i)];
+    if (code >= 0) v += velocity[size_t(code)];
+    if (code <= -2) v -= velocity[size_t(-2 - code)];
+    const VecX speed_squared = v.rowwise().squaredNorm();
+    for (int t = 0; t < T; ++t) {
+      double sum = 0;
+      for (int a = 0; a < 4; ++a) sum += speed_squared[tets(t, a)];
+      A(r, t) = tet_masses[t] / 4 * sum;
+    }
+  });
+  return A;
+}
+
 // Each sample (row) divided by its total, so that every sample counts as much in the fit and in
 // the error: the energies of the elastic samples span orders of magnitude (amplitudes from 1 mm
 // to training_amplitude), and unscaled the largest few would decide the whole selection. A
@@ -426,14 +509,21 @@ MatX perSampleRelative(MatX A) {
 
 // Selection on the training samples (seed), held-out error on as many samples from seed + 1;
 // columns mapped to template tet indices by `column_tets` (ascending, so the order is kept).
+// `extra_rows` (may be empty): fixed rows added to the training samples only.
 template <class SampleFn>
 Cubature trainCubature(SampleFn&& sample_matrix, int count, double tolerance, std::uint64_t seed,
                        const std::vector<int>& column_tets, double* test_error,
-                       double* seconds_training, double* seconds_cubature) {
+                       double* seconds_training, double* seconds_cubature,
+                       const MatX& extra_rows = MatX()) {
   auto t0 = Clock::now();
   Cubature cubature;
   {
-    const MatX training = perSampleRelative(sample_matrix(seed));
+    MatX samples = sample_matrix(seed);
+    if (extra_rows.size() > 0) {
+      samples.conservativeResize(samples.rows() + extra_rows.rows(), Eigen::NoChange);
+      samples.bottomRows(extra_rows.rows()) = extra_rows;
+    }
+    const MatX training = perSampleRelative(std::move(samples));
     *seconds_training += secondsSince(t0);
     t0 = Clock::now();
     CubatureOptions options;
@@ -688,6 +778,7 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
     const VecX tet_masses = tetVolumes(shaped).cwiseProduct(data.materials.density);
     std::vector<int> all_tets(size_t(data.numTets()));
     for (int t = 0; t < data.numTets(); ++t) all_tets[size_t(t)] = t;
+    const MatX rigid_rows = rigidMotionRows(data, body.parents, tet_masses);
     r.seconds_training += secondsSince(t0);
     d.inertial = trainCubature(
         [&](std::uint64_t seed) {
@@ -695,7 +786,7 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
         },
         settings.inertial_cubature_points, kInertialTrainingTolerance, settings.seed, all_tets,
         &d.inertial_test_error,
-        &r.seconds_training, &r.seconds_cubature);
+        &r.seconds_training, &r.seconds_cubature, rigid_rows);
   }
 
   if (cache) {

@@ -5,14 +5,18 @@
 //  - basis: bounded biharmonic weights φ_h on the tet mesh at X̄(β), so that the soft-tissue
 //    displacement of node j is u_j = Σ_h φ_h(j) z_h (z_h ∈ R³, m, unposed space);
 //  - elastic cubature: sample tets and weights w_e ≥ 0 with Σ_{e∈S} w_e Ψ_e ≈ Σ_e Ψ_e for the
-//    elastic energy of subspace deformations, plus a constant positive quadratic correction for
-//    the rest stiffness the samples miss;
+//    elastic energy of subspace deformations, and the subspace's exact rest stiffness K (the
+//    simulation integrates ½ zᵀKz exactly and the samples' excess over their own rest quadratic:
+//    the rest-stiffness split, docs/rom.md);
 //  - inertial cubature: sample tets and weights for the lumped-mass kinetic energy of the nodes,
 //    Σ_{e∈S} w_e Σ_{a∈e} (m_e/4) ‖v_a‖² ≈ Σ_e Σ_{a∈e} (m_e/4) ‖v_a‖², for velocities made of
-//    skinned rigid bone motions plus subspace motions. Equivalently a sparse set of node masses
+//    skinned rigid bone motions plus subspace motions, and for the skeleton's unit articulated
+//    motions (each bone turning about its joint, alone and in coupled pairs), so that the bones'
+//    rigid inertia comes out right too. Equivalently a sparse set of node masses
 //    (inertialNodeMasses).
 // Both cubatures are trained without simulation data (random subspace deformations and
-// velocities) by Optimized Cubature (cubature.h) and checked on held-out samples. Everything is
+// velocities) by Optimized Cubature (cubature.h) and checked on held-out samples (random ones
+// only). Everything is
 // cached on disk under a key that hashes the shape level's key and these settings.
 #pragma once
 

@@ -299,6 +299,8 @@ int cmdAvatar(const AvatarArgs& args) {
         cubature(d.elastic, d.elastic_test_error, avatar.elasticCubatureEnabled());
     reduced["inertial_cubature"] =
         cubature(d.inertial, d.inertial_test_error, avatar.inertialCubatureEnabled());
+    reduced["inertial_cubature"]["rigid_motion_error"] =
+        avatar.inertialCubatureEnabled() ? d.inertial_rigid_error : 0.0;
     out["reduced"] = reduced;
     out["cache"]["reduced"] = !settings.volumetric.use_cache ? "off"
                               : rr.from_cache                ? "hit"
@@ -521,8 +523,13 @@ void printReducedReport(const std::string& name, const SoftAvatar& avatar, bool 
                cubatureSummary(data.elastic, data.elastic_test_error,
                                avatar.elasticCubatureEnabled())
                    .c_str(),
-               cubatureSummary(data.inertial, data.inertial_test_error,
-                               avatar.inertialCubatureEnabled())
+               (cubatureSummary(data.inertial, data.inertial_test_error,
+                                avatar.inertialCubatureEnabled()) +
+                (avatar.inertialCubatureEnabled()
+                     ? ", rigid motions within " +
+                           std::to_string(int(std::ceil(100.0 * data.inertial_rigid_error))) +
+                           " %"
+                     : std::string()))
                    .c_str(),
                cache);
 }

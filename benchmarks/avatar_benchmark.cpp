@@ -159,9 +159,10 @@ int romBenchmark(int runs, const std::string& model_path) {
       long(d.elastic.elements.size()), d.elastic.training_error, d.elastic_test_error,
       d.elastic.rounds);
   std::printf(
-      "  inertial cubature: %4ld tets, training error %.4f, held-out error %.4f, %d rounds\n",
+      "  inertial cubature: %4ld tets, training error %.4f, held-out error %.4f, %d rounds, "
+      "rigid motions within %.4f\n",
       long(d.inertial.elements.size()), d.inertial.training_error, d.inertial_test_error,
-      d.inertial.rounds);
+      d.inertial.rounds, d.inertial_rigid_error);
   return 0;
 }
 

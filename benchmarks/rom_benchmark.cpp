@@ -431,11 +431,12 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   const ReducedData& rom = avatar->reducedData();
   const ReducedBuildReport& rep = avatar->reducedBuildReport();
   std::printf("avatar: %d nodes (%d bone nodes), %d tets; %d handles, cubature %d elastic / %d "
-              "inertial tets (held-out errors %.2f %% / %.2f %%); built/loaded in %.2f s "
-              "(reduced level %s, %.2f s)\n",
+              "inertial tets (held-out errors %.2f %% / %.2f %%, rigid motions within %.2f %%); "
+              "built/loaded in %.2f s (reduced level %s, %.2f s)\n",
               data.numNodes(), data.numBoneNodes(), data.numTets(), rom.numHandles(),
               int(rom.elastic.elements.size()), int(rom.inertial.elements.size()),
-              100 * rom.elastic_test_error, 100 * rom.inertial_test_error, build,
+              100 * rom.elastic_test_error, 100 * rom.inertial_test_error,
+              100 * rom.inertial_rigid_error, build,
               rep.from_cache ? "from the cache" : "built", rep.seconds_total);
 
   SceneOptions scene_options;

@@ -195,6 +195,10 @@ void bind_volume(py::module_& m) {
       .def_property_readonly("inertial_test_error",
                              [](const ReducedData& d) { return d.inertial_test_error; },
                              "held-out relative error of the kinetic energy (0 when off)")
+      .def_property_readonly("inertial_rigid_error",
+                             [](const ReducedData& d) { return d.inertial_rigid_error; },
+                             "largest relative error of the kinetic energy over the skeleton's "
+                             "rigid motions (each bone turning about its joint; 0 when off)")
       .def_property_readonly("key", [](const ReducedData& d) { return d.key; },
                              "cache key of this level")
       .def("__repr__", [](const ReducedData& d) {

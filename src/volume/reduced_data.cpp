@@ -34,10 +34,11 @@ double secondsSince(Clock::time_point t0) {
 
 // Revision of the rules of this level (handle choice, sample distributions, basis drop
 // threshold): bump it when they change so that data cached under older rules are rebuilt.
-constexpr int kReducedRules = 6;  // 1: first version; 2: rest-stiffness correction; 3: elastic
+constexpr int kReducedRules = 7;  // 1: first version; 2: rest-stiffness correction; 3: elastic
                                   // selection to the full count; 4: its positive part; 5: the
                                   // exact rest stiffness instead (the rest-stiffness split);
-                                  // 6: rigid-motion rows in the inertial training
+                                  // 6: rigid-motion rows in the inertial training; 7: their
+                                  // error stored (inertial_rigid_error)
 // Basis entries below this are dropped (they only cost memory and time in the simulation).
 constexpr double kBasisDropThreshold = 1e-12;
 // Smallest handle displacement amplitude of an elastic training sample, m (the samples spread
@@ -495,6 +496,21 @@ MatX rigidMotionRows(const VolumetricData& data, const std::vector<int>& parents
   return A;
 }
 
+// The largest relative error |Σ_k w_k A(r, e_k) / Σ_t A(r, t) − 1| of a cubature over the rows
+// of A (columns = template tets), rows with a zero total skipped.
+double largestRowError(const MatX& A, const Cubature& c) {
+  double largest = 0.0;
+  for (Eigen::Index r = 0; r < A.rows(); ++r) {
+    const double exact = A.row(r).sum();
+    if (!(exact > 0.0)) continue;
+    double approximate = 0.0;
+    for (Eigen::Index k = 0; k < c.elements.size(); ++k)
+      approximate += c.weights[k] * A(r, c.elements[k]);
+    largest = std::max(largest, std::abs(approximate / exact - 1.0));
+  }
+  return largest;
+}
+
 // Each sample (row) divided by its total, so that every sample counts as much in the fit and in
 // the error: the energies of the elastic samples span orders of magnitude (amplitudes from 1 mm
 // to training_amplitude), and unscaled the largest few would decide the whole selection. A
@@ -583,6 +599,7 @@ io::NpzWriter cacheArrays(const ReducedData& d) {
                                  .finished()));
   storeCubature(w, "elastic", d.elastic, d.elastic_test_error);
   storeCubature(w, "inertial", d.inertial, d.inertial_test_error);
+  w.add("inertial_rigid_error", VecX::Constant(1, d.inertial_rigid_error));
   if (d.elastic_rest_stiffness.size() > 0)
     w.add("elastic_rest_stiffness", d.elastic_rest_stiffness);
   return w;
@@ -675,6 +692,10 @@ ReducedData loadReducedData(const io::NpzFile& f, const VolumetricData& data, co
                            &d.elastic_test_error);
   d.inertial = loadCubature(f, "inertial", inertial, settings.inertial_cubature_points, T,
                             &d.inertial_test_error);
+  d.inertial_rigid_error = f.vector("inertial_rigid_error", 1)[0];
+  if (!(d.inertial_rigid_error >= 0 && std::isfinite(d.inertial_rigid_error)))
+    throw InputError(f.path() + ": key 'inertial_rigid_error': " + str(d.inertial_rigid_error) +
+                     ", expected a finite error ≥ 0");
   if (elastic) {
     d.elastic_rest_stiffness = f.matrix("elastic_rest_stiffness", 3 * H, 3 * H);
     if (!d.elastic_rest_stiffness.allFinite())
@@ -787,6 +808,7 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
         settings.inertial_cubature_points, kInertialTrainingTolerance, settings.seed, all_tets,
         &d.inertial_test_error,
         &r.seconds_training, &r.seconds_cubature, rigid_rows);
+    d.inertial_rigid_error = largestRowError(rigid_rows, d.inertial);
   }
 
   if (cache) {

@@ -114,6 +114,7 @@ for name in ("elastic_cubature", "inertial_cubature"):
     c = r[name]
     assert c["enabled"] and 1 <= c["tets"] <= (40 if name.startswith("e") else 30), (name, c)
     assert 0 <= c["held_out_error"] < 1 and c["weight_sum"] > 0, (name, c)
+assert r["inertial_cubature"]["rigid_motion_error"] > 0, r["inertial_cubature"]
 assert s["cache"]["shape"] == "hit" and s["cache"]["reduced"] == "miss", s["cache"]
 assert s["seconds"]["reduced_total"] > 0, s["seconds"]
 assert r["surface_partition_of_unity"] is False, r

@@ -128,6 +128,9 @@ def test_reduced_data_shapes_and_bounds(avatar):
         assert (weights > 0).all() and np.isfinite(weights).all()
         assert 0 <= cubature.training_error < 1 and cubature.rounds >= 1
         assert 0 < error < 1  # measured on held-out samples: nonzero, below 100 %
+    # The skeleton's rigid motions are in the inertial training set; 30 tets are too few to fit
+    # every bone's (0.83 here, 0.4 % on the full body with its 230), so only its wiring is checked.
+    assert np.isfinite(rd.inertial_rigid_error) and rd.inertial_rigid_error > 0
     assert isinstance(rd.key, str) and len(rd.key) > 0
 
 

@@ -13,6 +13,7 @@
 //                                [--models LIST]
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
 //        rom_benchmark --sag [--frames F]   (gravity's sag of a standing body: FEM and ROMs)
+//        rom_benchmark --galerkin LIST      (linear static sag: Galerkin against best fit)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
 //   --exact: no cubature (every tet and node integrated);
 //   --surface-pou: ReducedSettings::surface_partition_of_unity (the partition-of-unity basis);
@@ -47,6 +48,15 @@
 // 500 + 500 cubature tets), H/E/I (0: that cubature off) or Hexact, optionally followed by "pou"
 // (the partition-of-unity basis): e.g. --models 87pou,150pou,300pou or 87/500/0,87/0/500 (the
 // skeleton and the FEM always run).
+//
+// --galerkin LIST: how far the Galerkin solution in a basis's span is from the FEM as handles are
+// added, without dynamics or cubature: the linear static sag of a standing body (the FEM's
+// soft-tissue Hessian K at rest and gravity's load f, u = K⁻¹f, bones held). For each handle
+// count of LIST (comma-separated), with the prescribed and the partition-of-unity basis Φ:
+// z = (ΦᵀKΦ)⁻¹Φᵀf against the FEM's u, and the least-squares best fit of u on the surface, as
+// surface RMS errors relative to the FEM's. The entry "all" is the limit of ever more handles:
+// every soft surface node free and the tissue inside the biharmonic extension of the surface
+// (a constrained solve).
 #include <omp.h>
 
 #include <algorithm>
@@ -63,13 +73,17 @@
 #include <vector>
 
 #include <Eigen/SparseCholesky>
+#include <Eigen/SparseLU>
 
+#include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
 #include "flsh/io/motion.h"
 #include "flsh/render/plot.h"
 #include "flsh/render/render.h"
 #include "flsh/solve/scene.h"
+#include "flsh/volume/reduced_basis.h"
+#include "flsh/volume/reduced_data.h"
 
 namespace {
 
@@ -537,6 +551,129 @@ int sag(int frames) {
   return 0;
 }
 
+// --galerkin (see the top of the file).
+int galerkin(const std::string& list) {
+  std::vector<std::string> entries;  // checked before anything is built
+  for (size_t start = 0; start <= list.size();) {
+    const size_t comma = std::min(list.find(',', start), list.size());
+    entries.push_back(list.substr(start, comma - start));
+    start = comma + 1;
+  }
+  for (const std::string& entry : entries) {
+    int handles = 0, consumed = 0;
+    if (entry != "all" && !(std::sscanf(entry.c_str(), "%d%n", &handles, &consumed) == 1 &&
+                            consumed == int(entry.size()) && handles >= 1))
+      throw std::runtime_error("--galerkin: '" + entry +
+                               "' is neither a handle count (≥ 1) nor \"all\"");
+  }
+  auto body = std::make_shared<BodyModel>(makeSyntheticBody({}));
+  auto avatar = makeAvatar(body, {Kind::Fem}, nullptr);
+  const VolumetricData& data = avatar->volumetricData();
+  SimulableOptions options;
+  options.time_step = 1.0 / 30.0;
+  auto sim = std::make_shared<Simulable>(
+      avatar, std::make_shared<Motion>(makeBuiltinMotion("stand", 2.0, 30.0)), options);
+  const int bone_dofs = 6 * kNumJoints, n = sim->numDofs(), ns = n - bone_dofs;
+  std::vector<Triplet> triplets;
+  sim->getPotentialHessianTripletVector(triplets, 0, false);
+  SpMat H(n, n);
+  H.setFromTriplets(triplets.begin(), triplets.end());
+  const SpMat K = H.bottomRightCorner(ns, ns);
+  VecX g = VecX::Zero(n);
+  sim->getPotentialGradientVector(g);
+  const VecX f = -g.tail(ns);  // elasticity is at rest: the soft rows are gravity's load
+  const VecXi& soft = sim->softNodes();
+  const int N = data.numNodes(), V = data.templ->mesh.num_surface_nodes;
+  std::vector<int> dof(size_t(N), -1);
+  for (int k = 0; k < soft.size(); ++k) dof[size_t(soft[k])] = k;
+  const Eigen::SimplicialLDLT<SpMat> fem(K);
+  if (fem.info() != Eigen::Success) throw std::runtime_error("--galerkin: K is not factorable");
+  const VecX u_fem = fem.solve(f);
+  auto surfaceRms = [&](const VecX& u) {
+    double sum = 0.0;
+    for (int i = 0; i < V; ++i)
+      if (dof[size_t(i)] >= 0) sum += u.segment<3>(3 * dof[size_t(i)]).squaredNorm();
+    return std::sqrt(sum / V);
+  };
+  const double fem_rms = surfaceRms(u_fem);
+  std::vector<int> surface_rows;  // soft DoFs of surface nodes
+  for (int i = 0; i < V; ++i)
+    if (dof[size_t(i)] >= 0)
+      for (int c = 0; c < 3; ++c) surface_rows.push_back(3 * dof[size_t(i)] + c);
+  std::printf("linear static sag of a standing body: FEM %.3f mm RMS on the surface\n",
+              1e3 * fem_rms);
+  std::printf("| handles | prescribed: Galerkin (sag) / best fit | partition of unity: Galerkin "
+              "(sag) / best fit |\n|---|---|---|\n");
+  for (const std::string& entry : entries) {
+    if (entry == "all") {
+      // Constraints Σ_j Q_ij u_j = 0 per interior soft node i (Q the biharmonic energy matrix,
+      // bone nodes 0), solved with K as a KKT system.
+      const SpMat Q = biharmonicEnergyMatrix(data.templ->mesh, data.rest_nodes);
+      std::vector<Triplet> c;
+      int rows = 0;
+      for (int i = V; i < N; ++i) {
+        if (dof[size_t(i)] < 0) continue;
+        for (SpMat::InnerIterator it(Q, i); it; ++it)  // Q is symmetric: column i is row i
+          if (dof[size_t(it.row())] >= 0)
+            for (int k = 0; k < 3; ++k)
+              c.emplace_back(rows + k, 3 * dof[size_t(it.row())] + k, it.value());
+        rows += 3;
+      }
+      SpMat C(rows, ns);
+      C.setFromTriplets(c.begin(), c.end());
+      C *= K.diagonal().mean() / std::sqrt(SpMat(C * C.transpose()).diagonal().mean());
+      std::vector<Triplet> kkt;
+      for (int k = 0; k < K.outerSize(); ++k)
+        for (SpMat::InnerIterator it(K, k); it; ++it)
+          kkt.emplace_back(int(it.row()), int(it.col()), it.value());
+      for (int k = 0; k < C.outerSize(); ++k)
+        for (SpMat::InnerIterator it(C, k); it; ++it) {
+          kkt.emplace_back(ns + int(it.row()), int(it.col()), it.value());
+          kkt.emplace_back(int(it.col()), ns + int(it.row()), it.value());
+        }
+      SpMat A(ns + rows, ns + rows);
+      A.setFromTriplets(kkt.begin(), kkt.end());
+      A.makeCompressed();
+      Eigen::SparseLU<SpMat> lu(A);
+      if (lu.info() != Eigen::Success) throw std::runtime_error("--galerkin all: KKT solve failed");
+      VecX rhs = VecX::Zero(ns + rows);
+      rhs.head(ns) = f;
+      const VecX u = VecX(lu.solve(rhs)).head(ns);
+      std::printf("| all soft surface nodes, biharmonic inside | %.1f %% (%.1f %%) | |\n",
+                  100 * surfaceRms(u - u_fem) / fem_rms, 100 * surfaceRms(u) / fem_rms);
+      continue;
+    }
+    const int handles = std::atoi(entry.c_str());
+    std::printf("| %d |", handles);
+    for (bool pou : {false, true}) {
+      ReducedSettings settings;
+      settings.num_handles = handles;
+      settings.surface_partition_of_unity = pou;
+      const ReducedData r = buildReducedData(data, *body, settings, false, false, nullptr);
+      std::vector<Triplet> p;
+      for (int h = 0; h < r.basis.outerSize(); ++h)
+        for (SpMat::InnerIterator it(r.basis, h); it; ++it)
+          if (dof[size_t(it.row())] >= 0)
+            for (int k = 0; k < 3; ++k)
+              p.emplace_back(3 * dof[size_t(it.row())] + k, 3 * h + k, it.value());
+      SpMat P(ns, 3 * handles);
+      P.setFromTriplets(p.begin(), p.end());
+      const VecX u = P * VecX(MatX(P.transpose() * K * P).ldlt().solve(P.transpose() * f));
+      SpMat S(Eigen::Index(surface_rows.size()), ns);  // selects the surface rows
+      std::vector<Triplet> s;
+      for (size_t k = 0; k < surface_rows.size(); ++k) s.emplace_back(int(k), surface_rows[k], 1.0);
+      S.setFromTriplets(s.begin(), s.end());
+      const SpMat A = S * P;
+      const VecX fit = P * VecX(MatX(A.transpose() * A).ldlt().solve(A.transpose() * (S * u_fem)));
+      std::printf(" %.1f %% (%.1f %%) / %.1f %% |", 100 * surfaceRms(u - u_fem) / fem_rms,
+                  100 * surfaceRms(u) / fem_rms, 100 * surfaceRms(fit - u_fem) / fem_rms);
+      std::fflush(stdout);
+    }
+    std::printf("\n");
+  }
+  return 0;
+}
+
 int main(int argc, char** argv) {
   int steps = 300, frames = 45;
   ModelSpec m;
@@ -545,7 +682,8 @@ int main(int argc, char** argv) {
   int hessian = -1;  // −1: the scene default, 0: PSD, 1: exact
   bool lag = true;
   double reference = -1.0;
-  std::string motion = "walk", png = "rom_tradeoff.png", csv, plot_csv, models_option;
+  std::string motion = "walk", png = "rom_tradeoff.png", csv, plot_csv, models_option,
+      galerkin_list;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--handles" && i + 1 < argc) m.handles = std::atoi(argv[++i]);
@@ -567,6 +705,7 @@ int main(int argc, char** argv) {
     else if (a == "--compare") comparison = true;
     else if (a == "--models" && i + 1 < argc) models_option = argv[++i];
     else if (a == "--sag") sag_only = true;
+    else if (a == "--galerkin" && i + 1 < argc) galerkin_list = argv[++i];
     else if (a == "--materials" && i + 1 < argc) g_material_file = argv[++i];
     else if (a == "--inertia-floor" && i + 1 < argc) inertia_floor_option = std::atof(argv[++i]);
     else if (a == "--frames" && i + 1 < argc) frames = std::max(1, std::atoi(argv[++i]));
@@ -583,6 +722,7 @@ int main(int argc, char** argv) {
                    "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] "
                    "[--models LIST]\n"
                    "       rom_benchmark --sag [--frames F]\n"
+                   "       rom_benchmark --galerkin LIST\n"
                    "       rom_benchmark --plot-csv CSV [--png PATH]\n");
       return 2;
     }
@@ -604,6 +744,7 @@ int main(int argc, char** argv) {
       return compare(frames, png, csv, roms);
     }
     if (sag_only) return sag(frames);
+    if (!galerkin_list.empty()) return galerkin(galerkin_list);
     return speed(steps, m, tolerance, motion, ground, hessian, lag, reference);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "rom_benchmark: %s\n", e.what());

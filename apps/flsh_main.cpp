@@ -488,12 +488,17 @@ std::shared_ptr<Motion> placedMotion(Motion motion, const AvatarSpec& spec) {
   return std::make_shared<Motion>(std::move(motion));
 }
 
-/// "500 tets, held-out error 0.84 %" or "off (exact)" for one cubature of the reduced data.
-std::string cubatureSummary(const Cubature& cubature, double test_error, bool enabled) {
+/// "500 tets, held-out error 0.84 %" or "off (exact)" for one cubature of the reduced data;
+/// with `rigid_error` ≥ 0 (the inertial one's) also ", rigid motions within 1 %".
+std::string cubatureSummary(const Cubature& cubature, double test_error, bool enabled,
+                            double rigid_error = -1.0) {
   if (!enabled) return "off (exact)";
-  char text[96];
-  std::snprintf(text, sizeof(text), "%d tets, held-out error %.2f %%",
-                int(cubature.elements.size()), 100.0 * test_error);
+  char text[128];
+  int length = std::snprintf(text, sizeof(text), "%d tets, held-out error %.2f %%",
+                             int(cubature.elements.size()), 100.0 * test_error);
+  if (rigid_error >= 0)
+    std::snprintf(text + length, sizeof(text) - size_t(length), ", rigid motions within %d %%",
+                  int(std::ceil(100.0 * rigid_error)));
   return text;
 }
 
@@ -523,13 +528,8 @@ void printReducedReport(const std::string& name, const SoftAvatar& avatar, bool 
                cubatureSummary(data.elastic, data.elastic_test_error,
                                avatar.elasticCubatureEnabled())
                    .c_str(),
-               (cubatureSummary(data.inertial, data.inertial_test_error,
-                                avatar.inertialCubatureEnabled()) +
-                (avatar.inertialCubatureEnabled()
-                     ? ", rigid motions within " +
-                           std::to_string(int(std::ceil(100.0 * data.inertial_rigid_error))) +
-                           " %"
-                     : std::string()))
+               cubatureSummary(data.inertial, data.inertial_test_error,
+                               avatar.inertialCubatureEnabled(), data.inertial_rigid_error)
                    .c_str(),
                cache);
 }

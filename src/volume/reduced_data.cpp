@@ -364,16 +364,40 @@ MatX elasticSamples(const VolumetricData& data, const SpMat& basis, const Elasti
   return A;
 }
 
+// Node velocities (#N × 3) of skinned bone motions, joint velocities v and angular velocities ω of
+// the bones (B × 3 each), plus `extra` node velocities (#N × 3, e.g. Φż; empty: none):
+// v_j = Σ_b w_jb (v_b + ω_b × (X̄_j − J_b)) + extra_j = (W (v − ω × J))_j + extra_j + (W ω)_j × X̄_j.
+MatX skinnedBoneVelocities(const MatX& W, const MatX3& X, const MatX3& J, const MatX& linear,
+                           const MatX& angular, const MatX& extra = MatX()) {
+  MatX omega_cross_joint(angular.rows(), 3);
+  for (Eigen::Index b = 0; b < angular.rows(); ++b)
+    omega_cross_joint.row(b) = Vec3(angular.row(b)).cross(Vec3(J.row(b))).transpose();
+  MatX v = W * (linear - omega_cross_joint);
+  if (extra.size() > 0) v += extra;
+  const MatX skinned_angular = W * angular;
+  for (Eigen::Index j = 0; j < v.rows(); ++j)
+    v.row(j) += Vec3(skinned_angular.row(j)).cross(Vec3(X.row(j))).transpose();
+  return v;
+}
+
+// Row r of A (samples × #T): Σ_{a∈t} (m_t/4)‖v_a‖² per tet t, from the nodes' ‖v‖².
+void tetKineticEnergies(const VecX& speed_squared, const MatX4i& tets, const VecX& tet_masses,
+                        MatX& A, Eigen::Index r) {
+  for (Eigen::Index t = 0; t < tets.rows(); ++t) {
+    double sum = 0;
+    for (int a = 0; a < 4; ++a) sum += speed_squared[tets(t, a)];
+    A(r, t) = tet_masses[t] / 4 * sum;
+  }
+}
+
 // samples × #T: Σ_{a∈e} (m_e/4)‖v_a‖² (twice the lumped kinetic energy, J) of each tet for random
 // skinned bone twists plus random subspace velocities.
 MatX inertialSamples(const VolumetricData& data, const SpMat& basis, const VecX& tet_masses,
                      int samples, std::uint64_t seed) {
   const MatX& W = data.templ->fields.weights;  // #N × bones
-  const int B = int(W.cols()), H = int(basis.cols()), N = data.numNodes();
+  const int B = int(W.cols()), H = int(basis.cols());
   const MatX4i& tets = data.templ->mesh.tets;
   const int T = int(tets.rows());
-  const MatX X = data.rest_nodes;
-  const MatX J = data.rest_joints;
   SampleRandom random(seed);
   struct Velocities {
     MatX bone_linear, bone_angular, handles;  // B × 3, B × 3, H × 3
@@ -393,23 +417,9 @@ MatX inertialSamples(const VolumetricData& data, const SpMat& basis, const VecX&
   MatX A(samples, T);
   parallelFor(samples, [&](int s) {
     const Velocities& d = draws[size_t(s)];
-    // v_j = Σ_b w_jb (v_b + ω_b × (X̄_j − J_b)) + Σ_h φ_h(j) ż_h
-    //     = (W v)_j + (W ω)_j × X̄_j − (W (ω × J))_j + (Φ ż)_j.
-    MatX omega_cross_joint(B, 3);
-    for (int b = 0; b < B; ++b)
-      omega_cross_joint.row(b) = Vec3(d.bone_angular.row(b)).cross(Vec3(J.row(b))).transpose();
-    const MatX skinned_angular = W * d.bone_angular;
-    MatX v = W * (d.bone_linear - omega_cross_joint) + basis * d.handles;
-    VecX speed_squared(N);
-    for (int j = 0; j < N; ++j) {
-      const Vec3 vj = Vec3(v.row(j)) + Vec3(skinned_angular.row(j)).cross(Vec3(X.row(j)));
-      speed_squared[j] = vj.squaredNorm();
-    }
-    for (int t = 0; t < T; ++t) {
-      double sum = 0;
-      for (int a = 0; a < 4; ++a) sum += speed_squared[tets(t, a)];
-      A(s, t) = tet_masses[t] / 4 * sum;
-    }
+    const MatX v = skinnedBoneVelocities(W, data.rest_nodes, data.rest_joints, d.bone_linear,
+                                         d.bone_angular, MatX(basis * d.handles));
+    tetKineticEnergies(v.rowwise().squaredNorm(), tets, tet_masses, A, s);
   });
   return A;
 }
@@ -429,7 +439,6 @@ MatX rigidMotionRows(const VolumetricData& data, const std::vector<int>& parents
   const int B = int(W.cols()), N = data.numNodes(), D = 3 + 3 * B;
   const MatX4i& tets = data.templ->mesh.tets;
   const int T = int(tets.rows());
-  const MatX3& X = data.rest_nodes;
   const MatX3& J = data.rest_joints;
   // Per articulated DoF k: each bone's joint velocity and angular velocity (B × 6).
   std::vector<MatX> bone_motion(size_t(D), MatX::Zero(B, 6));
@@ -446,22 +455,12 @@ MatX rigidMotionRows(const VolumetricData& data, const std::vector<int>& parents
       m.row(b).head<3>() = m.row(p).head<3>() + omega.cross(Vec3(J.row(b) - J.row(p))).transpose();
     }
   }
-  // Node velocities per DoF (N × 3 each): v_j = Σ_b w_jb (v_b + ω_b × (X̄_j − J_b)).
-  std::vector<MatX3> velocity(static_cast<size_t>(D));
+  // Node velocities per DoF (N × 3 each).
+  std::vector<MatX> velocity(static_cast<size_t>(D));
   parallelFor(D, [&](int k) {
     const MatX& m = bone_motion[size_t(k)];
-    MatX3 v(N, 3);
-    for (int j = 0; j < N; ++j) {
-      Vec3 vj = Vec3::Zero();
-      for (int b = 0; b < B; ++b)
-        if (W(j, b) != 0.0) {
-          const Vec3 omega = m.row(b).tail<3>().transpose();
-          vj += W(j, b) * (Vec3(m.row(b).head<3>().transpose()) +
-                           omega.cross(Vec3(X.row(j) - J.row(b))));
-        }
-      v.row(j) = vj.transpose();
-    }
-    velocity[size_t(k)] = v;
+    velocity[size_t(k)] =
+        skinnedBoneVelocities(W, data.rest_nodes, J, m.leftCols(3), m.rightCols(3));
   });
   VecX node_mass = VecX::Zero(N);
   for (int t = 0; t < T; ++t)
@@ -483,15 +482,10 @@ MatX rigidMotionRows(const VolumetricData& data, const std::vector<int>& parents
   MatX A(Eigen::Index(motions.size()), T);
   parallelFor(int(motions.size()), [&](int r) {
     const auto [i, code] = motions[size_t(r)];
-    MatX3 v = velocity[size_t(i)];
+    MatX v = velocity[size_t(i)];
     if (code >= 0) v += velocity[size_t(code)];
     if (code <= -2) v -= velocity[size_t(-2 - code)];
-    const VecX speed_squared = v.rowwise().squaredNorm();
-    for (int t = 0; t < T; ++t) {
-      double sum = 0;
-      for (int a = 0; a < 4; ++a) sum += speed_squared[tets(t, a)];
-      A(r, t) = tet_masses[t] / 4 * sum;
-    }
+    tetKineticEnergies(v.rowwise().squaredNorm(), tets, tet_masses, A, r);
   });
   return A;
 }

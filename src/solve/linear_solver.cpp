@@ -144,9 +144,14 @@ class DenseCholeskySolver final : public LinearSolver {
     return pivots.minCoeff() > std::sqrt(kRelativePivotFloor) * pivots.maxCoeff();
   }
 
-  // Iterative refinement of the float solve against the double matrix: x ← x + M⁻¹(b − A x)
-  // until the residual is at double round-off (relative to |b| + ‖A‖ |x|); false (b kept) if it
-  // stops shrinking first.
+  // Iterative refinement of the float solve against the double matrix, x ← x + M⁻¹(b − A x),
+  // run to convergence: while each step at least halves the residual. It then sits at the
+  // round-off of the residual's own evaluation, as a double solve does (within ~2.5× of the
+  // double factor's residual on random SPD systems up to condition 1e6 and n = 405). A rule that
+  // stopped at a fixed threshold (n ε ‖A‖ |x|) stopped early, anywhere up to ~400× above the
+  // double solve's residual depending on the float rounding, hence on the build's SIMD width.
+  // The best iterate is kept; false (b kept) if it stalls above round-off: the double factor
+  // takes over.
   bool refine(VecX& b) const {
     const auto A = dense_.selfadjointView<Eigen::Lower>();
     refined_ = b;
@@ -155,23 +160,25 @@ class DenseCholeskySolver final : public LinearSolver {
     for (int k = 0; k < kMaxRefinements; ++k) {
       residual_.noalias() = b - A * refined_;
       const double r = residual_.lpNorm<Eigen::Infinity>();
-      const double scale = b.lpNorm<Eigen::Infinity>() +
-                           double(dense_.rows()) * largest_diagonal_ *
-                               refined_.lpNorm<Eigen::Infinity>();
       if (!std::isfinite(r)) return false;
-      if (r <= kRefinedResidual * scale) {
-        b = refined_;
-        return true;
+      if (r < previous) {
+        best_ = refined_;
+        best_residual_ = r;
       }
-      if (!(r < 0.5 * previous)) return false;
+      if (r == 0.0 || !(r < 0.5 * previous)) break;  // converged: no longer halving
       previous = r;
       preconditionInPlace(residual_);
       refined_ += residual_;
     }
-    return false;
+    const double scale = b.lpNorm<Eigen::Infinity>() + double(dense_.rows()) * largest_diagonal_ *
+                                                           best_.lpNorm<Eigen::Infinity>();
+    if (!(best_residual_ <= kRoundOffResidual * scale)) return false;
+    b = best_;
+    return true;
   }
-  static constexpr int kMaxRefinements = 12;
-  static constexpr double kRefinedResidual = 1e-15;
+  static constexpr int kMaxRefinements = 16;
+  // A converged residual above this fraction of |b| + n ‖A‖ |x| is no double-accuracy solve.
+  static constexpr double kRoundOffResidual = 1e-15;
 
   MatX dense_;
   double largest_diagonal_ = 0.0;
@@ -181,7 +188,8 @@ class DenseCholeskySolver final : public LinearSolver {
   bool has_factor_ = false;
   mutable Eigen::MatrixXf float_factor_;  // the double L in single precision (empty: not made)
   mutable Eigen::VectorXf float_rhs_;
-  mutable VecX refined_, residual_;
+  mutable VecX refined_, residual_, best_;
+  mutable double best_residual_ = 0.0;
 };
 
 /// Eigen's simplicial LLᵀ with the permuted copy P A Pᵀ kept between factorizations: Eigen's own

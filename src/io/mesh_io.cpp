@@ -5,18 +5,17 @@
 
 #include <algorithm>
 #include <cctype>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <fstream>
 #include <limits>
 #include <sstream>
 #include <vector>
 
 #include "flsh/core/error.h"
 #include "flsh/io/atomic_file.h"
+#include "flsh/io/input_file.h"
 
 namespace flsh::io {
 namespace {
@@ -85,17 +84,6 @@ void putNumber(std::string& out, double d) {
 
 // ---------------------------------------------------------------------------------------
 // Reading.
-
-std::string readWholeFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    throw FileError("readMesh: cannot open '" + path + "' for reading: " + std::strerror(errno));
-  }
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  if (in.bad()) throw FileError("readMesh: read error in '" + path + "'");
-  return buffer.str();
-}
 
 [[noreturn]] void malformed(const std::string& path, const std::string& what) {
   throw InputError("readMesh('" + path + "'): " + what);
@@ -395,6 +383,9 @@ void readPly(const std::string& path, const std::string& data, MatX3& V, MatX3i&
   for (const PlyElement& element : elements) {
     const bool is_vertex = &element == vertex_element;
     const bool is_face = &element == face_element;
+    // An element without properties takes no bytes: its count (unbounded by the file size)
+    // is not iterated.
+    if (element.properties.empty()) continue;
     for (long long row = 0; row < element.count; ++row) {
       const std::string where = element.name + " " + std::to_string(row);
       for (int p = 0; p < int(element.properties.size()); ++p) {
@@ -602,7 +593,8 @@ void writeObj(const std::string& path, const Eigen::Ref<const MatX3>& V,
 }
 
 void readMesh(const std::string& path, MatX3& V, MatX3i& F) {
-  const std::string data = readWholeFile(path);
+  // A FIFO, directory or device is refused (InputError), never opened.
+  const std::string data = readRegularFileText(path, "a PLY or OBJ mesh file");
   // PLY is recognised by its magic line whatever the extension; OBJ has none.
   const bool is_ply =
       data.compare(0, 3, "ply") == 0 && (data.size() == 3 || data[3] == '\n' || data[3] == '\r');

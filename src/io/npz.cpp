@@ -10,13 +10,12 @@
 #include <cmath>
 #include <cstring>
 #include <ctime>
-#include <filesystem>
-#include <fstream>
 #include <limits>
-#include <sstream>
 
 #include "flsh/core/error.h"
 #include "flsh/io/atomic_file.h"
+#include "flsh/io/input_file.h"
+#include "npy_format.h"
 
 #if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
 #error \
@@ -27,359 +26,8 @@ namespace flsh::io {
 
 namespace {
 
-const char kNpyMagic[] = "\x93NUMPY";
-constexpr size_t kNpyMagicSize = 6;
-
-// ---------------------------------------------------------------------------------------------
-// dtypes
-
-/// A dtype flsh understands: kind 'f' (float), 'i' (signed), 'u' (unsigned), 'b' (bool),
-/// 'U' (UTF-32 string), 'S' (byte string); `itemsize` in bytes.
-struct DtypeInfo {
-  bool supported = false;
-  char kind = 0;
-  long itemsize = 0;
-  std::string canonical;  ///< e.g. "<f8", "|u1", "<U6"
-};
-
-DtypeInfo parseDtype(const std::string& descr) {
-  DtypeInfo info;
-  if (descr.size() < 3) return info;
-  char order = descr[0];
-  const char kind = descr[1];
-  long count = 0;
-  for (size_t i = 2; i < descr.size(); ++i) {
-    if (!std::isdigit(static_cast<unsigned char>(descr[i]))) return info;
-    count = count * 10 + (descr[i] - '0');
-    if (count > (1L << 30)) return info;
-  }
-  if (order == '=') order = '<';  // native order on a little-endian host
-  auto accept = [&](long itemsize, const std::string& canonical) {
-    info.supported = true;
-    info.kind = kind;
-    info.itemsize = itemsize;
-    info.canonical = canonical;
-  };
-  const std::string bytes = std::to_string(count);
-  switch (kind) {
-    case 'f':
-      if (order == '<' && (count == 8 || count == 4)) accept(count, "<f" + bytes);
-      break;
-    case 'i':
-      if (order == '<' && (count == 8 || count == 4)) accept(count, "<i" + bytes);
-      break;
-    case 'u':
-      if (order == '<' && (count == 8 || count == 4)) accept(count, "<u" + bytes);
-      if (count == 1 && (order == '|' || order == '<')) accept(1, "|u1");
-      break;
-    case 'b':
-      if (count == 1 && (order == '|' || order == '<')) accept(1, "|b1");
-      break;
-    case 'U':
-      if (order == '<' || (order == '|' && count == 0)) accept(4 * count, "<U" + bytes);
-      break;
-    case 'S':
-      if (order == '|' || order == '<') accept(count, "|S" + bytes);
-      break;
-    default:
-      break;
-  }
-  return info;
-}
-
-std::string unsupportedDtypeMessage(const std::string& descr) {
-  std::string msg = "unsupported dtype '" + descr +
-                    "' (supported: <f8 <f4 <i8 <i4 <u8 <u4 |u1 |b1 and strings <U… |S…)";
-  if (descr == "|O")
-    msg +=
-        "; object arrays hold pickled Python objects (e.g. scipy.sparse or chumpy arrays): "
-        "convert an SMPL .pkl with tools/smpl_pkl_to_npz.py";
-  return msg;
-}
-
-// ---------------------------------------------------------------------------------------------
-// .npy header: a Python dict literal such as
-//   {'descr': '<f8', 'fortran_order': False, 'shape': (6890, 3), }
-
-struct NpyHeader {
-  std::string descr;
-  bool fortran_order = false;
-  std::vector<long> shape;
-};
-
-class HeaderParser {
- public:
-  explicit HeaderParser(const std::string& text) : s_(text) {}
-
-  NpyHeader parse() {
-    NpyHeader h;
-    bool have_descr = false, have_order = false, have_shape = false;
-    expect('{');
-    while (true) {
-      skipSpace();
-      if (peek() == '}') break;
-      const std::string key = parseString();
-      expect(':');
-      skipSpace();
-      if (key == "descr") {
-        if (peek() == '[') {
-          skipBalanced();  // structured dtype: a list of fields
-          h.descr = "structured";
-        } else {
-          h.descr = parseString();
-        }
-        have_descr = true;
-      } else if (key == "fortran_order") {
-        h.fortran_order = parseBool();
-        have_order = true;
-      } else if (key == "shape") {
-        h.shape = parseShape();
-        have_shape = true;
-      } else {
-        skipValue();
-      }
-      skipSpace();
-      if (peek() == ',') {
-        ++pos_;
-        continue;
-      }
-      skipSpace();
-      if (peek() != '}') fail("expected ',' or '}'");
-    }
-    if (!have_descr || !have_order || !have_shape)
-      fail("missing one of the keys 'descr', 'fortran_order', 'shape'");
-    return h;
-  }
-
- private:
-  [[noreturn]] void fail(const std::string& what) const {
-    throw InputError("malformed .npy header (" + what + " at character " + std::to_string(pos_) +
-                     "): " + s_);
-  }
-  char peek() const { return pos_ < s_.size() ? s_[pos_] : '\0'; }
-  void skipSpace() {
-    while (pos_ < s_.size() && std::isspace(static_cast<unsigned char>(s_[pos_]))) ++pos_;
-  }
-  void expect(char c) {
-    skipSpace();
-    if (peek() != c) fail(std::string("expected '") + c + "'");
-    ++pos_;
-  }
-  std::string parseString() {
-    skipSpace();
-    const char quote = peek();
-    if (quote != '\'' && quote != '"') fail("expected a string");
-    const size_t end = s_.find(quote, pos_ + 1);
-    if (end == std::string::npos) fail("unterminated string");
-    std::string out = s_.substr(pos_ + 1, end - pos_ - 1);
-    pos_ = end + 1;
-    return out;
-  }
-  bool parseBool() {
-    if (s_.compare(pos_, 4, "True") == 0) {
-      pos_ += 4;
-      return true;
-    }
-    if (s_.compare(pos_, 5, "False") == 0) {
-      pos_ += 5;
-      return false;
-    }
-    fail("expected True or False");
-  }
-  std::vector<long> parseShape() {
-    expect('(');
-    std::vector<long> shape;
-    while (true) {
-      skipSpace();
-      if (peek() == ')') {
-        ++pos_;
-        break;
-      }
-      if (!std::isdigit(static_cast<unsigned char>(peek()))) fail("expected a dimension");
-      long value = 0;
-      while (std::isdigit(static_cast<unsigned char>(peek()))) {
-        value = value * 10 + (s_[pos_++] - '0');
-        if (value > (1L << 48)) fail("dimension too large");
-      }
-      if (peek() == 'L') ++pos_;  // Python 2 long literal, e.g. (6890L, 3L)
-      shape.push_back(value);
-      skipSpace();
-      if (peek() == ',') {
-        ++pos_;
-      } else if (peek() != ')') {
-        fail("expected ',' or ')' in shape");
-      }
-    }
-    return shape;
-  }
-  void skipBalanced() {
-    int depth = 0;
-    do {
-      const char c = peek();
-      if (c == '\0') fail("unbalanced brackets");
-      if (c == '\'' || c == '"') {
-        parseString();
-        continue;
-      }
-      if (c == '[' || c == '(' || c == '{') ++depth;
-      if (c == ']' || c == ')' || c == '}') --depth;
-      ++pos_;
-    } while (depth > 0);
-  }
-  void skipValue() {
-    const char c = peek();
-    if (c == '\'' || c == '"') {
-      parseString();
-    } else if (c == '[' || c == '(' || c == '{') {
-      skipBalanced();
-    } else {
-      while (pos_ < s_.size() && s_[pos_] != ',' && s_[pos_] != '}') ++pos_;
-    }
-  }
-
-  const std::string& s_;
-  size_t pos_ = 0;
-};
-
-long elementCount(const std::vector<long>& shape) {
-  long n = 1;
-  for (long d : shape) {
-    if (d < 0) throw InputError("negative dimension in shape " + shapeString(shape));
-    if (d != 0 && n > std::numeric_limits<long>::max() / d)
-      throw InputError("shape " + shapeString(shape) + " is too large");
-    n *= d;
-  }
-  return n;
-}
-
-/// Reorders Fortran-ordered (column-major) elements of `shape` into C (row-major) order.
-std::vector<uint8_t> fortranToC(const std::vector<uint8_t>& in, const std::vector<long>& shape,
-                                long itemsize) {
-  const size_t ndim = shape.size();
-  if (ndim < 2) return in;
-  const long n = elementCount(shape);
-  std::vector<uint8_t> out(in.size());
-  std::vector<long> fstride(ndim);  // element strides of the Fortran layout
-  long stride = 1;
-  for (size_t k = 0; k < ndim; ++k) {
-    fstride[k] = stride;
-    stride *= shape[k];
-  }
-  std::vector<long> index(ndim, 0);  // C-order multi-index of element c
-  long source = 0;
-  for (long c = 0; c < n; ++c) {
-    std::memcpy(&out[size_t(c * itemsize)], &in[size_t(source * itemsize)], size_t(itemsize));
-    for (size_t k = ndim; k-- > 0;) {  // odometer increment, last axis fastest
-      if (++index[k] < shape[k]) {
-        source += fstride[k];
-        break;
-      }
-      source -= fstride[k] * (shape[k] - 1);
-      index[k] = 0;
-    }
-  }
-  return out;
-}
-
-/// Parses one `.npy` blob. Unsupported dtypes are kept with empty bytes (reported on access).
-/// The blob is consumed: its data bytes become the array's without a copy.
-NpyArray parseNpy(std::vector<uint8_t>&& blob) {
-  if (blob.size() < kNpyMagicSize + 4 || std::memcmp(blob.data(), kNpyMagic, kNpyMagicSize) != 0)
-    throw InputError("not a .npy array (missing the \\x93NUMPY magic)");
-  const int major = blob[6];
-  size_t header_len = 0, header_start = 0;
-  if (major == 1) {
-    header_len = size_t(blob[8]) | (size_t(blob[9]) << 8);
-    header_start = 10;
-  } else if (major == 2 || major == 3) {
-    if (blob.size() < 12) throw InputError("truncated .npy header");
-    header_len = size_t(blob[8]) | (size_t(blob[9]) << 8) | (size_t(blob[10]) << 16) |
-                 (size_t(blob[11]) << 24);
-    header_start = 12;
-  } else {
-    throw InputError("unsupported .npy format version " + std::to_string(major) + "." +
-                     std::to_string(int(blob[7])));
-  }
-  if (blob.size() < header_start + header_len)
-    throw InputError("truncated .npy header (" + std::to_string(header_len) +
-                     " header bytes announced, " + std::to_string(blob.size() - header_start) +
-                     " present)");
-  const std::string text(reinterpret_cast<const char*>(&blob[header_start]), header_len);
-  const NpyHeader header = HeaderParser(text).parse();
-
-  NpyArray array;
-  array.shape = header.shape;
-  const DtypeInfo dtype = parseDtype(header.descr);
-  if (!dtype.supported) {
-    array.dtype = header.descr;
-    return array;
-  }
-  array.dtype = dtype.canonical;
-  const long count = elementCount(header.shape);
-  const size_t data_start = header_start + header_len;
-  const size_t expected = size_t(count) * size_t(dtype.itemsize);
-  const size_t actual = blob.size() - data_start;
-  if (actual != expected)
-    throw InputError("data size " + std::to_string(actual) + " bytes does not match the header (" +
-                     header.descr + " " + shapeString(header.shape) + " needs " +
-                     std::to_string(expected) + " bytes)");
-  blob.erase(blob.begin(), blob.begin() + long(data_start));  // a move, not a second buffer
-  array.bytes = std::move(blob);
-  if (header.fortran_order) array.bytes = fortranToC(array.bytes, array.shape, dtype.itemsize);
-  return array;
-}
-
-/// The `.npy` bytes of an array (format 1.0, header padded so the data starts 64-aligned).
-std::vector<uint8_t> serializeNpy(const NpyArray& array) {
-  std::ostringstream dict;
-  dict << "{'descr': '" << array.dtype << "', 'fortran_order': False, 'shape': (";
-  for (size_t k = 0; k < array.shape.size(); ++k) dict << (k ? ", " : "") << array.shape[k];
-  if (array.shape.size() == 1) dict << ",";
-  dict << "), }";
-  std::string header = dict.str();
-  const size_t prefix = kNpyMagicSize + 2 + 2;
-  const size_t total = ((prefix + header.size() + 1 + 63) / 64) * 64;
-  header.append(total - prefix - header.size() - 1, ' ');
-  header.push_back('\n');
-  if (header.size() > 65535)
-    throw InputError("npz: .npy header of shape " + shapeString(array.shape) + " is too long");
-  std::vector<uint8_t> out;
-  out.reserve(total + array.bytes.size());
-  out.insert(out.end(), kNpyMagic, kNpyMagic + kNpyMagicSize);
-  out.push_back(1);
-  out.push_back(0);
-  out.push_back(uint8_t(header.size() & 0xff));
-  out.push_back(uint8_t(header.size() >> 8));
-  out.insert(out.end(), header.begin(), header.end());
-  out.insert(out.end(), array.bytes.begin(), array.bytes.end());
-  return out;
-}
-
 // ---------------------------------------------------------------------------------------------
 // Reading the archive
-
-std::vector<uint8_t> readWholeFile(const std::string& path) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  const fs::file_status status = fs::status(path, ec);
-  if (!fs::exists(status)) throw FileError(path + ": no such file");
-  if (fs::is_directory(status)) throw FileError(path + ": is a directory, expected an .npz file");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw FileError(path + ": cannot open for reading");
-  // One read of the announced size (byte-wise stream iteration costs ~3 ns per byte: 0.15 s
-  // for a cached avatar), then whatever a growing file appended.
-  const auto size = fs::file_size(path, ec);
-  std::vector<uint8_t> bytes(ec ? 0 : size_t(size));
-  in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size()));
-  bytes.resize(size_t(in.gcount()));
-  if (!in.eof() && in.good()) {
-    char chunk[1 << 16];
-    while (in.read(chunk, sizeof(chunk)) || in.gcount() > 0)
-      bytes.insert(bytes.end(), chunk, chunk + in.gcount());
-  }
-  if (in.bad()) throw FileError(path + ": read error");
-  return bytes;
-}
 
 std::string zipErrorText(zip_error_t* error) {
   const char* text = zip_error_strerror(error);
@@ -469,6 +117,64 @@ std::vector<uint32_t> decodeUtf8(const std::string& s) {
   return out;
 }
 
+/// Reads member `index` of `archive`, which its zip entry announces as `size` bytes and which
+/// can inflate to at most `inflatable` bytes (deflate expands at most ~1032×). Nothing is
+/// allocated on the announcement alone: the first MB is read, the .npy header in it must promise
+/// exactly `size` bytes, and only then does the buffer take min(size, inflatable) (before that
+/// it grows with the data, for headers over a MB). Errors are InputErrors for the caller to
+/// prefix with the file and key.
+std::vector<uint8_t> readMember(zip_t* archive, zip_uint64_t index, zip_uint64_t size,
+                                zip_uint64_t inflatable) {
+  zip_file_t* file = zip_fopen_index(archive, index, 0);
+  if (!file) throw InputError(std::string("cannot open member: ") + zip_strerror(archive));
+  struct Closer {
+    zip_file_t* file;
+    ~Closer() { zip_fclose(file); }
+  } closer{file};
+  auto corrupt = [&]() {
+    throw InputError(std::string("corrupt member (") + zip_file_strerror(file) + ")");
+  };
+  constexpr size_t kFirstChunk = size_t(1) << 20;
+  std::vector<uint8_t> blob(size_t(std::min<zip_uint64_t>(size, kFirstChunk)));
+  size_t filled = 0;
+  bool header_checked = false;
+  while (true) {
+    if (filled == blob.size()) {
+      if (filled >= size) {  // all announced bytes are in: anything more is corruption
+        uint8_t extra[256];
+        const zip_int64_t got = zip_fread(file, extra, sizeof(extra));
+        if (got < 0) corrupt();
+        if (got > 0)
+          throw InputError("corrupt member (more data than the announced " + std::to_string(size) +
+                           " bytes)");
+        break;
+      }
+      const zip_uint64_t grown = header_checked ? std::max<zip_uint64_t>(2 * filled, inflatable)
+                                                : 2 * zip_uint64_t(filled);
+      blob.resize(size_t(std::min<zip_uint64_t>(size, grown)));
+    }
+    const zip_int64_t got = zip_fread(file, blob.data() + filled, blob.size() - filled);
+    if (got < 0) corrupt();
+    if (got == 0) break;
+    filled += size_t(got);
+    NpyLayout layout;
+    if (!header_checked && parseNpyLayout(blob.data(), filled, size_t(size), layout)) {
+      header_checked = true;
+      const size_t promised = layout.data_start + layout.data_bytes;
+      if (layout.dtype.supported && promised != size)
+        throw InputError("data size " + std::to_string(size - layout.data_start) +
+                         " bytes does not match the header (" + layout.header.descr + " " +
+                         shapeString(layout.header.shape) + " needs " +
+                         std::to_string(layout.data_bytes) + " bytes)");
+    }
+  }
+  blob.resize(filled);
+  if (blob.size() != size)
+    throw InputError("truncated member (" + std::to_string(blob.size()) + " of " +
+                     std::to_string(size) + " bytes)");
+  return blob;
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -490,7 +196,19 @@ bool NpyArray::isInteger() const {
 // NpzFile
 
 NpzFile::NpzFile(const std::string& path) : path_(path) {
-  std::vector<uint8_t> bytes = readWholeFile(path);
+  std::vector<uint8_t> bytes = readRegularFileBytes(path, "an .npz file");
+  readArchive(bytes);
+}
+
+NpzFile NpzFile::fromBytes(std::vector<uint8_t> bytes, const std::string& origin) {
+  NpzFile file;
+  file.path_ = origin;
+  file.readArchive(bytes);
+  return file;
+}
+
+void NpzFile::readArchive(std::vector<uint8_t>& bytes) {
+  const std::string& path = path_;
   // libzip would open an empty source as an empty archive; numpy rejects it too.
   if (bytes.empty()) throw InputError(path + ": empty file, not an .npz archive");
   zip_error_t error;
@@ -534,40 +252,13 @@ NpzFile::NpzFile(const std::string& path) : path_(path) {
     if (zip_stat_index(archive, zip_uint64_t(index), 0, &stat) != 0 ||
         !(stat.valid & ZIP_STAT_SIZE))
       throw InputError(where + ": cannot read member size: " + zip_strerror(archive));
-    zip_file_t* file = zip_fopen_index(archive, zip_uint64_t(index), 0);
-    if (!file) throw InputError(where + ": cannot open member: " + zip_strerror(archive));
-    // Trust the announced size only as far as the archive can hold it (stored members are at
-    // most its size; deflate expands at most ~1000×), so a corrupt header cannot trigger a huge
-    // allocation; read straight into the buffer, then make sure nothing follows.
-    std::vector<uint8_t> blob;
-    const zip_uint64_t plausible = zip_uint64_t(bytes.size()) * 1032 + 4096;
-    blob.resize(size_t(std::min<zip_uint64_t>(stat.size, plausible)));
-    size_t filled = 0;
-    while (true) {
-      uint8_t overflow[4096];
-      const bool room = filled < blob.size();
-      const zip_int64_t got = room ? zip_fread(file, blob.data() + filled, blob.size() - filled)
-                                   : zip_fread(file, overflow, sizeof(overflow));
-      if (got < 0) {
-        const std::string text = zip_file_strerror(file);
-        zip_fclose(file);
-        throw InputError(where + ": corrupt member (" + text + ")");
-      }
-      if (got == 0) break;
-      if (!room) {  // more data than announced: keep it for the size check below
-        blob.insert(blob.end(), overflow, overflow + got);
-        filled = blob.size();
-        continue;
-      }
-      filled += size_t(got);
-    }
-    blob.resize(filled);
-    zip_fclose(file);
-    if (blob.size() != stat.size)
-      throw InputError(where + ": truncated member (" + std::to_string(blob.size()) + " of " +
-                       std::to_string(stat.size) + " bytes)");
     try {
-      arrays_[key] = parseNpy(std::move(blob));
+      // What the member's compressed bytes could inflate to (stored: themselves).
+      const zip_uint64_t compressed =
+          stat.valid & ZIP_STAT_COMP_SIZE ? stat.comp_size : zip_uint64_t(bytes.size());
+      const zip_uint64_t inflatable =
+          std::min<zip_uint64_t>(compressed, zip_uint64_t(1) << 50) * 1032 + 4096;
+      arrays_[key] = parseNpy(readMember(archive, zip_uint64_t(index), stat.size, inflatable));
     } catch (const InputError& e) {
       throw InputError(where + ": " + e.what());
     }

@@ -232,6 +232,21 @@ TEST(MeshIo, ReadsForeignBinaryPlyWithFloatCoordinates) {
   EXPECT_NE(message.find(path), std::string::npos) << message;
 }
 
+// An element without properties takes no bytes, so its count is not bounded by the file
+// size: a count of 10^18 was iterated row by row (a hang); it is skipped.
+TEST(MeshIo, PropertylessElementsWithHugeCountsAreSkipped) {
+  const std::string path = test::freshTempDir("mesh_io_propertyless") + "/marker.ply";
+  writeText(path,
+            "ply\nformat ascii 1.0\nelement marker 1000000000000000000\nelement vertex 3\n"
+            "property double x\nproperty double y\nproperty double z\nelement face 1\n"
+            "property list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n3 0 1 2\n");
+  MatX3 V;
+  MatX3i F;
+  readMesh(path, V, F);
+  EXPECT_EQ(V.rows(), 3);
+  EXPECT_EQ(F.rows(), 1);
+}
+
 TEST(MeshIo, ReadsObjIndexFormsAndNegativeIndices) {
   const std::string dir = test::freshTempDir("mesh_io_obj_forms");
   const std::string path = dir + "/forms.obj";
@@ -296,6 +311,33 @@ TEST(MeshIo, RejectsMalformedFilesWithMessages) {
       {"zero.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 0 1 2\n", "bad face vertex"},
       {"badv.obj", "v 0 0\nv 1 0 0\n", "line 1"},
       {"mesh.stl", "solid cube\n", "unknown mesh format"},
+      // Hostile headers and values (issue 23): clean errors, no huge allocation.
+      {"hugefaces.ply",
+       "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
+       "property double z\nelement face 99999999999\nproperty list uchar int vertex_indices\n"
+       "end_header\n0 0 0\n1 0 0\n1 1 0\n3 0 1 2\n",
+       "truncated"},
+      {"overflowcount.ply",
+       "ply\nformat ascii 1.0\nelement vertex 99999999999999999999999\nproperty double x\n"
+       "end_header\n",
+       "expected 'element <name> <count>'"},
+      {"negativecount.ply",
+       "ply\nformat ascii 1.0\nelement vertex -3\nproperty double x\nend_header\n",
+       "expected 'element <name> <count>'"},
+      {"floatindex.ply",
+       "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
+       "property double z\nelement face 1\nproperty list uchar float vertex_indices\n"
+       "end_header\n0 0 0\n1 0 0\n1 1 0\n3 0 1 nan\n",
+       "floating-point item type"},
+      {"hugeindex.ply", ply_header + "0 0 0\n1 0 0\n1 1 0\n3 0 1 99999999999999999999\n",
+       "expected an integer"},
+      {"inf.ply", ply_header + "0 0 0\n1 0 inf\n1 1 0\n3 0 1 2\n", "non-finite"},
+      {"nan.obj", "v 0 0 0\nv 1 nan 0\nv 1 1 0\nf 1 2 3\n", "needs 3 finite coordinates"},
+      {"hugeindex.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 99999999999999999999\n",
+       "bad face vertex"},
+      {"bigindex.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9999999999\n", "too large"},
+      {"negativeindex.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 -99999999999\n",
+       "before the first vertex"},
   };
   for (const Case& c : cases) {
     const std::string path = dir + "/" + c.name;

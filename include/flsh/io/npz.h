@@ -32,7 +32,13 @@ class NpzFile {
   /// Reads the archive. Throws FileError (missing/unreadable) or InputError (not a zip,
   /// truncated, corrupt member, malformed .npy header). A member of unsupported dtype (e.g.
   /// an object array) does not spoil the others: raw() and the conversions throw for it.
+  /// `path` must be a regular file: a FIFO, directory or device is an InputError (never a
+  /// blocking open). Every array's shape is checked against its member's bytes before anything
+  /// is allocated or iterated (an overflowing shape, zero-byte items outnumbering the member's
+  /// bytes or a zip entry announcing more than the header promises are InputErrors).
   explicit NpzFile(const std::string& path);
+  /// The archive held in memory by `bytes`; `origin` stands for the path in messages.
+  static NpzFile fromBytes(std::vector<uint8_t> bytes, const std::string& origin);
 
   const std::string& path() const { return path_; }
   std::vector<std::string> keys() const;
@@ -58,6 +64,9 @@ class NpzFile {
   std::string string(const std::string& key) const;
 
  private:
+  NpzFile() = default;
+  void readArchive(std::vector<uint8_t>& bytes);  ///< libzip reads `bytes` in place
+
   std::string path_;
   std::map<std::string, NpyArray> arrays_;
 };
@@ -68,7 +77,7 @@ class NpzWriter {
   void add(const std::string& key, const double* data, const std::vector<long>& shape);
   void add(const std::string& key, const int64_t* data, const std::vector<long>& shape);
   void add(const std::string& key, const Eigen::Ref<const RowMatX>& matrix);  ///< 2-D float64
-  void add(const std::string& key, const Eigen::Ref<const VecX>& vector);    ///< 1-D float64
+  void add(const std::string& key, const Eigen::Ref<const VecX>& vector);     ///< 1-D float64
   /// Any Eigen matrix or vector (e.g. RowMatX, MatX3, VecX): a compile-time column vector is
   /// written 1-D, anything else 2-D. Without it such calls are ambiguous between the two
   /// Ref overloads above (each Ref<const …> accepts any double expression).
@@ -79,8 +88,8 @@ class NpzWriter {
     else
       add(key, Eigen::Ref<const RowMatX>(values));
   }
-  void addScalar(const std::string& key, double value);                     ///< 0-d float64
-  void addString(const std::string& key, const std::string& value);         ///< 0-d '<U'
+  void addScalar(const std::string& key, double value);              ///< 0-d float64
+  void addString(const std::string& key, const std::string& value);  ///< 0-d '<U'
   /// The arrays collected so far, by key (e.g. to checksum them before saving).
   const std::map<std::string, NpyArray>& arrays() const { return arrays_; }
   /// Writes the archive (deflate-compressed if `compress`), atomically.

@@ -5,13 +5,13 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 
 #include "flsh/core/error.h"
+#include "flsh/io/input_file.h"
 #include "flsh/io/motion.h"
 
 namespace flsh {
@@ -60,9 +60,88 @@ std::string joinNames(const std::vector<std::string>& names) {
   return text;
 }
 
+// Scene files nest a few levels ("avatars": [{"path": {"offsets": [[…]]}}]); 64 is far beyond
+// any scene and far below what overflows a stack. nlohmann's dump() and copies recurse once per
+// level: 200 000 nested '[' crashed the reader when it printed the value in a message.
+constexpr int kMaxJsonDepth = 64;
+
+/// Line and column (1-based) of byte `byte` of `text`, for editors.
+std::string lineColumn(const std::string& text, size_t byte) {
+  byte = std::min(byte, text.size());
+  size_t line = 1, column = 1;
+  for (size_t k = 0; k + 1 < byte; ++k) {
+    if (text[k] == '\n') {
+      ++line;
+      column = 1;
+    } else {
+      ++column;
+    }
+  }
+  return "line " + std::to_string(line) + ", column " + std::to_string(column);
+}
+
+/// Throws InputError when arrays and objects nest deeper than kMaxJsonDepth: a scan of the
+/// brackets outside strings, before nlohmann builds (and later prints or copies) the tree.
+void checkNestingDepth(const std::string& text, const std::string& origin) {
+  int depth = 0;
+  bool in_string = false;
+  for (size_t k = 0; k < text.size(); ++k) {
+    const char c = text[k];
+    if (in_string) {
+      if (c == '\\')
+        ++k;  // the escaped character cannot end the string
+      else if (c == '"')
+        in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxJsonDepth)
+        throw InputError(origin + ": JSON nested deeper than " + std::to_string(kMaxJsonDepth) +
+                         " levels at byte " + std::to_string(k) + " (" + lineColumn(text, k + 1) +
+                         "); scene files nest a few levels");
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;  // unbalanced closers are nlohmann's to report
+    }
+  }
+}
+
+/// Appends compact JSON text of `value` to `out` (as dump() writes it) but stops adding
+/// elements, and cuts strings, once `out` holds `limit` characters: a message never renders a
+/// whole value of arbitrary size.
+void appendShortDump(const json& value, std::string& out, size_t limit) {
+  const auto quoted = [limit](const std::string& s) {
+    // A cut may split a UTF-8 sequence: replace it rather than throw.
+    return json(s.size() > limit ? s.substr(0, limit) : s)
+        .dump(-1, ' ', false, json::error_handler_t::replace);
+  };
+  if (value.is_array()) {
+    out += '[';
+    for (size_t k = 0; k < value.size() && out.size() < limit; ++k) {
+      if (k > 0) out += ',';
+      appendShortDump(value[k], out, limit);
+    }
+    out += ']';
+  } else if (value.is_object()) {
+    out += '{';
+    bool first = true;
+    for (auto it = value.begin(); it != value.end() && out.size() < limit; ++it) {
+      if (!first) out += ',';
+      first = false;
+      out += quoted(it.key()) + ':';
+      appendShortDump(it.value(), out, limit);
+    }
+    out += '}';
+  } else if (value.is_string()) {
+    out += quoted(value.get_ref<const std::string&>());
+  } else {
+    out += value.dump();
+  }
+}
+
 // A short rendering of a JSON value for messages ("string \"abc\"", "number -1").
 std::string describe(const json& value) {
-  std::string text = value.dump();
+  std::string text;
+  appendShortDump(value, text, 41);
   if (text.size() > 40) text = text.substr(0, 37) + "...";
   return std::string(value.type_name()) + " " + text;
 }
@@ -203,10 +282,9 @@ class SceneReader {
 
   SceneSpec read(const json& root, const SceneOverrides& overrides) const {
     if (!root.is_object()) fail("(top level)", "expected a JSON object, got " + describe(root));
-    checkKeys(
-        root, "",
-        {"time_step", "duration", "avatar_contact", "newton", "avatars", "colliders", "outputs",
-         "cache_dir", "use_cache"});
+    checkKeys(root, "",
+              {"time_step", "duration", "avatar_contact", "newton", "avatars", "colliders",
+               "outputs", "cache_dir", "use_cache"});
     SceneSpec scene;
     if (root.contains("time_step"))
       scene.time_step = toRange(root["time_step"], "time_step", 0.0, 1.0, true, "s");
@@ -289,8 +367,8 @@ class SceneReader {
     requireObject(node, path);
     checkKeys(node, path,
               {"max_iterations", "gradient_tolerance", "step_tolerance", "linear_solver",
-               "soft_tissue_gradient_tolerance", "reduced_gradient_tolerance",
-               "soft_tissue_lagged", "reduced_lagged"});
+               "soft_tissue_gradient_tolerance", "reduced_gradient_tolerance", "soft_tissue_lagged",
+               "reduced_lagged"});
     NewtonOptions newton;
     if (node.contains("max_iterations"))
       newton.max_iterations =
@@ -355,8 +433,7 @@ class SceneReader {
     checkKeys(node, path,
               {"name", "model", "vertices", "betas", "simulation", "resolution", "materials",
                "handles", "elastic_cubature", "inertial_cubature", "surface_partition_of_unity",
-               "motion", "motion_seconds",
-               "offset", "yaw_degrees", "options"});
+               "motion", "motion_seconds", "offset", "yaw_degrees", "options"});
     AvatarSpec avatar;
     avatar.name = node.contains("name") ? toName(node["name"], child(path, "name"))
                                         : "avatar" + std::to_string(index);
@@ -416,10 +493,12 @@ class SceneReader {
       if (avatar.simulation != "rom") fail(p, only_rom);
       const int points = toInt(node[key], p);
       if (points < 0 || points > 10000000)
-        fail(p, "expected a number of sample tets in [0, 10000000] (0 = off: exact "
-                "integration), got " + std::to_string(points));
+        fail(p,
+             "expected a number of sample tets in [0, 10000000] (0 = off: exact "
+             "integration), got " +
+                 std::to_string(points));
       (std::string(key) == "elastic_cubature" ? avatar.elastic_cubature
-                                               : avatar.inertial_cubature) = points;
+                                              : avatar.inertial_cubature) = points;
     }
     if (node.contains("surface_partition_of_unity")) {
       const std::string p = child(path, "surface_partition_of_unity");
@@ -616,24 +695,13 @@ class SceneReader {
 
 SceneSpec parseSceneJson(const std::string& text, const std::string& origin,
                          const std::string& base_dir, const SceneOverrides& overrides) {
+  checkNestingDepth(text, origin);
   json root;
   try {
     root = json::parse(text);
   } catch (const json::parse_error& e) {
-    // Line and column of the byte nlohmann stopped at, for editors.
-    const size_t byte = std::min<size_t>(e.byte, text.size());
-    size_t line = 1, column = 1;
-    for (size_t k = 0; k + 1 < byte; ++k) {
-      if (text[k] == '\n') {
-        ++line;
-        column = 1;
-      } else {
-        ++column;
-      }
-    }
-    throw InputError(origin + ": malformed JSON at byte " + std::to_string(e.byte) + " (line " +
-                     std::to_string(line) + ", column " + std::to_string(column) +
-                     "): " + e.what());
+    throw InputError(origin + ": malformed JSON at byte " + std::to_string(e.byte) + " (" +
+                     lineColumn(text, e.byte) + "): " + e.what());
   } catch (const json::exception& e) {
     // E.g. a number too large for a double (out_of_range.406).
     throw InputError(origin + ": invalid JSON: " + e.what());
@@ -645,14 +713,11 @@ SceneSpec parseSceneJson(const std::string& text, const std::string& origin,
 
 SceneSpec loadSceneFile(const std::string& path, const SceneOverrides& overrides) {
   std::error_code ec;
-  if (!fs::is_regular_file(path, ec)) throw FileError(path + ": scene file not found");
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw FileError(path + ": cannot open the scene file for reading");
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) throw FileError(path + ": read error");
+  if (!fs::exists(path, ec)) throw FileError(path + ": scene file not found");
+  // A FIFO, directory or device is refused (InputError), never opened.
+  const std::string text = io::readRegularFileText(path, "a JSON scene file");
   const fs::path parent = fs::path(path).parent_path();
-  return parseSceneJson(text.str(), path, parent.empty() ? "." : parent.string(), overrides);
+  return parseSceneJson(text, path, parent.empty() ? "." : parent.string(), overrides);
 }
 
 SceneSpec defaultScene(const SceneOverrides& overrides) {

@@ -348,7 +348,7 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
   EXPECT_EQ(fem.max_cg_iterations, 40);
   EXPECT_EQ(fem.refactor_after_cg_iterations, 15);
   EXPECT_FALSE(fem.fast_preconditioner);
-  EXPECT_TRUE(fem.enabled);            // not given: the FEM solver's default
+  EXPECT_TRUE(fem.enabled);  // not given: the FEM solver's default
   EXPECT_TRUE(fem.adaptive_forcing);
   EXPECT_DOUBLE_EQ(fem.reuse_hessian_below, softTissueNewtonDefaults().lagged.reuse_hessian_below);
   EXPECT_GT(fem.reuse_hessian_below, 0.0);
@@ -455,6 +455,52 @@ TEST(SceneFile, MalformedJsonNamesTheBytePosition) {
   const std::string m = inputError("{\"avatars\": [{}],\n \"duration\": }");
   EXPECT_THAT(m, HasSubstr("scene.json: malformed JSON at byte 32 (line 2, column 14)"));
   EXPECT_THAT(inputError(""), HasSubstr("scene.json: malformed JSON at byte"));
+}
+
+// 200 000 nested '[' overflowed the stack (nlohmann's dump() of the value in the message):
+// nesting beyond 64 levels is refused before nlohmann sees the text, wherever it is.
+TEST(SceneFile, DeepNestingIsAnInputErrorNotAStackOverflow) {
+  const std::string deep = std::string(200000, '[') + std::string(200000, ']');
+  const std::string deep_objects = [] {
+    std::string text;
+    for (int k = 0; k < 100000; ++k) text += "{\"a\":";
+    return text + "1" + std::string(100000, '}');
+  }();
+  for (const std::string& text :
+       {deep, "{\"avatars\": " + deep + "}", deep_objects,
+        "{\"avatars\": [{}], \"duration\": " + std::string(65, '[') + "}"}) {
+    const std::string message = inputError(text);
+    EXPECT_THAT(message, HasSubstr("scene.json: JSON nested deeper than 64 levels at byte"));
+    EXPECT_LT(message.size(), 200u);
+  }
+  // From a file too (the path is named), and brackets inside strings do not count.
+  const std::string path = test::freshTempDir("scene_deep") + "/deep.json";
+  std::ofstream(path) << deep;
+  EXPECT_THAT(messageOf<InputError>([&] { loadSceneFile(path); }),
+              HasSubstr(path + ": JSON nested deeper than 64 levels at byte 64 (line 1, "
+                               "column 65)"));
+  const std::string brackets = std::string(1000, '[') + "{\\\"]";  // [[…[{\"] in JSON
+  const SceneSpec in_string =
+      parse("{\"avatars\": [{}], \"outputs\": {\"dir\": \"" + brackets + "\"}}");
+  EXPECT_EQ(in_string.outputs.dir, std::string(1000, '[') + "{\"]");
+  // 64 levels are fine as far as nesting goes (the value is still of the wrong type).
+  EXPECT_THAT(inputError("{\"avatars\": [{}], \"duration\": " + std::string(63, '[') +
+                         std::string(63, ']') + "}"),
+              HasSubstr("duration: expected a number, got array [[[["));
+}
+
+// A wrong value is shown in 40 characters, however large (the whole dump was built first).
+TEST(SceneFile, WrongValuesAreShownCutShort) {
+  std::string big = "[";
+  for (int k = 0; k < 100000; ++k) big += (k ? "," : "") + std::to_string(k);
+  big += "]";
+  const std::string message = inputError("{\"avatars\": [{}], \"duration\": " + big + "}");
+  EXPECT_THAT(message, HasSubstr("duration: expected a number, got array [0,1,2,3,4,5,6,7,8,"));
+  EXPECT_LT(message.size(), 200u);
+  EXPECT_THAT(inputError("{\"avatars\": [{}], \"duration\": \"" + std::string(100000, 'x') + "\"}"),
+              HasSubstr("got string \"xxxxxxxx"));
+  EXPECT_THAT(inputError(R"({"avatars": [{}], "duration": {"a": [1, 2], "b": "c"}})"),
+              HasSubstr(R"(got object {"a":[1,2],"b":"c"})"));
 }
 
 TEST(SceneFile, RelativePathsResolveAgainstTheSceneFolder) {

@@ -1,4 +1,5 @@
 """Motions, meshes and pictures through the Python API: round trips and input checks."""
+import os
 import re
 
 import numpy as np
@@ -141,3 +142,19 @@ def test_render_options_are_checked():
         flsh.RenderOptions(frame=[0.0, 1.0, 2.0])
     with pytest.raises(ValueError, match="base_color"):
         flsh.RenderOptions(base_color=[0.0, 2.0, 0.0])
+
+
+def test_hostile_input_files_raise_clean_errors(tmp_path):
+    # 200 000 nested '[' overflowed the stack of the scene reader (issue 23): now a ValueError
+    # naming the file, raised before the JSON is parsed.
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 200000 + "]" * 200000)
+    with pytest.raises(ValueError, match=re.escape(str(deep)) + ".*nested deeper than 64"):
+        flsh.load_scene_file(deep)
+    # A FIFO at an input path is refused without opening it (an open would block forever).
+    fifo = tmp_path / "motion.npz"
+    os.mkfifo(fifo)
+    with pytest.raises(ValueError, match="is a FIFO"):
+        flsh.load_motion(fifo)
+    with pytest.raises(ValueError, match="is a FIFO"):
+        flsh.load_scene_file(fifo)

@@ -1,5 +1,6 @@
 #include "flsh/volume/avatar_cache.h"
 
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 
@@ -32,6 +33,13 @@ void checkKey(const std::string& key) {
                      "' is not a lower-case hex digest (use Sha256::hexDigest())");
 }
 
+/// A stored version number as text (any finite double: a corrupt file may hold 1e300).
+std::string versionText(double version) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.17g", version);
+  return text;
+}
+
 }  // namespace
 
 std::string npzContentChecksum(const std::map<std::string, io::NpyArray>& arrays) {
@@ -46,7 +54,8 @@ std::string npzContentChecksum(const std::map<std::string, io::NpyArray>& arrays
   return h.hexDigest();
 }
 
-AvatarCache::AvatarCache(std::string dir) : dir_(dir.empty() ? defaultDirectory() : std::move(dir)) {}
+AvatarCache::AvatarCache(std::string dir)
+    : dir_(dir.empty() ? defaultDirectory() : std::move(dir)) {}
 
 std::string AvatarCache::defaultDirectory() {
   if (const char* d = std::getenv("FLSH_CACHE_DIR"); d && *d) return d;
@@ -60,6 +69,22 @@ std::string AvatarCache::pathFor(const std::string& key) const {
   return (std::filesystem::path(dir_) / (key + ".npz")).string();
 }
 
+std::string AvatarCache::entryProblem(const io::NpzFile& file, const std::string& key) {
+  for (const char* header : {"__format__", "__version__", "__key__", "__checksum__"})
+    if (!file.has(header)) return std::string("has no '") + header + "' entry";
+  if (file.string("__format__") != kFormatName)
+    return "is not an flsh avatar cache file (format '" + file.string("__format__") + "')";
+  const double version = file.scalar("__version__");
+  if (version != kFormatVersion)
+    return "is stale: format version " + versionText(version) + ", expected " +
+           std::to_string(kFormatVersion);
+  if (file.string("__key__") != key)
+    return "was stored under another key (" + file.string("__key__") + ")";
+  if (file.string("__checksum__") != npzContentChecksum(file.arrays()))
+    return "is corrupted (content checksum mismatch)";
+  return "";
+}
+
 std::optional<io::NpzFile> AvatarCache::load(const std::string& key, std::string* problem) const {
   const std::string path = pathFor(key);
   std::error_code ec;
@@ -69,19 +94,11 @@ std::optional<io::NpzFile> AvatarCache::load(const std::string& key, std::string
     return std::nullopt;
   };
   try {
+    // A FIFO, directory or device at the path is refused by NpzFile (never opened), and
+    // reported like any unreadable entry.
     io::NpzFile file(path);
-    for (const char* header : {"__format__", "__version__", "__key__", "__checksum__"})
-      if (!file.has(header)) return fail(std::string("has no '") + header + "' entry");
-    if (file.string("__format__") != kFormatName)
-      return fail("is not an flsh avatar cache file (format '" + file.string("__format__") + "')");
-    const double version = file.scalar("__version__");
-    if (version != kFormatVersion)
-      return fail("is stale: format version " + std::to_string(int(version)) + ", expected " +
-                  std::to_string(kFormatVersion));
-    if (file.string("__key__") != key)
-      return fail("was stored under another key (" + file.string("__key__") + ")");
-    if (file.string("__checksum__") != npzContentChecksum(file.arrays()))
-      return fail("is corrupted (content checksum mismatch)");
+    const std::string why = entryProblem(file, key);
+    if (!why.empty()) return fail(why);
     return file;
   } catch (const Error& e) {
     return fail(std::string("is unreadable (") + e.what() + ")");

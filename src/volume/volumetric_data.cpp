@@ -6,6 +6,7 @@
 #include "flsh/body/body_forward.h"
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
+#include "volumetric_cache.h"
 
 namespace flsh {
 
@@ -14,42 +15,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-// Integer matrices go to the cache as int64 (the npz writer's integer type).
-template <class M>
-void addIntegers(io::NpzWriter& w, const std::string& key, const M& m) {
-  std::vector<int64_t> values(size_t(m.rows() * m.cols()));
-  for (Eigen::Index r = 0; r < m.rows(); ++r)
-    for (Eigen::Index c = 0; c < m.cols(); ++c) values[size_t(r * m.cols() + c)] = m(r, c);
-  if constexpr (M::ColsAtCompileTime == 1)
-    w.add(key, values.data(), {long(m.rows())});  // a vector is stored 1-D
-  else
-    w.add(key, values.data(), {long(m.rows()), long(m.cols())});
-}
-
-MatX4i readTets(const io::NpzFile& f, long nodes) {
-  const std::vector<int64_t> v = f.integers("tets", {-1, 4});
-  MatX4i tets(long(v.size() / 4), 4);
-  for (size_t i = 0; i < v.size(); ++i) {
-    if (v[i] < 0 || v[i] >= nodes)
-      throw InputError(f.path() + ": key 'tets': index " + std::to_string(v[i]) +
-                       " outside [0, " + std::to_string(nodes) + ")");
-    tets(long(i / 4), long(i % 4)) = int(v[i]);
-  }
-  return tets;
-}
-
-// A float64 array of the cache as a column-major matrix, in one copy (NpzFile::matrix would make
-// three: the big pose blend shapes dominate the time to load a cached avatar).
-MatX readMatrix(const io::NpzFile& f, const std::string& key, long rows, long cols) {
-  const io::NpyArray& a = f.raw(key);
-  if (a.dtype != "<f8" || a.shape.size() != 2 || a.shape[0] != rows || a.shape[1] != cols)
-    throw InputError(f.path() + ": key '" + key + "': expected float64 (" +
-                     std::to_string(rows) + ", " + std::to_string(cols) + ")");
-  MatX m = Eigen::Map<const RowMatX>(reinterpret_cast<const double*>(a.bytes.data()), rows, cols);
-  if (!m.allFinite()) throw InputError(f.path() + ": key '" + key + "': NaN or Inf");
-  return m;
 }
 
 void hashBody(Sha256& h, const BodyModel& body) {
@@ -111,22 +76,13 @@ std::shared_ptr<const VolumetricTemplate> buildVolumetricTemplate(const BodyMode
   VolumetricBuildReport& r = report ? *report : local;
   auto out = std::make_shared<VolumetricTemplate>();
   out->key = volumetricTemplateKey(body, options);
-  const int V = body.numVertices();
 
   if (cache) {
     const auto t0 = Clock::now();
     std::string problem;
     if (auto f = cache->load(out->key, &problem)) {
       try {
-        out->mesh.nodes = f->matrix("nodes", -1, 3);
-        const long N = out->mesh.nodes.rows();
-        out->mesh.tets = readTets(*f, N);
-        out->mesh.num_surface_nodes = V;
-        out->fields.weights = readMatrix(*f, "weights", N, body.numJoints());
-        out->fields.shapedirs = readMatrix(*f, "shapedirs", 3 * N, body.numBetas());
-        out->fields.posedirs = readMatrix(*f, "posedirs", 3 * N, body.posedirs.cols());
-        const VecX q = f->vector("quality", 5);
-        out->quality = {q(0), q(1), q(2), q(3), q(4)};
+        readTemplateCacheArrays(*f, body, *out);
         r.template_from_cache = true;
         r.seconds_cache_load += secondsSince(t0);
         return out;
@@ -152,17 +108,7 @@ std::shared_ptr<const VolumetricTemplate> buildVolumetricTemplate(const BodyMode
 
   if (cache) {
     t0 = Clock::now();
-    io::NpzWriter w;
-    w.add("nodes", out->mesh.nodes);
-    addIntegers(w, "tets", out->mesh.tets);
-    w.add("weights", RowMatX(out->fields.weights));
-    w.add("shapedirs", RowMatX(out->fields.shapedirs));
-    w.add("posedirs", RowMatX(out->fields.posedirs));
-    const TetMeshQuality& q = out->quality;
-    w.add("quality", VecX((VecX(5) << q.min_dihedral_deg, q.max_dihedral_deg,
-                           q.max_radius_edge_ratio, q.mean_radius_edge_ratio, q.min_volume)
-                              .finished()));
-    cache->store(out->key, w);
+    cache->store(out->key, templateCacheArrays(*out));
     r.seconds_cache_store += secondsSince(t0);
   }
   return out;
@@ -176,8 +122,8 @@ VolumetricData buildVolumetricData(const BodyModel& body, const VecX& betas_in,
   const auto start = Clock::now();
   const int K = body.numBetas();
   if (betas_in.size() > K || !betas_in.allFinite())
-    throw InputError("betas: expected at most " + std::to_string(K) +
-                     " finite values, got " + std::to_string(betas_in.size()));
+    throw InputError("betas: expected at most " + std::to_string(K) + " finite values, got " +
+                     std::to_string(betas_in.size()));
   VecX betas = VecX::Zero(K);
   betas.head(betas_in.size()) = betas_in;
 
@@ -190,7 +136,6 @@ VolumetricData buildVolumetricData(const BodyModel& body, const VecX& betas_in,
                          : MaterialModel::load(settings.material_file, K);
   d.templ = buildVolumetricTemplate(body, settings.tet_mesh, cache.get(), &r);
   const TetMesh& mesh = d.templ->mesh;
-  const long N = mesh.numNodes();
   d.key = dataKey(d.templ->key, betas, d.material_model);
   d.rest_nodes = shapedNodes(mesh, d.templ->fields, betas);
   d.rest_joints = body.J_regressor * d.rest_nodes.topRows(body.numVertices());
@@ -201,26 +146,7 @@ VolumetricData buildVolumetricData(const BodyModel& body, const VecX& betas_in,
     std::string problem;
     if (auto f = cache->load(d.key, &problem)) {
       try {
-        const long T = mesh.numTets();
-        const std::vector<int64_t> bones = f->integers("bone_of_node", {N});
-        d.bone_of_node.resize(N);
-        for (long i = 0; i < N; ++i) d.bone_of_node(i) = int(bones[size_t(i)]);
-        d.tissue_thickness = f->vector("tissue_thickness", body.numVertices());
-        TetMaterials& m = d.materials;
-        m.density = f->vector("density", T);
-        m.young = f->matrix("young", T, 3);
-        m.poisson = f->matrix("poisson", T, 3);
-        m.shear = f->matrix("shear", T, 3);
-        m.fung = f->vector("fung", T);
-        m.skin_fraction = f->vector("skin_fraction", T);
-        const RowMatX frames = f->matrix("frame", T, 9);
-        m.frame.resize(size_t(T));
-        for (long t = 0; t < T; ++t)
-          m.frame[size_t(t)] = Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(
-              frames.row(t).data());
-        const std::vector<int64_t> layer = f->integers("layer", {T});
-        m.layer.resize(T);
-        for (long t = 0; t < T; ++t) m.layer(t) = int(layer[size_t(t)]);
+        readDataCacheArrays(*f, betas, d);
         loaded = true;
         r.data_from_cache = true;
       } catch (const Error& e) {
@@ -242,28 +168,12 @@ VolumetricData buildVolumetricData(const BodyModel& body, const VecX& betas_in,
                                      body.parents, d.tissue_thickness);
     r.seconds_bone_nodes = secondsSince(t0);
     t0 = Clock::now();
-    d.materials = computeTetMaterials(mesh, d.rest_nodes, d.templ->fields.weights,
-                                      d.rest_joints, body.parents, d.material_model, betas);
+    d.materials = computeTetMaterials(mesh, d.rest_nodes, d.templ->fields.weights, d.rest_joints,
+                                      body.parents, d.material_model, betas);
     r.seconds_materials = secondsSince(t0);
     if (cache) {
       t0 = Clock::now();
-      io::NpzWriter w;
-      addIntegers(w, "bone_of_node", d.bone_of_node);
-      w.add("tissue_thickness", d.tissue_thickness);
-      const TetMaterials& m = d.materials;
-      w.add("density", m.density);
-      w.add("young", RowMatX(m.young));
-      w.add("poisson", RowMatX(m.poisson));
-      w.add("shear", RowMatX(m.shear));
-      w.add("fung", m.fung);
-      w.add("skin_fraction", m.skin_fraction);
-      RowMatX frames(long(m.frame.size()), 9);
-      for (size_t t = 0; t < m.frame.size(); ++t)
-        Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(frames.row(long(t)).data()) =
-            m.frame[t];
-      w.add("frame", frames);
-      addIntegers(w, "layer", m.layer);
-      cache->store(d.key, w);
+      cache->store(d.key, dataCacheArrays(d));
       r.seconds_cache_store += secondsSince(t0);
     }
   }

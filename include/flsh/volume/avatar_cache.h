@@ -33,6 +33,10 @@ class AvatarCache {
   /// The entry stored under `key`, or nullopt when there is none or it cannot be trusted; in
   /// the latter case `problem` (if given) receives a one-line reason naming the file.
   std::optional<io::NpzFile> load(const std::string& key, std::string* problem = nullptr) const;
+  /// Why `file` cannot be trusted as the entry stored under `key` (missing header array, other
+  /// format, version or key, checksum mismatch: "is corrupted (…)"), or "" when it can. The
+  /// caller still checks the content's ranges (e.g. readTemplateCacheArrays).
+  static std::string entryProblem(const io::NpzFile& file, const std::string& key);
   /// Writes `arrays` (plus the header arrays above) under `key`, atomically. Throws FileError
   /// when the directory or file cannot be written.
   void store(const std::string& key, const io::NpzWriter& arrays) const;

@@ -253,11 +253,11 @@ void NpzFile::readArchive(std::vector<uint8_t>& bytes) {
         !(stat.valid & ZIP_STAT_SIZE))
       throw InputError(where + ": cannot read member size: " + zip_strerror(archive));
     try {
-      // What the member's compressed bytes could inflate to (stored: themselves).
-      const zip_uint64_t compressed =
-          stat.valid & ZIP_STAT_COMP_SIZE ? stat.comp_size : zip_uint64_t(bytes.size());
-      const zip_uint64_t inflatable =
-          std::min<zip_uint64_t>(compressed, zip_uint64_t(1) << 50) * 1032 + 4096;
+      // What the member's compressed bytes (at most the archive's) could inflate to.
+      zip_uint64_t compressed = zip_uint64_t(bytes.size());
+      if ((stat.valid & ZIP_STAT_COMP_SIZE) && stat.comp_size < compressed)
+        compressed = stat.comp_size;
+      const zip_uint64_t inflatable = compressed * 1032 + 4096;
       arrays_[key] = parseNpy(readMember(archive, zip_uint64_t(index), stat.size, inflatable));
     } catch (const InputError& e) {
       throw InputError(where + ": " + e.what());

@@ -20,6 +20,7 @@ import torch
 __all__ = [
     "SmplTorch",
     "batch_rodrigues",
+    "check_rotation_vectors",
     "pose_feature",
     "skew",
     "to_smpl_poses",
@@ -62,6 +63,27 @@ def batch_rodrigues(theta: torch.Tensor) -> torch.Tensor:
     K = skew(theta)
     eye = torch.eye(3, dtype=theta.dtype, device=theta.device).expand(K.shape)
     return eye + a[..., None, None] * K + b[..., None, None] * (K @ K)
+
+
+# Largest angle |θ| (rad) of a pose's rotation vector, as flsh.MAX_ROTATION_ANGLE in C++
+# (kMaxRotationAngle): beyond it an angle means no rotation anyone meant.
+MAX_ROTATION_ANGLE = 1e6
+
+
+def check_rotation_vectors(poses: torch.Tensor, name: str) -> None:
+    """ValueError naming `name` unless every rotation vector of poses (..., 3J) is finite with
+    angle |θ| ≤ MAX_ROTATION_ANGLE (as the C++ forward pass; Rodrigues' |θ|² overflows to NaN
+    above 1e154)."""
+    with torch.no_grad():
+        theta = poses.detach().reshape(poses.shape[:-1] + (-1, 3))
+        if not bool(torch.isfinite(theta).all()):
+            raise ValueError(f"{name}: contains NaN or Inf")
+        # Scaled so that the norm of huge finite vectors does not overflow.
+        scale = theta.abs().amax(dim=-1, keepdim=True).clamp_min(1e-300)
+        angle = (theta / scale).norm(dim=-1) * scale[..., 0]
+        if bool((angle > MAX_ROTATION_ANGLE).any()):
+            raise ValueError(f"{name}: a rotation vector has angle |θ| = "
+                             f"{float(angle.max()):.6g} rad, expected at most 1e6 rad")
 
 
 def pose_feature(rotations: torch.Tensor) -> torch.Tensor:
@@ -129,6 +151,7 @@ class SmplTorch:
         """
         betas = self._as_tensor(betas)
         poses = to_smpl_poses(self._as_tensor(poses))
+        check_rotation_vectors(poses, "poses")
         B = poses.shape[0]
         if betas.shape[-1] < self.num_betas:
             padding = torch.zeros(betas.shape[:-1] + (self.num_betas - betas.shape[-1],),

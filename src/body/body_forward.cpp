@@ -12,6 +12,8 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "body/body_model_derived.h"
@@ -83,7 +85,7 @@ VecX paddedBetas(const BodyModel& m, const Eigen::Ref<const VecX>& betas, const 
     throw InputError(fn + ": betas has " + std::to_string(betas.size()) +
                      " values, expected at most " + std::to_string(K) +
                      " (the shape components of " + modelName(m) + ")");
-  if (!betas.allFinite()) throw InputError(fn + ": betas contains NaN or Inf");
+  checkShapeCoefficients(betas, fn + ": betas");
   VecX padded = VecX::Zero(K);
   padded.head(betas.size()) = betas;
   return padded;
@@ -342,6 +344,20 @@ PosedBody poseOneFrame(const BodyModel& m, const Derived& d, const VecX& betas, 
 }
 
 }  // namespace
+
+void checkShapeCoefficients(const Eigen::Ref<const VecX>& betas, const std::string& what) {
+  for (Eigen::Index k = 0; k < betas.size(); ++k) {
+    if (!std::isfinite(betas[k]))
+      throw InputError(what + " contains NaN or Inf (value " + std::to_string(k) + ")");
+    if (std::abs(betas[k]) > kMaxShapeCoefficient) {
+      char text[32];
+      std::snprintf(text, sizeof(text), "%.6g", betas[k]);
+      throw InputError(what + "[" + std::to_string(k) + "] = " + text +
+                       ", expected within [-100, 100] (shape coefficients, in standard "
+                       "deviations of the shape space)");
+    }
+  }
+}
 
 PosedBody poseBody(const BodyModel& model, const Eigen::Ref<const VecX>& betas,
                    const Eigen::Ref<const VecX>& pose, const Vec3& trans,

@@ -1,8 +1,10 @@
 #include "flsh/body/smpl_skeleton.h"
 
 #include <cmath>
+#include <cstdio>
 
 #include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
 
 namespace flsh {
 
@@ -23,12 +25,35 @@ int smplJointIndex(const std::string& name) {
   throw InputError("unknown SMPL joint name '" + name + "'");
 }
 
+void checkPoseAngles(const Eigen::Ref<const VecX>& pose, const std::string& what) {
+  for (Eigen::Index k = 0; k + 2 < pose.size(); k += 3) {
+    const Vec3 theta = pose.segment<3>(k);
+    const long joint = long(k / 3);
+    // SMPL-H shares SMPL's joints 0–21; its later ones are finger joints.
+    const bool smpl_joint =
+        pose.size() == kSmplPoseSize ? joint < kNumJoints : joint < kNumBodyJointsSmplh;
+    const std::string name =
+        smpl_joint ? std::string(" (") + kSmplJointNames[joint] + ")" : std::string();
+    if (!theta.allFinite())
+      throw InputError(what + ": joint " + std::to_string(joint) + name +
+                       " has a NaN or Inf rotation value (values " + std::to_string(k) + ".." +
+                       std::to_string(k + 2) + ")");
+    const double angle = theta.stableNorm();
+    if (angle > kMaxRotationAngle) {
+      char text[64];
+      std::snprintf(text, sizeof(text), "%.6g", angle);
+      throw InputError(what + ": joint " + std::to_string(joint) + name + " has angle |θ| = " +
+                       text + " rad, expected at most 1e6 rad (a rotation vector, axis × angle)");
+    }
+  }
+}
+
 VecX toSmplPose(const Eigen::Ref<const VecX>& pose, const std::string& what) {
   const long n = pose.size();
   if (n != kSmplPoseSize && n != kSmplhPoseSize)
     throw InputError(what + ": expected 72 (SMPL) or 156 (SMPL-H) values, got " +
                      std::to_string(n));
-  if (!pose.allFinite()) throw InputError(what + ": contains NaN or Inf");
+  checkPoseAngles(pose, what);
   VecX out = VecX::Zero(kSmplPoseSize);
   if (n == kSmplPoseSize) {
     out = pose;
@@ -43,7 +68,8 @@ RowMatX toSmplPoses(const Eigen::Ref<const RowMatX>& poses, const std::string& w
   if (cols != kSmplPoseSize && cols != kSmplhPoseSize)
     throw InputError(what + ": expected shape (T, 72) or (T, 156), got " +
                      shapeString({long(poses.rows()), cols}));
-  if (!poses.allFinite()) throw InputError(what + ": contains NaN or Inf");
+  for (Eigen::Index t = 0; t < poses.rows(); ++t)
+    checkPoseAngles(poses.row(t).transpose(), what + ": frame " + std::to_string(t));
   RowMatX out = RowMatX::Zero(poses.rows(), kSmplPoseSize);
   const int keep = cols == kSmplPoseSize ? kSmplPoseSize : 3 * kNumBodyJointsSmplh;
   out.leftCols(keep) = poses.leftCols(keep);

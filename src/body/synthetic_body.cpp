@@ -43,8 +43,8 @@ namespace synthetic {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr int kMinVertices = 200;
-constexpr int kMaxVertices = 100000;
+constexpr int kMinVertices = kMinSyntheticVertices;
+constexpr int kMaxVertices = kMaxSyntheticVertices;
 constexpr int kMaxInfluences = 4;  // nonzero skinning weights per vertex
 
 using JointWeights = std::array<double, kNumJoints>;
@@ -328,9 +328,10 @@ SyntheticBodyBuild buildSyntheticBody(const SyntheticBodyOptions& options) {
     throw InputError("makeSyntheticBody: options.vertices = " + std::to_string(options.vertices) +
                      ", expected an integer in [" + std::to_string(kMinVertices) + ", " +
                      std::to_string(kMaxVertices) + "]");
-  if (!std::isfinite(options.height) || options.height <= 0.0)
+  if (!(options.height >= kMinSyntheticHeight && options.height <= kMaxSyntheticHeight))
     throw InputError("makeSyntheticBody: options.height = " + std::to_string(options.height) +
-                     " m, expected a finite positive height");
+                     " m, expected a height in [" + std::to_string(kMinSyntheticHeight) + ", " +
+                     std::to_string(kMaxSyntheticHeight) + "] m");
 
   const BodyDesign design = makeBodyDesign();
   ImplicitSurface surface;

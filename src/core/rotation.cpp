@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <cmath>
+#include <limits>
 
 namespace flsh {
 
@@ -23,9 +24,17 @@ Mat3 rodrigues(const Vec3& theta) {
   if (t < kSmallAngle) {
     a = 1.0 - t2 / 6.0 + t2 * t2 / 120.0;
     b = 0.5 - t2 / 24.0 + t2 * t2 / 720.0;
-  } else {
+  } else if (std::isfinite(t2)) {
     a = std::sin(t) / t;
     b = (1.0 - std::cos(t)) / t2;
+  } else if (theta.allFinite()) {
+    // |θ|² overflows (|θ| > 1e154): the same formula on the unit axis, with |θ| from a
+    // norm that does not overflow; sin and cos reduce the angle exactly.
+    const double angle = theta.stableNorm();
+    const Mat3 K = skew(theta / angle);
+    return Mat3::Identity() + std::sin(angle) * K + (1.0 - std::cos(angle)) * K * K;
+  } else {
+    a = b = std::numeric_limits<double>::quiet_NaN();  // NaN in, NaN out (callers check)
   }
   const Mat3 K = skew(theta);
   return Mat3::Identity() + a * K + b * K * K;

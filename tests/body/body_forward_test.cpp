@@ -406,6 +406,17 @@ void expectInputError(F&& call, std::initializer_list<const char*> parts) {
   }
 }
 
+TEST(BodyForward, LargeAnglesWithinTheBoundAreRotations) {
+  // |θ| up to kMaxRotationAngle is accepted and means the angle modulo 2π.
+  const BodyModel m = test::makeRandomModel(100, 10, 54);
+  const double turns = 100000.0;  // 6.3e5 rad, below the bound
+  VecX pose = VecX::Zero(72), wound = VecX::Zero(72);
+  pose.segment<3>(3 * 4) = Vec3(0.0, 0.7, 0.0);
+  wound.segment<3>(3 * 4) = Vec3(0.0, 0.7 + 2.0 * kPi * turns, 0.0);
+  EXPECT_LT(maxAbsDiff(poseBody(m, VecX(), pose).vertices, poseBody(m, VecX(), wound).vertices),
+            1e-9);
+}
+
 TEST(BodyForward, InputErrors) {
   const BodyModel m = test::makeRandomModel(100, 10, 53);
   const VecX pose = VecX::Zero(72);
@@ -435,6 +446,20 @@ TEST(BodyForward, InputErrors) {
   RowMatX bad_trans = trans;
   bad_trans(4, 0) = inf;
   expectInputError([&] { poseBodyBatch(m, VecX(), poses, bad_trans); }, {"trans", "Inf"});
+
+  // Finite but absurd values (issue 23: a pose of 1e300 gave all-NaN vertices, no error).
+  bad_pose = pose;
+  bad_pose[3 * 5 + 1] = 1e300;
+  expectInputError([&] { poseBody(m, VecX(), bad_pose); },
+                   {"pose", "joint 5 (right_knee)", "1e+300 rad", "at most 1e6 rad"});
+  bad_poses = poses;
+  bad_poses(3, 2) = -2e6;
+  expectInputError([&] { poseBodyBatch(m, VecX(), bad_poses, trans); },
+                   {"poses", "frame 3", "joint 0 (pelvis)", "2e+06"});
+  bad_betas = VecX::Zero(10);
+  bad_betas[2] = 1e300;
+  expectInputError([&] { poseBody(m, bad_betas, pose); }, {"betas[2]", "1e+300", "[-100, 100]"});
+  expectInputError([&] { shapedVertices(m, bad_betas); }, {"betas[2]"});
 
   BodyModel unfinalized = m;
   unfinalized.derived.reset();

@@ -249,6 +249,41 @@ TEST_F(BodyModelIoErrors, BadValuesNameTheKey) {
   EXPECT_THAT(message, HasSubstr(path_ + ": array 'weights': row 0 sums to 0"));
 }
 
+// Finite but absurd values load as numbers but make no body; BodyModel::validate() names the
+// file, the array and the entry (issue 23: a regressor entry of 1e300 crashed the FEM set-up).
+TEST_F(BodyModelIoErrors, AbsurdValuesNameTheFileTheArrayAndTheEntry) {
+  const RowMatX regressor = RowMatX(MatX(model_.J_regressor));
+  std::vector<double> values(regressor.data(), regressor.data() + regressor.size());
+  values[size_t(3 * 30 + 17)] = 1e300;
+  std::string message = loadWith("J_regressor", test::npyOf("<f8", "(24, 30)", values));
+  EXPECT_THAT(message, HasSubstr(path_ + ": array 'J_regressor': entry [3, 17] = 1e+300 is "
+                                         "outside [-1000, 1000]"));
+
+  // Entries within the bound can still regress a joint to an absurd place.
+  values.assign(regressor.data(), regressor.data() + regressor.size());
+  for (int i = 0; i < 30; ++i) values[size_t(5 * 30 + i)] = 900;  // joint 5 at y ~ 24 km
+  message = loadWith("J_regressor", test::npyOf("<f8", "(24, 30)", values));
+  EXPECT_THAT(message, HasSubstr(path_ + ": array 'J_regressor' places joint 5 at coordinate"));
+  EXPECT_THAT(message, HasSubstr("expected within [-1000, 1000] m"));
+
+  std::vector<double> v(model_.v_template.data(), model_.v_template.data() + 90);
+  v[3 * 7 + 1] = -2e3;
+  message = loadWith("v_template", test::npyOf("<f8", "(30, 3)", v));
+  EXPECT_THAT(message, HasSubstr(path_ + ": array 'v_template': entry [7, 1] = -2000"));
+
+  const RowMatX shapedirs = model_.shapedirs;
+  std::vector<double> dirs(shapedirs.data(), shapedirs.data() + shapedirs.size());
+  dirs[5] = 1e250;
+  message = loadWith("shapedirs", test::npyOf("<f8", "(30, 3, 10)", dirs));
+  EXPECT_THAT(message, HasSubstr(path_ + ": array 'shapedirs': entry [0, 5] = 1e+250"));
+
+  // The same checks hold for a model built in memory (finalize() validates).
+  BodyModel edited = model_;
+  edited.posedirs(4, 100) = 5e3;
+  EXPECT_THAT(messageOf<InputError>([&] { edited.finalize(); }),
+              HasSubstr("array 'posedirs': entry [4, 100] = 5000 is outside [-1000, 1000]"));
+}
+
 TEST_F(BodyModelIoErrors, UnreadableFiles) {
   EXPECT_THROW(loadBodyModel(dir_ + "/missing.npz"), FileError);
   const std::string garbage = dir_ + "/garbage.npz";

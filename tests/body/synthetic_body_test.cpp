@@ -70,6 +70,9 @@ TEST(SyntheticBody, RejectsBadOptions) {
   EXPECT_THROW(makeSyntheticBody({-5, 1.70}), InputError);
   EXPECT_THROW(makeSyntheticBody({1000, 0.0}), InputError);
   EXPECT_THROW(makeSyntheticBody({1000, std::nan("")}), InputError);
+  EXPECT_THROW(makeSyntheticBody({1000, 1e300}), InputError);  // finite but absurd
+  EXPECT_THROW(makeSyntheticBody({1000, kMaxSyntheticHeight * 1.01}), InputError);
+  EXPECT_THROW(makeSyntheticBody({1000, kMinSyntheticHeight * 0.99}), InputError);
   try {
     makeSyntheticBody({150, 1.70});
     FAIL() << "expected InputError";

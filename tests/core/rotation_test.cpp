@@ -37,6 +37,27 @@ TEST(Rotation, RodriguesMatchesEigenAngleAxis) {
   }
 }
 
+// Huge finite angles (issue 23): |θ|² overflows above 1e154, which made R all NaN. R must be a
+// rotation about θ's axis. (Its angle is |θ| as float64 gives it: one ulp of 1e300 is ~1e284
+// rad, so beyond ~1e15 rad the angle modulo 2π carries no information, only validity.)
+TEST(Rotation, RodriguesOfHugeFiniteAnglesIsARotation) {
+  std::mt19937 rng(8);
+  for (double angle : {1e6, 1e100, 1e154, 1e155, 1e200, 1e300, 1.7e308}) {
+    const Vec3 axis = randomUnit(rng);
+    const Vec3 theta = angle * axis;
+    const Mat3 R = rodrigues(theta);
+    ASSERT_TRUE(R.allFinite()) << "angle " << angle;
+    EXPECT_LT((R.transpose() * R - Mat3::Identity()).cwiseAbs().maxCoeff(), 1e-14) << angle;
+    EXPECT_NEAR(R.determinant(), 1.0, 1e-14) << angle;
+    EXPECT_LT((R * axis - axis).norm(), 1e-13) << "the axis is fixed, angle " << angle;
+    // The angle: the one of |θ| as computed, here within an ulp of the stable norm's.
+    const double t = theta.stableNorm();
+    if (angle <= 1e6) EXPECT_NEAR(R.trace(), 1.0 + 2.0 * std::cos(t), 1e-9) << angle;
+  }
+  // NaN in, NaN out: callers check (toSmplPose, Simulable::setState).
+  EXPECT_FALSE(rodrigues(Vec3(std::nan(""), 0, 0)).allFinite());
+}
+
 // dR/dθ_a = [J_l(θ) e_a]× R, checked against central differences of rodrigues.
 void expectLeftJacobianMatchesFiniteDifferences(const Vec3& theta) {
   Mat3 dR[3];

@@ -233,6 +233,58 @@ def test_bad_values_and_dtypes_are_refused(body, tmp_path):
     assert not (tmp_path / "bad.ply").exists()
 
 
+def test_absurd_finite_values_are_refused_naming_the_argument(body):
+    # Issue 23: a pose value of 1e300 returned all-NaN vertices without an error.
+    betas = np.zeros(body.num_betas)
+    pose = np.zeros(72)
+    pose[3 * 5 + 1] = 1e300
+    with pytest.raises(ValueError, match=re.escape("joint 5 (right_knee) has angle |θ| = 1e+300 rad, "
+                                                   "expected at most 1e6 rad")):
+        flsh.pose_body(body, betas, pose)
+    poses = np.zeros((4, 72))
+    poses[2, 0] = -1e7
+    with pytest.raises(ValueError, match="frame 2: joint 0"):
+        flsh.pose_body_batch(body, betas, poses)
+    big_betas = betas.copy()
+    big_betas[1] = 1e300
+    with pytest.raises(ValueError, match=re.escape("betas[1] = 1e+300, expected within [-100, 100]")):
+        flsh.pose_body(body, big_betas, np.zeros(72))
+    # Large angles within the bound are rotations like any other (the angle modulo 2π).
+    pose = np.zeros(72)
+    pose[3 * 4 + 1] = 0.5
+    wound = pose.copy()
+    wound[3 * 4 + 1] += 2 * np.pi * 1000
+    np.testing.assert_allclose(flsh.pose_body(body, betas, wound).vertices,
+                               flsh.pose_body(body, betas, pose).vertices, atol=1e-10)
+
+
+def test_rodrigues_of_huge_finite_angles_is_a_rotation():
+    for angle in (1e6, 1e155, 1e300):
+        axis = np.array([0.6, 0.0, 0.8])
+        R = flsh.rodrigues(angle * axis)
+        assert np.isfinite(R).all(), angle
+        np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-14)
+        if angle <= 1e6:  # beyond, one ulp of the angle is more than a turn
+            np.testing.assert_allclose(np.trace(R), 1 + 2 * np.cos(angle), atol=1e-9)
+        np.testing.assert_allclose(R @ axis, axis, atol=1e-13)
+    with pytest.raises(ValueError, match="theta"):
+        flsh.rodrigues([np.inf, 0.0, 0.0])
+
+
+def test_body_model_with_absurd_values_names_the_file_and_key(body, tmp_path):
+    # Issue 23: a joint-regressor entry of 1e300 crashed the FEM set-up.
+    path = tmp_path / "body.npz"
+    flsh.save_body_model(body, path)
+    arrays = dict(np.load(path))
+    arrays["J_regressor"] = arrays["J_regressor"].copy()
+    arrays["J_regressor"][3, 17] = 1e300
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **arrays)
+    with pytest.raises(ValueError, match=re.escape(
+            "bad.npz: array 'J_regressor': entry [3, 17] = 1e+300 is outside [-1000, 1000]")):
+        flsh.load_body_model(bad)
+
+
 def test_float32_and_integer_inputs_are_accepted(body, rng):
     betas = rng.normal(0.0, 1.0, body.num_betas).astype(np.float32)
     pose = random_pose(rng).astype(np.float32)

@@ -171,3 +171,21 @@ def test_input_errors_name_the_argument(body):
     bad[5] = float("nan")
     with pytest.raises(ValueError, match=r"NaN"):
         flsh.torch.smpl(body, betas, bad)
+
+
+def test_absurd_pose_values_raise_value_error(body):
+    # Issue 23: a pose value of 1e300 gave all-NaN vertices without an error.
+    betas = torch.zeros(body.num_betas, dtype=torch.float64)
+    pose = torch.zeros(72, dtype=torch.float64)
+    pose[3 * 7] = 1e300
+    with pytest.raises(ValueError, match="joint 7 .* 1e\\+300 rad, expected at most 1e6 rad"):
+        flsh.torch.smpl(body, betas, pose)
+    pose[3 * 7] = float("nan")
+    with pytest.raises(ValueError, match="NaN"):
+        flsh.torch.smpl(body, betas, pose)
+    reference = smpl_torch.SmplTorch.from_flsh(body)
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        reference(betas, pose[None])
+    pose[3 * 7] = -2e6
+    with pytest.raises(ValueError, match="angle .* 2e\\+06 rad"):
+        reference(betas, pose[None])

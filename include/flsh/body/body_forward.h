@@ -5,11 +5,21 @@
 // (converted by toSmplPose). β may be shorter than the model's K (zero padded), not longer.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include "flsh/body/body_model.h"
 
 namespace flsh {
+
+/// Largest |β_k| the forward pass accepts: shape coefficients are in standard deviations of
+/// the shape space (|β| ≲ 5 for real people), so 100 is far outside any body and still keeps
+/// every derived position finite.
+constexpr double kMaxShapeCoefficient = 100.0;
+
+/// Throws InputError naming `what` and the value unless every β_k is finite and within
+/// ±kMaxShapeCoefficient.
+void checkShapeCoefficients(const Eigen::Ref<const VecX>& betas, const std::string& what);
 
 /// Result of posing one frame.
 struct PosedBody {
@@ -32,8 +42,9 @@ struct PosedBodyJacobians {
   MatX joints_trans;    ///< 72 × 3 (identity blocks)
 };
 
-/// Poses one frame. If `jacobians` is not null it is filled too. Throws InputError on sizes
-/// or non-finite values. Thread-safe (the model is read only).
+/// Poses one frame. If `jacobians` is not null it is filled too. Throws InputError on sizes,
+/// non-finite values, |β_k| > kMaxShapeCoefficient or joint angles above kMaxRotationAngle.
+/// Thread-safe (the model is read only).
 PosedBody poseBody(const BodyModel& model, const Eigen::Ref<const VecX>& betas,
                    const Eigen::Ref<const VecX>& pose, const Vec3& trans = Vec3::Zero(),
                    PosedBodyJacobians* jacobians = nullptr);

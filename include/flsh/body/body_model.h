@@ -13,6 +13,12 @@
 
 namespace flsh {
 
+/// Largest magnitude BodyModel::validate() accepts for any entry of a body model's arrays and
+/// for its regressed rest joints: 1000 (m for positions and shape directions; skinning and
+/// regressor weights are dimensionless). A human body is ~2 m; anything near this bound is a
+/// broken file, which would otherwise overflow the mesh and simulation set-up.
+constexpr double kMaxBodyModelValue = 1e3;
+
 struct BodyModel {
   /// #V × 3 template (T-pose, mean shape) vertex positions, m.
   MatX3 v_template;
@@ -38,9 +44,10 @@ struct BodyModel {
   int numBetas() const { return int(shapedirs.cols()); }
   int numJoints() const { return int(parents.size()); }
 
-  /// Checks every array's shape and values (finite, indices in range, parents form a tree
-  /// rooted at joint 0 with parents[j] < j). Throws InputError naming `source`, the array,
-  /// the expected and the actual shape.
+  /// Checks every array's shape and values (finite and within ±kMaxBodyModelValue, the
+  /// regressed rest joints and their shape directions too; indices in range; parents form a
+  /// tree rooted at joint 0 with parents[j] < j; weight rows sum to 1). Throws InputError
+  /// naming `source`, the array, the entry or the expected and the actual shape.
   void validate() const;
 
   /// Builds the acceleration data the forward pass uses (sparse weights, sparse pose blend

@@ -24,9 +24,14 @@ extern const std::array<int, kNumJoints> kSmplParents;
 /// Index of a joint by its SMPL name; throws InputError for an unknown name.
 int smplJointIndex(const std::string& name);
 
+/// Throws InputError naming `what` and the joint unless every rotation vector of `pose`
+/// (3 values per joint) is finite with angle |θ| ≤ kMaxRotationAngle (1e6 rad, rotation.h).
+void checkPoseAngles(const Eigen::Ref<const VecX>& pose, const std::string& what = "pose");
+
 /// Converts a pose of 72 (SMPL) or 156 (SMPL-H) values to SMPL's 72: SMPL-H body joints
 /// 0–21 map to SMPL 0–21 and SMPL's hand joints 22–23 are set to identity (zero).
-/// Throws InputError (naming `what`) for any other length or for non-finite values.
+/// Throws InputError (naming `what`) for any other length, for non-finite values and for
+/// angles above kMaxRotationAngle (checkPoseAngles).
 VecX toSmplPose(const Eigen::Ref<const VecX>& pose, const std::string& what = "pose");
 
 /// Row-wise toSmplPose for a T × 72 or T × 156 matrix.

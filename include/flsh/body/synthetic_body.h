@@ -15,6 +15,12 @@
 
 namespace flsh {
 
+/// Ranges of SyntheticBodyOptions that makeSyntheticBody accepts.
+constexpr int kMinSyntheticVertices = 200;
+constexpr int kMaxSyntheticVertices = 100000;
+constexpr double kMinSyntheticHeight = 0.3;  ///< m
+constexpr double kMaxSyntheticHeight = 3.0;  ///< m
+
 struct SyntheticBodyOptions {
   /// Number of surface vertices (exact). SMPL's own count by default; ~1000 for fast tests.
   /// A closed genus-0 mesh with V vertices has 2V − 4 triangles (6890 → 13776).
@@ -26,8 +32,9 @@ struct SyntheticBodyOptions {
 /// Meaning of the 10 shape directions of the synthetic body, in order (e.g. "height").
 extern const std::vector<std::string> kSyntheticShapeNames;
 
-/// Generates the synthetic body (finalized). Throws InputError for vertices < 200 or
-/// > 100 000, or a height that is not finite and positive.
+/// Generates the synthetic body (finalized). Throws InputError for vertices outside
+/// [kMinSyntheticVertices, kMaxSyntheticVertices] (200 … 100 000) or a height outside
+/// [kMinSyntheticHeight, kMaxSyntheticHeight] (0.3 … 3 m).
 BodyModel makeSyntheticBody(const SyntheticBodyOptions& options = {});
 
 }  // namespace flsh

@@ -2,17 +2,27 @@
 //
 // Convention: R = exp([θ]×) (Rodrigues). The left Jacobian J_l(θ) relates a change of the
 // rotation vector to a spatial (world-frame) angular increment: dR = [J_l(θ) dθ]× R.
-// All functions are exact to round-off at θ = 0 (Taylor branches) and valid up to |θ| = π.
+// All functions are exact to round-off at θ = 0 (Taylor branches) and valid up to |θ| = π;
+// rodrigues() is valid for every finite θ. They do not check their input (they run inside
+// parallel loops): a NaN in gives NaN out. Rotation vectors are checked where they enter flsh
+// (poses, states): finite and |θ| ≤ kMaxRotationAngle, else InputError.
 #pragma once
 
 #include "flsh/core/types.h"
 
 namespace flsh {
 
+/// Largest angle |θ| (rad) accepted where rotation vectors enter flsh: poses (toSmplPose),
+/// simulation states (Simulable::setState). Beyond it an angle means no rotation anyone meant
+/// (at 1e16 rad consecutive float64 values are 2 rad apart); 1e6 rad still resolves the
+/// angle modulo 2π to 1e-10 rad.
+constexpr double kMaxRotationAngle = 1e6;
+
 /// [v]×, the cross-product matrix: skew(v) w = v × w.
 Mat3 skew(const Vec3& v);
 
-/// Rodrigues' formula R = exp([θ]×).
+/// Rodrigues' formula R = exp([θ]×). Exact for every finite θ, however large: the angle is
+/// reduced modulo 2π by sin/cos (no overflow of |θ|² above 1e154).
 Mat3 rodrigues(const Vec3& theta);
 
 /// Left Jacobian of SO(3): d/dε exp([θ + ε]×) = [J_l(θ) ε]× exp([θ]×) to first order.

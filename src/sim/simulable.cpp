@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "core/first_failure.h"
@@ -68,6 +69,44 @@ using detail::addBlock;
 
 std::string motionName(const Motion& m) {
   return m.source.empty() ? std::string("mocap") : "mocap '" + m.source + "'";
+}
+
+std::string number(double value) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.6g", value);
+  return text;
+}
+
+/// Throws InputError (`fn` and `name` in the message) unless every value of the state-sized
+/// vector `x` is finite and within its bound: for a state (`velocity` false) positions and
+/// soft-tissue displacements within ±kMaxStatePosition m and rotation vectors of angle at most
+/// kMaxRotationAngle; for a velocity every entry within ±kMaxStateVelocity (m/s, rad/s).
+void checkStateValues(const VecX& x, int num_bones, bool velocity, const std::string& fn,
+                      const char* name) {
+  const char* unit = velocity ? " m/s or rad/s" : " m";
+  const double bound = velocity ? kMaxStateVelocity : kMaxStatePosition;
+  for (Eigen::Index k = 0; k < x.size(); ++k) {
+    if (!std::isfinite(x[k]))
+      throw InputError(fn + name + "[" + std::to_string(k) + "] is NaN or Inf (" + number(x[k]) +
+                       "), expected a finite value");
+    const bool rotation = k < 6 * num_bones && k % 6 >= 3;
+    if (rotation && !velocity) continue;  // checked as a whole vector below
+    if (std::abs(x[k]) > bound)
+      throw InputError(fn + name + "[" + std::to_string(k) + "] = " + number(x[k]) + unit +
+                       ", expected within [-" + number(bound) + ", " + number(bound) + "]" +
+                       (k < 6 * num_bones ? " (bone " + std::to_string(k / 6) + ")"
+                                          : std::string(" (soft-tissue values)")));
+  }
+  if (velocity) return;
+  for (int b = 0; b < num_bones; ++b) {
+    const double angle = x.segment<3>(6 * b + 3).stableNorm();
+    if (angle > kMaxRotationAngle)
+      throw InputError(fn + name + ": bone " + std::to_string(b) +
+                       " has a rotation vector of "
+                       "angle " +
+                       number(angle) + " rad, expected at most " + number(kMaxRotationAngle) +
+                       " rad");
+  }
 }
 
 }  // namespace
@@ -341,6 +380,13 @@ Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar,
                        ", expected (T, 72) and (T, 3)");
     if (!mo.poses.allFinite() || !mo.trans.allFinite())
       throw InputError(fn + motionName(mo) + " contains NaN or Inf in poses or trans");
+    for (Eigen::Index t = 0; t < mo.poses.rows(); ++t)
+      checkPoseAngles(mo.poses.row(t).transpose(),
+                      fn + motionName(mo) + ": poses: frame " + std::to_string(t));
+    if (mo.trans.size() > 0 && mo.trans.cwiseAbs().maxCoeff() > kMaxStatePosition)
+      throw InputError(fn + motionName(mo) + ": trans reaches " +
+                       number(mo.trans.cwiseAbs().maxCoeff()) + " m, expected within [-" +
+                       number(kMaxStatePosition) + ", " + number(kMaxStatePosition) + "] m");
     if (!(mo.fps > 0.0) || !std::isfinite(mo.fps))
       throw InputError(fn + motionName(mo) + " has fps = " + std::to_string(mo.fps) +
                        ", expected finite and > 0");
@@ -526,7 +572,7 @@ void Simulable::setState(const VecX& q) {
                      " values, expected numDofs() = " + std::to_string(m.dofs()) +
                      " (6 per bone: t, rotation vector; then 3 per soft-tissue node, or per handle of the "
                      "reduced model)");
-  if (!q.allFinite()) throw InputError("Simulable::setState: q contains NaN or Inf");
+  checkStateValues(q, m.num_bones, false, "Simulable::setState: ", "q");
   for (int b = 0; b < m.num_bones; ++b) {
     m.q.t.row(b) = q.segment<3>(6 * b).transpose();
     m.q.R[b] = rodrigues(q.segment<3>(6 * b + 3));
@@ -582,7 +628,7 @@ void Simulable::setVelocity(const VecX& v) {
   if (v.size() != m.dofs())
     throw InputError("Simulable::setVelocity: v has " + std::to_string(v.size()) +
                      " values, expected numDofs() = " + std::to_string(m.dofs()));
-  if (!v.allFinite()) throw InputError("Simulable::setVelocity: v contains NaN or Inf");
+  checkStateValues(v, m.num_bones, true, "Simulable::setVelocity: ", "v");
   const double h = m.options.time_step;
   for (int b = 0; b < m.num_bones; ++b) {
     m.q_nm1.t.row(b) = m.q_n.t.row(b) - h * v.segment<3>(6 * b).transpose();

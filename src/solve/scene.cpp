@@ -712,10 +712,25 @@ StepStats Scene::step() {
   if (simulables_.empty())
     throw Error("Scene::step: the scene has no simulables (call addSimulable first)");
   const auto start = std::chrono::steady_clock::now();
+  // Kept so that a step ending in a non-finite state can be undone (below).
+  std::vector<SimulableStep> before;
+  before.reserve(simulables_.size());
+  for (auto& s : simulables_) before.push_back(s->saveStep());
   for (auto& s : simulables_) s->preUpdate();
   ensureSolver();
   StepStats stats;
   stats.newton = newtonSolve(*this, newtonOptions(), solver_.get());
+  // Newton rejects non-finite energies, but a state can still overflow where no energy looks
+  // (e.g. a rotation): never hand a NaN state on. The scene goes back to before the step.
+  for (size_t i = 0; i < simulables_.size(); ++i) {
+    if (simulables_[i]->getState().allFinite()) continue;
+    for (size_t j = 0; j < simulables_.size(); ++j) simulables_[j]->restoreStep(before[j]);
+    throw Error("Scene::step: simulable " + std::to_string(i) +
+                " has a non-finite state after the step to t = " +
+                std::to_string(before[i].time + simulables_[i]->options().time_step) +
+                " s (Newton: " + stats.newton.message +
+                "); the scene is restored to its state before the step");
+  }
   // Newton's last evaluation is the gradient at the final state, so these counts belong to it.
   for (auto& s : simulables_) stats.active_contacts += s->stats().active_contacts;
   stats.active_contacts += avatar_contacts_;

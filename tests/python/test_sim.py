@@ -342,6 +342,31 @@ def test_bad_arrays_raise_value_errors_naming_shapes(avatar, walk, rng):
         flsh.Simulable(avatar, flsh.make_synthetic_body(vertices=200), walk)
 
 
+def test_absurd_finite_state_values_raise_value_errors(avatar, walk):
+    # Issue 23: set_velocity(1e300) and a Scene step left the state NaN without an exception.
+    sim = flsh.Simulable(avatar, walk)
+    scene = flsh.Scene()
+    scene.add_simulable(sim)
+    scene.initialize()
+    q0 = sim.getState()
+    with pytest.raises(ValueError, match=r"setVelocity: v\[0\] = 1e\+300 m/s or rad/s, "
+                                         r"expected within \[-10000, 10000\]"):
+        sim.set_velocity(np.full(NUM_DOFS, 1e300))
+    q = q0.copy()
+    q[4] = 1e300
+    with pytest.raises(ValueError, match="bone 0 has a rotation vector of angle 1e\\+300 rad"):
+        sim.setState(q)
+    q = q0.copy()
+    q[1] = -1e300
+    with pytest.raises(ValueError, match=r"q\[1\] = -1e\+300 m"):
+        sim.setState(q)
+    np.testing.assert_array_equal(sim.getState(), q0)  # untouched by the refused calls
+    # The largest velocity accepted steps to a finite state.
+    sim.set_velocity(np.full(NUM_DOFS, 1e4))
+    scene.step()
+    assert np.isfinite(sim.getState()).all()
+
+
 # --- Scene and Newton -------------------------------------------------------------------------
 
 

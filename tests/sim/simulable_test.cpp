@@ -7,6 +7,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <random>
 
@@ -357,6 +358,54 @@ TEST(Simulable, SetStateRejectsWrongSizesAndNonFiniteValues) {
   EXPECT_NE(message.find("143"), std::string::npos) << message;
   // The state is untouched by the rejected calls.
   EXPECT_TRUE(sim.bonePositions() == shared().avatar->restJoints());
+}
+
+// Finite but absurd values are rejected where they enter, naming the entry and the bound
+// (issue 23): a velocity of 1e300 used to leave the next step's state NaN.
+TEST(Simulable, SettersRejectAbsurdMagnitudes) {
+  Simulable sim(shared().avatar);
+  sim.initialize();
+  const VecX q0 = sim.getState();
+  VecX q = q0;
+  q[6 * 2 + 1] = 2e4;  // bone 2, t_y, m
+  std::string message = messageOf<InputError>([&] { sim.setState(q); });
+  for (const char* part : {"q[13]", "20000", "10000", "bone 2"})
+    EXPECT_NE(message.find(part), std::string::npos) << message;
+  q = q0;
+  q.segment<3>(6 * 5 + 3) = Vec3(0, 0, 2e6);  // bone 5's rotation vector, rad
+  message = messageOf<InputError>([&] { sim.setState(q); });
+  for (const char* part : {"bone 5", "angle 2e+06 rad", "at most 1e+06"})
+    EXPECT_NE(message.find(part), std::string::npos) << message;
+  q.segment<3>(6 * 5 + 3) = Vec3(0, 0, 1e5);  // large but accepted: a rotation all the same
+  sim.setState(q);
+  EXPECT_TRUE(sim.getState().allFinite());
+  EXPECT_LT(sim.getState().segment<3>(6 * 5 + 3).norm(), 3.15);
+
+  VecX v = VecX::Zero(sim.numDofs());
+  v[6 * 3 + 4] = 1e300;
+  message = messageOf<InputError>([&] { sim.setVelocity(v); });
+  for (const char* part : {"setVelocity", "v[22]", "1e+300", "10000", "bone 3"})
+    EXPECT_NE(message.find(part), std::string::npos) << message;
+  v[6 * 3 + 4] = -std::numeric_limits<double>::infinity();
+  message = messageOf<InputError>([&] { sim.setVelocity(v); });
+  EXPECT_NE(message.find("finite"), std::string::npos) << message;
+  v[6 * 3 + 4] = 0.0;
+  v[6 * 3 + 1] = kMaxStateVelocity;  // the bound itself is accepted (bone 3, t_y, m/s)
+  sim.setVelocity(v);
+  EXPECT_NEAR(sim.getVelocity()[6 * 3 + 1], kMaxStateVelocity, 1e-6 * kMaxStateVelocity);
+}
+
+TEST(Simulable, ConstructorRejectsAbsurdMocap) {
+  auto motion = std::make_shared<Motion>(*shared().walk);
+  motion->poses(2, 3 * 4 + 1) = 1e300;  // frame 2, left knee
+  std::string message = messageOf<InputError>([&] { Simulable sim(shared().avatar, motion); });
+  for (const char* part : {"frame 2", "joint 4 (left_knee)", "1e+300", "1e6 rad"})
+    EXPECT_NE(message.find(part), std::string::npos) << message;
+  motion = std::make_shared<Motion>(*shared().walk);
+  motion->trans(1, 2) = -1e300;
+  message = messageOf<InputError>([&] { Simulable sim(shared().avatar, motion); });
+  EXPECT_NE(message.find("trans"), std::string::npos) << message;
+  EXPECT_NE(message.find("10000"), std::string::npos) << message;
 }
 
 TEST(Simulable, SetStateGetStateRoundTrip) {

@@ -9,6 +9,7 @@
 
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
+#include "flsh/core/error.h"
 #include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
 #include "support/test_support.h"
@@ -112,6 +113,46 @@ TEST(SceneExtremes, StartingDeepInsideTheGround) {
   const Outcome out = run(SimulableOptions(), shared().walk, 30, 0.3);
   expectBounded(out, 3.0, "0.3 m inside the ground");
   EXPECT_GT(out.lowest_final, -0.3 + 0.05) << "the ground must push the avatar out";
+}
+
+TEST(SceneExtremes, LargestAcceptedVelocityKeepsTheStateFinite) {
+  // Every DoF at kMaxStateVelocity (10 km/s, 10^4 rad/s): nothing converges, but no step may
+  // produce NaN (the prediction's rotations go through rodrigues at 167 rad per step).
+  auto sim = std::make_shared<Simulable>(shared().avatar, shared().walk);
+  Scene scene;
+  scene.addSimulable(sim);
+  scene.initialize();
+  sim->setVelocity(VecX::Constant(sim->numDofs(), kMaxStateVelocity));
+  for (int k = 0; k < 3; ++k) {
+    scene.step();
+    ASSERT_TRUE(sim->getState().allFinite()) << "step " << k;
+  }
+}
+
+TEST(SceneExtremes, StepEndingInNonFiniteStateThrowsAndRestores) {
+  // The setters keep NaN out; a snapshot restored as is does not (restoreStep puts back what
+  // saveStep gave, bitwise), which makes the guard reachable: the prediction from a NaN
+  // previous state makes the whole step NaN. Scene::step must throw and put every simulable
+  // back to where it was before the step, never hand the NaN state on.
+  auto sim = std::make_shared<Simulable>(shared().avatar, shared().walk);
+  Scene scene;
+  scene.addSimulable(sim);
+  scene.initialize();
+  scene.step();
+  SimulableStep poisoned = sim->saveStep();
+  poisoned.t_nm1(3, 1) = std::nan("");
+  sim->restoreStep(poisoned);
+  const VecX q_before = sim->getState();
+  const double t_before = sim->time();
+  const std::string message = test::messageOf<Error>([&] { scene.step(); });
+  for (const char* part : {"Scene::step", "simulable 0", "non-finite", "restored"})
+    EXPECT_NE(message.find(part), std::string::npos) << message;
+  EXPECT_EQ(sim->getState(), q_before);
+  EXPECT_EQ(sim->time(), t_before);
+  // A state set afresh steps normally again.
+  sim->setVelocity(VecX::Zero(sim->numDofs()));
+  scene.step();
+  EXPECT_TRUE(sim->getState().allFinite());
 }
 
 TEST(SceneStatic, EquilibriumUnderGravityIsOneConvergedSolve) {

@@ -29,6 +29,14 @@
 
 namespace flsh {
 
+/// Largest magnitude Simulable::setState accepts for a bone position or a soft-tissue value
+/// (m), and the constructor for a mocap translation: 10 km. Rotation vectors are bounded by
+/// kMaxRotationAngle (rotation.h).
+constexpr double kMaxStatePosition = 1e4;
+/// Largest magnitude Simulable::setVelocity accepts for any entry (m/s, rad/s): 10 km/s, far
+/// beyond anything a body survives, and small enough that the energies stay finite.
+constexpr double kMaxStateVelocity = 1e4;
+
 /// Stiffnesses and physical settings of a simulable; every default has its unit.
 struct SimulableOptions {
   double time_step = 1.0 / 60.0;          ///< h, s
@@ -148,7 +156,9 @@ class Simulable {
   // ---- state -----------------------------------------------------------------------------
   int numDofs() const;                       ///< 6 · 24 (+ 3 per soft-tissue node)
   VecX getState() const;                     ///< layout above
-  void setState(const VecX& q);              ///< throws InputError on size / non-finite
+  /// Throws InputError on a wrong size, a non-finite value, a position or soft-tissue value
+  /// beyond ±kMaxStatePosition or a rotation angle beyond kMaxRotationAngle.
+  void setState(const VecX& q);
   void updateState(const VecX& dq);          ///< increment chart
   void pushState();                          ///< saves q on a stack
   void popState();                           ///< restores the last pushed q (throws if empty)
@@ -156,7 +166,8 @@ class Simulable {
   /// state exactly, without a pop-and-reapply.
   void discardState();
   /// Sets the previous state so that the velocity (per DoF, m/s and rad/s in the world frame)
-  /// is `v`: q_{n−1} = q_n − h v (in the increment chart).
+  /// is `v`: q_{n−1} = q_n − h v (in the increment chart). Throws InputError on a wrong size,
+  /// a non-finite value or an entry beyond ±kMaxStateVelocity.
   void setVelocity(const VecX& v);
   VecX getVelocity() const;                  ///< (q_n ⊖ q_{n−1}) / h
   double time() const;

@@ -157,7 +157,8 @@ class Scene : public Objective {
   /// Calls initialize() on every simulable.
   void initialize();
   /// One backward-Euler step of every simulable: preUpdate, Newton (newtonOptions()),
-  /// postUpdate.
+  /// postUpdate. A step that leaves some simulable with a non-finite state throws Error after
+  /// restoring every simulable to its state before the step (saveStep / restoreStep).
   StepStats step();
   /// True when some simulable has soft-tissue DoFs (numDofs() > numBoneDofs()).
   bool hasSoftTissue() const;

@@ -1,0 +1,70 @@
+// From a scene file (SceneSpec, docs/scene_format.md) to simulables ready for a Scene: body
+// models (loaded once per file, or the synthetic body), motions placed by their offset and yaw,
+// betas, soft-tissue and reduced-model settings, and the avatars' volumetric data (built or
+// read from the cache). What `flsh simulate` runs; the input checks name the scene file and
+// the key.
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "flsh/io/motion.h"
+#include "flsh/io/scene_file.h"
+#include "flsh/sim/simulable.h"
+#include "flsh/solve/scene.h"
+#include "flsh/volume/soft_avatar.h"
+
+namespace flsh::io {
+
+/// One avatar of a scene, built.
+struct SceneAvatar {
+  const AvatarSpec* spec = nullptr;  ///< in the SceneSpec it was built from (must outlive this)
+  std::string where;                 ///< "SCENE: avatars[i]", for messages
+  std::shared_ptr<const BodyModel> body;
+  std::shared_ptr<SoftAvatar> avatar;
+  std::shared_ptr<const Motion> motion;  ///< null without a motion
+  std::shared_ptr<Simulable> simulable;
+  bool soft = false;  ///< "simulation": "fem" or "rom" (soft-tissue displacements)
+  bool rom = false;   ///< "simulation": "rom"
+};
+
+/// Progress and warning lines ("generating the synthetic body (600 vertices)...",
+/// "warning: …"), one per call, without a trailing newline. May be empty (silent).
+using SceneBuildLog = std::function<void(const std::string&)>;
+
+/// Builds every avatar of `scene` in order (nothing is written but the avatar cache). Throws
+/// InputError naming the scene file and the avatar's key on bad input, e.g. a model that is not
+/// SMPL's 24 joints, betas longer than the model's, motion values out of range
+/// (checkMotionValues), or a ROM asking for more handles than the body has.
+std::vector<SceneAvatar> buildSceneAvatars(const SceneSpec& scene, const SceneBuildLog& log = {});
+
+/// The solver settings of a scene file. Soft-tissue scenes keep their own solver choices
+/// (SceneOptions::soft_tissue_newton with an FEM avatar, else reduced_newton for ROM avatars:
+/// Hessian form, linear solver, lagged factor, tolerance) and take the scene's iteration limit
+/// and step tolerance; their gradient tolerances and lagged-factor settings come from the scene
+/// file when it sets them.
+SceneOptions sceneOptionsOf(const SceneSpec& scene);
+
+/// The ROM's settings as the scene keys handles / elastic_cubature / inertial_cubature /
+/// surface_partition_of_unity and the `flsh avatar` flags give them: 0 sample tets switches
+/// that cubature off (exact integration), and its count then keeps the (unused) default.
+void setReducedSettings(ReducedSettings& reduced, int handles, int elastic, int inertial,
+                        bool partition_of_unity);
+
+/// Soft tissue, the reduced model and the cubatures that are on (as setReducedSettings).
+void enableReducedModel(SoftAvatar& avatar, int elastic, int inertial);
+
+/// `betas` fitted to the model's K shape components: shorter stays (the forward pass zero
+/// pads); longer is cut to K, and if a dropped coefficient is nonzero `warning` (if not null)
+/// gets a sentence naming `origin`.
+VecX fitBetas(const VecX& betas, const BodyModel& model, const std::string& origin,
+              std::string* warning = nullptr);
+
+/// Throws InputError naming the motion (`what`) unless its poses are rotation vectors the
+/// forward pass accepts (checkPoseAngles: finite, |θ| ≤ kMaxRotationAngle) and its
+/// translations are finite and within ±kMaxStatePosition m, by frame.
+void checkMotionValues(const Motion& motion, const std::string& what);
+
+}  // namespace flsh::io

@@ -1,0 +1,244 @@
+#include "flsh/io/scene_build.h"
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdarg>
+#include <cstdio>
+#include <map>
+
+#include "flsh/body/body_forward.h"
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/body/synthetic_body.h"
+#include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
+
+namespace flsh::io {
+
+namespace {
+
+std::string format(const char* pattern, double value) {
+  char text[64];
+  std::snprintf(text, sizeof(text), pattern, value);
+  return text;
+}
+
+/// A report's warnings (lines ending in newlines) without the last newline.
+std::string trimmed(std::string text) {
+  while (!text.empty() && text.back() == '\n') text.pop_back();
+  return text;
+}
+
+/// The avatar's motion with its yaw (about +y through the root's rest position) and offset:
+/// every frame is rigidly moved, trans' = R_y trans + offset and R_root' = R_y R_root.
+std::shared_ptr<Motion> placedMotion(Motion motion, const AvatarSpec& spec) {
+  const Mat3 Ry = Eigen::AngleAxisd(spec.yaw, Vec3::UnitY()).toRotationMatrix();
+  for (int k = 0; k < motion.numFrames(); ++k) {
+    const Vec3 trans = motion.trans.row(k).transpose();
+    motion.trans.row(k) = (Ry * trans + spec.offset).transpose();
+    const Vec3 root = motion.poses.row(k).head<3>().transpose();
+    motion.poses.row(k).head<3>() = logSO3(Ry * rodrigues(root)).transpose();
+  }
+  return std::make_shared<Motion>(std::move(motion));
+}
+
+/// "500 tets, held-out error 0.84 %" or "off (exact)" for one cubature of the reduced data;
+/// with `rigid_error` ≥ 0 (the inertial one's) also ", rigid motions within 1 %".
+std::string cubatureSummary(const Cubature& cubature, double test_error, bool enabled,
+                            double rigid_error = -1.0) {
+  if (!enabled) return "off (exact)";
+  char text[128];
+  int length = std::snprintf(text, sizeof(text), "%d tets, held-out error %.2f %%",
+                             int(cubature.elements.size()), 100.0 * test_error);
+  if (rigid_error >= 0)
+    std::snprintf(text + length, sizeof(text) - size_t(length), ", rigid motions within %d %%",
+                  int(std::ceil(100.0 * rigid_error)));
+  return text;
+}
+
+/// A ROM avatar's reduced data in one line (basis, cubatures, cache and build time), after its
+/// warnings.
+void reportReducedData(const std::string& name, const SoftAvatar& avatar, bool use_cache,
+                       const SceneBuildLog& log) {
+  const ReducedData& data = avatar.reducedData();
+  const ReducedBuildReport& report = avatar.reducedBuildReport();
+  if (!report.warnings.empty()) log("warning: avatar '" + name + "': " + trimmed(report.warnings));
+  if (!data.basis_converged)
+    log("warning: avatar '" + name +
+        "': the bounded biharmonic solve of some handle did not "
+        "converge (max bound violation " +
+        format("%.2g", data.basis_max_bound_violation) + ")");
+  const std::string cache = !use_cache ? format("off, built in %.1f s", report.seconds_total)
+                            : report.from_cache
+                                ? format("hit (%.2f s)", report.seconds_total)
+                                : format("miss (built and stored in %.1f s)", report.seconds_total);
+  log("avatar '" + name + "' (rom): " + std::to_string(data.numHandles()) + " handles, basis " +
+      std::to_string(long(data.basis.nonZeros())) + " nonzeros; elastic cubature " +
+      cubatureSummary(data.elastic, data.elastic_test_error, avatar.elasticCubatureEnabled()) +
+      "; inertial cubature " +
+      cubatureSummary(data.inertial, data.inertial_test_error, avatar.inertialCubatureEnabled(),
+                      data.inertial_rigid_error) +
+      "; reduced data cache: " + cache);
+}
+
+}  // namespace
+
+std::vector<SceneAvatar> buildSceneAvatars(const SceneSpec& scene, const SceneBuildLog& log_line) {
+  const SceneBuildLog log = log_line ? log_line : [](const std::string&) {};
+  std::map<std::string, std::shared_ptr<const BodyModel>> bodies;  // shared per model
+  std::vector<SceneAvatar> runs(scene.avatars.size());
+  for (size_t i = 0; i < scene.avatars.size(); ++i) {
+    const AvatarSpec& spec = scene.avatars[i];
+    SceneAvatar& run = runs[i];
+    run.spec = &spec;
+    run.where = scene.source + ": avatars[" + std::to_string(i) + "]";
+    const std::string key = spec.model == "synthetic"
+                                ? "synthetic:" + std::to_string(spec.synthetic_vertices)
+                                : spec.model;
+    auto& body = bodies[key];
+    if (!body) {
+      if (spec.model == "synthetic") {
+        log("generating the synthetic body (" + std::to_string(spec.synthetic_vertices) +
+            " vertices)...");
+        SyntheticBodyOptions options;
+        options.vertices = spec.synthetic_vertices;
+        body = std::make_shared<const BodyModel>(makeSyntheticBody(options));
+      } else {
+        body = std::make_shared<const BodyModel>(loadBodyModel(spec.model));
+      }
+      if (body->numJoints() != kNumJoints)
+        throw InputError(run.where + ".model: " + spec.model + " has " +
+                         std::to_string(body->numJoints()) + " joints, expected 24 (SMPL)");
+    }
+    run.body = body;
+
+    std::shared_ptr<Motion> motion;
+    if (!spec.motion.empty()) {
+      const std::string prefix = "builtin:";
+      Motion raw =
+          spec.motion.rfind(prefix, 0) == 0
+              ? makeBuiltinMotion(spec.motion.substr(prefix.size()),
+                                  spec.motion_seconds > 0 ? spec.motion_seconds : scene.duration)
+              : loadMotion(spec.motion);
+      checkMotionValues(raw,
+                        run.where + ".motion: " + (raw.source.empty() ? spec.motion : raw.source));
+      motion = placedMotion(std::move(raw), spec);
+      checkMotionValues(*motion,
+                        run.where + ".offset: the motion placed by offset and yaw_degrees");
+    }
+    run.motion = motion;
+
+    VecX betas = spec.betas;
+    if (betas.size() > body->numBetas())
+      throw InputError(run.where + ".betas: " + std::to_string(betas.size()) +
+                       " values, but the model has " + std::to_string(body->numBetas()) +
+                       " shape components");
+    checkShapeCoefficients(betas, run.where + ".betas");
+    if (betas.size() == 0 && motion && motion->betas.size() > 0) {
+      std::string warning;
+      betas = fitBetas(motion->betas, *body, motion->source, &warning);
+      if (!warning.empty()) log("warning: " + warning);
+      checkShapeCoefficients(betas, run.where + ".motion: " + motion->source + ": betas");
+    }
+    if (betas.size() == 0) betas = VecX::Zero(body->numBetas());
+    SoftAvatarSettings settings;
+    run.rom = spec.simulation == "rom";
+    run.soft = spec.simulation == "fem" || run.rom;
+    if (run.soft) {
+      settings.volumetric.tet_mesh.resolution = spec.resolution;
+      settings.volumetric.material_file = spec.material_file;
+      settings.volumetric.cache_dir = scene.cache_dir;
+      settings.volumetric.use_cache = scene.use_cache;
+    }
+    if (run.rom)
+      setReducedSettings(settings.reduced, spec.handles, spec.elastic_cubature,
+                         spec.inertial_cubature, spec.surface_partition_of_unity);
+    run.avatar = std::make_shared<SoftAvatar>(body, betas, settings);
+    if (run.soft) {
+      log(std::string("building the volumetric body") + (run.rom ? " and the reduced basis" : "") +
+          " of avatar '" + spec.name + "'...");
+      run.avatar->enableSoftTissue();
+    }
+    if (run.rom) enableReducedModel(*run.avatar, spec.elastic_cubature, spec.inertial_cubature);
+    try {
+      run.avatar->initVolumetricData();
+    } catch (const InputError& e) {
+      // E.g. more handles than the body has soft-tissue surface nodes: name the avatar.
+      throw InputError(run.where + " ('" + spec.name + "', \"" + spec.simulation +
+                       "\"): " + e.what());
+    }
+    if (run.soft) {
+      const VolumetricBuildReport& report = run.avatar->volumetricBuildReport();
+      const VolumetricData& data = run.avatar->volumetricData();
+      if (!report.warnings.empty())
+        log("warning: avatar '" + spec.name + "': " + trimmed(report.warnings));
+      log("avatar '" + spec.name + "': " + std::to_string(data.numNodes()) + " nodes (" +
+          std::to_string(data.numNodes() - data.numBoneNodes()) + " soft tissue), " +
+          std::to_string(data.numTets()) + " tets; cache: " +
+          (!scene.use_cache             ? "off"
+           : report.data_from_cache     ? "hit"
+           : report.template_from_cache ? "template hit, shape built"
+                                        : "miss (built and stored)"));
+    }
+    if (run.rom) reportReducedData(spec.name, *run.avatar, scene.use_cache, log);
+    SimulableOptions options = spec.options;
+    options.time_step = scene.time_step;
+    run.simulable = std::make_shared<Simulable>(run.avatar, run.motion, options);
+  }
+  return runs;
+}
+
+SceneOptions sceneOptionsOf(const SceneSpec& scene) {
+  SceneOptions options;
+  options.newton = scene.newton;
+  options.soft_tissue_newton.max_iterations = scene.newton.max_iterations;
+  options.soft_tissue_newton.step_tolerance = scene.newton.step_tolerance;
+  if (scene.soft_tissue_gradient_tolerance > 0)
+    options.soft_tissue_newton.gradient_tolerance = scene.soft_tissue_gradient_tolerance;
+  options.reduced_newton.max_iterations = scene.newton.max_iterations;
+  options.reduced_newton.step_tolerance = scene.newton.step_tolerance;
+  if (scene.reduced_gradient_tolerance > 0)
+    options.reduced_newton.gradient_tolerance = scene.reduced_gradient_tolerance;
+  options.soft_tissue_newton.lagged = scene.soft_tissue_lagged;
+  options.reduced_newton.lagged = scene.reduced_lagged;
+  options.avatar_contact = scene.avatar_contact;
+  return options;
+}
+
+void setReducedSettings(ReducedSettings& reduced, int handles, int elastic, int inertial,
+                        bool partition_of_unity) {
+  reduced.num_handles = handles;
+  if (elastic > 0) reduced.elastic_cubature_points = elastic;
+  if (inertial > 0) reduced.inertial_cubature_points = inertial;
+  reduced.surface_partition_of_unity = partition_of_unity;
+}
+
+void enableReducedModel(SoftAvatar& avatar, int elastic, int inertial) {
+  avatar.enableSoftTissue();
+  avatar.enableReducedModel();
+  avatar.enableElasticCubature(elastic > 0);
+  avatar.enableInertialCubature(inertial > 0);
+}
+
+VecX fitBetas(const VecX& betas, const BodyModel& model, const std::string& origin,
+              std::string* warning) {
+  const long K = model.numBetas();
+  if (betas.size() <= K) return betas;
+  if (warning && betas.tail(betas.size() - K).cwiseAbs().maxCoeff() > 0.0)
+    *warning = origin + " has " + std::to_string(betas.size()) + " shape coefficients, the model " +
+               std::to_string(K) + "; using the first " + std::to_string(K);
+  return betas.head(K);
+}
+
+void checkMotionValues(const Motion& motion, const std::string& what) {
+  for (Eigen::Index t = 0; t < motion.poses.rows(); ++t)
+    checkPoseAngles(motion.poses.row(t).transpose(), what + ": poses: frame " + std::to_string(t));
+  for (Eigen::Index t = 0; t < motion.trans.rows(); ++t)
+    for (int c = 0; c < motion.trans.cols(); ++c)
+      if (!(std::abs(motion.trans(t, c)) <= kMaxStatePosition))
+        throw InputError(
+            what + ": trans: frame " + std::to_string(t) + " has " +
+            format("%.6g", motion.trans(t, c)) + " m, expected a finite value within [-" +
+            format("%.6g", kMaxStatePosition) + ", " + format("%.6g", kMaxStatePosition) + "] m");
+}
+
+}  // namespace flsh::io

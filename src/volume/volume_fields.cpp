@@ -353,6 +353,11 @@ VecXi selectBoneNodes(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX
       const double d = boneDistance(x, b);
       if (d < owner_distance) owner = b, owner_distance = d;
     }
+    // Only overflowing positions (finite but absurd joints) leave every distance non-finite.
+    if (owner < 0)
+      throw InputError(fn + "node " + std::to_string(i) +
+                       " has no finite distance to the bones it is weighted to (joint or node "
+                       "positions too large)");
     // Surface nodes sort after every interior node: key = distance + (surface ? 1e6 : 0).
     dominated[owner].emplace_back(owner_distance + (i < nv ? 1e6 : 0.0), i);
   }

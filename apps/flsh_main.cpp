@@ -539,7 +539,15 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
   const double h = scene.time_step;
   io::SceneRecorder recorder(wanted, out_dir ? out_dir->staging() : std::string(), recorded,
                              scene.colliders, h, frames);
-  recorder.record(0.0);
+  // Recording (PLY frames are written as they come) counts as output time, not simulation.
+  double record_seconds = 0.0;
+  const auto record = [&](double t) {
+    const auto t0 = Clock::now();
+    recorder.record(t);
+    record_seconds += secondsSince(t0);
+  };
+  record(0.0);
+  const double first_record_seconds = record_seconds;  // before t_sim
   const auto t_sim = Clock::now();
   ProgressBar progress(steps);
   long newton_iterations = 0, factorizations = 0, cg_iterations = 0;
@@ -562,17 +570,17 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
     max_contacts = std::max(max_contacts, stats.active_contacts);
     if (!stats.newton.converged && unconverged++ == 0)
       first_unconverged = "step " + std::to_string(s) + ": " + stats.newton.message;
-    if (s % every == 0) recorder.record(s * h);
+    if (s % every == 0) record(s * h);
     progress.update(s, s * h);
   }
   progress.finish();
-  const double sim_seconds = secondsSince(t_sim);
+  const double sim_seconds = secondsSince(t_sim) - (record_seconds - first_record_seconds);
 
   // ---- outputs: each file atomic in the staging folder, which then replaces outputs.dir ----
   const auto t_out = Clock::now();
   const std::vector<std::string> written = recorder.finish();
   if (out_dir) out_dir->commit();
-  const double out_seconds = secondsSince(t_out);
+  const double out_seconds = secondsSince(t_out) + record_seconds;
 
   std::string outputs;
   for (const auto& w : written) outputs += (outputs.empty() ? "" : ", ") + w;

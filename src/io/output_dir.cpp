@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -52,6 +53,16 @@ bool isAtomicWriteLeftover(const std::string& name) {
   return name.size() > 1 && name[0] == '.' && name.find(".tmp.") != std::string::npos;
 }
 
+/// The PID of a staging or moved-aside folder's name after its prefix ("PID-N"), or −1 if the
+/// rest is not exactly that (then the folder is not flsh's and is left alone).
+long leftoverPid(const std::string& rest) {
+  const size_t dash = rest.find('-');
+  if (dash == 0 || dash == std::string::npos || dash + 1 == rest.size()) return -1;
+  for (size_t k = 0; k < rest.size(); ++k)
+    if (k != dash && !std::isdigit(static_cast<unsigned char>(rest[k]))) return -1;
+  return std::atol(rest.substr(0, dash).c_str());
+}
+
 bool processAlive(long pid) {
   if (pid <= 0) return false;
   return ::kill(pid_t(pid), 0) == 0 || errno == EPERM;
@@ -95,8 +106,9 @@ StagedOutputDir::StagedOutputDir(const std::string& target, std::vector<OutputEn
     const std::string entry = it->path().filename().string();
     const bool tmp = entry.rfind(tmp_prefix, 0) == 0, old = entry.rfind(old_prefix, 0) == 0;
     if (!tmp && !old) continue;
-    const long pid = std::atol(entry.c_str() + tmp_prefix.size());  // both prefixes are as long
-    if (pid == long(::getpid()) || processAlive(pid)) continue;
+    // Both prefixes are as long.
+    const long pid = leftoverPid(entry.substr(tmp_prefix.size()));
+    if (pid <= 0 || pid == long(::getpid()) || processAlive(pid)) continue;
     std::error_code ignored;
     if (old && !fs::exists(fs::symlink_status(p, ignored)))
       fs::rename(it->path(), p, ignored);
@@ -108,16 +120,21 @@ StagedOutputDir::StagedOutputDir(const std::string& target, std::vector<OutputEn
   checkCreatable(p, what_, target);
   for (fs::path a = p.parent_path(); !fs::exists(fs::symlink_status(a, ec)); a = a.parent_path())
     created_parents_.push_back(a.string());
-  fs::create_directories(parent_, ec);
-  if (ec) throw FileError(what_ + ": cannot create folder '" + parent_ + "': " + ec.message());
   static std::atomic<unsigned> counter{0};
   staging_ = (fs::path(parent_) /
               (tmp_prefix + std::to_string(::getpid()) + "-" + std::to_string(counter++)))
                  .string();
-  if (!fs::create_directory(staging_, ec) || ec)
-    throw FileError(
-        what_ + ": cannot create the staging folder '" + staging_ +
-        "' beside the output folder: " + (ec ? ec.message() : std::string("it exists already")));
+  std::string failure;
+  fs::create_directories(parent_, ec);
+  if (ec)
+    failure = "cannot create folder '" + parent_ + "': " + ec.message();
+  else if (!fs::create_directory(staging_, ec) || ec)
+    failure = "cannot create the staging folder '" + staging_ + "' beside the output folder: " +
+              (ec ? ec.message() : std::string("it exists already"));
+  if (!failure.empty()) {
+    for (const auto& dir : created_parents_) fs::remove(dir, ec);  // only if still empty
+    throw FileError(what_ + ": " + failure);
+  }
 }
 
 StagedOutputDir::~StagedOutputDir() {

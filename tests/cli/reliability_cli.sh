@@ -150,6 +150,11 @@ expect_exit2 "huge_regressor.npz: array 'J_regressor'" -- "$flsh" simulate bad_m
 [ ! -e ".out.old-$dead-0" ] || fail "the dead run's folder should be put back"
 [ "$(ls out/meshes/w | wc -l)" -eq 7 ] || fail "the previous outputs should be back in out"
 [ -z "$(ls -A . | grep '\.tmp-')" ] || fail "staging folder left behind: $(ls -A)"
+# Folders that only look like flsh's leftovers are left alone.
+mkdir -p .out.tmp-mine .out.tmp-12x-0
+"$flsh" simulate scene.json --duration 0.1 >/dev/null 2>&1
+[ -d .out.tmp-mine ] && [ -d .out.tmp-12x-0 ] || fail "a folder that is not flsh's was removed"
+rmdir .out.tmp-mine .out.tmp-12x-0
 
 # ---- memory: with every output off, 10x more frames cost no more memory ----
 for n in 300 3000; do

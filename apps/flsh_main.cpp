@@ -750,6 +750,12 @@ int main(int argc, char** argv) {
       overrides.no_cache = sim_no_cache;
       if (simulate->count("--cache") && sim_cache.empty())
         throw InputError("--cache: expected a directory, got an empty string");
+      if (!sim_cache.empty() && std::filesystem::exists(sim_cache) &&
+          !std::filesystem::is_directory(sim_cache))
+        throw InputError("--cache: '" + sim_cache + "' is a file, expected a folder");
+      if (!sim_cache.empty() && std::filesystem::exists(sim_cache) &&
+          !std::filesystem::is_directory(sim_cache))
+        throw InputError("--cache: '" + sim_cache + "' is a file, expected a folder");
       if (simulate->count("--duration") && duration == 0.0)
         throw InputError("--duration: expected a time > 0 s, got 0");
       if (simulate->count("--time-step") && time_step == 0.0)

@@ -96,6 +96,8 @@ expect_exit2 "npzdir/states.npz' is not a file, expected the file states.npz of 
 mkdir -p mine && echo notes > mine/notes.txt
 expect_exit2 "holds 'notes.txt', which flsh does not write there" -- "$flsh" simulate scene.json --out mine
 [ "$(ls -A mine)" = "notes.txt" ] || fail "a folder of other files was touched"
+expect_exit2 "--cache: 'body.npz' is a file, expected a folder" -- "$flsh" simulate scene.json --cache body.npz
+expect_exit2 "--cache: 'body.npz' is a file, expected a folder" -- "$flsh" avatar --model synthetic:600 --cache body.npz
 expect_exit2 "--out: '$work' is a folder, expected a file path" -- "$flsh" synth-body --out "$work"
 expect_exit2 "'$here/body.npz' is a file, expected a folder" -- "$flsh" motion --out body.npz/walk.npz
 expect_exit2 "--out: folder '$here/mine' holds 'notes.txt'" -- "$flsh" demo --vertices 600 --seconds 0.2 --out mine

@@ -192,6 +192,9 @@ void bind_solve(py::module_& m) {
                      "factor, gradient_tolerance 1e-6, linear_solver Auto = dense up to 1500 "
                      "DoFs, CHOLMOD above)")
       .def_readwrite("avatar_contact", &SceneOptions::avatar_contact)
+      .def_readwrite("lower_energy_start", &SceneOptions::lower_energy_start,
+                     "With soft tissue: start each step's Newton from the lower-energy of the "
+                     "inertial prediction and the previous state (default True)")
       .def_readwrite("avatar_contact_options", &SceneOptions::avatar_contact_options,
                      "ContactOptions (a copy on read)");
 

@@ -524,19 +524,30 @@ void Simulable::preUpdate() {
   Impl& m = *impl_;
   m.time += m.options.time_step;
   m.updateTargets(m.time);
-  // Start Newton from the inertial prediction: q_n extrapolated with the current velocity.
-  for (int b = 0; b < m.num_bones; ++b) {
-    m.q.t.row(b) = 2.0 * m.q_n.t.row(b) - m.q_nm1.t.row(b);
-    m.q.R[b] = rodrigues(logSO3(m.q_n.R[b] * m.q_nm1.R[b].transpose())) * m.q_n.R[b];
-  }
-  m.placeKinematicBones();
   if (m.soft) {
-    // Pose blend offsets of the last converged pose, held during the step; displacements
-    // start from their extrapolation like the bones.
+    // Pose blend offsets of the last converged pose, held during the step.
     m.soft->setPoseBlend(m.q_n.R);
     m.setSoftPrediction();
-    m.soft->u = 2.0 * m.soft->u_n - m.soft->u_nm1;
   }
+  setStepStart(StepStart::Prediction);
+}
+
+void Simulable::setStepStart(StepStart start) {
+  Impl& m = *impl_;
+  if (start == StepStart::Prediction) {
+    // The inertial prediction: q_n extrapolated with the current velocity; displacements from
+    // their extrapolation like the bones.
+    for (int b = 0; b < m.num_bones; ++b) {
+      m.q.t.row(b) = 2.0 * m.q_n.t.row(b) - m.q_nm1.t.row(b);
+      m.q.R[b] = rodrigues(logSO3(m.q_n.R[b] * m.q_nm1.R[b].transpose())) * m.q_n.R[b];
+    }
+    if (m.soft) m.soft->u = 2.0 * m.soft->u_n - m.soft->u_nm1;
+  } else {
+    m.q.t = m.q_n.t;
+    m.q.R = m.q_n.R;
+    if (m.soft) m.soft->u = m.soft->u_n;
+  }
+  m.placeKinematicBones();
   m.touch();
 }
 

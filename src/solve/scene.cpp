@@ -718,6 +718,13 @@ StepStats Scene::step() {
   for (auto& s : simulables_) before.push_back(s->saveStep());
   for (auto& s : simulables_) s->preUpdate();
   ensureSolver();
+  if (options_.lower_energy_start && hasSoftTissue()) {
+    const double at_prediction = energy();
+    for (auto& s : simulables_) s->setStepStart(Simulable::StepStart::PreviousState);
+    // A non-finite energy at the prediction keeps the previous state.
+    if (at_prediction <= energy())
+      for (auto& s : simulables_) s->setStepStart(Simulable::StepStart::Prediction);
+  }
   StepStats stats;
   stats.newton = newtonSolve(*this, newtonOptions(), solver_.get());
   // Newton rejects non-finite energies, but a state can still overflow where no energy looks

@@ -1,6 +1,7 @@
 // Two-level build of the volumetric body with the on-disk cache (volumetric_data.h).
 #include "flsh/volume/volumetric_data.h"
 
+#include <Eigen/Geometry>
 #include <chrono>
 
 #include "flsh/body/body_forward.h"
@@ -25,6 +26,35 @@ void hashBody(Sha256& h, const BodyModel& body) {
   h.updateMatrix("weights", body.weights);
   h.updateMatrix("faces", body.faces);
   h.updateField("parents", body.parents.data(), body.parents.size() * sizeof(int));
+}
+
+/// The tet mesh follows the shape through the harmonically extended shape directions; a shape
+/// far out (e.g. β_belly = −5 on the synthetic body) can fold a tet over: refused here, naming β,
+/// rather than later by the element that meets it.
+void checkShapedTets(const TetMesh& mesh, const MatX3& nodes, const VecX& betas) {
+  int inverted = 0, first = -1;
+  for (int e = 0; e < mesh.tets.rows(); ++e) {
+    const Vec3 x0 = nodes.row(mesh.tets(e, 0)).transpose();
+    const Vec3 a = nodes.row(mesh.tets(e, 1)).transpose() - x0;
+    const Vec3 b = nodes.row(mesh.tets(e, 2)).transpose() - x0;
+    const Vec3 c = nodes.row(mesh.tets(e, 3)).transpose() - x0;
+    if (!(a.cross(b).dot(c) > 0.0)) {
+      if (first < 0) first = e;
+      ++inverted;
+    }
+  }
+  if (inverted == 0) return;
+  std::string beta_text;
+  for (Eigen::Index k = 0; k < betas.size(); ++k)
+    if (betas[k] != 0.0)
+      beta_text += (beta_text.empty() ? "" : ", ") + std::string("β") + std::to_string(k) + " = " +
+                   std::to_string(betas[k]);
+  throw InputError("betas: the shape (" + (beta_text.empty() ? "all zero" : beta_text) +
+                   ") folds " + std::to_string(inverted) + " of the tet mesh's " +
+                   std::to_string(mesh.tets.rows()) + " tets inside out (first: tet " +
+                   std::to_string(first) +
+                   "): the soft-tissue models cannot use it; use a shape closer to the mean "
+                   "(smaller |β|)");
 }
 
 std::string dataKey(const std::string& template_key, const VecX& betas,
@@ -138,6 +168,7 @@ VolumetricData buildVolumetricData(const BodyModel& body, const VecX& betas_in,
   const TetMesh& mesh = d.templ->mesh;
   d.key = dataKey(d.templ->key, betas, d.material_model);
   d.rest_nodes = shapedNodes(mesh, d.templ->fields, betas);
+  checkShapedTets(mesh, d.rest_nodes, betas);
   d.rest_joints = body.J_regressor * d.rest_nodes.topRows(body.numVertices());
 
   bool loaded = false;

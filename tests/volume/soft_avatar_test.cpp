@@ -99,6 +99,20 @@ TEST(SoftAvatar, SkeletonAvatarBuildsNoTetMesh) {
 // The FEM avatar: surface nodes are the SMPL shaped vertices for any β, fields are consistent,
 // bone nodes exist, the second creation comes from the cache bitwise, a corrupted cache file is
 // rebuilt with a warning, and two shapes get different materials.
+TEST(SoftAvatar, ShapeThatFoldsTheTetMeshIsRefusedNamingBeta) {
+  // The tet mesh follows β through the extended shape directions; far out (the belly drawn in
+  // by β6 = −20) tets fold inside out. The error names β, not the first element that meets the
+  // folded tet (the stability sweep's β6 = −5 on its body was reported as "tet 3040: inverted").
+  VecX betas = VecX::Zero(10);
+  betas(6) = -20.0;
+  auto avatar = std::make_shared<SoftAvatar>(smallSyntheticBody(), betas,
+                                             cachedSettings(test::freshTempDir("folded")));
+  avatar->enableSoftTissue();
+  const std::string message = test::messageOf<InputError>([&] { avatar->initVolumetricData(); });
+  for (const char* part : {"betas", "β6 = -20", "inside out", "smaller |β|"})
+    EXPECT_NE(message.find(part), std::string::npos) << message;
+}
+
 TEST(SoftAvatar, FemAvatarVolumetricBodyAndCache) {
   const std::string cache_dir = test::freshTempDir("fem_avatar_cache");
   VecX betas = VecX::Zero(10);
@@ -244,9 +258,9 @@ TEST(SoftAvatar, UsesTheDensitySetting) {
 TEST(SoftAvatar, BoneInertiaAtZeroShapeIsTheVoxelizedTemplate) {
   const SoftAvatar& avatar = meanAvatar();
   const BodyModel& body = *smallSyntheticBody();
-  const auto direct = computeBoneInertia(avatar.restVertices(), body.faces, body.weights,
-                                         avatar.restJoints(), avatar.settings().density,
-                                         avatar.settings().voxel_size);
+  const auto direct =
+      computeBoneInertia(avatar.restVertices(), body.faces, body.weights, avatar.restJoints(),
+                         avatar.settings().density, avatar.settings().voxel_size);
   for (int b = 0; b < 24; ++b) {
     EXPECT_EQ(avatar.boneInertia()[b].mass, direct[b].mass) << b;
     EXPECT_EQ(avatar.boneInertia()[b].first_moment, direct[b].first_moment) << b;
@@ -296,12 +310,12 @@ TEST(SoftAvatar, ShapeJacobiansMatchFiniteDifferences) {
   const auto volume = [&](const VecX& beta) { return VecX::Constant(1, build(beta)->volume()); };
   ASSERT_EQ(avatar.boneInertiaShapeJacobian().rows(), 240);
   ASSERT_EQ(avatar.boneInertiaShapeJacobian().cols(), 10);
-  EXPECT_TRUE(test::jacobianMatchesFiniteDifferences(inertia, beta0,
-                                                     avatar.boneInertiaShapeJacobian(), 1e-8, 1e-4));
+  EXPECT_TRUE(test::jacobianMatchesFiniteDifferences(
+      inertia, beta0, avatar.boneInertiaShapeJacobian(), 1e-8, 1e-4));
   EXPECT_TRUE(test::jacobianMatchesFiniteDifferences(joints, beta0,
                                                      avatar.restJointsShapeJacobian(), 1e-8, 1e-4));
-  EXPECT_TRUE(test::jacobianMatchesFiniteDifferences(areas, beta0,
-                                                     avatar.vertexAreasShapeJacobian(), 1e-8, 1e-4));
+  EXPECT_TRUE(test::jacobianMatchesFiniteDifferences(
+      areas, beta0, avatar.vertexAreasShapeJacobian(), 1e-8, 1e-4));
   EXPECT_TRUE(test::jacobianMatchesFiniteDifferences(
       volume, beta0, MatX(avatar.volumeShapeGradient().transpose()), 1e-8, 1e-4));
 }

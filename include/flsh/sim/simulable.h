@@ -150,6 +150,11 @@ class Simulable {
   /// rotations, when rates differ), set the inertial prediction x̂ from q_n and q_{n−1}, and
   /// move kinematic bones to their targets.
   void preUpdate();
+  /// Where Newton starts the step set up by preUpdate: the inertial prediction (preUpdate's
+  /// choice) or the previous state q_n, kinematic bones at their targets either way. Scene::step
+  /// starts from whichever has the lower energy (SceneOptions::lower_energy_start).
+  enum class StepStart { Prediction, PreviousState };
+  void setStepStart(StepStart start);
   /// After the step converged: q_{n−1} ← q_n, q_n ← q.
   void postUpdate();
 

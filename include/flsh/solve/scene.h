@@ -127,6 +127,16 @@ struct SceneOptions {
   /// soft tissue. The skeleton then gets bitwise the same Hessians and states (its general
   /// pattern equals the block pattern) at some cost in speed: for tests and comparisons.
   bool general_hessian_pattern = false;
+  /// In scenes with soft tissue, start each step's Newton from the lower-energy of the inertial
+  /// prediction and the previous state (Simulable::setStepStart), for all simulables together.
+  /// Where the tissue moves fast (feet pushed out of the ground, 5× motions, very soft tissue)
+  /// the prediction can land deep in the Fung exponential (2.5e9 J against 241 J at the
+  /// previous state in the stability sweep's ground case) and Newton's tolerance, relative to
+  /// its first gradient, then accepts states with huge forces left (up to 1e23 N), which fling
+  /// the tissue off within steps (docs/benchmarks.md, stability sweep). Costs two energy
+  /// evaluations per step. Off: always the prediction (the former behaviour, and the skeleton's:
+  /// its energies have no exponential, and the check cost it ~15 % of its speed).
+  bool lower_energy_start = true;
   /// Vertices of each avatar against the other avatars' bone capsules.
   bool avatar_contact = true;
   ContactOptions avatar_contact_options;

@@ -16,4 +16,4 @@ apt-get install -y --no-install-recommends \
   nlohmann-json3-dev libcli11-dev libzip-dev libpng-dev libtinygltf-dev libstb-dev \
   pybind11-dev python3-dev python3-pybind11 \
   python3-numpy python3-scipy python3-pytest python3-torch \
-  clang-14 libclang-rt-14-dev ccache
+  clang-14 libclang-rt-14-dev libomp-14-dev ccache

@@ -414,6 +414,8 @@ NpyArray makeArray(const std::string& dtype, const void* data, size_t itemsize,
   a.dtype = dtype;
   a.shape = shape;
   const long n = elementCount(shape);
+  if (size_t(n) > std::numeric_limits<size_t>::max() / 2 / itemsize)
+    throw InputError("NpzWriter: shape " + shapeString(shape) + " is too large");
   a.bytes.resize(size_t(n) * itemsize);
   if (n > 0) std::memcpy(a.bytes.data(), data, a.bytes.size());
   return a;

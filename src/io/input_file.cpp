@@ -1,10 +1,11 @@
-// Reading input files whole, regular files only (input_file.h).
+// Reading input files whole, regular files only; the JSON nesting bound (input_file.h).
 #include "flsh/io/input_file.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 
@@ -63,6 +64,21 @@ void readInto(const std::string& path, const std::string& what, Buffer& out) {
   out.resize(filled);
 }
 
+/// Line and column (1-based) of the 1-based byte position `byte` of `text`, for editors.
+std::string lineColumn(const std::string& text, size_t byte) {
+  byte = std::min(byte, text.size());
+  size_t line = 1, column = 1;
+  for (size_t k = 0; k + 1 < byte; ++k) {
+    if (text[k] == '\n') {
+      ++line;
+      column = 1;
+    } else {
+      ++column;
+    }
+  }
+  return "line " + std::to_string(line) + ", column " + std::to_string(column);
+}
+
 }  // namespace
 
 std::string nonRegularFileKind(const std::string& path) {
@@ -89,6 +105,30 @@ std::string readRegularFileText(const std::string& path, const std::string& what
   std::string text;
   readInto(path, what, text);
   return text;
+}
+
+void checkJsonNesting(const std::string& text, const std::string& origin, const std::string& hint,
+                      int max_depth) {
+  int depth = 0;
+  bool in_string = false;
+  for (size_t k = 0; k < text.size(); ++k) {
+    const char c = text[k];
+    if (in_string) {
+      if (c == '\\')
+        ++k;  // the escaped character cannot end the string
+      else if (c == '"')
+        in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > max_depth)
+        throw InputError(origin + ": JSON nested deeper than " + std::to_string(max_depth) +
+                         " levels at byte " + std::to_string(k) + " (" + lineColumn(text, k + 1) +
+                         "); " + hint);
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;  // unbalanced closers are the parser's to report
+    }
+  }
 }
 
 }  // namespace flsh::io

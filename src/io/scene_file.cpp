@@ -60,11 +60,6 @@ std::string joinNames(const std::vector<std::string>& names) {
   return text;
 }
 
-// Scene files nest a few levels ("avatars": [{"path": {"offsets": [[…]]}}]); 64 is far beyond
-// any scene and far below what overflows a stack. nlohmann's dump() and copies recurse once per
-// level: 200 000 nested '[' crashed the reader when it printed the value in a message.
-constexpr int kMaxJsonDepth = 64;
-
 /// Line and column (1-based) of byte `byte` of `text`, for editors.
 std::string lineColumn(const std::string& text, size_t byte) {
   byte = std::min(byte, text.size());
@@ -78,31 +73,6 @@ std::string lineColumn(const std::string& text, size_t byte) {
     }
   }
   return "line " + std::to_string(line) + ", column " + std::to_string(column);
-}
-
-/// Throws InputError when arrays and objects nest deeper than kMaxJsonDepth: a scan of the
-/// brackets outside strings, before nlohmann builds (and later prints or copies) the tree.
-void checkNestingDepth(const std::string& text, const std::string& origin) {
-  int depth = 0;
-  bool in_string = false;
-  for (size_t k = 0; k < text.size(); ++k) {
-    const char c = text[k];
-    if (in_string) {
-      if (c == '\\')
-        ++k;  // the escaped character cannot end the string
-      else if (c == '"')
-        in_string = false;
-    } else if (c == '"') {
-      in_string = true;
-    } else if (c == '[' || c == '{') {
-      if (++depth > kMaxJsonDepth)
-        throw InputError(origin + ": JSON nested deeper than " + std::to_string(kMaxJsonDepth) +
-                         " levels at byte " + std::to_string(k) + " (" + lineColumn(text, k + 1) +
-                         "); scene files nest a few levels");
-    } else if ((c == ']' || c == '}') && depth > 0) {
-      --depth;  // unbalanced closers are nlohmann's to report
-    }
-  }
 }
 
 /// Appends compact JSON text of `value` to `out` (as dump() writes it) but stops adding
@@ -695,7 +665,8 @@ class SceneReader {
 
 SceneSpec parseSceneJson(const std::string& text, const std::string& origin,
                          const std::string& base_dir, const SceneOverrides& overrides) {
-  checkNestingDepth(text, origin);
+  // Scene files nest a few levels ("avatars": [{"path": {"offsets": [[…]]}}]).
+  io::checkJsonNesting(text, origin, "scene files nest a few levels");
   json root;
   try {
     root = json::parse(text);

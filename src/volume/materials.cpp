@@ -7,15 +7,15 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "flsh/core/error.h"
 #include "flsh/io/atomic_file.h"
+#include "flsh/io/input_file.h"
 #include "flsh/volume/soft_avatar.h"
-#include "volume/surface_query.h"
 #include "volume/kinematic_tree.h"
+#include "volume/surface_query.h"
 
 namespace flsh {
 
@@ -313,18 +313,19 @@ void MaterialModel::save(const std::string& path) const {
 }
 
 MaterialModel MaterialModel::load(const std::string& path, int num_betas) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw FileError("MaterialModel::load: cannot open '" + path + "'");
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) throw FileError("MaterialModel::load: cannot read '" + path + "'");
-  return fromText(text.str(), num_betas, path);
+  // A FIFO, directory or device is refused (InputError naming the path), never opened: an
+  // ifstream on a FIFO blocked forever.
+  return fromText(io::readRegularFileText(path, "a JSON material file"), num_betas, path);
 }
 
 MaterialModel MaterialModel::fromText(const std::string& text, int num_betas,
                                       const std::string& origin) {
   if (num_betas < 0)
     throw InputError(origin + ": num_betas = " + std::to_string(num_betas) + ", expected ≥ 0");
+  // Material files nest 5 levels ({"layers": {"skin": {"E1": {"log_slopes": [ ) and deeper
+  // input is refused before parsing: building, copying and dump()ing (in messages) the tree
+  // recurse once per level, and 200 000 nested '[' overflowed the stack.
+  io::checkJsonNesting(text, origin, "material files nest 5 levels");
   json root;
   try {
     root = json::parse(text);

@@ -1,6 +1,7 @@
 // Reading input files whole, safely: only regular files are opened. A FIFO would block the
 // open (or the read) forever, a directory or a device has no content to read; each is refused
-// with an InputError naming the path and what it is.
+// with an InputError naming the path and what it is. Also the nesting bound every JSON reader
+// applies to the text before parsing it.
 #pragma once
 
 #include <cstdint>
@@ -25,5 +26,18 @@ void requireRegularFile(const std::string& path, const std::string& what);
 std::vector<uint8_t> readRegularFileBytes(const std::string& path, const std::string& what);
 /// As readRegularFileBytes, as text.
 std::string readRegularFileText(const std::string& path, const std::string& what);
+
+/// How deep JSON input files may nest arrays and objects. flsh's files nest a few levels; 64 is
+/// far beyond any of them and far below what overflows a stack: nlohmann's dump() and copies
+/// recurse once per level, and 200 000 nested '[' crashed the readers.
+constexpr int kMaxJsonDepth = 64;
+
+/// Throws InputError("ORIGIN: JSON nested deeper than 64 levels at byte B (line L, column C);
+/// HINT") when arrays and objects in `text` nest deeper than `max_depth`: a scan of the brackets
+/// outside strings, to run before a parser builds (and later prints or copies) the tree.
+/// Unbalanced closing brackets are left for the parser to report. `hint` says how deep such
+/// files normally nest, e.g. "scene files nest a few levels".
+void checkJsonNesting(const std::string& text, const std::string& origin, const std::string& hint,
+                      int max_depth = kMaxJsonDepth);
 
 }  // namespace flsh::io

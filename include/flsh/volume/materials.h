@@ -41,8 +41,10 @@ class MaterialModel {
   /// Reads a material file for a body with num_betas components. Strict: unknown or missing
   /// keys, wrong types or sizes, non-finite or non-positive values, ν ≥ 0.5, an orthotropic
   /// compliance that is not positive definite, tissue_fraction ≥ 1, or a non-zero log-slope
-  /// beyond num_betas → InputError naming the file and the key path; unreadable → FileError.
-  /// Shorter slope lists are zero padded.
+  /// beyond num_betas → InputError naming the file and the key path; a path that is not a
+  /// regular file (a FIFO, a directory) or JSON nested deeper than io::kMaxJsonDepth →
+  /// InputError naming the path; missing or unreadable → FileError. Shorter slope lists are
+  /// zero padded.
   static MaterialModel load(const std::string& path, int num_betas);
   /// Writes the JSON file atomically (FileError on failure). load(save(m)) == m exactly.
   void save(const std::string& path) const;

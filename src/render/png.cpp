@@ -5,6 +5,7 @@
 
 #include <cerrno>
 #include <csetjmp>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -12,6 +13,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/io/atomic_file.h"
+#include "flsh/io/input_file.h"
 #include "flsh/render/render.h"
 
 namespace flsh::render {
@@ -57,12 +59,25 @@ bool writePngRows(FILE* file, int width, int height, png_bytep* rows, PngContext
   return true;
 }
 
+// A PNG file's bytes in memory, read by libpng through pngReadBytes.
+struct PngBytes {
+  const uint8_t* data;
+  size_t size, position;
+};
+
+void pngReadBytes(png_structp png, png_bytep out, size_t count) {
+  auto* bytes = static_cast<PngBytes*>(png_get_io_ptr(png));
+  if (count > bytes->size - bytes->position) png_error(png, "unexpected end of file");
+  std::memcpy(out, bytes->data + bytes->position, count);
+  bytes->position += count;
+}
+
 // Reads the header and sets up the conversion of any 8/16-bit gray, palette, RGB or RGBA
 // PNG to 8-bit RGB.
-bool readPngHeader(png_structp png, png_infop info, FILE* file, png_uint_32& width,
+bool readPngHeader(png_structp png, png_infop info, PngBytes* bytes, png_uint_32& width,
                    png_uint_32& height, size_t& row_bytes) {
   if (setjmp(png_jmpbuf(png))) return false;
-  png_init_io(png, file);
+  png_set_read_fn(png, bytes, pngReadBytes);
   png_read_info(png, info);
   png_set_expand(png);
   png_set_strip_16(png);
@@ -82,13 +97,6 @@ bool readPngRows(png_structp png, png_infop info, png_bytep* rows) {
   png_read_end(png, nullptr);
   return true;
 }
-
-struct FileCloser {
-  FILE* file;
-  ~FileCloser() {
-    if (file) std::fclose(file);
-  }
-};
 
 }  // namespace
 
@@ -122,14 +130,13 @@ void writePng(const std::string& path, const Image& image) {
 }
 
 Image readPng(const std::string& path) {
-  FileCloser file{std::fopen(path.c_str(), "rb")};
-  if (!file.file) {
-    throw FileError("readPng: cannot open '" + path + "' for reading: " + std::strerror(errno));
-  }
-  unsigned char signature[8] = {0};
-  if (std::fread(signature, 1, 8, file.file) != 8 || png_sig_cmp(signature, 0, 8) != 0) {
+  // Regular files only, read whole: a FIFO blocked fopen() forever; a directory or a device is
+  // an InputError naming the path.
+  const std::vector<uint8_t> file = io::readRegularFileBytes(path, "a PNG file");
+  if (file.size() < 8 || png_sig_cmp(file.data(), 0, 8) != 0) {
     throw InputError("readPng('" + path + "'): not a PNG file (bad signature)");
   }
+  PngBytes bytes{file.data(), file.size(), 8};
   PngContext context;
   png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &context, pngError, pngWarning);
   if (!png) throw FileError("readPng('" + path + "'): cannot create the PNG reader");
@@ -141,7 +148,7 @@ Image readPng(const std::string& path) {
   png_set_sig_bytes(png, 8);
   png_uint_32 width = 0, height = 0;
   size_t row_bytes = 0;
-  if (!readPngHeader(png, info, file.file, width, height, row_bytes)) {
+  if (!readPngHeader(png, info, &bytes, width, height, row_bytes)) {
     png_destroy_read_struct(&png, &info, nullptr);
     throw InputError("readPng('" + path + "'): malformed PNG: " + context.message);
   }
@@ -149,6 +156,18 @@ Image readPng(const std::string& path) {
     png_destroy_read_struct(&png, &info, nullptr);
     throw InputError("readPng('" + path + "'): unexpected row size " + std::to_string(row_bytes) +
                      " bytes after conversion to RGB, expected " + std::to_string(width * 3));
+  }
+  // The pixels are allocated only if the file can hold them: its compressed data inflates to
+  // at most 1032 times its size (deflate's limit), at least one bit per pixel, and the RGB
+  // conversion makes at most 24 bits of one. A header announcing 100 000 × 100 000 pixels in a
+  // file of a few bytes asked for 30 GB before libpng found the data missing.
+  const double rgb_bytes = double(width) * double(height) * 3.0;
+  const double most_bytes = 24.0 * 1032.0 * double(file.size()) + double(1 << 20);
+  if (rgb_bytes > most_bytes) {
+    png_destroy_read_struct(&png, &info, nullptr);
+    throw InputError("readPng('" + path + "'): header announces " + std::to_string(width) + " × " +
+                     std::to_string(height) + " pixels, more than a file of " +
+                     std::to_string(file.size()) + " bytes can hold");
   }
   Image image;
   image.width = int(width);

@@ -56,7 +56,9 @@ MatX3 displacementColors(const VecX& magnitudes, double max_value);
 /// Writes an 8-bit RGB PNG atomically. Throws FileError on failure.
 void writePng(const std::string& path, const Image& image);
 
-/// Reads an 8-bit RGB/RGBA PNG (for tests and tools).
+/// Reads an 8-bit RGB/RGBA PNG (for tests and tools). Throws FileError when `path` is missing or
+/// unreadable; InputError naming it when it is not a regular file (a FIFO, a directory: never
+/// opened), not a PNG, malformed, or announces more pixels than its size can hold.
 Image readPng(const std::string& path);
 
 }  // namespace flsh::render

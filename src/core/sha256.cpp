@@ -148,16 +148,19 @@ inline uint64_t xxMerge(uint64_t acc, uint64_t lane) {
 }  // namespace
 
 uint64_t xxhash64(const void* data, size_t bytes, uint64_t seed) {
+  // Offsets into the range, never pointers compared past its end: `data` may be null when
+  // `bytes` is 0 (an empty vector's data()), and null + 0, like a pointer beyond one past the
+  // end, is undefined behaviour (UBSan: "applying zero offset to null pointer").
   const auto* p = static_cast<const uint8_t*>(data);
-  const uint8_t* const end = p + bytes;
+  size_t at = 0;
   uint64_t h;
   if (bytes >= 32) {
     uint64_t v1 = seed + kP1 + kP2, v2 = seed + kP2, v3 = seed, v4 = seed - kP1;
-    for (; p + 32 <= end; p += 32) {
-      v1 = xxRound(v1, load64(p));
-      v2 = xxRound(v2, load64(p + 8));
-      v3 = xxRound(v3, load64(p + 16));
-      v4 = xxRound(v4, load64(p + 24));
+    for (; bytes - at >= 32; at += 32) {
+      v1 = xxRound(v1, load64(p + at));
+      v2 = xxRound(v2, load64(p + at + 8));
+      v3 = xxRound(v3, load64(p + at + 16));
+      v4 = xxRound(v4, load64(p + at + 24));
     }
     h = rotl64(v1, 1) + rotl64(v2, 7) + rotl64(v3, 12) + rotl64(v4, 18);
     h = xxMerge(h, v1);
@@ -168,12 +171,12 @@ uint64_t xxhash64(const void* data, size_t bytes, uint64_t seed) {
     h = seed + kP5;
   }
   h += uint64_t(bytes);
-  for (; p + 8 <= end; p += 8) h = rotl64(h ^ xxRound(0, load64(p)), 27) * kP1 + kP4;
-  if (p + 4 <= end) {
-    h = rotl64(h ^ (uint64_t(load32(p)) * kP1), 23) * kP2 + kP3;
-    p += 4;
+  for (; bytes - at >= 8; at += 8) h = rotl64(h ^ xxRound(0, load64(p + at)), 27) * kP1 + kP4;
+  if (bytes - at >= 4) {
+    h = rotl64(h ^ (uint64_t(load32(p + at)) * kP1), 23) * kP2 + kP3;
+    at += 4;
   }
-  for (; p < end; ++p) h = rotl64(h ^ (uint64_t(*p) * kP5), 11) * kP1;
+  for (; at < bytes; ++at) h = rotl64(h ^ (uint64_t(p[at]) * kP5), 11) * kP1;
   h ^= h >> 33;
   h *= kP2;
   h ^= h >> 29;

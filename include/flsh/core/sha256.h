@@ -50,6 +50,7 @@ std::string sha256Hex(const std::string& bytes);
 /// XXH64 (Yann Collet's xxHash, 64-bit variant) of a byte range: a fast non-cryptographic
 /// checksum (~10× SHA-256's throughput) for large arrays, where SHA-256 would dominate the
 /// time to load a cached avatar. Cache keys feed these into SHA-256 with their labels.
+/// `data` may be null when `bytes` is 0 (the hash of the empty range).
 uint64_t xxhash64(const void* data, size_t bytes, uint64_t seed = 0);
 
 }  // namespace flsh

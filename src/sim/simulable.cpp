@@ -697,15 +697,59 @@ void Simulable::restoreStep(const SimulableStep& s) {
                        " rotations per state, expected " + std::to_string(n) + " bones");
   for (const auto* t : {&s.t, &s.t_n, &s.t_nm1})
     if (size_t(t->rows()) != n)
-      throw InputError("Simulable::restoreStep: the snapshot has " +
-                       std::to_string(t->rows()) + " positions per state, expected " +
-                       std::to_string(n) + " bones");
+      throw InputError("Simulable::restoreStep: the snapshot has " + std::to_string(t->rows()) +
+                       " positions per state, expected " + std::to_string(n) + " bones");
   if (m.soft) {
     const Eigen::Index nu = m.soft->numSoftDofs();
     if (s.u.size() != nu || s.u_n.size() != nu || s.u_nm1.size() != nu ||
         s.pose_blend.rows() != m.soft->numNodes())
       throw InputError("Simulable::restoreStep: the snapshot's soft-tissue displacements have " +
                        std::to_string(s.u.size()) + " values, expected " + std::to_string(nu));
+  }
+  // Finite values only: a NaN or Inf restored here would be stepped on (every setter refuses
+  // them, so this was the one way in). Names the first non-finite value found.
+  const auto requireFinite = [](const std::string& name, const auto& values) {
+    for (Eigen::Index i = 0; i < values.rows(); ++i)
+      for (Eigen::Index j = 0; j < values.cols(); ++j)
+        if (!std::isfinite(values(i, j))) {
+          const std::string at = values.size() == 1 ? ""
+                                 : values.cols() == 1
+                                     ? "[" + std::to_string(i) + "]"
+                                     : "(" + std::to_string(i) + ", " + std::to_string(j) + ")";
+          throw InputError("Simulable::restoreStep: the snapshot's " + name + at + " is " +
+                           number(values(i, j)) + ", expected finite values; nothing restored");
+        }
+  };
+  const auto scalar = [](double value) { return Eigen::Matrix<double, 1, 1>::Constant(value); };
+  const auto requireFiniteRotations = [&](const std::string& name, const std::vector<Mat3>& R) {
+    for (size_t b = 0; b < R.size(); ++b) requireFinite(name + "[" + std::to_string(b) + "]", R[b]);
+  };
+  requireFiniteRotations("R", s.R);
+  requireFiniteRotations("R_n", s.R_n);
+  requireFiniteRotations("R_nm1", s.R_nm1);
+  requireFiniteRotations("target_R", s.target_R);
+  requireFinite("t", s.t);
+  requireFinite("t_n", s.t_n);
+  requireFinite("t_nm1", s.t_nm1);
+  requireFinite("target_t0", s.target_t0);
+  requireFinite("time", scalar(s.time));
+  for (size_t c = 0; c < s.colliders.size(); ++c) {
+    const Collider& collider = s.colliders[c];
+    const std::string name = "colliders[" + std::to_string(c) + "]";
+    requireFinite(name + ".p0", collider.p0());
+    requireFinite(name + ".p1", collider.p1());
+    requireFinite(name + ".radius", scalar(collider.radius()));
+    for (size_t k = 0; k < collider.path.times.size(); ++k)
+      requireFinite(name + ".path.times[" + std::to_string(k) + "]",
+                    scalar(collider.path.times[k]));
+    for (size_t k = 0; k < collider.path.offsets.size(); ++k)
+      requireFinite(name + ".path.offsets[" + std::to_string(k) + "]", collider.path.offsets[k]);
+  }
+  if (m.soft) {
+    requireFinite("u", s.u);
+    requireFinite("u_n", s.u_n);
+    requireFinite("u_nm1", s.u_nm1);
+    requireFinite("pose_blend", s.pose_blend);
   }
   m.q.R = s.R;
   m.q.t = s.t;

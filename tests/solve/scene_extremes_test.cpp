@@ -129,12 +129,12 @@ TEST(SceneExtremes, LargestAcceptedVelocityKeepsTheStateFinite) {
   }
 }
 
-TEST(SceneExtremes, StepEndingInNonFiniteStateThrowsAndRestores) {
-  // The setters keep NaN out; a snapshot restored as is does not (restoreStep puts back what
-  // saveStep gave, bitwise), which makes the guard reachable: the prediction from a NaN
-  // previous state makes the whole step NaN. Scene::step must throw and put every simulable
-  // back to where it was before the step, never hand the NaN state on. (Newton starts from the
-  // prediction here: the lower-energy start would pick the finite previous state instead.)
+TEST(SceneExtremes, NonFiniteSnapshotIsRefusedAndTheSceneStepsOn) {
+  // The setters keep NaN out, and so does restoreStep now (issue 23; it used to put back any
+  // snapshot as is, and a NaN previous state then made the whole step NaN, which Scene::step's
+  // guard caught, restored and reported). The snapshot is refused naming the value, nothing is
+  // restored, and the scene steps on normally. Scene::step's guard against a non-finite state
+  // after Newton stays as a defence; no input through the API is known to reach it now.
   auto sim = std::make_shared<Simulable>(shared().avatar, shared().walk);
   SceneOptions options;
   options.lower_energy_start = false;
@@ -144,16 +144,12 @@ TEST(SceneExtremes, StepEndingInNonFiniteStateThrowsAndRestores) {
   scene.step();
   SimulableStep poisoned = sim->saveStep();
   poisoned.t_nm1(3, 1) = std::nan("");
-  sim->restoreStep(poisoned);
   const VecX q_before = sim->getState();
   const double t_before = sim->time();
-  const std::string message = test::messageOf<Error>([&] { scene.step(); });
-  for (const char* part : {"Scene::step", "simulable 0", "non-finite", "restored"})
-    EXPECT_NE(message.find(part), std::string::npos) << message;
+  const std::string message = test::messageOf<InputError>([&] { sim->restoreStep(poisoned); });
+  EXPECT_NE(message.find("t_nm1(3, 1) is nan"), std::string::npos) << message;
   EXPECT_EQ(sim->getState(), q_before);
   EXPECT_EQ(sim->time(), t_before);
-  // A state set afresh steps normally again.
-  sim->setVelocity(VecX::Zero(sim->numDofs()));
   scene.step();
   EXPECT_TRUE(sim->getState().allFinite());
 }

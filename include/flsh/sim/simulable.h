@@ -177,8 +177,9 @@ class Simulable {
   VecX getVelocity() const;                  ///< (q_n ⊖ q_{n−1}) / h
   double time() const;
   /// Snapshot of the step data (states, time, targets, colliders); restoreStep puts them back
-  /// exactly (bitwise) and leaves the state stack alone. Throws InputError if the snapshot
-  /// belongs to a simulable of another size.
+  /// exactly (bitwise) and leaves the state stack alone. Throws InputError, restoring nothing,
+  /// if the snapshot belongs to a simulable of another size or holds a NaN or Inf (states,
+  /// time, targets, colliders, soft-tissue displacements and pose blend; the message names it).
   SimulableStep saveStep() const;
   void restoreStep(const SimulableStep& step);
   /// Derivatives of what initialize() sets with respect to the rest joints J (72 values, layout

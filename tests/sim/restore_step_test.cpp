@@ -1,0 +1,92 @@
+// Simulable::restoreStep refuses snapshots holding NaN or Inf (issue 23). Every setter of the
+// state refuses non-finite values, but restoreStep put back any snapshot as it was, so a NaN in
+// a snapshot (e.g. a tape edited by hand, or filled from a bad file) was stepped on.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <memory>
+
+#include "flsh/core/error.h"
+#include "flsh/sim/simulable.h"
+#include "support/test_support.h"
+
+namespace flsh {
+namespace {
+
+using test::messageOf;
+using ::testing::HasSubstr;
+
+const test::SmallScene& shared() { return test::smallScene(800, 1.0); }
+
+std::unique_ptr<Simulable> steppedSimulable() {
+  auto sim = std::make_unique<Simulable>(shared().avatar, shared().walk);
+  sim->initialize();
+  sim->preUpdate();
+  sim->updateState(test::randomVector(sim->numDofs(), 0.03, 5));
+  Collider ball = Collider::sphere(Vec3(0, 0, 0.5), 0.1);
+  ball.path = ColliderPath::constantVelocity(Vec3(0, 0, -1), 1.0);
+  sim->setColliders({Collider::plane(Vec3(0, -1, 0), Vec3::UnitY()), ball});
+  return sim;
+}
+
+struct Poison {
+  const char* name;  ///< what the message must name
+  std::function<void(SimulableStep&, double)> apply;
+};
+
+TEST(SimulableRestoreStep, NonFiniteSnapshotsAreRefusedNamingTheValue) {
+  auto sim = steppedSimulable();
+  const SimulableStep good = sim->saveStep();
+  const std::vector<Poison> poisons = {
+      {"R[4](1, 2)", [](SimulableStep& s, double x) { s.R[4](1, 2) = x; }},
+      {"R_n[0](0, 0)", [](SimulableStep& s, double x) { s.R_n[0](0, 0) = x; }},
+      {"R_nm1[23](2, 1)", [](SimulableStep& s, double x) { s.R_nm1[23](2, 1) = x; }},
+      {"target_R[7](0, 1)", [](SimulableStep& s, double x) { s.target_R[7](0, 1) = x; }},
+      {"t(2, 0)", [](SimulableStep& s, double x) { s.t(2, 0) = x; }},
+      {"t_n(10, 2)", [](SimulableStep& s, double x) { s.t_n(10, 2) = x; }},
+      {"t_nm1(3, 1)", [](SimulableStep& s, double x) { s.t_nm1(3, 1) = x; }},
+      {"target_t0[1]", [](SimulableStep& s, double x) { s.target_t0[1] = x; }},
+      {"time is", [](SimulableStep& s, double x) { s.time = x; }},
+      {"colliders[1].path.offsets[1][2]",
+       [](SimulableStep& s, double x) { s.colliders[1].path.offsets[1][2] = x; }},
+      {"colliders[1].path.times[0]",
+       [](SimulableStep& s, double x) { s.colliders[1].path.times[0] = x; }},
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const Poison& p : poisons) {
+    for (const double bad : {nan, inf, -inf}) {
+      // Change the simulable first, so that a (partial) restore would show.
+      sim->restoreStep(good);
+      sim->preUpdate();
+      sim->updateState(test::randomVector(sim->numDofs(), 0.02, 9));
+      const VecX q_before = sim->getState();
+      const VecX v_before = sim->getVelocity();
+      const double time_before = sim->time();
+
+      SimulableStep poisoned = good;
+      p.apply(poisoned, bad);
+      const std::string message = messageOf<InputError>([&] { sim->restoreStep(poisoned); });
+      EXPECT_THAT(message,
+                  HasSubstr("Simulable::restoreStep: the snapshot's " + std::string(p.name)))
+          << bad;
+      EXPECT_THAT(message, HasSubstr(std::isnan(bad) ? "nan" : "inf")) << p.name;
+      EXPECT_THAT(message, HasSubstr("nothing restored")) << p.name;
+      // Nothing half-restored.
+      EXPECT_EQ(sim->getState(), q_before) << p.name;
+      EXPECT_EQ(sim->getVelocity(), v_before) << p.name;
+      EXPECT_EQ(sim->time(), time_before) << p.name;
+      EXPECT_TRUE(sim->getState().allFinite()) << p.name;
+    }
+  }
+  // The unpoisoned snapshot still restores.
+  sim->restoreStep(good);
+  EXPECT_EQ(sim->saveStep().t, good.t);
+  EXPECT_EQ(sim->time(), good.time);
+}
+
+}  // namespace
+}  // namespace flsh

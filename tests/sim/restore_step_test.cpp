@@ -11,6 +11,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/sim/simulable.h"
+#include "flsh/volume/soft_avatar.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -86,6 +87,41 @@ TEST(SimulableRestoreStep, NonFiniteSnapshotsAreRefusedNamingTheValue) {
   sim->restoreStep(good);
   EXPECT_EQ(sim->saveStep().t, good.t);
   EXPECT_EQ(sim->time(), good.time);
+}
+
+TEST(SimulableRestoreStep, NonFiniteSoftTissueValuesAreRefused) {
+  // The FEM soft skeleton of the 800-vertex body (coarse interior): displacements of q, q_n,
+  // q_{n-1} and the held pose blend offsets are checked too.
+  auto avatar = std::make_shared<SoftAvatar>(
+      test::smallScene(800).body, VecX(),
+      test::smallSoftAvatarSettings(test::freshTempDir("restore_step_soft_cache")));
+  avatar->enableSoftTissue();
+  avatar->initVolumetricData();
+  Simulable sim(avatar, shared().walk);
+  sim.initialize();
+  sim.preUpdate();
+  sim.updateState(test::randomVector(sim.numDofs(), 0.001, 3));
+  const SimulableStep good = sim.saveStep();
+  ASSERT_GT(good.u.size(), 0);
+  const VecX q_before = sim.getState();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const Eigen::Index last = good.u.size() - 1;
+  const std::vector<std::pair<std::string, std::function<void(SimulableStep&)>>> poisons = {
+      {"u[0]", [&](SimulableStep& s) { s.u[0] = nan; }},
+      {"u_n[" + std::to_string(last) + "]", [&](SimulableStep& s) { s.u_n[last] = nan; }},
+      {"u_nm1[7]",
+       [&](SimulableStep& s) { s.u_nm1[7] = -std::numeric_limits<double>::infinity(); }},
+      {"pose_blend(5, 2)", [&](SimulableStep& s) { s.pose_blend(5, 2) = nan; }},
+  };
+  for (const auto& [name, apply] : poisons) {
+    SimulableStep poisoned = good;
+    apply(poisoned);
+    EXPECT_THAT(messageOf<InputError>([&] { sim.restoreStep(poisoned); }),
+                HasSubstr("the snapshot's " + name + " is "));
+    EXPECT_EQ(sim.getState(), q_before) << name;
+  }
+  sim.restoreStep(good);
+  EXPECT_EQ(sim.getState(), q_before);
 }
 
 }  // namespace

@@ -1,8 +1,8 @@
 // The `flsh` command-line program.
 //
 //   flsh synth-body --out BODY.npz [--vertices N] [--height M]
-//   flsh motion --name walk --out MOTION.npz [--seconds S] [--fps F]
-//   flsh pose --model BODY.npz --motion MOTION.npz --out OUT.npz [--betas b0,b1,…]
+//   flsh motion --name walk --out MOTION.npz [--seconds S] [--fps F] [--up y|z]
+//   flsh pose --model BODY.npz --motion MOTION.npz --out OUT.npz [--betas b0,b1,…] [--up y|z]
 //   flsh demo [--out DIR] [--vertices N] [--motion NAME] [--seconds S]
 //   flsh simulate [SCENE.json] [--out DIR] [--duration S] [--time-step H] [--cache DIR]
 //                 [--no-cache]
@@ -163,25 +163,26 @@ int cmdSynthBody(const std::string& out, int vertices, double height) {
   return 0;
 }
 
-int cmdMotion(const std::string& name, const std::string& out, double seconds, double fps) {
+int cmdMotion(const std::string& name, const std::string& out, double seconds, double fps,
+              const std::string& up) {
   checkRange("--seconds", seconds, 0.0, kMaxMotionFrames, false, "s");
   checkRange("--fps", fps, 0.0, 1000.0, true, "frames per second");
   checkMotionLength("--seconds, --fps", seconds, fps);
   io::checkOutputFile(out, "--out");
   const Motion motion = makeBuiltinMotion(name, seconds, fps);
-  saveMotion(motion, out);
-  std::printf("motion: wrote %s (%s, %d frames at %g fps)\n", out.c_str(), name.c_str(),
-              motion.numFrames(), motion.fps);
+  saveMotion(motion, out, up.empty() ? "y" : up);
+  std::printf("motion: wrote %s (%s, %d frames at %g fps, %s up)\n", out.c_str(), name.c_str(),
+              motion.numFrames(), motion.fps, up.empty() ? "y" : up.c_str());
   return 0;
 }
 
 int cmdPose(const std::string& model_path, const std::string& motion_spec, const std::string& out,
-            const std::string& betas_text) {
+            const std::string& betas_text, const std::string& up) {
   const auto t0 = Clock::now();
   const VecX given_betas = betas_text.empty() ? VecX() : parseBetas(betas_text);
   io::checkOutputFile(out, "--out");
   const BodyModel model = loadBodyModel(model_path);
-  const Motion motion = loadOrMakeMotion(motion_spec);
+  const Motion motion = loadOrMakeMotion(motion_spec, 2.0, 30.0, up);
   const std::string motion_name = motion.source.empty() ? "--motion " + motion_spec : motion.source;
   io::checkMotionValues(motion, motion_name);
   // Each input is checked where it enters: the motion's own betas name the motion file.
@@ -486,8 +487,8 @@ int numSteps(const SceneSpec& scene) {
 /// machine's memory; names the sizes and what to change.
 void checkRecordingMemory(const SceneSpec& scene, const std::vector<io::RecordedAvatar>& avatars,
                           int frames) {
-  const double per_frame =
-      io::SceneRecorder::bytesPerFrame(scene.outputs, avatars, scene.colliders.size());
+  const double per_frame = io::SceneRecorder::bytesPerFrame(
+      scene.outputs, avatars, scene.colliders.size() + (scene.ground.enabled ? 1 : 0));
   checkMemory(scene.source + ": outputs (states.npz and animation.glb keep " +
                   std::to_string(frames) + " saved frames of " +
                   std::to_string(int(std::ceil(per_frame / 1e3))) + " kB)",
@@ -516,29 +517,24 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
   for (const auto& run : runs) recorded.push_back({run.spec->name, run.simulable, run.soft});
   checkRecordingMemory(scene, recorded, frames);
 
+  // The scene's colliders and its "ground" (placed under the avatars with "auto").
+  const std::vector<Collider> colliders = io::sceneColliders(
+      scene, runs,
+      [](const std::string& line) { std::fprintf(stderr, "simulate: %s\n", line.c_str()); });
   Scene sim_scene(io::sceneOptionsOf(scene));
   for (auto& run : runs) sim_scene.addSimulable(run.simulable);
-  for (const auto& collider : scene.colliders) sim_scene.addCollider(collider);
+  for (const auto& collider : colliders) sim_scene.addCollider(collider);
   sim_scene.initialize();
-  // An avatar starting deep inside the ground is usually a wrong plane height: say so.
-  for (const auto& run : runs) {
-    const MatX3 nodes = run.simulable->getNodes();
-    for (const auto& collider : scene.colliders) {
-      if (collider.shape() != ColliderShape::Plane) continue;
-      double deepest = 0.0;
-      for (Eigen::Index i = 0; i < nodes.rows(); ++i)
-        deepest = std::min(deepest, collider.signedDistance(nodes.row(i).transpose(), 0.0));
-      if (deepest < -0.02)
-        std::fprintf(stderr, "simulate: warning: avatar '%s' starts %.3f m deep in plane '%s'\n",
-                     run.spec->name.c_str(), -deepest, collider.name.c_str());
-    }
-  }
+  // An avatar starting deep inside the ground or far above it is usually a wrong ground
+  // height or up axis: say so.
+  for (const std::string& warning : io::startWarnings(runs, colliders))
+    std::fprintf(stderr, "simulate: warning: %s\n", warning.c_str());
   const double setup_seconds = secondsSince(t_setup);
 
   // ---- simulation: PLY meshes go to the staging folder as they come, the rest is kept ----
   const double h = scene.time_step;
   io::SceneRecorder recorder(wanted, out_dir ? out_dir->staging() : std::string(), recorded,
-                             scene.colliders, h, frames);
+                             colliders, h, frames);
   // Recording (PLY frames are written as they come) counts as output time, not simulation.
   double record_seconds = 0.0;
   const auto record = [&](double t) {
@@ -592,6 +588,10 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
         runs[i].spec->name.c_str(), runs[i].spec->simulation.c_str(),
         recorder.maxDisplacementMm(i));
   }
+  std::string ground_note;
+  if (scene.ground.enabled)
+    ground_note = " (ground at y = " + number(colliders.back().p0().y()) + " m" +
+                  (scene.ground.automatic ? ", auto)" : ")");
   const bool any_soft =
       std::any_of(runs.begin(), runs.end(), [](const io::SceneAvatar& r) { return r.soft; });
   if (wanted.png && any_soft)
@@ -603,13 +603,13 @@ int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) 
     std::fprintf(stderr, "simulate: warning: %d of %d steps did not converge (first: %s)\n",
                  unconverged, steps, first_unconverged.c_str());
   std::printf(
-      "simulate: %s: %zu avatar(s), %zu collider(s), %d steps of %.4g s (%.3g s), "
+      "simulate: %s: %zu avatar(s), %zu collider(s)%s, %d steps of %.4g s (%.3g s), "
       "%d frames; %.0f steps/s, %.2f Newton iterations/step (%.2f factorizations, "
       "%.1f PCG iterations), %d unconverged, "
       "max %d contacts; wall time: set-up %.2f s, simulation %.2f s, output %.2f s; "
       "wrote %s in %s\n",
-      scene.source.c_str(), runs.size(), scene.colliders.size(), steps, h, steps * h, frames,
-      steps / std::max(sim_seconds, 1e-9), double(newton_iterations) / steps,
+      scene.source.c_str(), runs.size(), colliders.size(), ground_note.c_str(), steps, h, steps * h,
+      frames, steps / std::max(sim_seconds, 1e-9), double(newton_iterations) / steps,
       double(factorizations) / steps, double(cg_iterations) / steps, unconverged, max_contacts,
       setup_seconds, sim_seconds, out_seconds, outputs.empty() ? "nothing" : outputs.c_str(),
       wanted.dir.c_str());
@@ -622,7 +622,7 @@ int main(int argc, char** argv) {
   CLI::App app{"flsh: differentiable physics of SMPL human bodies"};
   app.require_subcommand(1);
 
-  std::string out, model, motion_spec, betas, name = "walk", demo_out = "out/demo";
+  std::string out, model, motion_spec, betas, up, name = "walk", demo_out = "out/demo";
   int vertices = 6890;
   double height = 1.70, seconds = 2.0, fps = 30.0;
 
@@ -645,6 +645,11 @@ int main(int argc, char** argv) {
   motion->add_option("--out", out, "output .npz file")->required();
   motion->add_option("--seconds", seconds, "duration, s")->capture_default_str();
   motion->add_option("--fps", fps, "frames per second")->capture_default_str();
+  motion
+      ->add_option("--up", up,
+                   "frame to write the motion in: y (flsh's world, default) or z (as AMASS stores "
+                   "clips); the file's 'up' key says which")
+      ->check(CLI::IsMember({"y", "z"}));
 
   auto* pose =
       app.add_subcommand("pose", "Pose a body through a motion: vertices and joints per frame");
@@ -653,6 +658,10 @@ int main(int argc, char** argv) {
   pose->add_option("--out", out, "output .npz with vertices (T,V,3) and joints (T,24,3)")
       ->required();
   pose->add_option("--betas", betas, "shape coefficients b0,b1,… (default: the motion's betas)");
+  pose->add_option("--up", up,
+                   "up axis the motion file was recorded in, y or z (default: the file's 'up' "
+                   "key, else z as AMASS); the output is in flsh's y-up world")
+      ->check(CLI::IsMember({"y", "z"}));
 
   auto* demo = app.add_subcommand(
       "demo", "Default job: synthetic body through a built-in motion, meshes and a picture");
@@ -732,8 +741,8 @@ int main(int argc, char** argv) {
   const std::string command = app.get_subcommands().front()->get_name();
   try {
     if (command == "synth-body") return cmdSynthBody(out, vertices, height);
-    if (command == "motion") return cmdMotion(name, out, seconds, fps);
-    if (command == "pose") return cmdPose(model, motion_spec, out, betas);
+    if (command == "motion") return cmdMotion(name, out, seconds, fps, up);
+    if (command == "pose") return cmdPose(model, motion_spec, out, betas, up);
     if (command == "demo") return cmdDemo(demo_out, vertices, name, seconds);
     if (command == "avatar") {
       avatar_args.reduced_options_given = handles_option->count() + elastic_option->count() +

@@ -8,6 +8,7 @@ Usage:
 Without --model the synthetic body is generated; without --motion the built-in "walk" is made,
 saved as an AMASS-style .npz in the output folder and read back, as a real file would be.
 The motion's stored betas (AMASS keeps 16) are used up to the model's number of components.
+AMASS clips are z up: load_motion turns them into flsh's y-up world (the file's `up` key, else z).
 """
 import argparse
 import os
@@ -34,7 +35,7 @@ def main():
         flsh.save_motion(flsh.make_builtin_motion("walk", seconds=2.0, fps=30.0), motion_path)
     motion = flsh.load_motion(motion_path)
     frames = motion.num_frames if args.max_frames <= 0 else min(args.max_frames, motion.num_frames)
-    betas = motion.betas[: model.num_betas]
+    betas = flsh.fit_betas(motion.betas, model, origin=motion.source)  # warns if it drops any
     print(f"{model}\n{motion}: posing {frames} frames")
 
     posed = flsh.pose_body_batch(model, betas, motion.poses[:frames], motion.trans[:frames])

@@ -85,6 +85,12 @@ from ._flsh import (  # noqa: F401  (re-exports)
     write_obj,
     write_ply,
     write_png,
+    fit_betas,
+    lowest_point_height,
+    placed_motion,
+    rotate_motion,
+    upright_warning,
+    world_from_up_axis,
 )
 
 # Same as project(flsh VERSION ...) in the top-level CMakeLists.txt (a test checks it).
@@ -162,4 +168,10 @@ __all__ = [
     "write_ply",
     "write_png",
     "__version__",
+    "fit_betas",
+    "lowest_point_height",
+    "placed_motion",
+    "rotate_motion",
+    "upright_warning",
+    "world_from_up_axis",
 ]

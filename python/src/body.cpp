@@ -86,44 +86,66 @@ void bind_body(py::module_& m) {
   py::class_<BodyModel, std::shared_ptr<BodyModel>>(
       m, "BodyModel",
       "Immutable SMPL-format body model. Array properties are read-only numpy views, m.")
-      .def_property_readonly("v_template", [d](py::object self) {
-          const BodyModel& b = model_of(self);
-          return readonly_view(b.v_template.data(), {b.v_template.rows(), 3}, {3 * d, d}, self);
-        }, "(V, 3) template vertices (T-pose, mean shape), m.")
-      .def_property_readonly("shapedirs", [](py::object self) {
-          return blend_shapes_view(model_of(self).shapedirs, self);
-        }, "(V, 3, K) shape directions, m per unit β.")
-      .def_property_readonly("posedirs", [](py::object self) {
-          return blend_shapes_view(model_of(self).posedirs, self);
-        }, "(V, 3, 207) pose blend shapes, m per unit entry of R_j − I (j = 1..23, row-major).")
-      .def_property_readonly("J_regressor", [](py::object self) {
-          return to_numpy(RowMatX(model_of(self).J_regressor));
-        }, "(24, V) joint regressor as a dense copy: J = J_regressor @ v_shaped.")
-      .def_property_readonly("weights", [d](py::object self) {
-          const MatX& w = model_of(self).weights;
-          return readonly_view(w.data(), {w.rows(), w.cols()}, {d, w.rows() * d}, self);
-        }, "(V, 24) skinning weights; rows sum to 1.")
-      .def_property_readonly("parents", [](py::object self) {
-          const auto& p = model_of(self).parents;
-          py::array_t<int> a(py::ssize_t(p.size()));
-          std::copy(p.begin(), p.end(), a.mutable_data());
-          return a;
-        }, "(24,) int parent of each joint; parents[0] = -1.")
-      .def_property_readonly("faces", [](py::object self) {
-          const MatX3i& f = model_of(self).faces;
-          return readonly_view(f.data(), {f.rows(), 3},
-                               {3 * py::ssize_t(sizeof(int)), py::ssize_t(sizeof(int))}, self);
-        }, "(F, 3) int32 triangles, counter-clockwise seen from outside.")
-      .def_property_readonly("source", [](const BodyModel& b) { return b.source; },
-                             "File path or 'synthetic(...)' the model came from.")
+      .def_property_readonly(
+          "v_template",
+          [d](py::object self) {
+            const BodyModel& b = model_of(self);
+            return readonly_view(b.v_template.data(), {b.v_template.rows(), 3}, {3 * d, d}, self);
+          },
+          "(V, 3) template vertices (T-pose, mean shape), m.")
+      .def_property_readonly(
+          "shapedirs",
+          [](py::object self) { return blend_shapes_view(model_of(self).shapedirs, self); },
+          "(V, 3, K) shape directions, m per unit β.")
+      .def_property_readonly(
+          "posedirs",
+          [](py::object self) { return blend_shapes_view(model_of(self).posedirs, self); },
+          "(V, 3, 207) pose blend shapes, m per unit entry of R_j − I (j = 1..23, row-major).")
+      .def_property_readonly(
+          "J_regressor",
+          [](py::object self) { return to_numpy(RowMatX(model_of(self).J_regressor)); },
+          "(24, V) joint regressor as a dense copy: J = J_regressor @ v_shaped.")
+      .def_property_readonly(
+          "weights",
+          [d](py::object self) {
+            const MatX& w = model_of(self).weights;
+            return readonly_view(w.data(), {w.rows(), w.cols()}, {d, w.rows() * d}, self);
+          },
+          "(V, 24) skinning weights; rows sum to 1.")
+      .def_property_readonly(
+          "parents",
+          [](py::object self) {
+            const auto& p = model_of(self).parents;
+            py::array_t<int> a(py::ssize_t(p.size()));
+            std::copy(p.begin(), p.end(), a.mutable_data());
+            return a;
+          },
+          "(24,) int parent of each joint; parents[0] = -1.")
+      .def_property_readonly(
+          "faces",
+          [](py::object self) {
+            const MatX3i& f = model_of(self).faces;
+            return readonly_view(f.data(), {f.rows(), 3},
+                                 {3 * py::ssize_t(sizeof(int)), py::ssize_t(sizeof(int))}, self);
+          },
+          "(F, 3) int32 triangles, counter-clockwise seen from outside.")
+      .def_property_readonly(
+          "source", [](const BodyModel& b) { return b.source; },
+          "File path or 'synthetic(...)' the model came from.")
+      .def_property_readonly(
+          "family", [](const BodyModel& b) { return b.family; },
+          "'SMPL', or 'SMPL-H' for an SMPL-H / SMPL+H file converted to "
+          "SMPL's 24 joints (finger joints merged into the hands).")
       .def_property_readonly("num_vertices", &BodyModel::numVertices, "V")
       .def_property_readonly("num_faces", &BodyModel::numFaces, "F")
       .def_property_readonly("num_betas", &BodyModel::numBetas, "K, number of shape components")
       .def_property_readonly("num_joints", &BodyModel::numJoints, "24")
       .def("__repr__", [](const BodyModel& b) {
-        return "BodyModel(source='" + b.source + "', vertices=" + std::to_string(b.numVertices()) +
-               ", faces=" + std::to_string(b.numFaces()) + ", betas=" +
-               std::to_string(b.numBetas()) + ", joints=" + std::to_string(b.numJoints()) + ")";
+        return "BodyModel(source='" + b.source + "', family='" + b.family +
+               "', vertices=" + std::to_string(b.numVertices()) +
+               ", faces=" + std::to_string(b.numFaces()) +
+               ", betas=" + std::to_string(b.numBetas()) +
+               ", joints=" + std::to_string(b.numJoints()) + ")";
       });
 
   m.def("load_body_model", [](const std::filesystem::path& path) {

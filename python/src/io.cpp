@@ -3,6 +3,7 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <Eigen/LU>
 #include <cmath>
 #include <memory>
 
@@ -10,6 +11,8 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/io/mesh_io.h"
 #include "flsh/io/motion.h"
+#include "flsh/io/motion_frame.h"
+#include "flsh/io/scene_build.h"
 #include "flsh/io/scene_file.h"
 
 namespace flsh::python {
@@ -19,7 +22,9 @@ namespace {
 const Motion& motion_of(const py::object& self) { return self.cast<const Motion&>(); }
 
 Motion make_motion(const py::object& poses, const py::object& trans, const py::object& betas,
-                   double fps, const std::string& gender, const std::string& source) {
+                   double fps, const std::string& gender, const std::string& source,
+                   const std::string& up) {
+  const Mat3 world = worldFromUpAxis(up, "up");
   auto a = as_float64(poses, "poses");
   if (a.ndim() != 2 || (a.shape(1) != kSmplPoseSize && a.shape(1) != kSmplhPoseSize))
     check_shape(a, "poses", {-1, kSmplPoseSize}, "(T, 72) or (T, 156)");
@@ -34,6 +39,8 @@ Motion make_motion(const py::object& poses, const py::object& trans, const py::o
   motion.fps = fps;
   motion.gender = gender;
   motion.source = source;
+  motion.up = up;
+  if (up != "y") rotateMotion(motion, world);
   return motion;
 }
 
@@ -42,29 +49,45 @@ Motion make_motion(const py::object& poses, const py::object& trans, const py::o
 void bind_io(py::module_& m) {
   // --- Motion --------------------------------------------------------------------------------
   const py::ssize_t d = sizeof(double);
-  py::class_<Motion, std::shared_ptr<Motion>>(m, "Motion",
-                     "A motion in SMPL's 72-value pose layout. Array properties are read-only.")
+  py::class_<Motion, std::shared_ptr<Motion>>(
+      m, "Motion", "A motion in SMPL's 72-value pose layout. Array properties are read-only.")
       .def(py::init(&make_motion), py::arg("poses"), py::arg("trans") = py::none(),
            py::arg("betas") = py::none(), py::arg("fps") = 30.0, py::arg("gender") = "",
-           py::arg("source") = "",
+           py::arg("source") = "", py::arg("up") = "y",
            "poses (T, 72) or SMPL-H (T, 156) axis-angle, rad (stored as (T, 72)); trans (T, 3) "
-           "m or None (zeros); betas (K,) or None; fps > 0.")
-      .def_property_readonly("poses", [d](py::object self) {
-          const RowMatX& p = motion_of(self).poses;
-          return readonly_view(p.data(), {p.rows(), p.cols()}, {p.cols() * d, d}, self);
-        }, "(T, 72) axis-angle joint rotations, rad.")
-      .def_property_readonly("trans", [d](py::object self) {
-          const RowMatX& t = motion_of(self).trans;
-          return readonly_view(t.data(), {t.rows(), t.cols()}, {t.cols() * d, d}, self);
-        }, "(T, 3) root translation, m.")
-      .def_property_readonly("betas", [d](py::object self) {
-          const VecX& b = motion_of(self).betas;
-          return readonly_view(b.data(), {b.size()}, {d}, self);
-        }, "(K,) shape coefficients stored with the motion (may be empty).")
-      .def_property_readonly("fps", [](const Motion& mo) { return mo.fps; }, "Frames per second.")
+           "m or None (zeros); betas (K,) or None; fps > 0; up: the up axis the arrays were "
+           "recorded in, 'y' (flsh's world) or 'z' (AMASS: the motion is turned upright, "
+           "rotate_motion).")
+      .def_property_readonly(
+          "poses",
+          [d](py::object self) {
+            const RowMatX& p = motion_of(self).poses;
+            return readonly_view(p.data(), {p.rows(), p.cols()}, {p.cols() * d, d}, self);
+          },
+          "(T, 72) axis-angle joint rotations, rad.")
+      .def_property_readonly(
+          "trans",
+          [d](py::object self) {
+            const RowMatX& t = motion_of(self).trans;
+            return readonly_view(t.data(), {t.rows(), t.cols()}, {t.cols() * d, d}, self);
+          },
+          "(T, 3) root translation, m.")
+      .def_property_readonly(
+          "betas",
+          [d](py::object self) {
+            const VecX& b = motion_of(self).betas;
+            return readonly_view(b.data(), {b.size()}, {d}, self);
+          },
+          "(K,) shape coefficients stored with the motion (may be empty).")
+      .def_property_readonly(
+          "fps", [](const Motion& mo) { return mo.fps; }, "Frames per second.")
       .def_property_readonly("gender", [](const Motion& mo) { return mo.gender; })
-      .def_property_readonly("source", [](const Motion& mo) { return mo.source; },
-                             "File path or 'builtin:NAME'.")
+      .def_property_readonly(
+          "up", [](const Motion& mo) { return mo.up; },
+          "Up axis the source was recorded in, 'y' or 'z'; poses and trans "
+          "are in flsh's y-up world either way.")
+      .def_property_readonly(
+          "source", [](const Motion& mo) { return mo.source; }, "File path or 'builtin:NAME'.")
       .def_property_readonly("num_frames", &Motion::numFrames, "T")
       .def_property_readonly("duration", &Motion::duration, "(T − 1) / fps, s.")
       .def("__len__", &Motion::numFrames)
@@ -73,45 +96,112 @@ void bind_io(py::module_& m) {
                ", fps=" + py::repr(py::float_(mo.fps)).cast<std::string>() + ")";
       });
 
-  m.def("load_motion", [](const std::filesystem::path& path) {
-          const std::string p = path_string(path);
-          require_existing_file(p, "load_motion");
-          py::gil_scoped_release release;
-          return loadMotion(p);
-        },
-        py::arg("path"),
-        "Reads an AMASS-style .npz (poses (T, 72|156), trans (T, 3), optional betas, "
-        "mocap_framerate, gender) as a Motion with (T, 72) poses.");
-  m.def("save_motion", [](const Motion& motion, const std::filesystem::path& path) {
-          const std::string p = path_string(path);
-          py::gil_scoped_release release;
-          saveMotion(motion, p);
-        },
-        py::arg("motion"), py::arg("path"),
-        "Writes an AMASS-style .npz (poses (T, 72), trans, betas, mocap_framerate, gender), "
-        "atomically.");
+  m.def(
+      "load_motion",
+      [](const std::filesystem::path& path, const py::object& up) {
+        const std::string p = path_string(path);
+        require_existing_file(p, "load_motion");
+        const std::string axis = up.is_none() ? std::string() : up.cast<std::string>();
+        py::gil_scoped_release release;
+        return loadMotion(p, axis);
+      },
+      py::arg("path"), py::arg("up") = py::none(),
+      "Reads an AMASS-style .npz (poses (T, 72|156), trans (T, 3), optional betas, "
+      "mocap_framerate, gender, up) as a Motion with (T, 72) poses in flsh's y-up world. "
+      "up: 'y' or 'z', the axis the clip was recorded with; None = the file's 'up' key, "
+      "else 'z' (AMASS). Warns on stderr if the body is not upright at frame 0.");
+  m.def(
+      "save_motion",
+      [](const Motion& motion, const std::filesystem::path& path, const std::string& up) {
+        const std::string p = path_string(path);
+        py::gil_scoped_release release;
+        saveMotion(motion, p, up);
+      },
+      py::arg("motion"), py::arg("path"), py::arg("up") = "y",
+      "Writes an AMASS-style .npz (poses (T, 72), trans, betas, mocap_framerate, gender, up), "
+      "atomically: up='y' as the motion is in flsh's world, 'z' turned z up as AMASS stores "
+      "clips (load_motion reads either back).");
   m.def("builtin_motion_names", &builtinMotionNames, "Names of the built-in motions.");
+  m.def(
+      "world_from_up_axis",
+      [](const std::string& up) { return to_numpy(RowMatX(worldFromUpAxis(up))); }, py::arg("up"),
+      "(3, 3) rotation from a frame whose up axis is 'y' or 'z' to flsh's y-up world "
+      "('z': (x, y, z) -> (x, z, -y)).");
+  m.def(
+      "rotate_motion",
+      [](const Motion& motion, const py::object& rotation) {
+        const Mat3 R = to_matrix(rotation, "rotation", 3, 3);
+        if (!((R.transpose() * R - Mat3::Identity()).norm() < 1e-9 && R.determinant() > 0))
+          throw py::value_error(
+              "rotation: expected a (3, 3) rotation matrix (orthonormal, "
+              "determinant +1)");
+        Motion turned = motion;
+        rotateMotion(turned, R);
+        return turned;
+      },
+      py::arg("motion"), py::arg("rotation"),
+      "A copy of `motion` turned by the (3, 3) rotation about the root joint's rest position "
+      "(trans <- R trans, root <- R root): every posed vertex v -> J0 + R (v - J0).");
+  m.def(
+      "placed_motion",
+      [](const Motion& motion, double yaw, const py::object& offset) {
+        return placedMotion(motion, yaw, to_vec3(offset, "offset"));
+      },
+      py::arg("motion"), py::arg("yaw") = 0.0, py::arg("offset") = py::make_tuple(0.0, 0.0, 0.0),
+      "A copy of `motion` turned by `yaw` rad about +y through the root's rest position, then "
+      "moved by `offset` (3,) m, as a scene file's yaw_degrees and offset do.");
+  m.def(
+      "lowest_point_height",
+      [](const BodyModel& body, const py::object& betas, const Motion& motion, double seconds) {
+        const VecX b =
+            betas.is_none() ? VecX::Zero(body.numBetas()) : to_vector(betas, "betas", -1, "(K,)");
+        py::gil_scoped_release release;
+        return lowestPointHeight(body, b, motion, seconds);
+      },
+      py::arg("body"), py::arg("betas"), py::arg("motion"), py::arg("seconds") = 1.0,
+      "World height y (m) of the body's lowest vertex posed by `motion` over its first "
+      "`seconds`: where to put the ground under a clip (a scene file's \"ground\": \"auto\").");
+  m.def(
+      "fit_betas",
+      [](const py::object& betas, const BodyModel& body, const std::string& origin) {
+        const VecX b = to_vector(betas, "betas", -1, "(K,)");
+        std::string warning;
+        const VecX fitted = io::fitBetas(b, body, origin, &warning);
+        if (!warning.empty() &&
+            PyErr_WarnEx(PyExc_UserWarning, ("flsh: " + warning).c_str(), 1) != 0)
+          throw py::error_already_set();  // warnings turned into errors
+        return to_numpy(fitted);
+      },
+      py::arg("betas"), py::arg("body"), py::arg("origin") = "betas",
+      "`betas` for `body`'s K shape components: shorter stays, longer is cut to K with a "
+      "UserWarning naming `origin` if a dropped value is nonzero (AMASS clips carry 16).");
+  m.def("upright_warning", &uprightWarning, py::arg("motion"),
+        "A warning sentence if the body leans more than 60 degrees from +y at frame 0 (the usual "
+        "sign of a wrong up axis), else ''.");
   m.def("make_builtin_motion", [](const std::string& name, double seconds, double fps) {
           py::gil_scoped_release release;
           return makeBuiltinMotion(name, seconds, fps);
         },
         py::arg("name"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0,
         "A built-in procedural motion `seconds` long (s) at `fps`; ValueError for unknown names.");
-  m.def("load_or_make_motion",
-        [](const std::string& spec, double seconds, double fps) {
-          py::gil_scoped_release release;
-          return loadOrMakeMotion(spec, seconds, fps);
-        },
-        py::arg("spec"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0,
-        "A motion file path if it exists, else 'builtin:NAME' or NAME of a built-in motion.");
+  m.def(
+      "load_or_make_motion",
+      [](const std::string& spec, double seconds, double fps, const py::object& up) {
+        const std::string axis = up.is_none() ? std::string() : up.cast<std::string>();
+        py::gil_scoped_release release;
+        return loadOrMakeMotion(spec, seconds, fps, axis);
+      },
+      py::arg("spec"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0, py::arg("up") = py::none(),
+      "A motion file path if it exists, else 'builtin:NAME' or NAME of a built-in motion.");
 
   // --- Scene files (read-only views) ---------------------------------------------------------
   py::class_<AvatarSpec>(m, "AvatarSpec", "One avatar of a scene file (read-only).")
       .def_readonly("name", &AvatarSpec::name)
       .def_readonly("model", &AvatarSpec::model, "SMPL .npz path or 'synthetic'")
       .def_readonly("synthetic_vertices", &AvatarSpec::synthetic_vertices)
-      .def_property_readonly("betas", [](const AvatarSpec& a) { return to_numpy(a.betas); },
-                             "(K,) shape; empty = zeros")
+      .def_property_readonly(
+          "betas", [](const AvatarSpec& a) { return to_numpy(a.betas); },
+          "(K,) shape; empty = zeros")
       .def_readonly("simulation", &AvatarSpec::simulation, "'skeleton', 'fem' or 'rom'")
       .def_readonly("resolution", &AvatarSpec::resolution, "tet-mesh resolution ('fem', 'rom')")
       .def_readonly("material_file", &AvatarSpec::material_file,
@@ -123,9 +213,12 @@ void bind_io(py::module_& m) {
                     "inertial cubature tets ('rom'); 0 = off")
       .def_readonly("motion", &AvatarSpec::motion, "AMASS .npz path or builtin:NAME; '' = none")
       .def_readonly("motion_seconds", &AvatarSpec::motion_seconds, "s; 0 = the duration")
-      .def_property_readonly("offset", [](const AvatarSpec& a) { return to_numpy(VecX(a.offset)); },
-                             "(3,) added to the motion's root translation, m")
+      .def_property_readonly(
+          "offset", [](const AvatarSpec& a) { return to_numpy(VecX(a.offset)); },
+          "(3,) added to the motion's root translation, m")
       .def_readonly("yaw", &AvatarSpec::yaw, "rotation of the motion about +y, rad")
+      .def_readonly("up", &AvatarSpec::up,
+                    "up axis of the motion file, 'y' or 'z'; '' = the file's, else 'z'")
       .def_readonly("options", &AvatarSpec::options, "SimulableOptions")
       .def("__repr__", [](const AvatarSpec& a) {
         return "AvatarSpec(name='" + a.name + "', model='" + a.model + "', motion='" + a.motion +
@@ -142,7 +235,16 @@ void bind_io(py::module_& m) {
   py::class_<SceneSpec>(m, "SceneSpec", "A parsed, validated scene file (read-only).")
       .def_readonly("source", &SceneSpec::source, "file path or 'builtin default scene'")
       .def_readonly("avatars", &SceneSpec::avatars, "list of AvatarSpec")
-      .def_readonly("colliders", &SceneSpec::colliders, "list of Collider")
+      .def_readonly("colliders", &SceneSpec::colliders,
+                    "list of Collider (without the \"ground\" key's plane)")
+      .def_property_readonly(
+          "ground",
+          [](const SceneSpec& s) -> py::object {
+            if (!s.ground.enabled) return py::none();
+            if (s.ground.automatic) return py::str("auto");
+            return py::float_(s.ground.height);
+          },
+          "the \"ground\" key: None, 'auto' or a height y (m)")
       .def_readonly("time_step", &SceneSpec::time_step, "s")
       .def_readonly("duration", &SceneSpec::duration, "s")
       .def_readonly("newton", &SceneSpec::newton, "NewtonOptions")

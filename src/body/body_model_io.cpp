@@ -1,9 +1,12 @@
 // Loading and saving SMPL-format body models as `.npz` (ARCHITECTURE.md §2).
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "flsh/body/body_model.h"
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/body/smplh.h"
 #include "flsh/core/error.h"
 #include "flsh/io/npz.h"
 
@@ -57,8 +60,10 @@ BodyModel loadBodyModel(const std::string& path) {
     throw InputError(path + ": key 'kintree_table': expected shape (2, J), got " +
                      shapeString(tree_shape));
   const long J = tree_shape[1];
-  if (J < 1)
-    throw InputError(path + ": key 'kintree_table' is empty, shape " + shapeString(tree_shape));
+  if (J != kNumJoints && J != kNumSmplhJoints)
+    throw InputError(path + ": key 'kintree_table' has shape " + shapeString(tree_shape) + ": " +
+                     std::to_string(J) + " joints" + (J == 55 ? " (SMPL-X?)" : "") +
+                     "; flsh reads SMPL (24 joints) and SMPL-H / SMPL+H (52 joints) models");
   const std::vector<int64_t> tree = file.integers("kintree_table", {2, J});
   model.parents.resize(size_t(J));
   for (long j = 0; j < J; ++j) {
@@ -115,6 +120,16 @@ BodyModel loadBodyModel(const std::string& path) {
     model.faces.data()[k] = int(faces[size_t(k)]);
   }
 
+  if (J == kNumSmplhJoints) {
+    if (!isSmplhSkeleton(model.parents))
+      throw InputError(path + ": key 'kintree_table': 52 joints but not SMPL-H's tree (joint " +
+                       std::to_string(std::mismatch(model.parents.begin(), model.parents.end(),
+                                                    kSmplhParents.begin())
+                                          .first -
+                                      model.parents.begin()) +
+                       " has another parent)");
+    return smplFromSmplh(model);
+  }
   model.finalize();
   return model;
 }

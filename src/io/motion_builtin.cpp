@@ -172,11 +172,18 @@ Motion makeBuiltinMotion(const std::string& name, double seconds, double fps) {
   return m;
 }
 
-Motion loadOrMakeMotion(const std::string& spec, double seconds, double fps) {
+Motion loadOrMakeMotion(const std::string& spec, double seconds, double fps,
+                        const std::string& up) {
   const std::string prefix = "builtin:";
-  if (spec.rfind(prefix, 0) == 0) return makeBuiltinMotion(spec.substr(prefix.size()), seconds, fps);
-  if (std::filesystem::exists(spec)) return loadMotion(spec);
-  if (registry().count(spec)) return makeBuiltinMotion(spec, seconds, fps);
+  const auto builtin = [&](const std::string& name) {
+    if (!up.empty() && up != "y")
+      throw InputError("motion '" + spec + "' is a built-in motion, made y up; up \"" + up +
+                       "\" applies to motion files only");
+    return makeBuiltinMotion(name, seconds, fps);
+  };
+  if (spec.rfind(prefix, 0) == 0) return builtin(spec.substr(prefix.size()));
+  if (std::filesystem::exists(spec)) return loadMotion(spec, up);
+  if (registry().count(spec)) return builtin(spec);
   throw FileError("motion '" + spec + "' is neither an existing file nor a built-in motion (" +
                   knownMotions() + ")");
 }

@@ -6,6 +6,7 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/io/motion.h"
+#include "flsh/io/motion_frame.h"
 #include "flsh/io/npz.h"
 
 namespace flsh {
@@ -31,7 +32,7 @@ double readFrameRate(const io::NpzFile& file) {
 
 }  // namespace
 
-Motion loadMotion(const std::string& path) {
+Motion loadMotion(const std::string& path, const std::string& up) {
   const io::NpzFile file(path);
   Motion motion;
   motion.source = path;
@@ -70,10 +71,25 @@ Motion loadMotion(const std::string& path) {
   }
   motion.fps = readFrameRate(file);
   motion.gender = file.string("gender");
+
+  // The clip's up axis: the caller's, else the file's own key, else AMASS's z up.
+  if (!up.empty()) {
+    worldFromUpAxis(up, path + ": up axis asked for");
+    motion.up = up;
+  } else if (file.has("up")) {
+    motion.up = file.string("up");
+    worldFromUpAxis(motion.up, path + ": key 'up'");
+  } else {
+    motion.up = "z";
+  }
+  if (motion.up != "y") rotateMotion(motion, worldFromUpAxis(motion.up));  // y: as stored
+  const std::string warning = uprightWarning(motion);
+  if (!warning.empty()) std::cerr << "flsh: warning: " << warning << "\n";
   return motion;
 }
 
-void saveMotion(const Motion& motion, const std::string& path) {
+void saveMotion(const Motion& motion, const std::string& path, const std::string& up) {
+  const Mat3 file_from_world = worldFromUpAxis(up, "saveMotion(" + path + "): up").transpose();
   const long T = motion.poses.rows();
   if (motion.poses.cols() != kSmplPoseSize)
     throw InputError("saveMotion(" + path + "): poses: expected shape (T, 72), got " +
@@ -87,12 +103,15 @@ void saveMotion(const Motion& motion, const std::string& path) {
   if (!(motion.fps > 0.0) || !std::isfinite(motion.fps))
     throw InputError("saveMotion(" + path + "): fps must be finite and > 0, got " +
                      std::to_string(motion.fps));
+  Motion stored = motion;
+  if (up != "y") rotateMotion(stored, file_from_world);
   io::NpzWriter writer;
-  writer.add("poses", motion.poses);
-  writer.add("trans", motion.trans);
+  writer.add("poses", stored.poses);
+  writer.add("trans", stored.trans);
   writer.add("betas", motion.betas);
   writer.addScalar("mocap_framerate", motion.fps);
   if (!motion.gender.empty()) writer.addString("gender", motion.gender);
+  writer.addString("up", up);
   writer.save(path);
 }
 

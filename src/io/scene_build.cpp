@@ -1,9 +1,12 @@
 #include "flsh/io/scene_build.h"
 
 #include <Eigen/Geometry>
+#include <cctype>
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
+#include <filesystem>
+#include <limits>
 #include <map>
 
 #include "flsh/body/body_forward.h"
@@ -11,10 +14,28 @@
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
+#include "flsh/io/motion_frame.h"
 
 namespace flsh::io {
 
 namespace {
+
+/// What flsh made of a model file of another SMPL family (docs/formats.md).
+std::string familyNote(const BodyModel& body) {
+  return body.family == "SMPL-H" ? "its finger joints merged into SMPL's hand joints (hands held "
+                                   "in the model's rest pose)"
+                                 : "read as SMPL";
+}
+
+/// The avatar's surface at t = 0 (the motion's first frame, else the rest pose), as
+/// Simulable::initialize() places it.
+MatX3 startVertices(const SceneAvatar& run) {
+  const VecX& betas = run.avatar->betas();
+  if (!run.motion) return poseBody(*run.body, betas, VecX::Zero(kSmplPoseSize)).vertices;
+  return poseBody(*run.body, betas, run.motion->poses.row(0).transpose(),
+                  run.motion->trans.row(0).transpose())
+      .vertices;
+}
 
 std::string format(const char* pattern, double value) {
   char text[64];
@@ -28,17 +49,26 @@ std::string trimmed(std::string text) {
   return text;
 }
 
-/// The avatar's motion with its yaw (about +y through the root's rest position) and offset:
-/// every frame is rigidly moved, trans' = R_y trans + offset and R_root' = R_y R_root.
-std::shared_ptr<Motion> placedMotion(Motion motion, const AvatarSpec& spec) {
-  const Mat3 Ry = Eigen::AngleAxisd(spec.yaw, Vec3::UnitY()).toRotationMatrix();
-  for (int k = 0; k < motion.numFrames(); ++k) {
-    const Vec3 trans = motion.trans.row(k).transpose();
-    motion.trans.row(k) = (Ry * trans + spec.offset).transpose();
-    const Vec3 root = motion.poses.row(k).head<3>().transpose();
-    motion.poses.row(k).head<3>() = logSO3(Ry * rodrigues(root)).transpose();
-  }
-  return std::make_shared<Motion>(std::move(motion));
+/// The model file of an avatar: its "model" path with kGenderPlaceholder filled in by the
+/// motion's gender ("neutral" without one), checked to be a file.
+std::string modelPathFor(const AvatarSpec& spec, const Motion* motion, const std::string& where) {
+  const size_t at = spec.model.find(kGenderPlaceholder);
+  if (at == std::string::npos) return spec.model;
+  std::string gender = motion ? motion->gender : "";
+  for (char& c : gender) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (gender.empty()) gender = "neutral";
+  const std::string origin =
+      motion && !motion->gender.empty() ? "the gender of " + motion->source : "no gender given";
+  if (gender != "female" && gender != "male" && gender != "neutral")
+    throw InputError(where + ".model: " + spec.model + ": " + origin + " is \"" + gender +
+                     "\", expected \"female\", \"male\" or \"neutral\"");
+  std::string path = spec.model;
+  path.replace(at, std::string(kGenderPlaceholder).size(), gender);
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw FileError(where + ".model: body model file not found: " + path + " (" + origin + ": \"" +
+                    gender + "\")");
+  return path;
 }
 
 /// "500 tets, held-out error 0.84 %" or "off (exact)" for one cubature of the reduced data;
@@ -91,25 +121,6 @@ std::vector<SceneAvatar> buildSceneAvatars(const SceneSpec& scene, const SceneBu
     SceneAvatar& run = runs[i];
     run.spec = &spec;
     run.where = scene.source + ": avatars[" + std::to_string(i) + "]";
-    const std::string key = spec.model == "synthetic"
-                                ? "synthetic:" + std::to_string(spec.synthetic_vertices)
-                                : spec.model;
-    auto& body = bodies[key];
-    if (!body) {
-      if (spec.model == "synthetic") {
-        log("generating the synthetic body (" + std::to_string(spec.synthetic_vertices) +
-            " vertices)...");
-        SyntheticBodyOptions options;
-        options.vertices = spec.synthetic_vertices;
-        body = std::make_shared<const BodyModel>(makeSyntheticBody(options));
-      } else {
-        body = std::make_shared<const BodyModel>(loadBodyModel(spec.model));
-      }
-      if (body->numJoints() != kNumJoints)
-        throw InputError(run.where + ".model: " + spec.model + " has " +
-                         std::to_string(body->numJoints()) + " joints, expected 24 (SMPL)");
-    }
-    run.body = body;
 
     std::shared_ptr<Motion> motion;
     if (!spec.motion.empty()) {
@@ -118,14 +129,37 @@ std::vector<SceneAvatar> buildSceneAvatars(const SceneSpec& scene, const SceneBu
           spec.motion.rfind(prefix, 0) == 0
               ? makeBuiltinMotion(spec.motion.substr(prefix.size()),
                                   spec.motion_seconds > 0 ? spec.motion_seconds : scene.duration)
-              : loadMotion(spec.motion);
+              : loadMotion(spec.motion, spec.up);
       checkMotionValues(raw,
                         run.where + ".motion: " + (raw.source.empty() ? spec.motion : raw.source));
-      motion = placedMotion(std::move(raw), spec);
+      motion = std::make_shared<Motion>(placedMotion(std::move(raw), spec.yaw, spec.offset));
       checkMotionValues(*motion,
                         run.where + ".offset: the motion placed by offset and yaw_degrees");
     }
     run.motion = motion;
+
+    const std::string model = modelPathFor(spec, motion.get(), run.where);
+    const std::string key =
+        model == "synthetic" ? "synthetic:" + std::to_string(spec.synthetic_vertices) : model;
+    auto& body = bodies[key];
+    if (!body) {
+      if (model == "synthetic") {
+        log("generating the synthetic body (" + std::to_string(spec.synthetic_vertices) +
+            " vertices)...");
+        SyntheticBodyOptions options;
+        options.vertices = spec.synthetic_vertices;
+        body = std::make_shared<const BodyModel>(makeSyntheticBody(options));
+      } else {
+        body = std::make_shared<const BodyModel>(loadBodyModel(model));
+        if (body->family != "SMPL")
+          log("avatar '" + spec.name + "': " + model + ": " + body->family + " body model, " +
+              familyNote(*body));
+      }
+      if (body->numJoints() != kNumJoints)
+        throw InputError(run.where + ".model: " + model + " has " +
+                         std::to_string(body->numJoints()) + " joints, expected 24 (SMPL)");
+    }
+    run.body = body;
 
     VecX betas = spec.betas;
     if (betas.size() > body->numBetas())
@@ -227,6 +261,68 @@ VecX fitBetas(const VecX& betas, const BodyModel& model, const std::string& orig
     *warning = origin + " has " + std::to_string(betas.size()) + " shape coefficients, the model " +
                std::to_string(K) + "; using the first " + std::to_string(K);
   return betas.head(K);
+}
+
+std::vector<Collider> sceneColliders(const SceneSpec& scene,
+                                     const std::vector<SceneAvatar>& avatars,
+                                     const SceneBuildLog& log) {
+  std::vector<Collider> colliders = scene.colliders;
+  const GroundSpec& ground = scene.ground;
+  if (!ground.enabled) return colliders;
+  double height = ground.height;
+  if (ground.automatic) {
+    height = std::numeric_limits<double>::infinity();
+    std::string lowest;
+    for (const SceneAvatar& run : avatars) {
+      const double y = run.motion ? lowestPointHeight(*run.body, run.avatar->betas(), *run.motion,
+                                                      ground.over_seconds)
+                                  : startVertices(run).col(1).minCoeff();
+      if (y < height) {
+        height = y;
+        lowest = run.spec->name;
+      }
+    }
+    if (log)
+      log("ground: auto, plane at y = " + format("%.4g", height) +
+          " m, under the lowest point of avatar '" + lowest + "' over its first " +
+          format("%g", ground.over_seconds) + " s");
+  }
+  Collider plane = Collider::plane(Vec3(0.0, height, 0.0), Vec3::UnitY());
+  plane.name = "ground";
+  colliders.push_back(plane);
+  return colliders;
+}
+
+std::vector<std::string> startWarnings(const std::vector<SceneAvatar>& avatars,
+                                       const std::vector<Collider>& colliders) {
+  std::vector<std::string> warnings;
+  for (const SceneAvatar& run : avatars) {
+    const MatX3 nodes = startVertices(run);
+    double nearest = std::numeric_limits<double>::infinity();  // floors only
+    std::string nearest_name;
+    for (const Collider& collider : colliders) {
+      if (collider.shape() != ColliderShape::Plane) continue;
+      double lowest = std::numeric_limits<double>::infinity();
+      for (Eigen::Index i = 0; i < nodes.rows(); ++i)
+        lowest = std::min(lowest, collider.signedDistance(nodes.row(i).transpose(), 0.0));
+      if (lowest < -kStartDepthWarning)
+        warnings.push_back("avatar '" + run.spec->name + "' starts " + format("%.3f", -lowest) +
+                           " m deep in plane '" + collider.name + "'");
+      if (collider.p1().y() > 0.7 && std::abs(lowest) < std::abs(nearest)) {
+        nearest = lowest;
+        nearest_name = collider.name;
+      }
+    }
+    if (std::isfinite(nearest) && nearest > kStartHeightWarning)
+      warnings.push_back("avatar '" + run.spec->name + "' starts " + format("%.3f", nearest) +
+                         " m above the nearest floor ('" + nearest_name +
+                         "'), the lowest point of its body at t = 0; \"ground\": \"auto\" puts "
+                         "the ground under it" +
+                         (run.motion && run.motion->up == "y" && run.spec->up.empty()
+                              ? ""
+                              : ", and \"up\" says which way the clip was recorded"));
+  }
+  return warnings;
 }
 
 void checkMotionValues(const Motion& motion, const std::string& what) {

@@ -166,11 +166,14 @@ class SceneReader {
     return int(x);
   }
 
-  Vec3 toVec3(const json& value, const std::string& path) const {
+  /// Three numbers, each within ±`bound` (`unit` names it in messages): positions within the
+  /// simulation's ±kMaxStatePosition by default.
+  Vec3 toVec3(const json& value, const std::string& path, double bound = kMaxStatePosition,
+              const std::string& unit = "m") const {
     if (!value.is_array() || value.size() != 3)
       fail(path, "expected 3 numbers [x, y, z], got " + describe(value));
     Vec3 v;
-    for (int c = 0; c < 3; ++c) v[c] = toDouble(value[c], item(path, c));
+    for (int c = 0; c < 3; ++c) v[c] = toRange(value[c], item(path, c), -bound, bound, false, unit);
     return v;
   }
 
@@ -220,17 +223,22 @@ class SceneReader {
   /// Resolves a relative path against the scene file's folder and requires an existing file.
   std::string existingFile(const std::string& text, const std::string& path,
                            const std::string& what) const {
+    const fs::path p = resolvedPath(text, path);
+    std::error_code ec;
+    if (!fs::is_regular_file(p, ec))
+      throw FileError(origin_ + ": " + path + ": " + what + " file not found: " + p.string());
+    return p.string();
+  }
+
+  /// `text` resolved against the scene file's folder, absolute and normal (not checked).
+  std::string resolvedPath(const std::string& text, const std::string& path) const {
     if (text.empty()) fail(path, "expected a file path, got an empty string");
     fs::path p(text);
     if (p.is_relative()) p = fs::path(base_dir_) / p;
     std::error_code absolute_error;
     const fs::path absolute = fs::absolute(p, absolute_error);  // messages name a full path
     if (!absolute_error) p = absolute;
-    p = p.lexically_normal();
-    std::error_code ec;
-    if (!fs::is_regular_file(p, ec))
-      throw FileError(origin_ + ": " + path + ": " + what + " file not found: " + p.string());
-    return p.string();
+    return p.lexically_normal().string();
   }
 
   /// A folder that may not exist yet (it is created on use), resolved like existingFile;
@@ -254,7 +262,7 @@ class SceneReader {
     if (!root.is_object()) fail("(top level)", "expected a JSON object, got " + describe(root));
     checkKeys(root, "",
               {"time_step", "duration", "avatar_contact", "newton", "avatars", "colliders",
-               "outputs", "cache_dir", "use_cache"});
+               "ground", "outputs", "cache_dir", "use_cache"});
     SceneSpec scene;
     if (root.contains("time_step"))
       scene.time_step = toRange(root["time_step"], "time_step", 0.0, 1.0, true, "s");
@@ -306,6 +314,14 @@ class SceneReader {
           fail(item("colliders", i) + ".name", "duplicate collider name \"" + collider.name + "\"");
         scene.colliders.push_back(std::move(collider));
       }
+    }
+    if (root.contains("ground")) {
+      readGround(root["ground"], "ground", scene.ground);
+      for (const Collider& collider : scene.colliders)
+        if (collider.name == "ground")
+          fail("ground",
+               "the scene also has a collider named \"ground\": give one ground, or rename "
+               "that collider");
     }
     if (root.contains("outputs")) scene.outputs = readOutputs(root["outputs"], "outputs");
     if (!overrides.output_dir.empty()) scene.outputs.dir = overrides.output_dir;
@@ -403,14 +419,18 @@ class SceneReader {
     checkKeys(node, path,
               {"name", "model", "vertices", "betas", "simulation", "resolution", "materials",
                "handles", "elastic_cubature", "inertial_cubature", "surface_partition_of_unity",
-               "motion", "motion_seconds", "offset", "yaw_degrees", "options"});
+               "motion", "motion_seconds", "up", "offset", "yaw_degrees", "options"});
     AvatarSpec avatar;
     avatar.name = node.contains("name") ? toName(node["name"], child(path, "name"))
                                         : "avatar" + std::to_string(index);
     if (node.contains("model")) {
       const std::string p = child(path, "model");
       const std::string model = toString(node["model"], p);
-      avatar.model = model == "synthetic" ? model : existingFile(model, p, "body model");
+      // "{gender}" is filled in with the clip's gender when the avatar is built.
+      avatar.model = model == "synthetic" ? model
+                     : model.find(kGenderPlaceholder) != std::string::npos
+                         ? resolvedPath(model, p)
+                         : existingFile(model, p, "body model");
     }
     if (node.contains("vertices")) {
       const std::string p = child(path, "vertices");
@@ -506,6 +526,21 @@ class SceneReader {
       if (!builtin_motion) fail(p, "only for a built-in motion (\"motion\": \"builtin:NAME\")");
       avatar.motion_seconds = toRange(node["motion_seconds"], p, 0.0, 1e5, true, "s");
     }
+    if (node.contains("up")) {
+      const std::string p = child(path, "up");
+      if (avatar.motion.empty() || builtin_motion)
+        fail(p, "only for a motion file (built-in motions are made y up)");
+      avatar.up = toString(node["up"], p);
+      if (avatar.up != "y" && avatar.up != "z")
+        fail(p,
+             "expected \"y\" or \"z\" (the up axis the clip was recorded in; AMASS: \"z\"), "
+             "got \"" +
+                 avatar.up + "\"");
+    }
+    if (avatar.model.find(kGenderPlaceholder) != std::string::npos && avatar.motion.empty())
+      fail(child(path, "model"), std::string("\"") + kGenderPlaceholder +
+                                     "\" is filled in with the motion's gender, but this avatar "
+                                     "has no motion");
     if (node.contains("offset")) avatar.offset = toVec3(node["offset"], child(path, "offset"));
     if (node.contains("yaw_degrees"))
       avatar.yaw = toRange(node["yaw_degrees"], child(path, "yaw_degrees"), -3600.0, 3600.0, false,
@@ -523,24 +558,26 @@ class SceneReader {
     checkKeys(node, path,
               {"tracking_stiffness", "tracking_inertia_floor", "root_stiffness", "joint_stiffness",
                "contact_stiffness", "gravity", "kinematic_bones", "track_mocap"});
-    const double inf = std::numeric_limits<double>::infinity();
+    // Bounds far beyond any body (defaults: tracking 355, root 630 1/s², joints 1e5 N/m,
+    // contact 2e6 N/m³, gravity 9.81 m/s²) that keep each energy term finite.
     if (node.contains("tracking_stiffness"))
       options.tracking_stiffness = toRange(
-          node["tracking_stiffness"], child(path, "tracking_stiffness"), 0.0, inf, false, "1/s²");
+          node["tracking_stiffness"], child(path, "tracking_stiffness"), 0.0, 1e9, false, "1/s²");
     if (node.contains("tracking_inertia_floor"))
       options.tracking_inertia_floor =
-          toRange(node["tracking_inertia_floor"], child(path, "tracking_inertia_floor"), 0.0, inf,
+          toRange(node["tracking_inertia_floor"], child(path, "tracking_inertia_floor"), 0.0, 1e6,
                   false, "kg·m²");
     if (node.contains("root_stiffness"))
       options.root_stiffness =
-          toRange(node["root_stiffness"], child(path, "root_stiffness"), 0.0, inf, false, "1/s²");
+          toRange(node["root_stiffness"], child(path, "root_stiffness"), 0.0, 1e9, false, "1/s²");
     if (node.contains("joint_stiffness"))
       options.joint_stiffness =
-          toRange(node["joint_stiffness"], child(path, "joint_stiffness"), 0.0, inf, true, "N/m");
+          toRange(node["joint_stiffness"], child(path, "joint_stiffness"), 0.0, 1e12, true, "N/m");
     if (node.contains("contact_stiffness"))
       options.contact.stiffness = toRange(
-          node["contact_stiffness"], child(path, "contact_stiffness"), 0.0, inf, false, "N/m³");
-    if (node.contains("gravity")) options.gravity = toVec3(node["gravity"], child(path, "gravity"));
+          node["contact_stiffness"], child(path, "contact_stiffness"), 0.0, 1e15, false, "N/m³");
+    if (node.contains("gravity"))
+      options.gravity = toVec3(node["gravity"], child(path, "gravity"), 1e3, "m/s²");
     if (node.contains("track_mocap"))
       options.track_mocap = toBool(node["track_mocap"], child(path, "track_mocap"));
     if (node.contains("kinematic_bones")) {
@@ -565,7 +602,6 @@ class SceneReader {
     if (!node.contains("type"))
       fail(child(path, "type"), "missing (expected \"plane\", \"sphere\" or \"capsule\")");
     const std::string type = toString(node["type"], child(path, "type"));
-    const double inf = std::numeric_limits<double>::infinity();
     Collider collider;
     if (type == "plane") {
       checkKeys(node, path, {"name", "type", "point", "normal", "velocity", "path"});
@@ -581,9 +617,9 @@ class SceneReader {
       if (!node.contains("center")) fail(child(path, "center"), "missing (expected [x, y, z], m)");
       if (!node.contains("radius"))
         fail(child(path, "radius"), "missing (expected a radius > 0, m)");
-      collider =
-          Collider::sphere(toVec3(node["center"], child(path, "center")),
-                           toRange(node["radius"], child(path, "radius"), 0.0, inf, true, "m"));
+      collider = Collider::sphere(
+          toVec3(node["center"], child(path, "center")),
+          toRange(node["radius"], child(path, "radius"), 0.0, kMaxStatePosition, true, "m"));
     } else if (type == "capsule") {
       checkKeys(node, path, {"name", "type", "a", "b", "radius", "velocity", "path"});
       for (const char* key : {"a", "b"})
@@ -592,7 +628,7 @@ class SceneReader {
         fail(child(path, "radius"), "missing (expected a radius > 0, m)");
       collider = Collider::capsule(
           toVec3(node["a"], child(path, "a")), toVec3(node["b"], child(path, "b")),
-          toRange(node["radius"], child(path, "radius"), 0.0, inf, true, "m"));
+          toRange(node["radius"], child(path, "radius"), 0.0, kMaxStatePosition, true, "m"));
     } else {
       fail(child(path, "type"),
            "expected \"plane\", \"sphere\" or \"capsule\", got \"" + type + "\"");
@@ -603,7 +639,8 @@ class SceneReader {
       fail(child(path, "velocity"), "give either \"velocity\" or \"path\", not both");
     if (node.contains("velocity")) {
       // Constant velocity over the whole simulation (held after the last key otherwise).
-      const Vec3 velocity = toVec3(node["velocity"], child(path, "velocity"));
+      const Vec3 velocity =
+          toVec3(node["velocity"], child(path, "velocity"), kMaxStateVelocity, "m/s");
       collider.path = ColliderPath::constantVelocity(velocity, scene.duration + scene.time_step);
     }
     if (node.contains("path")) collider.path = readPath(node["path"], child(path, "path"));
@@ -635,6 +672,34 @@ class SceneReader {
     }
     result.validate(origin_ + ": " + path);
     return result;
+  }
+
+  /// "ground": "auto" | height (m) | {"height": "auto" | height, "over_seconds": s}.
+  void readGround(const json& node, const std::string& path, GroundSpec& ground) const {
+    const auto readHeight = [&](const json& value, const std::string& p) {
+      if (value.is_string()) {
+        const std::string text = value.get<std::string>();
+        if (text != "auto")
+          fail(p,
+               "expected \"auto\" (the plane under the avatars' lowest point) or a height "
+               "(m), got \"" +
+                   text + "\"");
+        ground.automatic = true;
+      } else {
+        ground.height = toRange(value, p, -kMaxStatePosition, kMaxStatePosition, false, "m");
+      }
+    };
+    ground.enabled = true;
+    if (!node.is_object()) return readHeight(node, path);
+    checkKeys(node, path, {"height", "over_seconds"});
+    if (!node.contains("height"))
+      fail(child(path, "height"), "missing (expected \"auto\" or a height, m)");
+    readHeight(node["height"], child(path, "height"));
+    if (node.contains("over_seconds")) {
+      if (!ground.automatic) fail(child(path, "over_seconds"), "only for \"height\": \"auto\"");
+      ground.over_seconds =
+          toRange(node["over_seconds"], child(path, "over_seconds"), 0.0, 1e6, false, "s");
+    }
   }
 
   OutputSpec readOutputs(const json& node, const std::string& path) const {

@@ -92,7 +92,8 @@ TEST(MotionIo, EmptyBetasAndGenderRoundTrip) {
 TEST(MotionIo, SmplhPosesKeepBodyJointsAndZeroTheHands) {
   const std::string dir = test::freshTempDir("motion_smplh");
   AmassFile amass;
-  const Motion motion = loadMotion(amass.write(dir + "/smplh.npz"));
+  // Read as recorded y up, so that the values are the file's (AmassFrame tests the z-up turn).
+  const Motion motion = loadMotion(amass.write(dir + "/smplh.npz"), "y");
   ASSERT_EQ(motion.poses.rows(), 5);
   ASSERT_EQ(motion.poses.cols(), 72);
   EXPECT_EQ(motion.poses.leftCols(66), amass.poses.leftCols(66));  // joints 0–21
@@ -115,7 +116,7 @@ TEST(MotionIo, AcceptsFloat32AlternateFrameRateKeyAndRowBetas) {
                            {"trans.npy", test::npyOf("<f4", "(2, 3)", trans)},
                            {"betas.npy", test::npyOf("<f4", "(1, 2)", betas)},
                            {"mocap_frame_rate.npy", test::npyOf("<f8", "()", rate)}});
-  const Motion motion = loadMotion(path);
+  const Motion motion = loadMotion(path, "y");
   EXPECT_EQ(motion.poses(1, 71), double(0.01f * 143.0f));
   EXPECT_EQ(motion.trans(1, 2), 2.5);
   EXPECT_EQ(motion.betas, (VecX(2) << 0.25, -0.5).finished());

@@ -215,7 +215,7 @@ TEST(SceneFile, WrongTypesAndValuesAreNamedWithTheirPath) {
       {R"({"avatars": [{"options": {"tracking_inertia_floor": -0.01}}]})",
        "options.tracking_inertia_floor: expected 0 <= value"},
       {R"({"avatars": [{}], "colliders": [{"type": "sphere", "center": [0,0,0], "radius": 0}]})",
-       "colliders[0].radius: expected 0 < value (m), got 0"},
+       "colliders[0].radius: expected 0 < value <= 10000 (m), got 0"},
       {R"({"avatars": [{}], "colliders": [{"type": "sphere", "radius": 1}]})",
        "colliders[0].center: missing"},
       {R"({"avatars": [{}], "colliders": [{"type": "box"}]})",

@@ -7,6 +7,7 @@
 #include <random>
 
 #include "flsh/body/smpl_skeleton.h"
+#include "flsh/body/smplh.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/rotation.h"
 
@@ -169,6 +170,38 @@ VecX pullBackRotationGradient(const VecX& g, const VecX& d) {
     out.segment<3>(6 * b + 3) =
         leftJacobianSO3(d.segment<3>(6 * b + 3)).transpose() * g.segment<3>(6 * b + 3);
   return out;
+}
+
+BodyModel smplhFrom(const BodyModel& smpl) {
+  std::mt19937 rng(11);
+  std::normal_distribution<double> normal(0.0, 1e-3);
+  const long V = smpl.numVertices(), K = smpl.numBetas();
+  BodyModel h;
+  h.v_template = smpl.v_template;
+  h.faces = smpl.faces;
+  h.parents.assign(kSmplhParents.begin(), kSmplhParents.end());
+  h.shapedirs = MatX::Zero(3 * V, K + 6);
+  h.shapedirs.leftCols(K) = smpl.shapedirs;
+  for (long k = 0; k < 3 * V * 6; ++k) h.shapedirs.rightCols(6).data()[k] = normal(rng);
+  h.posedirs = MatX::Zero(3 * V, 9 * 51);
+  h.posedirs.leftCols(9 * 21) = smpl.posedirs.leftCols(9 * 21);
+  for (long k = 0; k < 3 * V * 9 * 30; ++k) h.posedirs.rightCols(9 * 30).data()[k] = normal(rng);
+  h.weights = MatX::Zero(V, kNumSmplhJoints);
+  h.weights.leftCols(22) = smpl.weights.leftCols(22);
+  const MatX dense_regressor = MatX(smpl.J_regressor);
+  MatX regressor(kNumSmplhJoints, V);
+  regressor.topRows(22) = dense_regressor.topRows(22);
+  for (int hand = 0; hand < 2; ++hand) {
+    const int first = 22 + 15 * hand, smpl_hand = 22 + hand;
+    const VecX w = smpl.weights.col(smpl_hand);
+    h.weights.col(first + 3) += 0.5 * w;   // middle1
+    h.weights.col(first) += 0.3 * w;       // index1
+    h.weights.col(first + 12) += 0.2 * w;  // thumb1
+    for (int j = first; j < first + 15; ++j) regressor.row(j) = dense_regressor.row(smpl_hand);
+  }
+  h.J_regressor = regressor.sparseView(1.0, 0.0);
+  h.source = "smplh-from-synthetic";
+  return h;
 }
 
 }  // namespace flsh::test

@@ -93,4 +93,9 @@ VecX pullBackRotationGradient(const VecX& g, const VecX& d);
 /// `seed`. For unit tests of the forward pass that must not depend on the synthetic body.
 BodyModel makeRandomModel(int vertices = 300, int betas = 10, unsigned seed = 1);
 
+/// An SMPL-H model built from an SMPL one: the same body joints; each hand's SMPL weight split
+/// over three finger joints; the middle fingers' first joints at SMPL's hand joints, the other
+/// finger joints there too; random finger pose blend shapes; 6 more shape components (random).
+BodyModel smplhFrom(const BodyModel& smpl);
+
 }  // namespace flsh::test

@@ -38,6 +38,9 @@ struct BodyModel {
   MatX3i faces;
   /// Where the model came from: a file path or "synthetic(...)". For messages only.
   std::string source;
+  /// The SMPL family member the file held: "SMPL", or "SMPL-H" (SMPL+H, AMASS's body model)
+  /// converted to SMPL's 24 joints on loading (smplFromSmplh, smplh.h). For messages only.
+  std::string family = "SMPL";
 
   int numVertices() const { return int(v_template.rows()); }
   int numFaces() const { return int(faces.rows()); }
@@ -60,10 +63,13 @@ struct BodyModel {
   std::shared_ptr<const Derived> derived;
 };
 
-/// Loads an SMPL body model from an `.npz` file (SMPL's keys; any number of shape
+/// Loads an SMPL-family body model from an `.npz` file (SMPL's keys; any number of shape
 /// components; float32 or float64; J_regressor dense; kintree_table int or uint with the
-/// root's parent stored as −1 or 2³²−1). Throws FileError / InputError naming the file,
-/// the key, and the expected and actual shape or dtype.
+/// root's parent stored as −1 or 2³²−1): SMPL (24 joints) as it is, SMPL-H / SMPL+H (52
+/// joints, AMASS's body model) converted to SMPL's 24 (smplFromSmplh). Extra keys (e.g.
+/// SMPL-H's hand PCA) are ignored. Throws FileError / InputError naming the file, the key, and
+/// the expected and actual shape or dtype; any other joint count (e.g. SMPL-X's 55) is an
+/// InputError naming 'kintree_table'.
 BodyModel loadBodyModel(const std::string& path);
 
 /// Writes a body model as an SMPL-format `.npz` (float64 arrays, int64 kintree_table and f),

@@ -40,6 +40,26 @@ using SceneBuildLog = std::function<void(const std::string&)>;
 /// (checkMotionValues), or a ROM asking for more handles than the body has.
 std::vector<SceneAvatar> buildSceneAvatars(const SceneSpec& scene, const SceneBuildLog& log = {});
 
+/// The colliders of `scene` and its "ground" (GroundSpec), a plane with normal +y named
+/// "ground": at its height, or with "ground": "auto" at the lowest vertex of every avatar
+/// posed by its motion over its first `over_seconds` (lowestPointHeight, motion_frame.h; an
+/// avatar without a motion: its start), which is reported through `log`.
+std::vector<Collider> sceneColliders(const SceneSpec& scene,
+                                     const std::vector<SceneAvatar>& avatars,
+                                     const SceneBuildLog& log = {});
+
+/// Thresholds of startWarnings (m): an avatar deeper than this in a plane, or whose lowest point
+/// is higher than this above the nearest floor (a plane facing up, normal y > 0.7).
+constexpr double kStartDepthWarning = 0.02;
+constexpr double kStartHeightWarning = 0.10;
+
+/// One sentence per avatar that starts deeper than kStartDepthWarning in a plane collider or
+/// higher than kStartHeightWarning above every floor: usually a ground at the wrong height or a
+/// clip read with the wrong up axis. The surface at t = 0 is the body posed by the motion's
+/// first frame (else the rest pose), where Simulable::initialize() puts it.
+std::vector<std::string> startWarnings(const std::vector<SceneAvatar>& avatars,
+                                       const std::vector<Collider>& colliders);
+
 /// The solver settings of a scene file. Soft-tissue scenes keep their own solver choices
 /// (SceneOptions::soft_tissue_newton with an FEM avatar, else reduced_newton for ROM avatars:
 /// Hessian form, linear solver, lagged factor, tolerance) and take the scene's iteration limit

@@ -14,9 +14,15 @@
 
 namespace flsh {
 
+/// In a model path, replaced by the gender of the avatar's motion ("female", "male" or
+/// "neutral"; a motion without one, or a built-in motion, is "neutral"), e.g.
+/// "models/smplh/{gender}/model.npz" for AMASS's body-model layout.
+constexpr const char* kGenderPlaceholder = "{gender}";
+
 struct AvatarSpec {
   std::string name;                     ///< for outputs; default "avatar<i>"
-  std::string model = "synthetic";      ///< SMPL .npz path, or "synthetic"
+  /// SMPL or SMPL-H .npz path (resolved; may hold kGenderPlaceholder), or "synthetic".
+  std::string model = "synthetic";
   int synthetic_vertices = 6890;        ///< for model = "synthetic"
   VecX betas;                           ///< shape; empty = zeros (or the motion's)
   /// "skeleton" (articulated rigid bones), "fem" (FEM soft skeleton: the avatar is built with
@@ -39,6 +45,9 @@ struct AvatarSpec {
   bool surface_partition_of_unity = ReducedSettings().surface_partition_of_unity;
   std::string motion;                   ///< AMASS .npz path or builtin:NAME; empty = none
   double motion_seconds = 0.0;          ///< length of a built-in motion, s; 0 = the duration
+  /// Up axis the motion file was recorded in, "y" or "z"; empty = the file's own `up` key,
+  /// else "z" (AMASS). loadMotion turns the clip into flsh's y-up world.
+  std::string up;
   Vec3 offset = Vec3::Zero();           ///< added to the motion's root translation, m
   double yaw = 0.0;                     ///< rotation of the motion about +y, rad
   SimulableOptions options;
@@ -54,10 +63,21 @@ struct OutputSpec {
   int every = 1;         ///< write every n-th frame
 };
 
+/// "ground": a plane with normal +y named "ground", at a given height or under the avatars.
+struct GroundSpec {
+  bool enabled = false;
+  /// At the lowest vertex of every avatar posed by its motion over its first `over_seconds`
+  /// (io::automaticGround, scene_build.h), rather than at `height`.
+  bool automatic = false;
+  double height = 0.0;        ///< m (world y), when not automatic
+  double over_seconds = 1.0;  ///< s, when automatic
+};
+
 struct SceneSpec {
   std::string source;    ///< file path or "builtin default scene"
   std::vector<AvatarSpec> avatars;
   std::vector<Collider> colliders;
+  GroundSpec ground;  ///< the "ground" key; added to the colliders by io::sceneColliders
   double time_step = 1.0 / 60.0;  ///< s
   double duration = 2.0;          ///< s
   NewtonOptions newton;

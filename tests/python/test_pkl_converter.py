@@ -263,3 +263,51 @@ def test_missing_output_directory(tmp_path, no_chumpy_env):
     assert result.returncode == 1
     assert "does not exist" in result.stderr
     assert not (tmp_path / "nowhere").exists()
+
+
+def test_converts_smplh_pickle_that_flsh_reads_with_merged_hands(tmp_path, no_chumpy_env):
+    """SMPL-H (MANO's SMPLH_*.pkl layout: 52 joints, 16 shape components, hand PCA extras)
+    converts like SMPL, and flsh reads the result as SMPL's 24 joints (docs/formats.md)."""
+    import flsh
+
+    parents = SMPL_PARENTS[:22]
+    for wrist in (20, 21):
+        for _ in range(5):
+            parents = parents + [wrist, len(parents), len(parents) + 1]
+    rng = np.random.default_rng(3)
+    Jh, Kh = 52, 16
+    weights = rng.random((V, Jh))
+    weights /= weights.sum(axis=1, keepdims=True)
+    regressor = np.zeros((Jh, V))
+    regressor[np.arange(Jh), np.arange(Jh) % V] = 1.0
+    kintree = np.stack([parents, np.arange(Jh)]).astype(np.int64)
+    kintree[0, 0] = 2**32 - 1
+    arrays = {
+        "v_template": rng.normal(size=(V, 3)),
+        "shapedirs": rng.normal(size=(V, 3, Kh)),
+        "posedirs": rng.normal(size=(V, 3, 9 * (Jh - 1))),
+        "J_regressor": regressor,
+        "weights": weights,
+        "kintree_table": kintree.astype(np.uint32),
+        "f": rng.integers(0, V, size=(F, 3)).astype(np.uint32),
+    }
+    with fake_chumpy() as ch:
+        payload = smpl_pickle_dict(ch, arrays)
+        payload["J"] = ch.Select(ch.Ch(arrays["v_template"]), np.arange(Jh))
+        payload["hands_componentsl"] = rng.normal(size=(45, 45))
+        payload["hands_meanl"] = rng.normal(size=45)
+        pkl = write_pickle(tmp_path / "SMPLH_female.pkl", payload)
+    out = tmp_path / "smplh_female.npz"
+    result = run_converter(no_chumpy_env, pkl, out)
+    assert result.returncode == 0, result.stderr
+    assert f"J={Jh} joints, K={Kh} shape components" in result.stdout
+
+    model = flsh.load_body_model(out)
+    assert model.family == "SMPL-H"
+    assert model.num_joints == 24 and model.num_betas == Kh
+    np.testing.assert_array_equal(model.parents, SMPL_PARENTS)
+    # Each hand joint carries its 15 fingers' weights.
+    np.testing.assert_allclose(model.weights[:, 22], weights[:, 22:37].sum(axis=1), atol=1e-12)
+    np.testing.assert_allclose(model.weights[:, 23], weights[:, 37:52].sum(axis=1), atol=1e-12)
+    np.testing.assert_array_equal(model.posedirs[..., :189], arrays["posedirs"][..., :189])
+    np.testing.assert_array_equal(model.posedirs[..., 189:], 0.0)

@@ -76,7 +76,7 @@ expect_exit2 "huge_regressor.npz: array 'J_regressor'" -- \
 [ ! -e p.npz ] || fail "output p.npz left behind"
 printf '{"avatars": [{"vertices": 600, "motion": "builtin:walk", "offset": [1e300, 0, 0]}],
   "duration": 0.05, "outputs": {"dir": "offset_out"}}' > offset.json
-expect_exit2 "offset.json: avatars[0].offset: the motion placed by offset and yaw_degrees: trans: frame 0 has 1e+300 m" -- \
+expect_exit2 "offset.json: avatars[0].offset[0]: expected -10000 <= value <= 10000 (m), got 1e+300" -- \
   "$flsh" simulate offset.json
 [ ! -e offset_out ] || fail "offset_out left behind"
 

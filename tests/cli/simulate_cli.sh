@@ -150,7 +150,7 @@ expect_error "avatars[0].materials: material file not found: $here/data/soft.jso
   '{"avatars": [{"vertices": 600, "simulation": "fem", "materials": "data/soft.json"}]}'
 expect_error "bad.json: time_step: expected 0 < value <= 1 (s), got -0.01" \
   '{"time_step": -0.01, "avatars": [{"vertices": 600}]}'
-expect_error "colliders[0].radius: expected 0 < value (m), got 0" \
+expect_error "colliders[0].radius: expected 0 < value <= 10000 (m), got 0" \
   '{"avatars": [{"vertices": 600}], "colliders": [{"type": "sphere", "center": [0,0,0], "radius": 0}]}'
 rm -rf badout
 if "$flsh" simulate scene.json --duration -1 --out badout >/dev/null 2>err.log; then fail "negative --duration accepted"; fi

@@ -33,6 +33,7 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
+#include "flsh/core/memory_check.h"
 #include "flsh/io/atomic_file.h"
 #include "flsh/io/mesh_io.h"
 #include "flsh/io/motion.h"
@@ -41,6 +42,7 @@
 #include "flsh/io/scene_build.h"
 #include "flsh/io/scene_file.h"
 #include "flsh/io/scene_outputs.h"
+#include "flsh/io/scene_run.h"
 #include "flsh/render/render.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/scene.h"
@@ -55,8 +57,6 @@ double secondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-/// Most steps a simulation may take (as the scene reader's bound: catches unit mistakes).
-constexpr long kMaxSteps = 10'000'000;
 /// Most frames `flsh motion` and `flsh demo` generate.
 constexpr double kMaxMotionFrames = 1e6;
 
@@ -107,21 +107,6 @@ void checkRange(const std::string& what, double value, double lo, double hi, boo
     throw InputError(what + ": expected " + number(lo) + (open_lo ? " < " : " <= ") +
                      "value <= " + number(hi) + (unit.empty() ? "" : " (" + unit + ")") + ", got " +
                      number(value));
-}
-
-/// Throws InputError naming `what` unless about `bytes` of memory fit in half of this
-/// machine's; `advice` says what to change.
-void checkMemory(const std::string& what, double bytes, const std::string& advice) {
-  const double memory = double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE));
-  auto gigabytes = [](double b) {
-    char text[32];
-    std::snprintf(text, sizeof(text), "%.3g GB", b / 1e9);
-    return std::string(text);
-  };
-  if (memory > 0 && !(bytes <= 0.5 * memory))
-    throw InputError(what + ": this needs about " + gigabytes(bytes) +
-                     " of memory, expected at most " + gigabytes(0.5 * memory) +
-                     " (half of this machine's memory); " + advice);
 }
 
 /// Throws InputError unless a built-in motion of `seconds` at `fps` has at most
@@ -432,187 +417,20 @@ int cmdDemo(const std::string& out_dir, int vertices, const std::string& motion_
 // ---------------------------------------------------------------------------------------------
 // flsh simulate
 
-/// One line on stderr that updates in place on a terminal; a line per 10 % otherwise.
-class ProgressBar {
- public:
-  explicit ProgressBar(int total) : total_(std::max(1, total)), tty_(isatty(fileno(stderr)) != 0) {}
-  void update(int done, double sim_time) {
-    const double elapsed = secondsSince(start_);
-    const int percent = int(100.0 * done / total_);
-    if (tty_) {
-      if (done < total_ && secondsSince(last_) < 0.1) return;
-      last_ = Clock::now();
-    } else {
-      if (percent / 10 == last_decile_ && done < total_) return;
-      last_decile_ = percent / 10;
-    }
-    const double rate = elapsed > 0 ? done / elapsed : 0.0;
-    const double eta = rate > 0 ? (total_ - done) / rate : 0.0;
-    const int width = 24, filled = width * done / total_;
-    std::fprintf(stderr, "%s[%s%s] %3d%%  step %d/%d  t = %.3f s  %.0f steps/s  ETA %.1f s%s",
-                 tty_ ? "\r" : "", std::string(filled, '#').c_str(),
-                 std::string(width - filled, '.').c_str(), percent, done, total_, sim_time, rate,
-                 eta, tty_ ? "\033[K" : "\n");
-    std::fflush(stderr);
-  }
-  void finish() {
-    if (tty_) std::fputc('\n', stderr);
-  }
-
- private:
-  int total_;
-  bool tty_;
-  int last_decile_ = 0;  // the first line comes at 10 %
-  Clock::time_point start_ = Clock::now(), last_ = Clock::time_point();
-};
-
-/// What `flsh simulate` may find in (and writes to) its output folder.
-std::vector<io::OutputEntry> simulateOutputEntries() {
-  return {io::OutputEntry::folderOf("meshes", ".ply"), io::OutputEntry::file("states.npz"),
-          io::OutputEntry::file("animation.glb"), io::OutputEntry::file("sheet.png")};
-}
-
-/// The number of steps of the scene; throws InputError naming the allowed range unless it is
-/// at least 1 and at most kMaxSteps.
-int numSteps(const SceneSpec& scene) {
-  const double steps = std::round(scene.duration / scene.time_step);
-  if (!(steps <= double(kMaxSteps)))
-    throw InputError(scene.source + ": duration / time_step = " + number(steps) +
-                     " steps, expected at most " + number(kMaxSteps) +
-                     " (shorten duration or raise time_step)");
-  return std::max(1, int(steps));
-}
-
-/// Throws InputError unless the frames the enabled outputs keep in memory fit in half of this
-/// machine's memory; names the sizes and what to change.
-void checkRecordingMemory(const SceneSpec& scene, const std::vector<io::RecordedAvatar>& avatars,
-                          int frames) {
-  const double per_frame = io::SceneRecorder::bytesPerFrame(
-      scene.outputs, avatars, scene.colliders.size() + (scene.ground.enabled ? 1 : 0));
-  checkMemory(scene.source + ": outputs (states.npz and animation.glb keep " +
-                  std::to_string(frames) + " saved frames of " +
-                  std::to_string(int(std::ceil(per_frame / 1e3))) + " kB)",
-              per_frame * frames,
-              "save fewer frames (outputs.every), shorten duration, or switch npz and gltf off");
-}
-
 int cmdSimulate(const std::string& scene_path, const SceneOverrides& overrides) {
-  const auto t_setup = Clock::now();
-  // Everything is read and checked before anything is written.
+  // Everything is read and checked before anything is written (io::runScene).
   const SceneSpec scene =
       scene_path.empty() ? defaultScene(overrides) : loadSceneFile(scene_path, overrides);
-  const OutputSpec& wanted = scene.outputs;
-  const bool any_output = wanted.ply || wanted.npz || wanted.gltf || wanted.png;
-  const int steps = numSteps(scene), every = wanted.every;
-  const int frames = 1 + steps / every;
-  // The outputs go to a staging folder beside outputs.dir, which replaces it at the end.
-  std::unique_ptr<io::StagedOutputDir> out_dir;
-  const std::string out_what =
-      overrides.output_dir.empty() ? scene.source + ": outputs.dir" : "--out";
-  if (any_output)
-    out_dir = std::make_unique<io::StagedOutputDir>(wanted.dir, simulateOutputEntries(), out_what);
-  std::vector<io::SceneAvatar> runs = io::buildSceneAvatars(
-      scene, [](const std::string& line) { std::fprintf(stderr, "simulate: %s\n", line.c_str()); });
-  std::vector<io::RecordedAvatar> recorded;
-  for (const auto& run : runs) recorded.push_back({run.spec->name, run.simulable, run.soft});
-  checkRecordingMemory(scene, recorded, frames);
-
-  // The scene's colliders and its "ground" (placed under the avatars with "auto").
-  const std::vector<Collider> colliders = io::sceneColliders(
-      scene, runs,
-      [](const std::string& line) { std::fprintf(stderr, "simulate: %s\n", line.c_str()); });
-  Scene sim_scene(io::sceneOptionsOf(scene));
-  for (auto& run : runs) sim_scene.addSimulable(run.simulable);
-  for (const auto& collider : colliders) sim_scene.addCollider(collider);
-  sim_scene.initialize();
-  // An avatar starting deep inside the ground or far above it is usually a wrong ground
-  // height or up axis: say so.
-  for (const std::string& warning : io::startWarnings(runs, colliders))
-    std::fprintf(stderr, "simulate: warning: %s\n", warning.c_str());
-  const double setup_seconds = secondsSince(t_setup);
-
-  // ---- simulation: PLY meshes go to the staging folder as they come, the rest is kept ----
-  const double h = scene.time_step;
-  io::SceneRecorder recorder(wanted, out_dir ? out_dir->staging() : std::string(), recorded,
-                             colliders, h, frames);
-  // Recording (PLY frames are written as they come) counts as output time, not simulation.
-  double record_seconds = 0.0;
-  const auto record = [&](double t) {
-    const auto t0 = Clock::now();
-    recorder.record(t);
-    record_seconds += secondsSince(t0);
+  io::SceneRunOptions options;
+  options.log = [](const std::string& line) {
+    std::fprintf(stderr, "simulate: %s\n", line.c_str());
   };
-  record(0.0);
-  const double first_record_seconds = record_seconds;  // before t_sim
-  const auto t_sim = Clock::now();
-  ProgressBar progress(steps);
-  long newton_iterations = 0, factorizations = 0, cg_iterations = 0;
-  int unconverged = 0, max_contacts = 0;
-  std::string first_unconverged;
-  for (int s = 1; s <= steps; ++s) {
-    StepStats stats;
-    try {
-      stats = sim_scene.step();
-    } catch (const Error& e) {
-      std::string names;  // Scene numbers its simulables in the scene's avatar order
-      for (const auto& run : runs) names += (names.empty() ? "" : ", ") + run.spec->name;
-      throw Error("simulation failed at step " + std::to_string(s) + " (t = " + number(s * h) +
-                  " s): " + e.what() + " (simulables 0, 1, ... are the avatars " + names +
-                  "); nothing was written");
-    }
-    newton_iterations += stats.newton.iterations;
-    factorizations += stats.newton.factorizations;
-    cg_iterations += stats.newton.cg_iterations;
-    max_contacts = std::max(max_contacts, stats.active_contacts);
-    if (!stats.newton.converged && unconverged++ == 0)
-      first_unconverged = "step " + std::to_string(s) + ": " + stats.newton.message;
-    if (s % every == 0) record(s * h);
-    progress.update(s, s * h);
-  }
-  progress.finish();
-  const double sim_seconds = secondsSince(t_sim) - (record_seconds - first_record_seconds);
-
-  // ---- outputs: each file atomic in the staging folder, which then replaces outputs.dir ----
-  const auto t_out = Clock::now();
-  const std::vector<std::string> written = recorder.finish();
-  if (out_dir) out_dir->commit();
-  const double out_seconds = secondsSince(t_out) + record_seconds;
-
-  std::string outputs;
-  for (const auto& w : written) outputs += (outputs.empty() ? "" : ", ") + w;
-  for (size_t i = 0; i < runs.size(); ++i) {
-    if (!runs[i].soft) continue;
-    std::printf(
-        "simulate: avatar '%s' (%s): max soft-tissue displacement |u| %.3f mm over the "
-        "saved frames\n",
-        runs[i].spec->name.c_str(), runs[i].spec->simulation.c_str(),
-        recorder.maxDisplacementMm(i));
-  }
-  std::string ground_note;
-  if (scene.ground.enabled)
-    ground_note = " (ground at y = " + number(colliders.back().p0().y()) + " m" +
-                  (scene.ground.automatic ? ", auto)" : ")");
-  const bool any_soft =
-      std::any_of(runs.begin(), runs.end(), [](const io::SceneAvatar& r) { return r.soft; });
-  if (wanted.png && any_soft)
-    std::printf(
-        "simulate: sheet.png colours soft avatars by |u| (viridis): 0 mm dark purple to "
-        "%.3f mm yellow\n",
-        recorder.sheetMaxDisplacementMm());
-  if (unconverged > 0)
-    std::fprintf(stderr, "simulate: warning: %d of %d steps did not converge (first: %s)\n",
-                 unconverged, steps, first_unconverged.c_str());
-  std::printf(
-      "simulate: %s: %zu avatar(s), %zu collider(s)%s, %d steps of %.4g s (%.3g s), "
-      "%d frames; %.0f steps/s, %.2f Newton iterations/step (%.2f factorizations, "
-      "%.1f PCG iterations), %d unconverged, "
-      "max %d contacts; wall time: set-up %.2f s, simulation %.2f s, output %.2f s; "
-      "wrote %s in %s\n",
-      scene.source.c_str(), runs.size(), colliders.size(), ground_note.c_str(), steps, h, steps * h,
-      frames, steps / std::max(sim_seconds, 1e-9), double(newton_iterations) / steps,
-      double(factorizations) / steps, double(cg_iterations) / steps, unconverged, max_contacts,
-      setup_seconds, sim_seconds, out_seconds, outputs.empty() ? "nothing" : outputs.c_str(),
-      wanted.dir.c_str());
+  options.progress_bar = true;
+  if (!overrides.output_dir.empty()) options.output_dir_origin = "--out";
+  const io::SceneRunReport report = io::runScene(scene, options);
+  const std::string warning = report.unconvergedWarning();
+  if (!warning.empty()) std::fprintf(stderr, "simulate: warning: %s\n", warning.c_str());
+  std::printf("%s", report.summary().c_str());
   return 0;
 }
 

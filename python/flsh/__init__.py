@@ -85,6 +85,8 @@ from ._flsh import (  # noqa: F401  (re-exports)
     write_obj,
     write_ply,
     write_png,
+    load_scene,
+    run_scene,
     fit_betas,
     lowest_point_height,
     placed_motion,
@@ -174,4 +176,6 @@ __all__ = [
     "rotate_motion",
     "upright_warning",
     "world_from_up_axis",
+    "load_scene",
+    "run_scene",
 ]

@@ -5,6 +5,7 @@
 
 #include <Eigen/LU>
 #include <cmath>
+#include <cstdio>
 #include <memory>
 
 #include "bindings.h"
@@ -14,6 +15,7 @@
 #include "flsh/io/motion_frame.h"
 #include "flsh/io/scene_build.h"
 #include "flsh/io/scene_file.h"
+#include "flsh/io/scene_run.h"
 
 namespace flsh::python {
 
@@ -289,6 +291,88 @@ void bind_io(py::module_& m) {
         py::kw_only(), py::arg("duration") = 0.0, py::arg("time_step") = 0.0,
         py::arg("output_dir") = "",
         "The built-in default SceneSpec (a synthetic avatar walking, a ball thrown at it).");
+
+  // A scene file (or None: the built-in default scene) parsed with its overrides.
+  const auto scene_spec = [overrides_of](const py::object& path, double duration, double time_step,
+                                         const std::string& output_dir, const std::string& fn) {
+    const SceneOverrides o = overrides_of(duration, time_step, output_dir);
+    if (path.is_none()) return defaultScene(o);
+    const std::string p = path_string(path.cast<std::filesystem::path>());
+    require_existing_file(p, fn);
+    return loadSceneFile(p, o);
+  };
+  const auto stderr_log = [](const std::string& prefix) {
+    return [prefix](const std::string& line) {
+      std::fprintf(stderr, "%s%s\n", prefix.c_str(), line.c_str());
+    };
+  };
+  m.def(
+      "load_scene",
+      [scene_spec, stderr_log](const py::object& path, double duration, double time_step,
+                               bool verbose) {
+        const SceneSpec spec = scene_spec(path, duration, time_step, "", "load_scene");
+        py::gil_scoped_release release;
+        return io::buildScene(spec, verbose ? io::SceneBuildLog(stderr_log("load_scene: "))
+                                            : io::SceneBuildLog())
+            .scene;
+      },
+      py::arg("path") = py::none(), py::kw_only(), py::arg("duration") = 0.0,
+      py::arg("time_step") = 0.0, py::arg("verbose") = true,
+      "A scene file (None: the built-in default scene) built into a ready, initialized Scene: "
+      "its avatars (Scene.simulables, in the file's order), colliders and \"ground\", solver "
+      "settings; step it with Scene.step(). Progress and warnings go to stderr (verbose). "
+      "Overrides (0 = keep): duration s, time_step s.");
+  m.def(
+      "run_scene",
+      [scene_spec, stderr_log](const py::object& path, const std::string& out_dir, double duration,
+                               double time_step, bool progress) {
+        const SceneSpec spec = scene_spec(path, duration, time_step, out_dir, "run_scene");
+        io::SceneRunOptions options;
+        options.log = stderr_log("simulate: ");
+        options.progress_bar = progress;
+        if (!out_dir.empty()) options.output_dir_origin = "out_dir";
+        io::SceneRunReport r;
+        {
+          py::gil_scoped_release release;
+          r = io::runScene(spec, options);
+        }
+        const std::string warning = r.unconvergedWarning();
+        if (!warning.empty()) std::fprintf(stderr, "simulate: warning: %s\n", warning.c_str());
+        if (progress) std::fprintf(stderr, "%s", r.summary().c_str());
+        py::dict report;
+        report["source"] = r.source;
+        report["output_dir"] = r.output_dir;
+        report["written"] = r.written;
+        report["avatars"] = r.avatar_names;
+        report["colliders"] = r.colliders;
+        report["ground_height"] = r.ground ? py::object(py::float_(r.ground_height)) : py::none();
+        report["steps"] = r.steps;
+        report["frames"] = r.frames;
+        report["time_step"] = r.time_step;
+        report["newton_iterations"] = r.newton_iterations;
+        report["factorizations"] = r.factorizations;
+        report["cg_iterations"] = r.cg_iterations;
+        report["unconverged"] = r.unconverged;
+        report["max_contacts"] = r.max_contacts;
+        py::dict displacement;
+        for (size_t i = 0; i < r.avatar_names.size(); ++i)
+          if (r.max_displacement_mm[i] >= 0)
+            displacement[py::str(r.avatar_names[i])] = r.max_displacement_mm[i];
+        report["max_displacement_mm"] = displacement;
+        report["setup_seconds"] = r.setup_seconds;
+        report["simulation_seconds"] = r.simulation_seconds;
+        report["output_seconds"] = r.output_seconds;
+        report["summary"] = r.summary();
+        return report;
+      },
+      py::arg("path") = py::none(), py::arg("out_dir") = "", py::kw_only(),
+      py::arg("duration") = 0.0, py::arg("time_step") = 0.0, py::arg("progress") = true,
+      "Runs a scene file (None: the built-in default scene) as `flsh simulate` does: the same "
+      "outputs (meshes/, states.npz, animation.glb, sheet.png) in out_dir ('' = the file's "
+      "outputs.dir), written through a staging folder; progress, warnings and the summary on "
+      "stderr (progress=True). Returns a dict of the run's figures (steps, Newton "
+      "iterations, contacts, max_displacement_mm per soft avatar, written files, times, "
+      "summary). Overrides (0 = keep): duration s, time_step s.");
 
   // --- Meshes --------------------------------------------------------------------------------
   m.def("write_ply",

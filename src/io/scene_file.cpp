@@ -21,7 +21,6 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr long kMaxSteps = 10'000'000;  // a bound that catches unit mistakes (ms for s)
 
 // The built-in default scene, kept byte-identical to examples/scenes/default.json (a test
 // checks that they parse to the same scene). The ground sits at the 1.70 m synthetic body's
@@ -269,9 +268,9 @@ class SceneReader {
     if (root.contains("duration"))
       scene.duration = toRange(root["duration"], "duration", 0.0, 1e6, true, "s");
     applyOverrides(scene, overrides);
-    if (scene.duration / scene.time_step > double(kMaxSteps))
+    if (scene.duration / scene.time_step > double(kMaxSceneSteps))
       fail("duration", "duration / time_step = " + number(scene.duration / scene.time_step) +
-                           " steps, expected at most " + std::to_string(kMaxSteps));
+                           " steps, expected at most " + std::to_string(kMaxSceneSteps));
     if (root.contains("avatar_contact"))
       scene.avatar_contact = toBool(root["avatar_contact"], "avatar_contact");
     if (root.contains("newton")) {

@@ -14,6 +14,10 @@
 
 namespace flsh {
 
+/// Most steps a scene may take, duration / time_step: a bound that catches unit mistakes (ms
+/// for s).
+constexpr long kMaxSceneSteps = 10'000'000;
+
 /// In a model path, replaced by the gender of the avatar's motion ("female", "male" or
 /// "neutral"; a motion without one, or a built-in motion, is "neutral"), e.g.
 /// "models/smplh/{gender}/model.npz" for AMASS's body-model layout.

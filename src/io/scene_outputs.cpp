@@ -11,6 +11,7 @@
 #include "flsh/io/gltf.h"
 #include "flsh/io/mesh_io.h"
 #include "flsh/io/npz.h"
+#include "flsh/render/plot.h"
 #include "flsh/render/render.h"
 
 namespace flsh::io {
@@ -174,6 +175,7 @@ void SceneRecorder::record(double t) {
   const bool every_frame = outputs_.npz || outputs_.gltf;
   const bool shown = std::binary_search(shown_.begin(), shown_.end(), frame);
   if (every_frame) times_.push_back(t);
+  if (shown) shown_times_.push_back(t);
   for (size_t c = 0; c < colliders_.size(); ++c)
     if (every_frame || shown) collider_offsets_[c].push_back(colliders_[c].path.offsetAt(t));
   for (size_t i = 0; i < avatars_.size(); ++i) {
@@ -295,12 +297,19 @@ void SceneRecorder::writeGltf() const {
 
 void SceneRecorder::writePng() {
   // All avatars and the sphere/capsule colliders in one mesh per shown frame, framed on the
-  // avatars (a collider far away is cut off rather than shrinking the bodies). Soft avatars
-  // are coloured by ‖u_i‖ with one scale over the whole sheet.
-  sheet_max_mm_ = 0.0;
+  // avatars (a collider far away is cut off rather than shrinking the bodies), each frame
+  // labelled with its time. Soft avatars are coloured by ‖u_i‖ with one robust scale over the
+  // whole sheet (the 99th percentile of the shown values, not their maximum: a few flopping
+  // vertices would leave everything else in the bottom colour), drawn as a colour bar in mm.
+  std::vector<VecX> shown_mm;
+  double largest_mm = 0.0;
   for (size_t i = 0; i < avatars_.size(); ++i)
-    for (const VecX& norms : data_[i]->shown_norms)
-      sheet_max_mm_ = std::max(sheet_max_mm_, maxMm(norms));
+    for (const VecX& norms : data_[i]->shown_norms) {
+      shown_mm.push_back(1000.0 * norms);
+      largest_mm = std::max(largest_mm, maxMm(norms));
+    }
+  sheet_max_mm_ = render::quantileOf(shown_mm, kSheetScaleQuantile);
+  if (!(sheet_max_mm_ > 0.0)) sheet_max_mm_ = largest_mm;
   const bool every_frame = outputs_.npz || outputs_.gltf;
   MatX3i faces;
   std::vector<MatX3> frames, colors;
@@ -351,8 +360,19 @@ void SceneRecorder::writePng() {
   // Padded except below: the renderer puts its floor at the bottom of the box (the soles).
   view.frame =
       Eigen::AlignedBox3d(box.min() - Vec3(0.15, 0.0, 0.15), box.max() + Vec3::Constant(0.15));
-  render::writePng((fs::path(dir_) / "sheet.png").string(),
-                   render::renderSheet(frames, faces, view, 0, colors));
+  render::Image sheet = render::renderSheet(frames, faces, view, 0, colors);
+  for (size_t j = 0; j < shown_.size(); ++j) {
+    char label[64];
+    std::snprintf(label, sizeof(label), "t = %.2f s", shown_times_[j]);
+    render::drawLabel(sheet, int(j) * view.width + 8, 8, label, Vec3(0.1, 0.1, 0.1), 2);
+  }
+  if (!shown_mm.empty()) {
+    char caption[160];
+    std::snprintf(caption, sizeof(caption),
+                  "soft-tissue |u|, mm: scale to the 99th percentile (largest %.3g)", largest_mm);
+    sheet = render::withColorBar(sheet, sheet_max_mm_, "mm", caption);
+  }
+  render::writePng((fs::path(dir_) / "sheet.png").string(), sheet);
 }
 
 }  // namespace flsh::io

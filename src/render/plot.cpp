@@ -765,4 +765,14 @@ Image renderPlot(const std::vector<PlotSeries>& series, const PlotOptions& optio
   return image;
 }
 
+void drawLabel(Image& image, int x, int y, const std::string& text, const Vec3& color, int scale) {
+  if (scale < 1 || scale > 16)
+    throw InputError("drawLabel: scale = " + std::to_string(scale) + ", expected 1..16");
+  if (image.width <= 0 || image.height <= 0) return;
+  Canvas(image).text(x, y, text, toRgb(color), scale);
+}
+
+int labelWidth(const std::string& text, int scale) { return textWidth(text, scale); }
+int labelHeight(int scale) { return textHeight(scale); }
+
 }  // namespace flsh::render

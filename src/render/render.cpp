@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "flsh/core/error.h"
+#include "flsh/render/plot.h"
 
 namespace flsh::render {
 namespace {
@@ -566,6 +567,112 @@ MatX3 displacementColors(const VecX& magnitudes, double max_value) {
       colors(i, c) = ((1.0 - f) * kViridis[k][c] + f * kViridis[k + 1][c]) / 255.0;
   }
   return colors;
+}
+
+double quantileOf(const std::vector<VecX>& values, double q) {
+  if (!(q >= 0.0 && q <= 1.0)) {
+    std::ostringstream msg;
+    msg << "quantileOf: argument q is " << q << ", expected a quantile in [0, 1]";
+    throw InputError(msg.str());
+  }
+  std::vector<double> all;
+  for (size_t k = 0; k < values.size(); ++k) {
+    for (Eigen::Index i = 0; i < values[k].size(); ++i) {
+      if (!std::isfinite(values[k][i])) {
+        std::ostringstream msg;
+        msg << "quantileOf: values[" << k << "] has the non-finite value " << values[k][i]
+            << " at index " << i;
+        throw InputError(msg.str());
+      }
+      all.push_back(values[k][i]);
+    }
+  }
+  if (all.empty()) return 0.0;
+  const double position = q * double(all.size() - 1);
+  const size_t below = size_t(std::floor(position));
+  std::nth_element(all.begin(), all.begin() + long(below), all.end());
+  const double lo = all[below];
+  if (below + 1 >= all.size()) return lo;
+  const double hi = *std::min_element(all.begin() + long(below) + 1, all.end());
+  return lo + (position - double(below)) * (hi - lo);
+}
+
+std::vector<double> colorBarTicks(double max_value, int max_ticks) {
+  if (!std::isfinite(max_value) || max_value < 0.0) {
+    std::ostringstream msg;
+    msg << "colorBarTicks: argument max_value is " << max_value << ", expected a finite value ≥ 0";
+    throw InputError(msg.str());
+  }
+  if (max_ticks < 2)
+    throw InputError("colorBarTicks: argument max_ticks is " + std::to_string(max_ticks) +
+                     ", expected ≥ 2");
+  if (max_value == 0.0) return {0.0};
+  // The smallest step 1, 2 or 5 × 10^k that leaves at most max_ticks ticks (0 included).
+  double step = std::pow(10.0, std::floor(std::log10(max_value / (max_ticks - 1))));
+  for (int k = 0; max_value / step > max_ticks - 1 + 1e-9; ++k) {
+    const double mantissa[3] = {2.0, 2.5, 2.0};  // 1 → 2 → 5 → 10 → 20 …
+    step *= mantissa[k % 3];
+  }
+  std::vector<double> ticks;
+  for (int k = 0; k * step <= max_value * (1 + 1e-12); ++k) ticks.push_back(k * step);
+  return ticks;
+}
+
+namespace {
+std::string tickText(double value) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%.3g", value);
+  return buffer;
+}
+}  // namespace
+
+Image withColorBar(const Image& image, double max_value, const std::string& unit,
+                   const std::string& caption) {
+  if (image.width < 64 || image.height <= 0)
+    throw InputError("withColorBar: the image is " + std::to_string(image.width) + " × " +
+                     std::to_string(image.height) + " pixels, expected at least 64 wide");
+  const std::vector<double> ticks = colorBarTicks(max_value);  // checks max_value
+  constexpr int kStrip = 64, kLeft = 16, kBarTop = 22, kBarHeight = 14, kMaxBar = 480;
+  const int right_room = labelWidth(tickText(max_value) + "+ " + unit) + 12;
+  const int bar_width = std::max(8, std::min(kMaxBar, image.width - kLeft - right_room));
+  Image out;
+  out.width = image.width;
+  out.height = image.height + kStrip;
+  out.rgb.assign(size_t(out.width) * out.height * 3, 255);
+  std::copy(image.rgb.begin(), image.rgb.end(), out.rgb.begin());
+  const int top = image.height;
+  const Vec3 text_color(0.1, 0.1, 0.1);
+  drawLabel(out, kLeft, top + 8, caption, text_color);
+  const VecX positions = VecX::LinSpaced(bar_width, 0.0, 1.0);
+  const MatX3 colors = displacementColors(positions, 1.0);
+  for (int x = 0; x < bar_width; ++x)
+    for (int y = 0; y < kBarHeight; ++y) {
+      uint8_t* p = out.pixel(kLeft + x, top + kBarTop + y);
+      for (int c = 0; c < 3; ++c) p[c] = uint8_t(std::lround(255.0 * colors(x, c)));
+    }
+  auto xOf = [&](double value) {
+    return kLeft + int(std::lround((bar_width - 1) * (max_value > 0 ? value / max_value : 0.0)));
+  };
+  auto tick = [&](double value, const std::string& label) {
+    const int x = xOf(value);
+    for (int y = top + kBarTop + kBarHeight; y < top + kBarTop + kBarHeight + 4; ++y) {
+      uint8_t* p = out.pixel(x, y);
+      p[0] = p[1] = p[2] = 25;
+    }
+    drawLabel(out, std::max(0, x - labelWidth(label) / 2), top + kBarTop + kBarHeight + 6, label,
+              text_color);
+  };
+  // The scale's top at the bar's end ("+": larger values share its colour); ticks whose labels
+  // would run into it are left out.
+  const std::string top_label = tickText(max_value) + "+ " + unit;
+  const int top_label_left = xOf(max_value) - labelWidth(top_label) / 2;
+  for (double value : ticks) {
+    const std::string label = tickText(value);
+    if (value < max_value && xOf(value) + labelWidth(label) / 2 + 8 < top_label_left)
+      tick(value, label);
+  }
+  tick(max_value, top_label);
+  return out;
 }
 
 }  // namespace flsh::render

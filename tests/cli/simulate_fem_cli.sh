@@ -57,12 +57,14 @@ assert m.shape == (T,) and np.isfinite(m).all() and (m >= 0).all(), m
 # Surface vertices are a subset of the soft-tissue nodes: their maximum cannot exceed all nodes'.
 assert (m <= 1000 * np.linalg.norm(u, axis=2).max(axis=1) + 1e-9).all(), (m, u)
 assert m.max() > 0, "the soft tissue should move while walking: max displacement %s mm" % m
-# The sheet shows frames 0 and 3 with one scale: their larger maximum (printed with 3 decimals).
-assert abs(scale_mm - max(m[0], m[-1])) < 1e-3 + 1e-9, (scale_mm, m)
+# The sheet shows frames 0 and 3 with one robust scale: the 99th percentile of their surface
+# |u| (issue 29), so at most their larger maximum (printed with 3 decimals) and above 0.
+assert 0 < scale_mm <= max(m[0], m[-1]) + 1e-3 + 1e-9, (scale_mm, m)
 assert d["soft_vertices"].shape == (T, 600, 3) and np.isfinite(d["soft_vertices"]).all()
 
 rgb, coloured, skin = count_sheet_pixels("out/sheet.png")
 h, w = rgb.shape[:2]
+assert h > 480, "no colour bar strip below the 480-pixel frames: %d rows" % h
 assert coloured > 500, "only %d displacement-coloured pixels" % coloured
 assert skin > 500, "only %d skin-coloured pixels" % skin
 print("fem sheet: %d x %d, %d coloured and %d skin pixels, max |u| %.3f mm"

@@ -64,7 +64,9 @@ assert m.shape == (T,) and np.isfinite(m).all() and (m >= 0).all(), m
 assert m.max() > 0, "the soft tissue should move while walking: max displacement %s mm" % m
 # Every handle is a surface vertex whose u is its z_h: the surface maximum is at least max |z|.
 assert (m >= 1000 * np.linalg.norm(z, axis=2).max(axis=1) - 1e-9).all(), (m, z)
-assert abs(scale_mm - max(m[0], m[-1])) < 1e-3 + 1e-9, (scale_mm, m)
+# The sheet shows frames 0 and 3 with one robust scale: the 99th percentile of their surface
+# |u| (issue 29), so at most their larger maximum (printed with 3 decimals) and above 0.
+assert 0 < scale_mm <= max(m[0], m[-1]) + 1e-3 + 1e-9, (scale_mm, m)
 assert d["soft_vertices"].shape == (T, 600, 3) and np.isfinite(d["soft_vertices"]).all()
 # The ROM surface differs from pure skinning: same motion, offset by 1.2 m along x.
 moved = np.abs(d["soft_vertices"][-1] - d["rigid_vertices"][-1] - [1.2, 0, 0]).max()

@@ -49,8 +49,14 @@ class SceneRecorder {
   /// Largest ‖u_i‖ over the surface vertices and the saved frames of avatar i, mm (0 for a
   /// skeleton avatar).
   double maxDisplacementMm(size_t avatar) const { return max_displacement_mm_[avatar]; }
-  /// The colour scale of sheet.png's soft avatars, mm (valid after finish()).
+  /// The colour scale of sheet.png's soft avatars, mm (valid after finish()): the
+  /// kSheetScaleQuantile-quantile of ‖u_i‖ over the surface vertices of every soft avatar in
+  /// every shown frame (the largest value if that quantile is 0); larger values share the top
+  /// colour. The sheet draws it as a colour bar in mm below the frames.
   double sheetMaxDisplacementMm() const { return sheet_max_mm_; }
+  /// The quantile that sets the sheet's colour scale: 0.99, so that a few flopping vertices
+  /// (1 % of the shown values) do not leave the rest of the body in the bottom colour.
+  static constexpr double kSheetScaleQuantile = 0.99;
 
  private:
   struct AvatarFrames;
@@ -65,6 +71,7 @@ class SceneRecorder {
   double time_step_;
   int frames_, recorded_ = 0;
   std::vector<int> shown_;  ///< the sheet's frames, increasing
+  std::vector<double> shown_times_;  ///< their times, s (labels)
   std::vector<double> times_;
   std::vector<std::vector<Vec3>> collider_offsets_;  ///< per collider, per kept frame
   std::vector<std::shared_ptr<AvatarFrames>> data_;

@@ -76,4 +76,15 @@ PlotFrame plotFrame(const std::vector<PlotSeries>& series, const PlotOptions& op
 /// series, legend in the emptiest corner of the plot area). Same errors as plotFrame.
 Image renderPlot(const std::vector<PlotSeries>& series, const PlotOptions& options = {});
 
+/// Draws `text` in the plots' 5 × 7 pixel font, each font pixel a `scale` × `scale` block, with
+/// its top-left corner at pixel (x, y) (row 0 at the top); pixels outside the image are
+/// clipped. Characters outside printable ASCII are drawn as an empty box. `color` is sRGB in
+/// [0, 1] (clamped). Throws InputError for scale < 1 or > 16.
+void drawLabel(Image& image, int x, int y, const std::string& text,
+               const Vec3& color = Vec3(0.1, 0.1, 0.1), int scale = 1);
+/// Width and height in pixels of `text` as drawLabel draws it (width 0 for empty text; the
+/// height of one line, descenders of g, p, q, y excluded).
+int labelWidth(const std::string& text, int scale = 1);
+int labelHeight(int scale = 1);
+
 }  // namespace flsh::render

@@ -53,6 +53,26 @@ Image renderSheet(const std::vector<MatX3>& frames, const Eigen::Ref<const MatX3
 /// for a non-finite value (naming its index) or a negative or non-finite max_value.
 MatX3 displacementColors(const VecX& magnitudes, double max_value);
 
+/// The q-quantile of all entries of `values` pooled (linear interpolation between the order
+/// statistics, as numpy.quantile's default): the robust top of a colour scale, which ignores the
+/// largest (1 − q) of the entries, e.g. a few flopping vertices. 0 when there are no entries.
+/// Throws InputError for q outside [0, 1] or a non-finite entry (naming its vector and index).
+double quantileOf(const std::vector<VecX>& values, double q);
+
+/// Tick values of a colour bar over [0, max_value]: 0 and the multiples of a step of 1, 2 or
+/// 5 × 10^k up to max_value, at most `max_ticks` (≥ 2) of them. {0} for max_value = 0. Throws
+/// InputError for a negative or non-finite max_value or max_ticks < 2.
+std::vector<double> colorBarTicks(double max_value, int max_ticks = 6);
+
+/// `image` with a white strip appended below it holding a horizontal colour bar of
+/// displacementColors over [0, max_value] (left to right), tick marks labelled with
+/// colorBarTicks' values, max_value labelled at the right end with "+" (larger values share its
+/// colour), `unit` after the labels and `caption` above the bar (printable ASCII, the plots'
+/// font). The bar is at most 480 pixels wide and fits the image's width. Throws InputError for
+/// an image narrower than 64 pixels or a negative or non-finite max_value.
+Image withColorBar(const Image& image, double max_value, const std::string& unit,
+                   const std::string& caption);
+
 /// Writes an 8-bit RGB PNG atomically. Throws FileError on failure.
 void writePng(const std::string& path, const Image& image);
 

@@ -1426,16 +1426,6 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
   return potential_start;
 }
 
-void appendBlockTriplets(const std::vector<FixedHessianBlocks>& lists, std::vector<Triplet>& H) {
-  for (const FixedHessianBlocks& list : lists)
-    for (size_t k = 0; !list.empty() && k < list.positions->size(); ++k) {
-      const auto [row, col] = (*list.positions)[k];
-      for (int j = 0; j < 3; ++j)
-        for (int i = 0; i < 3; ++i)
-          H.emplace_back(row + list.offset + i, col + list.offset + j, (*list.values)[k](i, j));
-    }
-}
-
 void Simulable::fixVectorKinematic(VecX& g, int offset) const {
   const Impl& m = *impl_;
   for (int b = 0; b < m.num_bones; ++b)

@@ -18,8 +18,6 @@ namespace {
 
 using test::jacobianMatchesFiniteDifferences;
 using test::messageOf;
-using Vec9 = Eigen::Matrix<double, 9, 1>;
-using Mat9 = Eigen::Matrix<double, 9, 9>;
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 

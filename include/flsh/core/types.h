@@ -28,4 +28,12 @@ using SpMat = Eigen::SparseMatrix<double>;                   // column-major spa
 using SpMatR = Eigen::SparseMatrix<double, Eigen::RowMajor>;  // row-major sparse
 using Triplet = Eigen::Triplet<double>;
 
+// Small fixed sizes: a bone's 6 DoFs (translation, rotation), 3 × 3 pairs, two bones.
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+using Vec9 = Eigen::Matrix<double, 9, 1>;
+using Mat9 = Eigen::Matrix<double, 9, 9>;
+using Vec12 = Eigen::Matrix<double, 12, 1>;
+using Mat12 = Eigen::Matrix<double, 12, 12>;
+
 }  // namespace flsh

@@ -31,12 +31,7 @@
 
 namespace flsh {
 
-// Same aliases as flsh/sim/skeleton_energies.h (a redeclaration of the same type is legal).
-using Vec6 = Eigen::Matrix<double, 6, 1>;
-using Mat6 = Eigen::Matrix<double, 6, 6>;
-using Mat9 = Eigen::Matrix<double, 9, 9>;
-using Vec12 = Eigen::Matrix<double, 12, 1>;
-using Mat12 = Eigen::Matrix<double, 12, 12>;
+// Vec6, Mat6, Mat9, Vec12, Mat12: flsh/core/types.h.
 /// Nodal values of one tet (3 × 4): column a is node a.
 using Mat34 = Eigen::Matrix<double, 3, 4>;
 using Mat3X = Eigen::Matrix<double, 3, Eigen::Dynamic>;

@@ -24,10 +24,7 @@
 
 namespace flsh {
 
-using Vec6 = Eigen::Matrix<double, 6, 1>;
-using Mat6 = Eigen::Matrix<double, 6, 6>;
-using Vec12 = Eigen::Matrix<double, 12, 1>;
-using Mat12 = Eigen::Matrix<double, 12, 12>;
+// Vec6, Mat6, Vec12, Mat12: flsh/core/types.h.
 
 /// Inertia of one rigid bone in backward Euler: E = 1/(2h²) Σ m ‖x − x̂‖² over its mass points,
 /// x = R (X − J) + t, x̂ = 2 x_n − x_{n−1}; in closed form with A = 2R_n − R_{n−1},

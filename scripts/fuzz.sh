@@ -6,11 +6,13 @@
 #
 # SECONDS per target (default 60); TARGETs among fuzz_npz fuzz_scene_file fuzz_mesh
 # fuzz_avatar_cache (default: all four, one after the other). The build directory (default
-# build-fuzz/, FLSH_FUZZ_BUILD) is configured with clang-14 and FLSH_FUZZ=ON if needed. Each run
-# starts from the seeds in fuzz/corpus/TARGET/, the inputs that once crashed a reader
-# (fuzz/regressions/TARGET/, also replayed by tests/io/fuzz_replay_test.cpp) and what earlier
-# runs found, kept with the crash artefacts outside the source tree in FLSH_FUZZ_OUT (default
-# ${TMPDIR:-/tmp}/flsh-fuzz/TARGET/). Per input: a 10 s timeout and a 2 GB RSS limit. Prints
+# build-sanitize/, FLSH_FUZZ_BUILD) is the sanitized suite's (scripts/sanitize.sh configures it:
+# clang-14, ASan + UBSan, FLSH_FUZZ=ON), so one instrumented build serves both; only the fuzz
+# targets are built here. Each run starts from the seeds in fuzz/corpus/TARGET/, the inputs that
+# once crashed a reader (fuzz/regressions/TARGET/, also replayed by tests/io/fuzz_replay_test.cpp)
+# and what earlier runs found, kept with the crash artefacts outside the source tree in
+# FLSH_FUZZ_OUT (default ${TMPDIR:-/tmp}/flsh-fuzz/TARGET/). Per input: a 10 s timeout and a
+# 2 GB RSS limit. Prints
 # each target's executions and whether it found a crash; exits 1 if any run crashed, timed out
 # or ran out of memory.
 #
@@ -18,26 +20,16 @@
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
-build=${FLSH_FUZZ_BUILD:-$root/build-fuzz}
+build=${FLSH_FUZZ_BUILD:-$root/build-sanitize}
 out=${FLSH_FUZZ_OUT:-${TMPDIR:-/tmp}/flsh-fuzz}
 jobs=${FLSH_FUZZ_JOBS:-2}
 all_targets=(fuzz_npz fuzz_scene_file fuzz_mesh fuzz_avatar_cache)
 
 configure() {
-  if [ ! -f "$build/build.ninja" ]; then
-    command -v clang++-14 >/dev/null || {
-      echo "fuzz.sh: clang++-14 not found (scripts/setup.sh installs clang-14 and libclang-rt-14-dev)" >&2
-      exit 2
-    }
-    # -O1 with line tables (sanitizer reports with lines, compiles fast) and without NDEBUG, so
-    # that Eigen's index assertions abort like a sanitizer report would.
-    local launcher=()
-    command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
-    CC=clang-14 CXX=clang++-14 cmake -S "$root" -B "$build" -G Ninja \
-      -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -gline-tables-only" \
-      -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -gline-tables-only" "${launcher[@]}" \
-      -DFLSH_FUZZ=ON -DFLSH_NATIVE=OFF -DFLSH_PYTHON=OFF -DFLSH_TESTS=OFF -DFLSH_BENCHMARKS=OFF \
-      -DFLSH_CERES=OFF
+  # Configured (or reconfigured, if another compiler set it up) by the sanitizer script.
+  if [ ! -f "$build/build.ninja" ] || ! grep -q '^FLSH_FUZZ:BOOL=ON$' "$build/CMakeCache.txt" ||
+    ! grep -q '^CMAKE_CXX_COMPILER:[A-Z]*=.*clang++-14$' "$build/CMakeCache.txt"; then
+    bash "$root/scripts/sanitize.sh" --configure "$build"
   fi
 }
 

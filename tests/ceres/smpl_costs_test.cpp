@@ -347,7 +347,7 @@ TEST(SmplCosts, BadConstructionArgumentsThrowNamingTheArgument) {
   msg = messageOf<InputError>([&] { (void)PosePriorCost(VecX::Ones(23)); });
   EXPECT_NE(msg.find("23 values, expected 24"), std::string::npos) << msg;
   EXPECT_THROW(PosePriorCost(-1.0), InputError);
-  EXPECT_THROW(PosePriorCost(std::numeric_limits<double>::quiet_NaN()), InputError);
+  EXPECT_THROW((void)PosePriorCost(std::numeric_limits<double>::quiet_NaN()), InputError);
   EXPECT_THROW(ShapePriorCost(0, 1.0), InputError);
   EXPECT_THROW(ShapePriorCost(10, -2.0), InputError);
 }

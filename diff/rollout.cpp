@@ -12,14 +12,6 @@ namespace flsh {
 
 namespace {
 
-constexpr int kGroupShape = int(SimulableGroup::Shape);
-constexpr int kGroupJoints = int(SimulableGroup::RestJoints);
-constexpr int kGroupInertia = int(SimulableGroup::BoneInertia);
-constexpr int kGroupPose = int(SimulableGroup::PoseTargets);
-constexpr int kGroupRoot = int(SimulableGroup::RootTargets);
-constexpr int kGroupStiffnesses = int(SimulableGroup::Stiffnesses);
-constexpr int kGroupColliders = int(SimulableGroup::ColliderOffsets);
-
 void checkVector(const VecX& v, long expected, const std::string& who, const std::string& name,
                  bool empty_ok = true) {
   if (empty_ok && v.size() == 0) return;
@@ -57,12 +49,45 @@ class RestoreStepOnExit {
 
 }  // namespace
 
+VecX* RolloutVariables::global(SimParameter p) {
+  switch (p) {
+    case SimParameter::Shape:
+      return &shape;
+    case SimParameter::RestJoints:
+      return &rest_joints;
+    case SimParameter::BoneInertia:
+      return &bone_inertia;
+    case SimParameter::Stiffnesses:
+      return &stiffnesses;
+    case SimParameter::ColliderOffsets:
+      return &collider_offsets;
+    case SimParameter::PoseTargets:
+    case SimParameter::RootTranslationTarget:
+      return nullptr;
+  }
+  return nullptr;
+}
+
+RowMatX* RolloutVariables::perStep(SimParameter p) {
+  if (p == SimParameter::PoseTargets) return &pose_targets;
+  if (p == SimParameter::RootTranslationTarget) return &root_targets;
+  return nullptr;
+}
+
+const VecX* RolloutVariables::global(SimParameter p) const {
+  return const_cast<RolloutVariables&>(*this).global(p);
+}
+
+const RowMatX* RolloutVariables::perStep(SimParameter p) const {
+  return const_cast<RolloutVariables&>(*this).perStep(p);
+}
+
 double dot(const RolloutVariables& a, const RolloutVariables& b) {
-  return dotOrZero(a.shape, b.shape) + dotOrZero(a.rest_joints, b.rest_joints) +
-         dotOrZero(a.bone_inertia, b.bone_inertia) + dotOrZero(a.pose_targets, b.pose_targets) +
-         dotOrZero(a.root_targets, b.root_targets) + dotOrZero(a.stiffnesses, b.stiffnesses) +
-         dotOrZero(a.collider_offsets, b.collider_offsets) +
-         dotOrZero(a.initial_state, b.initial_state) +
+  double sum = 0.0;
+  for (const SimParameterInfo& info : simParameters())
+    sum += info.per_step ? dotOrZero(*a.perStep(info.id), *b.perStep(info.id))
+                         : dotOrZero(*a.global(info.id), *b.global(info.id));
+  return sum + dotOrZero(a.initial_state, b.initial_state) +
          dotOrZero(a.initial_velocity, b.initial_velocity);
 }
 
@@ -85,13 +110,12 @@ void addMember(M& into, const M& add, const char* name) {
 }  // namespace
 
 void accumulate(RolloutVariables& into, const RolloutVariables& add) {
-  addMember(into.shape, add.shape, "shape");
-  addMember(into.rest_joints, add.rest_joints, "rest_joints");
-  addMember(into.bone_inertia, add.bone_inertia, "bone_inertia");
-  addMember(into.pose_targets, add.pose_targets, "pose_targets");
-  addMember(into.root_targets, add.root_targets, "root_targets");
-  addMember(into.stiffnesses, add.stiffnesses, "stiffnesses");
-  addMember(into.collider_offsets, add.collider_offsets, "collider_offsets");
+  for (const SimParameterInfo& info : simParameters()) {
+    if (info.per_step)
+      addMember(*into.perStep(info.id), *add.perStep(info.id), info.name);
+    else
+      addMember(*into.global(info.id), *add.global(info.id), info.name);
+  }
   addMember(into.initial_state, add.initial_state, "initial_state");
   addMember(into.initial_velocity, add.initial_velocity, "initial_velocity");
 }
@@ -264,11 +288,11 @@ Rollout::VerticesCotangent Rollout::verticesCotangent(int t, const MatX3& dL_dve
   VerticesCotangent out;
   out.state =
       model.incrementToStateCotangent(simulable_->getStateJacobian().transpose() * pose_trans);
-  out.direct.shape =
-      jac.vertices_betas.transpose() * g -
-      avatar.restJointsShapeJacobian().topRows<3>().transpose() * pose_trans.tail<3>();
+  // trans = t_0 − J_0 moves with the root joint, and J_0 with β.
   out.direct.rest_joints = VecX::Zero(72);
   out.direct.rest_joints.head<3>() = -pose_trans.tail<3>();
+  out.direct.shape = jac.vertices_betas.transpose() * g;
+  chainShapeCotangent(avatar, out.direct.rest_joints, VecX(), out.direct.shape);
   return out;
 }
 
@@ -279,13 +303,12 @@ RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVaria
   checkVariables(direct, who + ": direct");
   const AdjointResult r = adjointSweep(model_, tape_, dL_dstates);
   RolloutVariables g;
-  g.shape = r.global[kGroupShape];
-  g.rest_joints = r.global[kGroupJoints];
-  g.bone_inertia = r.global[kGroupInertia];
-  g.pose_targets = r.per_step[kGroupPose];
-  g.root_targets = r.per_step[kGroupRoot];
-  g.stiffnesses = r.global[kGroupStiffnesses];
-  g.collider_offsets = r.global[kGroupColliders];
+  for (const SimParameterInfo& info : simParameters()) {
+    if (info.per_step)
+      *g.perStep(info.id) = r.per_step[size_t(info.id)];
+    else
+      *g.global(info.id) = r.global[size_t(info.id)];
+  }
   g.initial_state = r.initial_state;
   g.initial_velocity = r.initial_velocity;
   // The initial conditions initialize() sets move with the rest joints (and so with β).
@@ -295,7 +318,7 @@ RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVaria
   if (velocity_from_initialize_)
     initial_joints += initial_velocity_joints_jacobian_.transpose() * r.initial_velocity;
   g.rest_joints += initial_joints;
-  g.shape += simulable_->avatar().restJointsShapeJacobian().transpose() * initial_joints;
+  chainShapeCotangent(simulable_->avatar(), initial_joints, VecX(), g.shape);
   accumulate(g, direct);
   return g;
 }
@@ -312,19 +335,22 @@ std::vector<RowMatX> Rollout::forwardSensitivities(
     TangentDirection t;
     t.global.resize(groups.size());
     t.per_step.resize(groups.size());
-    t.global[kGroupShape] = v.shape;
-    t.global[kGroupJoints] = v.rest_joints;
-    t.global[kGroupInertia] = v.bone_inertia;
-    t.per_step[kGroupPose] = v.pose_targets;
-    t.per_step[kGroupRoot] = v.root_targets;
-    t.global[kGroupStiffnesses] = v.stiffnesses;
-    t.global[kGroupColliders] = v.collider_offsets;
+    for (const SimParameterInfo& info : simParameters()) {
+      if (info.per_step)
+        t.per_step[size_t(info.id)] = *v.perStep(info.id);
+      else
+        t.global[size_t(info.id)] = *v.global(info.id);
+    }
     t.initial_state = v.initial_state;
     t.initial_velocity = v.initial_velocity;
     // The initial conditions initialize() sets move with J (and β).
     VecX dJ = VecX::Zero(72);
     if (v.rest_joints.size()) dJ += v.rest_joints;
-    if (v.shape.size()) dJ += simulable_->avatar().restJointsShapeJacobian() * v.shape;
+    if (v.shape.size()) {
+      VecX shape_joints;
+      shapeTangent(simulable_->avatar(), v.shape, &shape_joints, nullptr);
+      dJ += shape_joints;
+    }
     if (state_from_initialize_) t.initial_state_increment = initial_state_joints_jacobian_ * dJ;
     if (velocity_from_initialize_) {
       const VecX dv = initial_velocity_joints_jacobian_ * dJ;

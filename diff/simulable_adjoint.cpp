@@ -16,13 +16,12 @@ struct SimulableSnapshot final : StepSnapshot {
   SimulableStep step;
 };
 
-constexpr SimParameter kGroupParameter[kNumSimulableGroups] = {SimParameter::Shape,
-                                                               SimParameter::RestJoints,
-                                                               SimParameter::BoneInertia,
-                                                               SimParameter::PoseTargets,
-                                                               SimParameter::RootTranslationTarget,
-                                                               SimParameter::Stiffnesses,
-                                                               SimParameter::ColliderOffsets};
+// The adjoint's groups are the registry's, in SimParameter order.
+std::vector<SimParameter> allGroups() {
+  std::vector<SimParameter> groups;
+  for (const SimParameterInfo& info : simParameters()) groups.push_back(info.id);
+  return groups;
+}
 
 void checkSize(const VecX& v, int n, const char* who, const char* what) {
   if (v.size() != n)
@@ -47,14 +46,10 @@ SimulableAdjointModel::SimulableAdjointModel(std::shared_ptr<Simulable> simulabl
 int SimulableAdjointModel::numDofs() const { return simulable_->numDofs(); }
 
 std::vector<ParameterGroupInfo> SimulableAdjointModel::parameterGroups() const {
-  const Simulable& s = *simulable_;
-  return {{"shape", s.parameterSize(SimParameter::Shape), false},
-          {"rest_joints", s.parameterSize(SimParameter::RestJoints), false},
-          {"bone_inertia", s.parameterSize(SimParameter::BoneInertia), false},
-          {"pose_targets", s.parameterSize(SimParameter::PoseTargets), true},
-          {"root_targets", s.parameterSize(SimParameter::RootTranslationTarget), true},
-          {"stiffnesses", s.parameterSize(SimParameter::Stiffnesses), false},
-          {"collider_offsets", s.parameterSize(SimParameter::ColliderOffsets), false}};
+  std::vector<ParameterGroupInfo> groups;
+  for (const SimParameterInfo& info : simParameters())
+    groups.push_back({info.name, simulable_->parameterSize(info.id), info.per_step});
+  return groups;
 }
 
 std::unique_ptr<StepSnapshot> SimulableAdjointModel::saveStep() const {
@@ -88,8 +83,7 @@ SpMat SimulableAdjointModel::previousStateJacobian(int which) const {
 }
 
 void SimulableAdjointModel::parameterJacobians(std::vector<MatX>& out) const {
-  out = simulable_->getGradientParameterJacobians(
-      std::vector<SimParameter>(kGroupParameter, kGroupParameter + kNumSimulableGroups));
+  out = simulable_->getGradientParameterJacobians(allGroups());
 }
 
 void SimulableAdjointModel::previousStatesVJP(const VecX& lambda, VecX& a_n, VecX& a_nm1) const {
@@ -101,41 +95,34 @@ VecX SimulableAdjointModel::previousStatesJVP(const VecX& dq_n, const VecX& dq_n
 }
 
 void SimulableAdjointModel::parameterVJPs(const VecX& lambda, std::vector<VecX>& out) const {
-  out = simulable_->getGradientParameterVJPs(
-      lambda, std::vector<SimParameter>(kGroupParameter, kGroupParameter + kNumSimulableGroups),
-      /*shape_surface_only=*/true);
+  out = simulable_->getGradientParameterVJPs(lambda, allGroups(), /*shape_surface_only=*/true);
 }
 
 // p̄_β = Σ_t (dJ/dβ)ᵀ (∂g_t/∂J)ᵀ λ_t + (dI/dβ)ᵀ (∂g_t/∂I)ᵀ λ_t + surface: the first two sums are
 // the RestJoints and BoneInertia cotangents themselves (dJ/dβ, dI/dβ do not change over steps).
 void SimulableAdjointModel::finishParameterVJPs(std::vector<VecX>& global) const {
-  const int shape = int(SimulableGroup::Shape), joints = int(SimulableGroup::RestJoints),
-            inertia = int(SimulableGroup::BoneInertia);
-  if (global.size() != size_t(kNumSimulableGroups) || global[shape].size() == 0) return;
-  const SoftAvatar& avatar = simulable_->avatar();
-  if (global[joints].size())
-    global[shape].noalias() += avatar.restJointsShapeJacobian().transpose() * global[joints];
-  if (global[inertia].size())
-    global[shape].noalias() += avatar.boneInertiaShapeJacobian().transpose() * global[inertia];
+  const size_t shape = size_t(SimParameter::Shape), joints = size_t(SimParameter::RestJoints),
+               inertia = size_t(SimParameter::BoneInertia);
+  if (global.size() != size_t(kNumSimParameters) || global[shape].size() == 0) return;
+  chainShapeCotangent(simulable_->avatar(), global[joints], global[inertia], global[shape]);
 }
 
 void SimulableAdjointModel::parameterJVPs(const std::vector<std::vector<const VecX*>>& directions,
                                           std::vector<VecX>& out) const {
-  const int shape = int(SimulableGroup::Shape), joints = int(SimulableGroup::RestJoints),
-            inertia = int(SimulableGroup::BoneInertia);
-  const std::vector<MatX> jacobians = simulable_->getGradientParameterJacobians(
-      std::vector<SimParameter>(kGroupParameter, kGroupParameter + kNumSimulableGroups),
-      /*shape_surface_only=*/true);
+  const int shape = int(SimParameter::Shape), joints = int(SimParameter::RestJoints),
+            inertia = int(SimParameter::BoneInertia);
+  const std::vector<MatX> jacobians =
+      simulable_->getGradientParameterJacobians(allGroups(), /*shape_surface_only=*/true);
   const SoftAvatar& avatar = simulable_->avatar();
   out.assign(directions.size(), VecX::Zero(numDofs()));
   for (size_t d = 0; d < directions.size(); ++d) {
     const auto& dir = directions[d];
     auto given = [&](int g) { return int(dir.size()) > g && dir[g] && dir[g]->size(); };
-    for (int g = 0; g < kNumSimulableGroups; ++g)
+    for (int g = 0; g < kNumSimParameters; ++g)
       if (given(g)) out[d].noalias() += jacobians[g] * *dir[g];
     if (given(shape)) {
-      const VecX dJ = avatar.restJointsShapeJacobian() * *dir[shape];
-      const VecX dI = avatar.boneInertiaShapeJacobian() * *dir[shape];
+      VecX dJ, dI;
+      shapeTangent(avatar, *dir[shape], &dJ, &dI);
       out[d].noalias() += jacobians[joints] * dJ;
       out[d].noalias() += jacobians[inertia] * dI;
     }

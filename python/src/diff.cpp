@@ -201,15 +201,26 @@ void bind_diff(py::module_& m) {
         },
         doc);
   };
-  vector_member("shape", &RolloutVariables::shape, -1, "(K,) body shape β");
-  vector_member("rest_joints", &RolloutVariables::rest_joints, 72,
-                "(72,) rest joint centres J_b, m (as if set by Simulable.setParameter)");
-  vector_member("bone_inertia", &RolloutVariables::bone_inertia, 240,
-                "(240,) per bone mass (kg), first moment (3, kg·m), second moment (6, kg·m²)");
-  matrix_member("pose_targets", &RolloutVariables::pose_targets, 72, kPoseDoc);
-  matrix_member("root_targets", &RolloutVariables::root_targets, 3, kRootDoc);
-  vector_member("stiffnesses", &RolloutVariables::stiffnesses, 4, kStiffnessDoc);
-  vector_member("collider_offsets", &RolloutVariables::collider_offsets, -1, kColliderDoc);
+  // One property per registry group (flsh/sim/sim_parameter.h).
+  for (const SimParameterInfo& info : simParameters()) {
+    const SimParameter id = info.id;
+    const std::string name = info.name;
+    const long size = info.fixed_size;
+    if (info.per_step)
+      variables.def_property(
+          info.name, [id](const RolloutVariables& v) { return matrix_or_none(*v.perStep(id)); },
+          [id, name, size](RolloutVariables& v, const py::object& value) {
+            *v.perStep(id) = optional_matrix(value, name, size);
+          },
+          (std::string("(T, ") + std::to_string(size) + ") one row per step: " + info.doc).c_str());
+    else
+      variables.def_property(
+          info.name, [id](const RolloutVariables& v) { return vector_or_none(*v.global(id)); },
+          [id, name, size](RolloutVariables& v, const py::object& value) {
+            *v.global(id) = optional_vector(value, name, size);
+          },
+          info.doc);
+  }
   vector_member("initial_state", &RolloutVariables::initial_state, -1, kStateDoc);
   vector_member("initial_velocity", &RolloutVariables::initial_velocity, -1, kVelocityDoc);
   variables.def(
@@ -229,13 +240,12 @@ void bind_diff(py::module_& m) {
       if (s.back() != '(') s += ", ";
       s += std::string(name) + "=" + (cols < 0 ? shape_text({rows}) : shape_text({rows, cols}));
     };
-    add("shape", v.shape.size(), -1);
-    add("rest_joints", v.rest_joints.size(), -1);
-    add("bone_inertia", v.bone_inertia.size(), -1);
-    add("pose_targets", v.pose_targets.rows(), v.pose_targets.cols());
-    add("root_targets", v.root_targets.rows(), v.root_targets.cols());
-    add("stiffnesses", v.stiffnesses.size(), -1);
-    add("collider_offsets", v.collider_offsets.size(), -1);
+    for (const SimParameterInfo& info : simParameters()) {
+      if (info.per_step)
+        add(info.name, v.perStep(info.id)->rows(), v.perStep(info.id)->cols());
+      else
+        add(info.name, v.global(info.id)->size(), -1);
+    }
     add("initial_state", v.initial_state.size(), -1);
     add("initial_velocity", v.initial_velocity.size(), -1);
     return s + ")";

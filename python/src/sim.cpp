@@ -160,29 +160,15 @@ void bind_sim(py::module_& m) {
                ", track_mocap=" + (o.track_mocap ? "True" : "False") + ")";
       });
 
-  py::enum_<SimParameter>(
-      m, "SimParameter",
-      "Parameter groups the total gradient g = ∇(E_dyn + E_pot) depends on (for the adjoint). "
-      "Sizes and layouts: Simulable.parameterSize / getParameter.")
-      .value("RestJoints", SimParameter::RestJoints,
-             "(72,) rest joint centres J_b, m, 3 per bone (joint springs, skinning, tracking "
-             "moments, root target)")
-      .value("BoneInertia", SimParameter::BoneInertia,
-             "(240,) per bone: mass (kg), first moment (3, kg·m), second moment (6, kg·m²: xx, "
-             "yy, zz, xy, xz, yz)")
-      .value("PoseTargets", SimParameter::PoseTargets,
-             "(72,) tracking target rotation vectors θ_b, rad (b ≥ 1 relative to the parent, "
-             "θ_0 the root orientation); recomputed from the mocap by preUpdate/initialize")
-      .value("RootTranslationTarget", SimParameter::RootTranslationTarget,
-             "(3,) target position of the root joint centre, m; recomputed by preUpdate")
-      .value("Stiffnesses", SimParameter::Stiffnesses,
-             "(4,) joint_stiffness (N/m), tracking_stiffness (1/s²), root_stiffness (1/s²), "
-             "contact stiffness (N/m³)")
-      .value("ColliderOffsets", SimParameter::ColliderOffsets,
-             "(3·#colliders,) translation offset of each collider's path, m")
-      .value("Shape", SimParameter::Shape,
-             "(K,) the avatar's shape β (read only: setParameter raises ValueError; build a new "
-             "SoftAvatar instead)");
+  {
+    // The values and their docs come from the parameter registry (flsh/sim/sim_parameter.h).
+    py::enum_<SimParameter> parameter(
+        m, "SimParameter",
+        "Parameter groups the total gradient g = ∇(E_dyn + E_pot) depends on (for the adjoint). "
+        "Sizes and layouts: Simulable.parameterSize / getParameter.");
+    for (const SimParameterInfo& info : simParameters())
+      parameter.value(info.enum_name, info.id, info.doc);
+  }
 
   using S = Simulable;
   py::class_<S, std::shared_ptr<S>> sim(

@@ -20,7 +20,11 @@
 #include "flsh/core/rotation.h"
 #include "flsh/sim/skeleton_energies.h"
 #include "hessian_blocks.h"
-#include "sim/parameter_derivatives.h"
+#include "sim/terms/bone_gravity_term.h"
+#include "sim/terms/joint_spring_term.h"
+#include "sim/terms/rigid_inertia_term.h"
+#include "sim/terms/surface_contact_term.h"
+#include "sim/terms/tracking_spring_term.h"
 #include "soft_tissue.h"
 
 namespace flsh {
@@ -125,12 +129,8 @@ struct Simulable::Impl {
   std::vector<char> kinematic;  // per bone
 
   // Skinning weights as (bone, weight) lists per vertex (the nonzero entries only).
-  struct Influence {
-    int bone;
-    double weight;
-  };
-  std::vector<int> influence_start;  // #V + 1
-  std::vector<Influence> influences;
+  using Influence = SparseSkinWeights::Influence;
+  SparseSkinWeights skin;
 
   // Broad phase: per bone, the vertices it dominates (largest weight), a sphere bounding their
   // rest offsets X − J_b (centre s_b in the bone frame, radius ρ_b about s_b, extent e_b = max
@@ -163,20 +163,12 @@ struct Simulable::Impl {
   long state_version = 0;
 
   // Contact cache, valid while cache_version == state_version.
-  struct ContactCache {
+  // The candidates are the vertices dominated by bones near colliders (broadPhase).
+  struct ContactCache : SurfaceContactState {
     long version = -1;
-    std::vector<int> candidates;  // vertex indices evaluated (dominated by bones near colliders)
-    MatX3 nodes;                  // positions of the candidates
-    VecX areas;
-    VecX gradient;                // ∂E/∂x of the candidates (3 per candidate)
-    double energy = 0.0;
-    int active = 0;
     std::vector<ContactPoint> points;
-    std::vector<Triplet> node_hessian;  // scratch for colliderContactEnergy
   };
   mutable ContactCache contact;
-  // Scratch for assembling contact Hessians bone pair by bone pair.
-  mutable detail::BonePairBlocks pair_blocks;
   // Scratch of getHessianTripletVector: the ROM's inertia and gravity triplets, summed on two
   // threads.
   mutable std::vector<Triplet> hessian_scratch[2];
@@ -222,8 +214,22 @@ struct Simulable::Impl {
     ensureContact();
     return contact.energy;
   }
-  void addContactGradient(VecX& g, int offset) const;
-  void addContactHessian(std::vector<Triplet>& H, int offset, bool psd) const;
+
+  // ---- energy terms (energy_term.h) ----
+  // The articulated skeleton's energy is the sum of these terms; with soft tissue the bones
+  // keep their springs (joint_term, tracking_term) and SoftTissue carries inertia, gravity,
+  // elasticity and contact on the tet nodes.
+  detail::RigidInertiaTerm inertia_term;
+  detail::BoneGravityTerm gravity_term;
+  detail::JointSpringTerm joint_term;
+  std::unique_ptr<detail::TrackingSpringTerm> tracking_term;
+  std::unique_ptr<detail::SurfaceContactTerm> contact_term;
+  /// The skeleton's terms by part (dynamic: inertia; potential: the rest), all of them in
+  /// `terms`; the bone springs alone in `spring_terms` (with soft tissue too).
+  std::vector<const EnergyTerm*> dynamic_terms, potential_terms, terms, spring_terms;
+  void buildTerms();
+  /// The view the terms read at the current state (call ensureContact first for contact).
+  TermContext context() const;
 };
 
 // ---- construction ------------------------------------------------------------------------
@@ -254,17 +260,17 @@ void Simulable::Impl::buildSkinning() {
   const MatX& W = avatar->body().weights;  // #V × 24
   const MatX3& X = avatar->restVertices();
   const int nv = int(X.rows());
-  influence_start.assign(nv + 1, 0);
-  influences.clear();
+  skin.start.assign(nv + 1, 0);
+  skin.entries.clear();
   dominated.assign(num_bones, {});
   std::vector<int> dominant(nv, 0);
   for (int i = 0; i < nv; ++i) {
     int best = 0;
     for (int b = 0; b < num_bones; ++b) {
-      if (W(i, b) != 0.0) influences.push_back({b, W(i, b)});
+      if (W(i, b) != 0.0) skin.entries.push_back({b, W(i, b)});
       if (W(i, b) > W(i, best)) best = b;
     }
-    influence_start[i + 1] = int(influences.size());
+    skin.start[i + 1] = int(skin.entries.size());
     dominant[i] = best;
     dominated[best].push_back(i);
   }
@@ -286,10 +292,10 @@ void Simulable::Impl::buildSkinning() {
       const Vec3 p = X.row(i).transpose() - J.row(b).transpose();
       sphere_radius[b] = std::max(sphere_radius[b], (p - sphere_center[b]).norm());
       sphere_extent[b] = std::max(sphere_extent[b], p.norm());
-      for (int k = influence_start[i]; k < influence_start[i + 1]; ++k)
-        if (influences[k].bone != b)
-          max_weight[influences[k].bone] = std::max(max_weight[influences[k].bone],
-                                                    influences[k].weight);
+      for (int k = skin.start[i]; k < skin.start[i + 1]; ++k)
+        if (skin.entries[k].bone != b)
+          max_weight[skin.entries[k].bone] =
+              std::max(max_weight[skin.entries[k].bone], skin.entries[k].weight);
     }
     for (int c = 0; c < num_bones; ++c)
       if (max_weight[c] > 0.0) co_influence[b].push_back({c, max_weight[c]});
@@ -334,17 +340,26 @@ void Simulable::Impl::buildClusters() {
 }
 
 // Tracking stiffness k_b = ω_T² (I_b + I_floor) and the root springs (whole body, no floor):
-// detail::trackingMoment, which the parameter derivatives use too.
+// the tracking term's, whose parameter products differentiate the same formula.
 void Simulable::Impl::buildStiffnesses() {
-  const std::vector<std::vector<int>> sub = detail::boneSubtrees(parents);
-  tracking_k.assign(num_bones, 0.0);
-  for (int b = 1; b < num_bones; ++b)
-    tracking_k[b] =
-        options.tracking_stiffness * detail::trackingMoment(J, inertia, options, sub[b], b);
-  double mass = 0.0;
-  for (const BoneInertia& bone : inertia) mass += bone.mass;
-  root_k_pos = options.root_stiffness * mass;
-  root_k_rot = options.root_stiffness * detail::trackingMoment(J, inertia, options, sub[0], 0);
+  tracking_term->stiffnesses(J, inertia, options, tracking_k, root_k_pos, root_k_rot);
+}
+
+void Simulable::Impl::buildTerms() {
+  tracking_term = std::make_unique<detail::TrackingSpringTerm>(parents);
+  contact_term = std::make_unique<detail::SurfaceContactTerm>(num_bones);
+  spring_terms = {&joint_term, tracking_term.get()};
+  dynamic_terms = {&inertia_term};
+  potential_terms = {&gravity_term, &joint_term, tracking_term.get(), contact_term.get()};
+  terms = dynamic_terms;
+  terms.insert(terms.end(), potential_terms.begin(), potential_terms.end());
+}
+
+TermContext Simulable::Impl::context() const {
+  return {num_bones, parents,  J,         inertia,    options,    mocap && options.track_mocap,
+          is_static, q.R,      q.t,       q_n.R,      q_n.t,      q_nm1.R,
+          q_nm1.t,   target_R, target_t0, tracking_k, root_k_pos, root_k_rot,
+          colliders, time,     *avatar,   skin,       contact};
 }
 
 Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar,
@@ -402,8 +417,8 @@ Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar,
   m.kinematic.assign(m.num_bones, 0);
   for (int b : m.options.kinematic_bones) m.kinematic[b] = 1;
   m.buildSkinning();
+  m.buildTerms();
   m.buildStiffnesses();
-  m.pair_blocks.resize(m.num_bones);
   m.q = m.q_n = m.q_nm1 = restBones(m.J);
   if (m.avatar->softTissueEnabled()) {
     if (!m.avatar->hasVolumetricData())
@@ -868,9 +883,9 @@ MatX3 Simulable::getVertices() const {
 Vec3 Simulable::Impl::node(int i) const {
   const Vec3 X = avatar->restVertices().row(i).transpose();
   Vec3 x = Vec3::Zero();
-  for (int k = influence_start[i]; k < influence_start[i + 1]; ++k) {
-    const int b = influences[k].bone;
-    x += influences[k].weight * (q.R[b] * (X - J.row(b).transpose()) + q.t.row(b).transpose());
+  for (int k = skin.start[i]; k < skin.start[i + 1]; ++k) {
+    const int b = skin.entries[k].bone;
+    x += skin.entries[k].weight * (q.R[b] * (X - J.row(b).transpose()) + q.t.row(b).transpose());
   }
   return x;
 }
@@ -901,11 +916,11 @@ SpMat Simulable::getNodesStateJacobian() const {
   }
   const MatX3& X = m.avatar->restVertices();
   std::vector<Triplet> triplets;
-  triplets.reserve(m.influences.size() * 9);
+  triplets.reserve(m.skin.entries.size() * 9);
   for (int i = 0; i < X.rows(); ++i) {
-    for (int k = m.influence_start[i]; k < m.influence_start[i + 1]; ++k) {
-      const int b = m.influences[k].bone;
-      const double w = m.influences[k].weight;
+    for (int k = m.skin.start[i]; k < m.skin.start[i + 1]; ++k) {
+      const int b = m.skin.entries[k].bone;
+      const double w = m.skin.entries[k].weight;
       const Mat3 dx_dw = -w * skew(m.q.R[b] * (X.row(i) - m.J.row(b)).transpose());
       for (int r = 0; r < 3; ++r) {
         triplets.emplace_back(3 * i + r, 6 * b + r, w);
@@ -1057,9 +1072,9 @@ void Simulable::Impl::ensureContact() const {
       const int i = cc.candidates[j];
       const Vec3 Xi = X.row(i).transpose();
       Vec3 x = Vec3::Zero();
-      for (int k = influence_start[i]; k < influence_start[i + 1]; ++k) {
-        const int b = influences[k].bone;
-        x += influences[k].weight * (q.R[b] * Xi + bone_shift[b]);
+      for (int k = skin.start[i]; k < skin.start[i + 1]; ++k) {
+        const int b = skin.entries[k].bone;
+        x += skin.entries[k].weight * (q.R[b] * Xi + bone_shift[b]);
       }
       cc.nodes.row(j) = x.transpose();
       cc.areas[j] = areas[i];
@@ -1073,83 +1088,9 @@ void Simulable::Impl::ensureContact() const {
   cc.version = state_version;
 }
 
-void Simulable::Impl::addContactGradient(VecX& g, int offset) const {
-  ensureContact();
-  const MatX3& X = avatar->restVertices();
-  for (size_t j = 0; j < contact.candidates.size(); ++j) {
-    const Vec3 gx = contact.gradient.segment<3>(3 * j);
-    if (gx.isZero(0.0)) continue;
-    const int i = contact.candidates[j];
-    for (int k = influence_start[i]; k < influence_start[i + 1]; ++k) {
-      const int b = influences[k].bone;
-      const double w = influences[k].weight;
-      const Vec3 y = q.R[b] * (X.row(i) - J.row(b)).transpose();
-      g.segment<3>(offset + 6 * b) += w * gx;
-      g.segment<3>(offset + 6 * b + 3) += w * y.cross(gx);
-    }
-  }
-}
-
-// Jᵀ H_x J per active vertex, accumulated per bone pair; the exact form adds the curvature
-// of the rotating points, Σ_b w_ib (g_i · ∂²y_ib), in each bone's rotation block.
-void Simulable::Impl::addContactHessian(std::vector<Triplet>& H, int offset, bool psd) const {
-  ensureContact();
-  if (contact.active == 0) return;
-  ContactOptions contact_options = options.contact;
-  contact_options.exact_hessian = !psd;
-  std::vector<Triplet>& node_hessian = contact.node_hessian;
-  node_hessian.clear();
-  colliderContactEnergy(contact.nodes, contact.areas, colliders, time, contact_options, nullptr,
-                        &node_hessian, 0, nullptr);
-  const MatX3& X = avatar->restVertices();
-  auto block = [&](int b, int c) -> Mat6& { return pair_blocks.block(b, c); };
-  // colliderContactEnergy emits 9 consecutive triplets (one 3 × 3 block) per active pair.
-  Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
-  int bones[kNumJoints];
-  for (size_t start = 0; start + 9 <= node_hessian.size(); start += 9) {
-    const int j = node_hessian[start].row() / 3;
-    Mat3 Hx;
-    for (int e = 0; e < 9; ++e) {
-      const Triplet& t = node_hessian[start + e];
-      Hx(t.row() - 3 * j, t.col() - 3 * j) = t.value();
-    }
-    const int i = contact.candidates[j];
-    const int count = influence_start[i + 1] - influence_start[i];
-    for (int a = 0; a < count; ++a) {
-      const Influence& inf = influences[influence_start[i] + a];
-      const Vec3 y = q.R[inf.bone] * (X.row(i) - J.row(inf.bone)).transpose();
-      bones[a] = inf.bone;
-      Jb[a].leftCols<3>() = inf.weight * Mat3::Identity();
-      Jb[a].rightCols<3>() = -inf.weight * skew(y);
-    }
-    for (int a = 0; a < count; ++a) {
-      const Eigen::Matrix<double, 6, 3> JaT_H = Jb[a].transpose() * Hx;
-      for (int c = 0; c < count; ++c) block(bones[a], bones[c]) += JaT_H * Jb[c];
-    }
-  }
-  // Curvature of the rotating contact points, summed per bone (Σ_i w_ib g_i·∂²y_ib); the PSD
-  // form keeps its projection on the PSD cone (the stabilizing part) instead of dropping it.
-  Mat3 curvature[kNumJoints];
-  bool has_curvature[kNumJoints] = {};
-  for (size_t j = 0; j < contact.candidates.size(); ++j) {
-    const Vec3 gx = contact.gradient.segment<3>(3 * j);
-    if (gx.isZero(0.0)) continue;
-    const int i = contact.candidates[j];
-    for (int k = influence_start[i]; k < influence_start[i + 1]; ++k) {
-      const int b = influences[k].bone;
-      const Vec3 y = q.R[b] * (X.row(i) - J.row(b)).transpose();
-      if (!has_curvature[b]) curvature[b].setZero();
-      has_curvature[b] = true;
-      curvature[b] += influences[k].weight * rotationCurvature(gx, y);
-    }
-  }
-  for (int b = 0; b < num_bones; ++b)
-    if (has_curvature[b])
-      block(b, b).bottomRightCorner<3, 3>() += psd ? projectToPSD<3>(curvature[b]) : curvature[b];
-  pair_blocks.emit(H, offset);
-}
-
 // ---- energies ----------------------------------------------------------------------------
+// The skeleton sums its terms (Impl::dynamic_terms, potential_terms); with soft tissue the
+// bones' springs are terms and SoftTissue carries the rest.
 
 double Simulable::getDynamicEnergyScalar() const {
   const Impl& m = *impl_;
@@ -1158,11 +1099,9 @@ double Simulable::getDynamicEnergyScalar() const {
     m.prepareSoft();
     return m.soft->inertia(nullptr, nullptr, 0, true);
   }
+  const TermContext c = m.context();
   double E = 0.0;
-  for (int b = 0; b < m.num_bones; ++b)
-    E += rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(),
-                            m.q_n.R[b], m.q_nm1.t.row(b).transpose(), m.q_nm1.R[b],
-                            m.inertia[b], m.options.time_step);
+  for (const EnergyTerm* term : m.dynamic_terms) E += term->evaluate(c, nullptr, 0);
   return E;
 }
 
@@ -1175,14 +1114,9 @@ double Simulable::dynamicGradient(VecX& g, int offset) const {
     m.prepareSoft();
     return m.soft->inertia(&g, nullptr, offset, true);
   }
-  Vec6 gb;
+  const TermContext c = m.context();
   double E = 0.0;
-  for (int b = 0; b < m.num_bones; ++b) {
-    E += rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(),
-                            m.q_n.R[b], m.q_nm1.t.row(b).transpose(), m.q_nm1.R[b], m.inertia[b],
-                            m.options.time_step, &gb);
-    g.segment<6>(offset + 6 * b) += gb;
-  }
+  for (const EnergyTerm* term : m.dynamic_terms) E += term->evaluate(c, &g, offset);
   return E;
 }
 
@@ -1210,92 +1144,50 @@ void Simulable::dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessian
     m.soft->flushReduced(0, H, offset, blocks);
     return;
   }
-  Mat6 Hb;
-  for (int b = 0; b < m.num_bones; ++b) {
-    rigidInertiaEnergy(m.q.t.row(b).transpose(), m.q.R[b], m.q_n.t.row(b).transpose(), m.q_n.R[b],
-                       m.q_nm1.t.row(b).transpose(), m.q_nm1.R[b], m.inertia[b],
-                       m.options.time_step, nullptr, &Hb, psd);
-    addBlock(H, offset + 6 * b, offset + 6 * b, Hb);
-  }
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.dynamic_terms) term->addHessian(c, H, offset, psd);
 }
 
 double Simulable::getPotentialEnergyScalar() const {
   const Impl& m = *impl_;
+  const TermContext c = m.context();
   double E = 0.0;
-  const bool tracking = m.mocap && m.options.track_mocap;
-  for (int b = 0; b < m.num_bones; ++b) {
-    const Vec3 t_b = m.q.t.row(b).transpose();
-    if (!m.soft) E += gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity);
-    const int p = m.parents[b];
-    if (p < 0) {
-      if (tracking)
-        E += rootSpringEnergy(t_b, m.q.R[b], m.target_t0, m.target_R[b], m.root_k_pos,
-                              m.root_k_rot);
-      continue;
-    }
-    E += jointSpringEnergy(m.q.t.row(p).transpose(), m.q.R[p], t_b, m.q.R[b],
-                           m.J.row(p).transpose(), m.J.row(b).transpose(),
-                           m.options.joint_stiffness);
-    if (tracking) E += trackingSpringEnergy(m.q.R[p], m.q.R[b], m.target_R[b], m.tracking_k[b]);
+  if (!m.soft) {
+    m.ensureContact();
+    for (const EnergyTerm* term : m.potential_terms) E += term->evaluate(c, nullptr, 0);
+    return E;
   }
-  if (m.soft) {
-    m.prepareSoft();
-    E += m.soft->gravity(m.options.gravity, nullptr, nullptr, 0, true) +
-         m.soft->elastic(nullptr, nullptr, 0, true);
-  }
+  for (const EnergyTerm* term : m.spring_terms) E += term->evaluate(c, nullptr, 0);
+  m.prepareSoft();
+  E += m.soft->gravity(m.options.gravity, nullptr, nullptr, 0, true) +
+       m.soft->elastic(nullptr, nullptr, 0, true);
   return E + m.contactEnergy();
 }
 
 double Simulable::boneSpringGradient(VecX& g, int offset) const {
   const Impl& m = *impl_;
-  const bool tracking = m.mocap && m.options.track_mocap;
-  Vec6 g6;
-  Vec12 g12;
+  const TermContext c = m.context();
   double E = 0.0;
-  for (int b = 0; b < m.num_bones; ++b) {
-    const Vec3 t_b = m.q.t.row(b).transpose();
-    const int ib = offset + 6 * b;
-    if (!m.soft) {
-      E += gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, &g6);
-      g.segment<6>(ib) += g6;
-    }
-    const int p = m.parents[b];
-    if (p < 0) {
-      if (tracking) {
-        E += rootSpringEnergy(t_b, m.q.R[b], m.target_t0, m.target_R[b], m.root_k_pos,
-                              m.root_k_rot, &g6);
-        g.segment<6>(ib) += g6;
-      }
-      continue;
-    }
-    const int ip = offset + 6 * p;
-    E += jointSpringEnergy(m.q.t.row(p).transpose(), m.q.R[p], t_b, m.q.R[b],
-                           m.J.row(p).transpose(), m.J.row(b).transpose(),
-                           m.options.joint_stiffness, &g12);
-    g.segment<6>(ip) += g12.head<6>();
-    g.segment<6>(ib) += g12.tail<6>();
-    if (tracking) {
-      E += trackingSpringEnergy(m.q.R[p], m.q.R[b], m.target_R[b], m.tracking_k[b], &g6);
-      g.segment<3>(ip + 3) += g6.head<3>();
-      g.segment<3>(ib + 3) += g6.tail<3>();
-    }
-  }
+  for (const EnergyTerm* term : m.spring_terms) E += term->evaluate(c, &g, offset);
   return E;
 }
 
 double Simulable::potentialGradient(VecX& g, int offset) const {
   const Impl& m = *impl_;
-  double E = boneSpringGradient(g, offset);
-  if (m.soft) {
-    m.prepareSoft();
-    E += m.soft->gravity(m.options.gravity, &g, nullptr, offset, true) +
-         m.soft->elastic(&g, nullptr, offset, true);
+  if (!m.soft) {
     m.ensureContact();
-    return E + m.soft->contact(m.colliders, m.time, m.options.contact, &g, nullptr, offset, true,
-                               nullptr, &m.contact.candidates);
+    const TermContext c = m.context();
+    double E = 0.0;
+    for (const EnergyTerm* term : m.potential_terms) E += term->evaluate(c, &g, offset);
+    return E;
   }
-  m.addContactGradient(g, offset);
-  return E + m.contactEnergy();
+  double E = boneSpringGradient(g, offset);
+  m.prepareSoft();
+  E += m.soft->gravity(m.options.gravity, &g, nullptr, offset, true) +
+       m.soft->elastic(&g, nullptr, offset, true);
+  m.ensureContact();
+  return E + m.soft->contact(m.colliders, m.time, m.options.contact, &g, nullptr, offset, true,
+                             nullptr, &m.contact.candidates);
 }
 
 void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
@@ -1335,65 +1227,32 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H,
 void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
                                  int offset, bool psd, bool soft_done) const {
   const Impl& m = *impl_;
-  const bool tracking = m.mocap && m.options.track_mocap;
-  Mat6 H6;
-  Mat12 H12;
-  for (int b = 0; b < m.num_bones; ++b) {
-    const Vec3 t_b = m.q.t.row(b).transpose();
-    const int ib = offset + 6 * b;
-    if (!m.soft) {
-      gravityEnergy(t_b, m.q.R[b], m.inertia[b], m.options.gravity, nullptr, &H6, psd);
-      addBlock(H, ib + 3, ib + 3, H6.bottomRightCorner<3, 3>());  // only the rotation block
-    }
-    const int p = m.parents[b];
-    if (p < 0) {
-      if (tracking) {
-        rootSpringEnergy(t_b, m.q.R[b], m.target_t0, m.target_R[b], m.root_k_pos, m.root_k_rot,
-                         nullptr, &H6, psd);
-        addBlock(H, ib, ib, H6);
-      }
-      continue;
-    }
-    const int ip = offset + 6 * p;
-    jointSpringEnergy(m.q.t.row(p).transpose(), m.q.R[p], t_b, m.q.R[b], m.J.row(p).transpose(),
-                      m.J.row(b).transpose(), m.options.joint_stiffness, nullptr, &H12, psd);
-    // Rows/columns of δω_b are structurally zero (the spring does not rotate with bone b).
-    addBlock(H, ip, ip, H12.topLeftCorner<6, 6>());
-    addBlock(H, ip, ib, H12.block<6, 3>(0, 6));
-    addBlock(H, ib, ip, H12.block<3, 6>(6, 0));
-    addBlock(H, ib, ib, H12.block<3, 3>(6, 6));
-    if (tracking) {
-      trackingSpringEnergy(m.q.R[p], m.q.R[b], m.target_R[b], m.tracking_k[b], nullptr, &H6,
-                           psd);
-      addBlock(H, ip + 3, ip + 3, H6.topLeftCorner<3, 3>());
-      addBlock(H, ip + 3, ib + 3, H6.topRightCorner<3, 3>());
-      addBlock(H, ib + 3, ip + 3, H6.bottomLeftCorner<3, 3>());
-      addBlock(H, ib + 3, ib + 3, H6.bottomRightCorner<3, 3>());
-    }
-  }
-  if (m.soft) {
-    m.prepareSoft();
-    // With soft_done the ROM's gravity, elastic and contact blocks are already in value list
-    // 1, their bone triplets in getHessianTripletVector's scratch.
-    FixedHessianBlocks gravity_blocks, elastic_blocks;
-    if (!soft_done) {
-      m.soft->beginReduced(1);
-      m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd,
-                      blocks ? &gravity_blocks : nullptr);
-      m.soft->elastic(nullptr, &H, offset, psd, blocks ? &elastic_blocks : nullptr);
-    }
-    if (blocks)
-      for (const FixedHessianBlocks& list : {elastic_blocks, gravity_blocks})
-        if (!list.empty()) blocks->push_back(list);
-    if (!soft_done) {
-      m.ensureContact();
-      m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
-                      &m.contact.candidates);
-    }
-    m.soft->flushReduced(1, H, offset, blocks);
+  const TermContext c = m.context();
+  if (!m.soft) {
+    m.ensureContact();
+    for (const EnergyTerm* term : m.potential_terms) term->addHessian(c, H, offset, psd);
     return;
   }
-  m.addContactHessian(H, offset, psd);
+  for (const EnergyTerm* term : m.spring_terms) term->addHessian(c, H, offset, psd);
+  m.prepareSoft();
+  // With soft_done the ROM's gravity, elastic and contact blocks are already in value list
+  // 1, their bone triplets in getHessianTripletVector's scratch.
+  FixedHessianBlocks gravity_blocks, elastic_blocks;
+  if (!soft_done) {
+    m.soft->beginReduced(1);
+    m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd,
+                    blocks ? &gravity_blocks : nullptr);
+    m.soft->elastic(nullptr, &H, offset, psd, blocks ? &elastic_blocks : nullptr);
+  }
+  if (blocks)
+    for (const FixedHessianBlocks& list : {elastic_blocks, gravity_blocks})
+      if (!list.empty()) blocks->push_back(list);
+  if (!soft_done) {
+    m.ensureContact();
+    m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
+                    &m.contact.candidates);
+  }
+  m.soft->flushReduced(1, H, offset, blocks);
 }
 
 size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
@@ -1448,6 +1307,16 @@ void Simulable::fixMatrixKinematic(std::vector<Triplet>& H, int offset) const {
         H.emplace_back(offset + 6 * b + k, offset + 6 * b + k, 1.0);
 }
 
+std::vector<const EnergyTerm*> Simulable::energyTerms() const {
+  const Impl& m = *impl_;
+  return m.soft ? m.spring_terms : m.terms;
+}
+
+TermContext Simulable::termContext() const {
+  impl_->ensureContact();
+  return impl_->context();
+}
+
 // ---- scene hooks -------------------------------------------------------------------------
 
 void Simulable::setColliders(std::vector<Collider> colliders) {
@@ -1470,58 +1339,135 @@ SimulableStats Simulable::stats() const {
 
 }  // namespace flsh
 
-// ---- parameter derivatives (formulas in parameter_derivatives.cpp) ---------------------------
+// ---- parameter derivatives (each term's products, energy_term.h) ---------------------------
 
 namespace flsh {
 
 namespace {
 
-detail::SimulableParameterView parameterView(const Simulable::Impl& m) {
-  if (m.soft)
-    throw Error(
-        "Simulable: parameter derivatives (the adjoint layer) are available for the articulated "
-        "skeleton only; this avatar has soft tissue (the FEM or ROM soft skeleton)");
+void requireSkeleton(const Simulable::Impl& m, const char* who);
+
+void checkStateSized(const VecX& x, int n, const char* who, const char* name) {
+  if (x.size() != n)
+    throw InputError(std::string("Simulable::") + who + ": " + name + " has " +
+                     std::to_string(x.size()) +
+                     " values, expected numDofs() = " + std::to_string(n));
+}
+
+}  // namespace
+
+/// Λᵀ ∂g/∂p for each group, summed over the terms (Λ: a vector or numDofs × m), with the β
+/// chain through the rest joints and bone inertias unless `shape_surface_only`.
+template <class Lambda, class Block>
+std::vector<Block> parameterProducts(const Simulable& s, const Simulable::Impl& m,
+                                     const Lambda& lambda, const std::vector<SimParameter>& groups,
+                                     bool shape_surface_only) {
+  ParameterProducts<Block> products;
+  bool shape = false;
+  const auto want = [&](SimParameter p) {
+    Block& block = products[p];
+    if (block.rows() == 0) block = Block::Zero(s.parameterSize(p), lambda.cols());
+  };
+  for (SimParameter p : groups) {
+    simParameterInfo(p);  // throws for a value outside the enum
+    want(p);
+    shape = shape || p == SimParameter::Shape;
+  }
+  const bool chain = shape && !shape_surface_only;
+  if (chain) {
+    want(SimParameter::RestJoints);
+    want(SimParameter::BoneInertia);
+  }
   m.ensureContact();
-  return {m.num_bones, m.parents, m.J, m.inertia, m.options, m.mocap && m.options.track_mocap,
-          m.is_static, m.q.R, m.q.t, m.q_n.R, m.q_n.t, m.q_nm1.R, m.q_nm1.t, m.target_R,
-          m.target_t0, m.avatar->body().weights, m.avatar->restVertices(), m.contact.candidates,
-          m.contact.nodes, m.contact.areas, m.contact.gradient, m.colliders, m.time,
-          m.avatar->body().shapedirs, m.avatar->restJointsShapeJacobian(),
-          m.avatar->boneInertiaShapeJacobian(), m.avatar->vertexAreasShapeJacobian()};
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms) term->addParameterProducts(c, lambda, products);
+  Block shape_products;
+  if (chain) {
+    shape_products = products[SimParameter::Shape];
+    chainShapeCotangent(*m.avatar, products[SimParameter::RestJoints],
+                        products[SimParameter::BoneInertia], shape_products);
+  }
+  std::vector<Block> out;
+  out.reserve(groups.size());
+  for (SimParameter p : groups)
+    out.push_back(p == SimParameter::Shape && chain ? shape_products : products[p]);
+  return out;
+}
+
+namespace {
+
+void requireSkeleton(const Simulable::Impl& m, const char* who) {
+  if (m.soft)
+    throw Error(std::string("Simulable::") + who +
+                ": parameter derivatives (the adjoint layer) are available for the articulated "
+                "skeleton only; this avatar has soft tissue (the FEM or ROM soft skeleton)");
 }
 
 }  // namespace
 
 int Simulable::parameterSize(SimParameter p) const {
-  return detail::simParameterSize(p, int(impl_->colliders.size()),
-                                  int(impl_->avatar->betas().size()));
+  return simParameterSize(p, int(impl_->colliders.size()), int(impl_->avatar->betas().size()));
 }
 
 MatX Simulable::getGradientParameterJacobian(SimParameter p) const {
-  return detail::gradientParameterJacobian(parameterView(*impl_), p);
+  return getGradientParameterJacobians({p}).front();
 }
 
+// The Jacobians are the products with Λ = I, transposed.
 std::vector<MatX> Simulable::getGradientParameterJacobians(
     const std::vector<SimParameter>& groups, bool shape_surface_only) const {
-  return detail::gradientParameterJacobians(parameterView(*impl_), groups, shape_surface_only);
-}
-
-MatX Simulable::getGradientPreviousStateJacobian(int which) const {
-  return detail::gradientPreviousStateJacobian(parameterView(*impl_), which);
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientParameterJacobians");
+  const MatX identity = MatX::Identity(numDofs(), numDofs());
+  std::vector<MatX> out =
+      parameterProducts<MatX, MatX>(*this, m, identity, groups, shape_surface_only);
+  for (MatX& D : out) D.transposeInPlace();
+  return out;
 }
 
 std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
                                                      const std::vector<SimParameter>& groups,
                                                      bool shape_surface_only) const {
-  return detail::gradientParameterVJPs(parameterView(*impl_), lambda, groups, shape_surface_only);
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientParameterVJPs");
+  checkStateSized(lambda, numDofs(), "getGradientParameterVJPs", "lambda");
+  return parameterProducts<VecX, VecX>(*this, m, lambda, groups, shape_surface_only);
+}
+
+MatX Simulable::getGradientPreviousStateJacobian(int which) const {
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientPreviousStateJacobian");
+  if (which != 1 && which != 2)
+    throw InputError("Simulable::getGradientPreviousStateJacobian: which = " +
+                     std::to_string(which) + ", expected 1 (q_n) or 2 (q_{n-1})");
+  MatX D = MatX::Zero(numDofs(), numDofs());
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms)
+    if (term->dependsOnPreviousStates()) term->addPreviousStateJacobian(c, which, D);
+  return D;
 }
 
 void Simulable::getGradientPreviousStatesVJP(const VecX& lambda, VecX* a_n, VecX* a_nm1) const {
-  detail::gradientPreviousStatesVJP(parameterView(*impl_), lambda, a_n, a_nm1);
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientPreviousStatesVJP");
+  checkStateSized(lambda, numDofs(), "getGradientPreviousStatesVJP", "lambda");
+  if (a_n) a_n->setZero(lambda.size());
+  if (a_nm1) a_nm1->setZero(lambda.size());
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms)
+    if (term->dependsOnPreviousStates()) term->addPreviousStatesProducts(c, lambda, a_n, a_nm1);
 }
 
 VecX Simulable::getGradientPreviousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const {
-  return detail::gradientPreviousStatesJVP(parameterView(*impl_), dq_n, dq_nm1);
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientPreviousStatesJVP");
+  checkStateSized(dq_n, numDofs(), "getGradientPreviousStatesJVP", "dq_n");
+  checkStateSized(dq_nm1, numDofs(), "getGradientPreviousStatesJVP", "dq_nm1");
+  VecX out = VecX::Zero(dq_n.size());
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms)
+    if (term->dependsOnPreviousStates()) term->addPreviousStatesTangent(c, dq_n, dq_nm1, out);
+  return out;
 }
 
 VecX Simulable::getParameter(SimParameter p) const {

@@ -66,6 +66,13 @@ struct RolloutVariables {
   VecX collider_offsets;  ///< 3 per collider
   VecX initial_state;     ///< numDofs
   VecX initial_velocity;  ///< numDofs
+
+  /// The member holding registry group p (flsh/sim/sim_parameter.h): a one-per-rollout group's
+  /// vector (perStep is null for it) or a per-step group's matrix (global is null).
+  VecX* global(SimParameter p);
+  RowMatX* perStep(SimParameter p);
+  const VecX* global(SimParameter p) const;
+  const RowMatX* perStep(SimParameter p) const;
 };
 
 /// Σ over groups of the element-wise products (empty members count as zero): vᵀ(dL/dp).

@@ -15,17 +15,8 @@
 
 namespace flsh {
 
-/// Parameter groups of SimulableAdjointModel, in parameterGroups() order.
-enum class SimulableGroup {
-  Shape = 0,        ///< K: β (through J(β), bone inertias and the contact surface)
-  RestJoints,       ///< 72: J (m), as if set by Simulable::setParameter(RestJoints)
-  BoneInertia,      ///< 240: per bone mass, first moment, second moment (SimParameter layout)
-  PoseTargets,      ///< per step, 72: tracking target rotation vectors (rad)
-  RootTargets,      ///< per step, 3: root position target t_0 = J_0 + trans (m)
-  Stiffnesses,      ///< 4: joint, tracking, root, contact (SimParameter::Stiffnesses)
-  ColliderOffsets,  ///< 3 per collider: a translation of its whole path (m)
-};
-constexpr int kNumSimulableGroups = 7;
+// The parameter groups, in parameterGroups() order, are the registry's (flsh/sim/sim_parameter.h):
+// group k is SimParameter(k), named simParameterInfo(k).name.
 
 class SimulableAdjointModel final : public AdjointModel {
  public:

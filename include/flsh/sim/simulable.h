@@ -26,6 +26,8 @@
 #include "flsh/core/hessian_blocks.h"
 #include "flsh/core/types.h"
 #include "flsh/io/motion.h"
+#include "flsh/sim/energy_term.h"
+#include "flsh/sim/sim_parameter.h"
 #include "flsh/volume/soft_avatar.h"
 
 namespace flsh {
@@ -67,26 +69,7 @@ struct SimulableOptions {
   ContactOptions contact;                 ///< collider contact on surface vertices
 };
 
-/// Parameter groups the total gradient depends on (for the adjoint, ARCHITECTURE.md §6).
-enum class SimParameter {
-  RestJoints,             ///< 72: rest joint centres J_b (m), 3 per bone: joint springs, skinning
-                          ///< (x_i = Σ w (R(X − J) + t)), tracking/root stiffness moments and the
-                          ///< root target J_0 + trans. Bone inertias are separate parameters
-                          ///< (their moments are about J_b as stored).
-  BoneInertia,            ///< 24 × 10: per bone mass (kg), first moment (3, kg·m), second
-                          ///< moment (6, kg·m²: xx, yy, zz, xy, xz, yz)
-  PoseTargets,            ///< 72: current tracking target rotation vectors θ_b (rad): b ≥ 1
-                          ///< relative to the parent, θ_0 the root orientation target
-  RootTranslationTarget,  ///< 3: target position of the root joint centre t_0 (m)
-  Stiffnesses,            ///< 4: joint_stiffness (N/m), tracking_stiffness (1/s²),
-                          ///< root_stiffness (1/s²), contact stiffness (N/m³)
-  ColliderOffsets,        ///< 3 per collider: current translation offset of its path (m)
-  /// K: the avatar's shape β (fixed by the SoftAvatar: setParameter throws, build a new
-  /// avatar instead). Its gradient Jacobian goes through the rest joints J(β), the bone
-  /// inertias (SoftAvatar::boneInertiaShapeJacobian), and the rest surface X(β) and vertex areas
-  /// a(β) of the contact nodes x_i = Σ_b w_ib (R_b (X_i − J_b) + t_b).
-  Shape,
-};
+// SimParameter (the parameter groups): flsh/sim/sim_parameter.h.
 
 /// What one step of a Simulable depends on besides its model data and parameter groups: the
 /// current and previous states (rotations kept as matrices, so a restore is bitwise exact), the
@@ -328,6 +311,16 @@ class Simulable {
   /// per-bone 6 × 6 inertia blocks, and the tangent ∂g/∂q_n dq_n + ∂g/∂q_{n−1} dq_{n−1}.
   void getGradientPreviousStatesVJP(const VecX& lambda, VecX* a_n, VecX* a_nm1) const;
   VecX getGradientPreviousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const;
+
+  // ---- energy terms (energy_term.h) ---------------------------------------------------------
+  /// The terms whose sum is the articulated skeleton's energy: rigid inertia (the dynamic part),
+  /// bone gravity, joint springs, tracking and root springs, collider contact. With soft tissue,
+  /// the bones' joint and tracking springs (SoftTissue carries the node terms, not yet as
+  /// EnergyTerms). Owned by the simulable.
+  std::vector<const EnergyTerm*> energyTerms() const;
+  /// The view the terms read at the current state, with contact up to date. Its references
+  /// are the simulable's: valid until the state, a parameter or the colliders change.
+  TermContext termContext() const;
 
   struct Impl;
 

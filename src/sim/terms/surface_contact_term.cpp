@@ -123,7 +123,9 @@ void SurfaceContactTerm::products(const TermContext& c, const Lambda& l,
                                   ParameterProducts<Block>& out) const {
   const SurfaceContactState& s = c.contact;
   const size_t n = s.candidates.size();
-  if (n == 0) return;
+  if (n == 0 || !(out.wants(SimParameter::RestJoints) || out.wants(SimParameter::Stiffnesses) ||
+                  out.wants(SimParameter::ColliderOffsets) || out.wants(SimParameter::Shape)))
+    return;
   const std::vector<Mat3> H = nodeHessians(c, c.colliders);
   const auto cotangent = [&](size_t j) {
     const int i = s.candidates[j];

@@ -101,7 +101,11 @@ void TrackingSpringTerm::addHessian(const TermContext& c, std::vector<Triplet>& 
 template <class Lambda, class Block>
 void TrackingSpringTerm::products(const TermContext& c, const Lambda& l,
                                   ParameterProducts<Block>& out) const {
-  if (!c.tracking) return;
+  if (!c.tracking ||
+      !(out.wants(SimParameter::RestJoints) || out.wants(SimParameter::BoneInertia) ||
+        out.wants(SimParameter::PoseTargets) || out.wants(SimParameter::RootTranslationTarget) ||
+        out.wants(SimParameter::Stiffnesses)))
+    return;
   const int n = c.num_bones;
   const SimulableOptions& o = c.options;
   const auto scaleOf = [&](int b) { return b == 0 ? o.root_stiffness : o.tracking_stiffness; };

@@ -1,0 +1,149 @@
+// Internal: the data of one Simulable (Simulable::Impl), shared by the files that implement it:
+// simulable.cpp (construction, targets, stepping, state), simulable_outputs.cpp (poses, meshes,
+// Jacobians, soft-tissue accessors), simulable_surface.cpp (the skinned surface and the contact
+// broad phase), simulable_energy.cpp (the energy terms' sums and Hessians) and
+// simulable_parameters.cpp (parameter groups and the adjoint's products).
+#pragma once
+
+#include <memory>
+#include <vector>
+
+#include "flsh/sim/simulable.h"
+#include "sim/hessian_blocks.h"
+#include "sim/soft_tissue.h"
+#include "sim/terms/bone_gravity_term.h"
+#include "sim/terms/joint_spring_term.h"
+#include "sim/terms/rigid_inertia_term.h"
+#include "sim/terms/surface_contact_term.h"
+#include "sim/terms/tracking_spring_term.h"
+
+namespace flsh {
+
+namespace detail {
+
+constexpr int kDofsPerBone = 6;
+
+// Rigid transforms of all bones: rotation R_b and joint centre t_b (row b of t).
+struct BoneStates {
+  std::vector<Mat3> R;
+  MatX3 t;
+};
+
+}  // namespace detail
+
+struct Simulable::Impl {
+  // ---- model data (immutable after construction) ----
+  std::shared_ptr<const SoftAvatar> avatar;
+  std::shared_ptr<const Motion> mocap;
+  SimulableOptions options;
+  int num_bones = 0;
+  std::vector<int> parents;
+  MatX3 J;  // 24 × 3 rest joint centres
+  std::vector<BoneInertia> inertia;
+  std::vector<double> tracking_k;  // N·m/rad² per bone (root unused)
+  double root_k_pos = 0.0, root_k_rot = 0.0;
+  std::vector<char> kinematic;  // per bone
+
+  // Skinning weights as (bone, weight) lists per vertex (the nonzero entries only).
+  using Influence = SparseSkinWeights::Influence;
+  SparseSkinWeights skin;
+
+  // Broad phase: per bone, the vertices it dominates (largest weight), a sphere bounding their
+  // rest offsets X − J_b (centre s_b in the bone frame, radius ρ_b about s_b, extent e_b = max
+  // |X − J_b|), and W_bc = max over those vertices of w_ic for each other bone c that
+  // influences them.
+  std::vector<std::vector<int>> dominated;
+  std::vector<Vec3> sphere_center;
+  std::vector<double> sphere_radius, sphere_extent;
+  // Spatial clusters of each bone's dominated vertices (contiguous ranges of dominated[b]), for
+  // a finer broad phase than the bone sphere; centres are relative to J_b in the rest frame.
+  struct VertexCluster {
+    Vec3 center;
+    double radius;
+    int begin, end;
+  };
+  std::vector<std::vector<VertexCluster>> clusters;
+  std::vector<std::vector<Influence>> co_influence;
+
+  // ---- mutable data ----
+  detail::BoneStates q, q_n, q_nm1;
+  // Saved states: entries [0, stack_depth) are live; the rest keep their storage for reuse
+  // (push/pop/discard then allocate nothing).
+  std::vector<detail::BoneStates> stack;
+  size_t stack_depth = 0;
+  std::vector<Collider> colliders;
+  double time = 0.0;
+  bool is_static = false;
+  std::vector<Mat3> target_R;  // per bone: R_target,rel (root: the global target rotation)
+  Vec3 target_t0 = Vec3::Zero();
+  long state_version = 0;
+
+  // Contact cache, valid while cache_version == state_version.
+  // The candidates are the vertices dominated by bones near colliders (broadPhase).
+  struct ContactCache : SurfaceContactState {
+    long version = -1;
+    std::vector<ContactPoint> points;
+  };
+  mutable ContactCache contact;
+  // Scratch of getHessianTripletVector: the ROM's inertia and gravity triplets, summed on two
+  // threads.
+  mutable std::vector<Triplet> hessian_scratch[2];
+
+  // FEM soft skeleton (null for the articulated skeleton): node data, displacements u.
+  std::unique_ptr<detail::SoftTissue> soft;
+  std::vector<VecX> u_stack;  // displacements saved with `stack` (same depth)
+
+  void touch() { ++state_version; }
+  int boneDofs() const { return detail::kDofsPerBone * num_bones; }
+  int dofs() const { return boneDofs() + (soft ? soft->numSoftDofs() : 0); }
+  detail::BoneFrames frames(const detail::BoneStates& s) const { return {s.R, s.t}; }
+  // Node positions of the current state (soft tissue only).
+  void prepareSoft() const { soft->prepare(state_version, frames(q)); }
+  /// prepareSoft, the contact broad phase and the skinning of its candidates, before terms run
+  /// on two threads (skinning writes node rows inertia reads); true if contact has candidates
+  /// (then call SoftTissue::contact with skin = false).
+  bool prepareSoftForThreads() const {
+    prepareSoft();
+    ensureContact();
+    const bool any = !colliders.empty() && !contact.candidates.empty();
+    if (any) soft->skinSurfaceNodes(contact.candidates);
+    return any;
+  }
+  void setSoftPrediction() { soft->setPrediction(frames(q_n), frames(q_nm1)); }
+
+  void validateOptions() const;
+  void buildSkinning();
+  void buildStiffnesses();
+  void updateTargets(double t);
+  void placeKinematicBones();
+  void ensureContact() const;
+  /// Surface vertices that may touch a collider (see ensureContact); `extra_margin`: per bone,
+  /// added to its bound (null: none).
+  void broadPhase(const double* extra_margin, std::vector<int>& candidates) const;
+  // Soft tissue: per bone, the largest blendBound and displacementWeight of its vertices.
+  std::vector<double> soft_blend_bound, soft_weight_bound;
+  void buildClusters();
+  Vec3 node(int i) const;
+  double contactEnergy() const {
+    ensureContact();
+    return contact.energy;
+  }
+
+  // ---- energy terms (energy_term.h) ----
+  // The articulated skeleton's energy is the sum of these terms; with soft tissue the bones
+  // keep their springs (joint_term, tracking_term) and SoftTissue carries inertia, gravity,
+  // elasticity and contact on the tet nodes.
+  detail::RigidInertiaTerm inertia_term;
+  detail::BoneGravityTerm gravity_term;
+  detail::JointSpringTerm joint_term;
+  std::unique_ptr<detail::TrackingSpringTerm> tracking_term;
+  std::unique_ptr<detail::SurfaceContactTerm> contact_term;
+  /// The skeleton's terms by part (dynamic: inertia; potential: the rest), all of them in
+  /// `terms`; the bone springs alone in `spring_terms` (with soft tissue too).
+  std::vector<const EnergyTerm*> dynamic_terms, potential_terms, terms, spring_terms;
+  void buildTerms();
+  /// The view the terms read at the current state (call ensureContact first for contact).
+  TermContext context() const;
+};
+
+}  // namespace flsh

@@ -1,0 +1,251 @@
+// Simulable: the parameter groups (get/setParameter) and the adjoint's derivatives, the energy
+// terms' products summed (energy_term.h), with the β chain (sim_parameter.h).
+#include <string>
+
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
+#include "flsh/sim/simulable.h"
+#include "flsh/sim/skeleton_energies.h"
+#include "sim/simulable_impl.h"
+
+namespace flsh {
+
+using detail::BoneStates;
+using detail::kDofsPerBone;
+
+namespace {
+
+void requireSkeleton(const Simulable::Impl& m, const char* who);
+
+void checkStateSized(const VecX& x, int n, const char* who, const char* name) {
+  if (x.size() != n)
+    throw InputError(std::string("Simulable::") + who + ": " + name + " has " +
+                     std::to_string(x.size()) +
+                     " values, expected numDofs() = " + std::to_string(n));
+}
+
+}  // namespace
+
+/// Λᵀ ∂g/∂p for each group, summed over the terms (Λ: a vector or numDofs × m), with the β
+/// chain through the rest joints and bone inertias unless `shape_surface_only`.
+template <class Lambda, class Block>
+std::vector<Block> parameterProducts(const Simulable& s, const Simulable::Impl& m,
+                                     const Lambda& lambda, const std::vector<SimParameter>& groups,
+                                     bool shape_surface_only) {
+  ParameterProducts<Block> products;
+  bool shape = false;
+  const auto want = [&](SimParameter p) {
+    Block& block = products[p];
+    if (block.rows() == 0) block = Block::Zero(s.parameterSize(p), lambda.cols());
+  };
+  for (SimParameter p : groups) {
+    simParameterInfo(p);  // throws for a value outside the enum
+    want(p);
+    shape = shape || p == SimParameter::Shape;
+  }
+  const bool chain = shape && !shape_surface_only;
+  if (chain) {
+    want(SimParameter::RestJoints);
+    want(SimParameter::BoneInertia);
+  }
+  m.ensureContact();
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms) term->addParameterProducts(c, lambda, products);
+  Block shape_products;
+  if (chain) {
+    shape_products = products[SimParameter::Shape];
+    chainShapeCotangent(*m.avatar, products[SimParameter::RestJoints],
+                        products[SimParameter::BoneInertia], shape_products);
+  }
+  std::vector<Block> out;
+  out.reserve(groups.size());
+  for (SimParameter p : groups)
+    out.push_back(p == SimParameter::Shape && chain ? shape_products : products[p]);
+  return out;
+}
+
+namespace {
+
+void requireSkeleton(const Simulable::Impl& m, const char* who) {
+  if (m.soft)
+    throw Error(std::string("Simulable::") + who +
+                ": parameter derivatives (the adjoint layer) are available for the articulated "
+                "skeleton only; this avatar has soft tissue (the FEM or ROM soft skeleton)");
+}
+
+}  // namespace
+
+int Simulable::parameterSize(SimParameter p) const {
+  return simParameterSize(p, int(impl_->colliders.size()), int(impl_->avatar->betas().size()));
+}
+
+MatX Simulable::getGradientParameterJacobian(SimParameter p) const {
+  return getGradientParameterJacobians({p}).front();
+}
+
+// The Jacobians are the products with Λ = I, transposed.
+std::vector<MatX> Simulable::getGradientParameterJacobians(const std::vector<SimParameter>& groups,
+                                                           bool shape_surface_only) const {
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientParameterJacobians");
+  const MatX identity = MatX::Identity(numDofs(), numDofs());
+  std::vector<MatX> out =
+      parameterProducts<MatX, MatX>(*this, m, identity, groups, shape_surface_only);
+  for (MatX& D : out) D.transposeInPlace();
+  return out;
+}
+
+std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
+                                                      const std::vector<SimParameter>& groups,
+                                                      bool shape_surface_only) const {
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientParameterVJPs");
+  checkStateSized(lambda, numDofs(), "getGradientParameterVJPs", "lambda");
+  return parameterProducts<VecX, VecX>(*this, m, lambda, groups, shape_surface_only);
+}
+
+MatX Simulable::getGradientPreviousStateJacobian(int which) const {
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientPreviousStateJacobian");
+  if (which != 1 && which != 2)
+    throw InputError("Simulable::getGradientPreviousStateJacobian: which = " +
+                     std::to_string(which) + ", expected 1 (q_n) or 2 (q_{n-1})");
+  MatX D = MatX::Zero(numDofs(), numDofs());
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms)
+    if (term->dependsOnPreviousStates()) term->addPreviousStateJacobian(c, which, D);
+  return D;
+}
+
+void Simulable::getGradientPreviousStatesVJP(const VecX& lambda, VecX* a_n, VecX* a_nm1) const {
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientPreviousStatesVJP");
+  checkStateSized(lambda, numDofs(), "getGradientPreviousStatesVJP", "lambda");
+  if (a_n) a_n->setZero(lambda.size());
+  if (a_nm1) a_nm1->setZero(lambda.size());
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms)
+    if (term->dependsOnPreviousStates()) term->addPreviousStatesProducts(c, lambda, a_n, a_nm1);
+}
+
+VecX Simulable::getGradientPreviousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const {
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientPreviousStatesJVP");
+  checkStateSized(dq_n, numDofs(), "getGradientPreviousStatesJVP", "dq_n");
+  checkStateSized(dq_nm1, numDofs(), "getGradientPreviousStatesJVP", "dq_nm1");
+  VecX out = VecX::Zero(dq_n.size());
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms)
+    if (term->dependsOnPreviousStates()) term->addPreviousStatesTangent(c, dq_n, dq_nm1, out);
+  return out;
+}
+
+VecX Simulable::getParameter(SimParameter p) const {
+  const Impl& m = *impl_;
+  VecX value(parameterSize(p));
+  switch (p) {
+    case SimParameter::RestJoints:
+      for (int b = 0; b < m.num_bones; ++b) value.segment<3>(3 * b) = m.J.row(b).transpose();
+      break;
+    case SimParameter::BoneInertia:
+      for (int b = 0; b < m.num_bones; ++b) {
+        const BoneInertia& in = m.inertia[b];
+        const Mat3& S = in.second_moment;
+        value.segment<10>(10 * b) << in.mass, in.first_moment, S(0, 0), S(1, 1), S(2, 2), S(0, 1),
+            S(0, 2), S(1, 2);
+      }
+      break;
+    case SimParameter::PoseTargets:
+      for (int b = 0; b < m.num_bones; ++b) value.segment<3>(3 * b) = logSO3(m.target_R[b]);
+      break;
+    case SimParameter::RootTranslationTarget:
+      value = m.target_t0;
+      break;
+    case SimParameter::Stiffnesses:
+      value << m.options.joint_stiffness, m.options.tracking_stiffness, m.options.root_stiffness,
+          m.options.contact.stiffness;
+      break;
+    case SimParameter::ColliderOffsets:
+      for (size_t k = 0; k < m.colliders.size(); ++k)
+        value.segment<3>(3 * k) = m.colliders[k].path.offsetAt(m.time);
+      break;
+    case SimParameter::Shape:
+      value = m.avatar->betas();
+      break;
+  }
+  return value;
+}
+
+void Simulable::setParameter(SimParameter p, const VecX& value) {
+  Impl& m = *impl_;
+  if (p == SimParameter::Shape)
+    throw InputError(
+        "Simulable::setParameter: Shape (β) is fixed by the SoftAvatar the simulable was built "
+        "with; build a new SoftAvatar with the new β and a new Simulable on it");
+  if (value.size() != parameterSize(p))
+    throw InputError("Simulable::setParameter: value has " + std::to_string(value.size()) +
+                     " entries, expected parameterSize() = " + std::to_string(parameterSize(p)));
+  if (!value.allFinite()) throw InputError("Simulable::setParameter: value contains NaN or Inf");
+  switch (p) {
+    case SimParameter::RestJoints: {
+      const Vec3 root_shift = value.head<3>() - m.J.row(0).transpose();
+      for (int b = 0; b < m.num_bones; ++b) m.J.row(b) = value.segment<3>(3 * b).transpose();
+      m.target_t0 += root_shift;  // the root target is J_0 + trans
+      m.buildSkinning();
+      m.buildStiffnesses();
+      break;
+    }
+    case SimParameter::BoneInertia:
+      for (int b = 0; b < m.num_bones; ++b)
+        if (!(value[10 * b] > 0.0))
+          throw InputError("Simulable::setParameter: BoneInertia of bone " + std::to_string(b) +
+                           " has mass " + std::to_string(value[10 * b]) + ", expected > 0 kg");
+      for (int b = 0; b < m.num_bones; ++b) {
+        const auto v = value.segment<10>(10 * b);
+        BoneInertia& in = m.inertia[b];
+        in.mass = v[0];
+        in.first_moment = v.segment<3>(1);
+        in.second_moment << v[4], v[7], v[8], v[7], v[5], v[9], v[8], v[9], v[6];
+      }
+      m.buildStiffnesses();
+      break;
+    case SimParameter::PoseTargets:
+      for (int b = 0; b < m.num_bones; ++b) m.target_R[b] = rodrigues(value.segment<3>(3 * b));
+      break;
+    case SimParameter::RootTranslationTarget:
+      m.target_t0 = value;
+      break;
+    case SimParameter::Stiffnesses: {
+      SimulableOptions previous = m.options;
+      m.options.joint_stiffness = value[0];
+      m.options.tracking_stiffness = value[1];
+      m.options.root_stiffness = value[2];
+      m.options.contact.stiffness = value[3];
+      try {
+        m.validateOptions();
+      } catch (...) {
+        m.options = previous;
+        throw;
+      }
+      m.buildStiffnesses();
+      break;
+    }
+    case SimParameter::ColliderOffsets:
+      for (size_t k = 0; k < m.colliders.size(); ++k) {
+        ColliderPath& path = m.colliders[k].path;
+        const Vec3 shift = value.segment<3>(3 * k) - path.offsetAt(m.time);
+        if (path.times.empty()) {
+          path.times = {0.0};
+          path.offsets = {Vec3::Zero()};
+        }
+        for (Vec3& o : path.offsets) o += shift;
+      }
+      break;
+    case SimParameter::Shape:
+      break;  // rejected above
+  }
+  m.touch();
+}
+
+}  // namespace flsh

@@ -7,17 +7,27 @@
 //   upper arms shoulders (16, 17)              head      neck and head (12, 15)
 //   torso      pelvis, spine, collars          thighs    hips (1, 2)
 //   shins      knees (4, 5)                    feet      ankles and toes (7, 8, 10, 11)
-// Columns per motion and region: the largest |u| over the vertices and the motion's steps
-// ("max"), the root mean square over the same ("rms"), and the largest |u(t) − u(t_end)| over
-// the last 0.5 s of the rest ("jiggle after stop": what is still moving once the body has stood
-// still for a while; the static sag under gravity is not counted).
+// Columns per motion and region, all in mm:
+//   max       the largest |u| over the region's vertices and every step (motion and rest);
+//   rms       the root mean square of |u| over the same vertices and the motion's steps;
+//   stop      the largest |u(t) − u(t_end)| over the first 0.5 s of the rest: the ring-down
+//             once the body stops (u(t_end), the last step, is the static sag under gravity,
+//             which is not counted);
+//   late      the same over the last 0.5 s of the rest: what still moves a while after the stop
+//             (smaller than "stop" when the motion decays).
+// Each motion runs whole cycles by default (walk 2.2 s, jumping_jacks 1.8 s, jump 1.6 s; other
+// motions 1.5 s), so it stops in a pose it passes through naturally; --seconds overrides.
+// --materials FILE takes a material file (docs/materials.md): a version-1 file (no "regions")
+// gives the body without regional differences, for before/after tables.
 //
-// Usage: tissue_regions_benchmark [--motions walk,jumping_jacks,jump] [--seconds S=1.5]
+// Usage: tissue_regions_benchmark [--motions walk,jumping_jacks,jump] [--seconds S]
 //                                 [--rest R=1.0] [--resolution R=1] [--vertices V=6890]
 //                                 [--materials FILE] [--rom]
-// Timing is not the point: every number is a displacement (mm).
+// --vertices 6890 (the default) is the full-size synthetic body (SMPL's vertex count); 800 the
+// tests' small body. Timing is not the point: every number is a displacement.
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -56,6 +66,15 @@ std::vector<std::string> split(const std::string& text) {
   return out;
 }
 
+/// Whole cycles of the built-in motions (motion_builtin.cpp): the motion ends in a pose it passes
+/// through, with the body over its feet.
+double defaultSeconds(const std::string& name) {
+  if (name == "walk") return 2.2;           // two gait cycles of 1.1 s
+  if (name == "jumping_jacks") return 1.8;  // two jacks of 0.9 s, arms down
+  if (name == "jump") return 1.6;           // crouch, flight, landing
+  return 1.5;
+}
+
 /// `name` for `seconds`, then its last frame held for `rest` seconds.
 Motion motionThenRest(const std::string& name, double seconds, double rest, double fps) {
   Motion m = makeBuiltinMotion(name, seconds, fps);
@@ -76,7 +95,7 @@ Motion motionThenRest(const std::string& name, double seconds, double rest, doub
 
 int main(int argc, char** argv) {
   std::vector<std::string> motions = {"walk", "jumping_jacks", "jump"};
-  double seconds = 1.5, rest = 1.0, resolution = 1.0;
+  double seconds_override = -1.0, rest = 1.0, resolution = 1.0;
   int vertices = 6890;
   std::string materials;
   bool rom = false;
@@ -85,7 +104,7 @@ int main(int argc, char** argv) {
     if (a == "--motions" && i + 1 < argc)
       motions = split(argv[++i]);
     else if (a == "--seconds" && i + 1 < argc)
-      seconds = std::atof(argv[++i]);
+      seconds_override = std::atof(argv[++i]);
     else if (a == "--rest" && i + 1 < argc)
       rest = std::atof(argv[++i]);
     else if (a == "--resolution" && i + 1 < argc)
@@ -125,29 +144,42 @@ int main(int argc, char** argv) {
         "%s\n",
         rom ? "ROM" : "FEM", V, resolution, data.numNodes(), data.numBoneNodes(), data.numTets(),
         materials.empty() ? "built-in defaults" : materials.c_str());
-    // Region of each surface vertex, and how many surface vertices are bone nodes.
-    std::vector<int> region_of(V, -1);
-    std::vector<int> count(regions().size(), 0), bone_count(regions().size(), 0);
-    for (int v = 0; v < V; ++v) {
+    // Region of each node (its largest weight's bone); surface vertices are nodes 0..V−1.
+    const MatX& node_weights = data.templ->fields.weights;
+    const int N = data.numNodes();
+    std::vector<int> region_of(N, -1);
+    const size_t R = regions().size();
+    std::vector<int> count(R, 0), bone_count(R, 0), interior(R, 0), interior_bone(R, 0);
+    for (int i = 0; i < N; ++i) {
       int dominant = 0;
-      body->weights.row(v).maxCoeff(&dominant);
-      for (size_t r = 0; r < regions().size(); ++r)
+      node_weights.row(i).maxCoeff(&dominant);
+      for (size_t r = 0; r < R; ++r)
         for (int b : regions()[r].bones)
-          if (b == dominant) region_of[v] = int(r);
-      if (region_of[v] >= 0) {
-        ++count[region_of[v]];
-        if (data.bone_of_node[v] >= 0) ++bone_count[region_of[v]];
+          if (b == dominant) region_of[i] = int(r);
+      if (region_of[i] < 0) continue;
+      const bool bone = data.bone_of_node[i] >= 0;
+      if (i < V) {
+        ++count[region_of[i]];
+        bone_count[region_of[i]] += bone;
+      } else {
+        ++interior[region_of[i]];
+        interior_bone[region_of[i]] += bone;
       }
     }
 
+    std::printf("nodes per region (dominant bone): surface bone/all, interior bone/all:");
+    for (size_t r = 0; r < R; ++r)
+      std::printf("%s %s %d/%d, %d/%d", r ? ";" : "", regions()[r].name, bone_count[r], count[r],
+                  interior_bone[r], interior[r]);
     const double fps = 30.0, h = 1.0 / fps;
     std::printf(
-        "h = 1/30 s, on the ground; each motion %.2f s, then %.2f s at rest in its last "
-        "pose; |u| of the surface vertices, mm\n\n",
-        seconds, rest);
-    std::printf("%-14s %-11s %6s %9s %9s %17s\n", "motion", "region", "verts", "max", "rms",
-                "jiggle after stop");
+        "\nh = 1/30 s, on the ground; each motion then %.2f s at rest in its last pose; |u| of "
+        "the surface vertices, mm\n\n",
+        rest);
+    std::printf("%-20s %-11s %6s %8s %8s %8s %8s\n", "motion", "region", "verts", "max", "rms",
+                "stop", "late");
     for (const std::string& name : motions) {
+      const double seconds = seconds_override > 0 ? seconds_override : defaultSeconds(name);
       auto motion = std::make_shared<Motion>(motionThenRest(name, seconds, rest, fps));
       SimulableOptions options;
       options.time_step = h;
@@ -159,42 +191,49 @@ int main(int argc, char** argv) {
           Collider::plane(Vec3(0, sim->getNodes().col(1).minCoeff() - 0.002, 0), Vec3::UnitY()));
       const int motion_steps = int(std::lround(seconds * fps));
       const int rest_steps = int(std::lround(rest * fps));
-      const int tail = std::min(rest_steps, int(std::lround(0.5 * fps)));
-      std::vector<double> largest(regions().size(), 0.0), squares(regions().size(), 0.0);
-      std::vector<MatX3> tail_u;
+      const int window = std::min(rest_steps, int(std::lround(0.5 * fps)));
+      std::vector<double> largest(R, 0.0), squares(R, 0.0);
+      std::vector<MatX3> rest_u;  // surface |u| of every rest step
       int unconverged = 0;
+      const auto start = std::chrono::steady_clock::now();
       for (int k = 0; k < motion_steps + rest_steps; ++k) {
         const StepStats s = scene.step();
         unconverged += s.newton.converged ? 0 : 1;
         const MatX3 u = sim->getSoftTissueDisplacements();
-        if (k < motion_steps) {
-          for (int v = 0; v < V; ++v) {
-            if (region_of[v] < 0) continue;
-            const double n = u.row(v).norm();
-            largest[region_of[v]] = std::max(largest[region_of[v]], n);
-            squares[region_of[v]] += n * n;
-          }
-        } else if (k >= motion_steps + rest_steps - tail) {
-          tail_u.push_back(u);
+        for (int v = 0; v < V; ++v) {
+          if (region_of[v] < 0) continue;
+          const double n = u.row(v).norm();
+          largest[region_of[v]] = std::max(largest[region_of[v]], n);
+          if (k < motion_steps) squares[region_of[v]] += n * n;
         }
+        if (k >= motion_steps) rest_u.push_back(u);
       }
-      std::vector<double> after(regions().size(), 0.0);
-      for (const MatX3& u : tail_u)
-        for (int v = 0; v < V; ++v)
-          if (region_of[v] >= 0)
-            after[region_of[v]] =
-                std::max(after[region_of[v]], (u.row(v) - tail_u.back().row(v)).norm());
-      for (size_t r = 0; r < regions().size(); ++r) {
+      const double elapsed =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      // Largest |u(t) − u(t_end)| per region over rest steps [first, last).
+      auto jiggle = [&](int first, int last) {
+        std::vector<double> out(R, 0.0);
+        for (int k = std::max(0, first); k < last; ++k)
+          for (int v = 0; v < V; ++v)
+            if (region_of[v] >= 0)
+              out[region_of[v]] =
+                  std::max(out[region_of[v]], (rest_u[k].row(v) - rest_u.back().row(v)).norm());
+        return out;
+      };
+      const std::vector<double> stop = jiggle(0, window);
+      const std::vector<double> late = jiggle(rest_steps - window, rest_steps);
+      char label[64];
+      std::snprintf(label, sizeof(label), "%s %.1f s", name.c_str(), seconds);
+      for (size_t r = 0; r < R; ++r) {
         const double rms = std::sqrt(squares[r] / std::max(1, count[r] * motion_steps));
-        std::printf("%-14s %-11s %6d %9.2f %9.2f %17.2f\n", r == 0 ? name.c_str() : "",
-                    regions()[r].name, count[r], 1000 * largest[r], 1000 * rms, 1000 * after[r]);
+        std::printf("%-20s %-11s %6d %8.1f %8.1f %8.1f %8.1f\n", r == 0 ? label : "",
+                    regions()[r].name, count[r], 1000 * largest[r], 1000 * rms, 1000 * stop[r],
+                    1000 * late[r]);
       }
-      if (unconverged > 0) std::printf("  (%d steps did not converge)\n", unconverged);
+      std::printf("  %d steps in %.0f s, %d did not converge\n", motion_steps + rest_steps, elapsed,
+                  unconverged);
+      std::fflush(stdout);
     }
-    std::printf("\nsurface vertices that are bone nodes, per region:");
-    for (size_t r = 0; r < regions().size(); ++r)
-      std::printf(" %s %d/%d%s", regions()[r].name, bone_count[r], count[r],
-                  r + 1 < regions().size() ? "," : "\n");
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tissue_regions_benchmark: %s\n", e.what());

@@ -234,11 +234,12 @@ MaterialModel MaterialModel::defaults(int num_betas) {
   set("skin_thickness", kBodyLevel, 0.002, 0.02, 0.04);
   set("tissue_fraction", kBodyLevel, 0.5, 0.01, 0.05);
   // Body regions (docs/materials.md, "Body regions"): hands, feet and the head are mostly bone,
-  // tendon and thin, stiff skin-bound tissue; forearms and shins are in between; torso, thighs
-  // and upper arms keep the reference tissue. No slopes of their own: the shape dependence is
-  // the body-level one.
+  // tendon and thin, fibrous skin-bound tissue (×100: an effective 1–1.5 MPa that also carries
+  // fingers and toes where the mesh has no bone node; ×20 left fingertips and heels moving 1–2
+  // cm); forearms and shins are in between; torso, thighs and upper arms keep the reference
+  // tissue. No slopes of their own: the shape dependence is the body-level one.
   const double tissue_scale[8] = {1.0, 1.0, 0.4, 0.2, 0.2, 1.0, 0.4, 0.2};
-  const double stiffness_scale[8] = {1.0, 1.0, 5.0, 20.0, 20.0, 1.0, 5.0, 20.0};
+  const double stiffness_scale[8] = {1.0, 1.0, 5.0, 100.0, 100.0, 1.0, 5.0, 100.0};
   for (int r = 0; r < numRegions(); ++r) {
     set("tissue_scale", regionLevel(r), tissue_scale[r], 0.0, 0.0);
     set("stiffness_scale", regionLevel(r), stiffness_scale[r], 0.0, 0.0);

@@ -65,7 +65,11 @@ TEST(MaterialModel, LogLinearValueAndGradient) {
   MaterialModel m = MaterialModel::defaults(10);
   const VecX betas = test::randomVector(10, 1.5, 4);
   for (const auto& [q, layer] : std::vector<std::pair<std::string, int>>{
-           {"E1", kTissue}, {"nu23", kSkin}, {"skin_thickness", kBody}}) {
+           {"E1", kTissue},
+           {"nu23", kSkin},
+           {"skin_thickness", kBody},
+           {"tissue_scale", MaterialModel::regionLevel(3)},
+           {"stiffness_scale", MaterialModel::regionLevel(7)}}) {
     EXPECT_EQ(m.value(q, layer, VecX::Zero(10)), m.baseValue(q, layer));
     EXPECT_NEAR(m.value(q, layer, betas),
                 m.baseValue(q, layer) * std::exp(m.logSlopes(q, layer).dot(betas)),

@@ -6,7 +6,7 @@
 // Usage: fem_benchmark [STEPS=30] [--resolution R] [--tolerance T] [--no-lag] [--threads N]
 //                      [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME]
 //                      [--no-ground] [--contact-stiffness K] [--psd-hessian]
-//                      [--exact-preconditioner] [--inertia-floor I]
+//                      [--exact-preconditioner] [--inertia-floor I] [--materials FILE]
 //   --tolerance: Newton's relative gradient tolerance (default: the scene default);
 //   --no-lag:    factor every Newton iteration (plain Newton on CHOLMOD) for comparison;
 //   --psd-hessian: the PSD Hessian form only (exact_hessian = false), for comparison;
@@ -19,6 +19,8 @@
 //                after this many CG iterations, CG iteration limit;
 //   --motion:    a built-in motion instead of "walk" (e.g. jumping_jacks).
 //   --inertia-floor: SimulableOptions::tracking_inertia_floor (kg·m²; 0 = the former model).
+//   --materials: a material file (docs/materials.md) instead of the built-in defaults, e.g. a
+//                version-1 file for the body without regions (issue 29).
 // Prints steps/s over the timed steps (after 3 warm-up steps) and the per-step breakdown:
 // Newton iterations, seconds in energy / gradient / Hessian assembly / factorization / solves,
 // factorizations and PCG iterations per step, and the largest soft-tissue displacement.
@@ -55,6 +57,7 @@ int main(int argc, char** argv) {
   double contact_stiffness = -1.0;
   double inertia_floor = -1.0;
   std::string motion_name = "walk";
+  std::string materials;
   double reference = -1.0;
   double cg_tolerance = -1.0;
   int refactor_after = 0, max_cg = 0;
@@ -69,6 +72,8 @@ int main(int argc, char** argv) {
     else if (a == "--contact-stiffness" && i + 1 < argc) contact_stiffness = std::atof(argv[++i]);
     else if (a == "--motion" && i + 1 < argc) motion_name = argv[++i];
     else if (a == "--inertia-floor" && i + 1 < argc) inertia_floor = std::atof(argv[++i]);
+    else if (a == "--materials" && i + 1 < argc)
+      materials = argv[++i];
     else if (a == "--cg" && i + 3 < argc) {  // forcing term, refactor-after, max CG iterations
       cg_tolerance = std::atof(argv[++i]);
       refactor_after = std::atoi(argv[++i]);
@@ -78,10 +83,12 @@ int main(int argc, char** argv) {
     else if (a == "--threads" && i + 1 < argc) omp_set_num_threads(std::atoi(argv[++i]));
     else if (!a.empty() && a[0] != '-') steps = std::max(1, std::atoi(a.c_str()));
     else {
-      std::fprintf(stderr,
-                   "usage: fem_benchmark [STEPS] [--resolution R] [--tolerance T] [--no-lag] "
-                   "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] [--no-ground] [--contact-stiffness K] [--psd-hessian] [--inertia-floor I] "
-                   "[--exact-preconditioner]\n");
+      std::fprintf(
+          stderr,
+          "usage: fem_benchmark [STEPS] [--resolution R] [--tolerance T] [--no-lag] "
+          "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] "
+          "[--no-ground] [--contact-stiffness K] [--psd-hessian] [--inertia-floor I] "
+          "[--exact-preconditioner] [--materials FILE]\n");
       return 2;
     }
   }
@@ -90,6 +97,7 @@ int main(int argc, char** argv) {
     auto body = std::make_shared<BodyModel>(makeSyntheticBody({}));
     SoftAvatarSettings settings;
     settings.volumetric.tet_mesh.resolution = resolution;
+    settings.volumetric.material_file = materials;
     auto avatar = std::make_shared<SoftAvatar>(body, VecX(), settings);
     avatar->enableSoftTissue();
     avatar->initVolumetricData();

@@ -24,7 +24,9 @@ namespace {
 using json = nlohmann::json;
 
 constexpr const char* kFormatName = "flsh-materials";
-constexpr int kFormatVersion = 1;
+// Version 2 adds "regions"; version-1 files (no regions) still load, with every region
+// coefficient 1 (a body without regional differences, as version 1 described it).
+constexpr int kFormatVersion = 2;
 // Plausibility bounds that catch unit mistakes (g/cm³ for kg/m³, mm for m).
 constexpr double kMinDensity = 100, kMaxDensity = 3000;  // kg/m³
 constexpr double kMaxSkinThickness = 0.05;               // m
@@ -36,6 +38,16 @@ const std::vector<std::string> kLayerQuantities = {
     "density", "E1", "E2", "E3", "nu12", "nu13", "nu23", "G12", "G13", "G23", "fung_gamma"};
 const std::vector<std::string> kBodyQuantities = {"skin_thickness", "tissue_fraction"};
 const std::vector<std::string> kLayerNames = {"skin", "soft_tissue"};
+const std::vector<std::string> kRegionQuantities = {"tissue_scale", "stiffness_scale"};
+const std::vector<std::string> kRegionNames = {"torso", "thighs",     "shins",    "feet",
+                                               "head",  "upper_arms", "forearms", "hands"};
+enum Region { kTorso, kThighs, kShins, kFeet, kHead, kUpperArms, kForearms, kHands };
+// SMPL's 24 bones (joint order of smpl_skeleton.h) to regions.
+constexpr int kSmplRegion[24] = {kTorso,    kThighs,   kThighs, kTorso, kShins,     kShins,
+                                 kTorso,    kFeet,     kFeet,   kTorso, kFeet,      kFeet,
+                                 kHead,     kTorso,    kTorso,  kHead,  kUpperArms, kUpperArms,
+                                 kForearms, kForearms, kHands,  kHands, kHands,     kHands};
+constexpr int kNumLayered = 2 * 11, kNumBody = 2;  // coefficients before the regions'
 
 int layeredIndex(const std::string& quantity) {
   const auto it = std::find(kLayerQuantities.begin(), kLayerQuantities.end(), quantity);
@@ -44,6 +56,13 @@ int layeredIndex(const std::string& quantity) {
 int bodyIndex(const std::string& quantity) {
   const auto it = std::find(kBodyQuantities.begin(), kBodyQuantities.end(), quantity);
   return it == kBodyQuantities.end() ? -1 : int(it - kBodyQuantities.begin());
+}
+int regionQuantityIndex(const std::string& quantity) {
+  const auto it = std::find(kRegionQuantities.begin(), kRegionQuantities.end(), quantity);
+  return it == kRegionQuantities.end() ? -1 : int(it - kRegionQuantities.begin());
+}
+size_t numCoefficients() {
+  return kNumLayered + kNumBody + kRegionNames.size() * kRegionQuantities.size();
 }
 
 std::string numberText(double x) {
@@ -107,6 +126,37 @@ void writeCompact(const json& j, int depth, std::string& out) {
 const std::vector<std::string>& MaterialModel::layerQuantities() { return kLayerQuantities; }
 const std::vector<std::string>& MaterialModel::bodyQuantities() { return kBodyQuantities; }
 const std::vector<std::string>& MaterialModel::layerNames() { return kLayerNames; }
+const std::vector<std::string>& MaterialModel::regionNames() { return kRegionNames; }
+const std::vector<std::string>& MaterialModel::regionQuantities() { return kRegionQuantities; }
+
+int MaterialModel::regionOfBone(int bone) {
+  if (bone < 0)
+    throw InputError("MaterialModel::regionOfBone: bone " + std::to_string(bone) +
+                     ", expected ≥ 0");
+  return bone < 24 ? kSmplRegion[bone] : kTorso;
+}
+
+MatX MaterialModel::regionWeights(const MatX& bone_weights) {
+  MatX omega = MatX::Zero(bone_weights.rows(), numRegions());
+  for (Eigen::Index b = 0; b < bone_weights.cols(); ++b)
+    omega.col(regionOfBone(int(b))) += bone_weights.col(b);
+  return omega;
+}
+
+VecX MaterialModel::blendedRegionValue(const std::string& quantity, const MatX& region_weights,
+                                       const VecX& betas) const {
+  if (regionQuantityIndex(quantity) < 0)
+    throw InputError("MaterialModel::blendedRegionValue: '" + quantity +
+                     "' is not a region quantity, expected tissue_scale or stiffness_scale");
+  if (region_weights.cols() != numRegions())
+    throw InputError("MaterialModel::blendedRegionValue: region_weights has " +
+                     std::to_string(region_weights.cols()) + " columns, expected " +
+                     std::to_string(numRegions()) + " (one per region)");
+  VecX log_scale(numRegions());
+  for (int r = 0; r < numRegions(); ++r)
+    log_scale[r] = std::log(value(quantity, regionLevel(r), betas));
+  return (region_weights * log_scale).array().exp();
+}
 
 int MaterialModel::index(const std::string& quantity, int layer) const {
   const int layered = layeredIndex(quantity), body = bodyIndex(quantity);
@@ -123,9 +173,20 @@ int MaterialModel::index(const std::string& quantity, int layer) const {
                        std::to_string(layer));
     return kNumLayers * int(kLayerQuantities.size()) + body;
   }
+  const int regional = regionQuantityIndex(quantity);
+  if (regional >= 0) {
+    const int r = layer - kFirstRegion;
+    if (r < 0 || r >= numRegions())
+      throw InputError("MaterialModel: quantity '" + quantity +
+                       "' is a region quantity, expected layer regionLevel(r) = " +
+                       std::to_string(kFirstRegion) + " + r with r in [0, " +
+                       std::to_string(numRegions()) + "), got " + std::to_string(layer));
+    return kNumLayered + kNumBody + r * int(kRegionQuantities.size()) + regional;
+  }
   std::string known;
   for (const auto& q : kLayerQuantities) known += q + ", ";
-  for (const auto& q : kBodyQuantities) known += q + (q == kBodyQuantities.back() ? "" : ", ");
+  for (const auto& q : kBodyQuantities) known += q + ", ";
+  for (const auto& q : kRegionQuantities) known += q + (q == kRegionQuantities.back() ? "" : ", ");
   throw InputError("MaterialModel: unknown quantity '" + quantity + "', expected one of " + known);
 }
 
@@ -135,8 +196,7 @@ MaterialModel MaterialModel::defaults(int num_betas) {
                      ", expected ≥ 0");
   MaterialModel m;
   m.num_betas_ = num_betas;
-  m.coefficients_.assign(kNumLayers * kLayerQuantities.size() + kBodyQuantities.size(),
-                         Coefficient{1.0, VecX::Zero(num_betas)});
+  m.coefficients_.assign(numCoefficients(), Coefficient{1.0, VecX::Zero(num_betas)});
   // Log-slopes on β₀ (size / height) and β₁ (weight): bigger, heavier bodies get softer and
   // thicker tissue (docs/materials.md).
   auto set = [&](const std::string& q, int layer, double value, double slope0, double slope1) {
@@ -173,6 +233,17 @@ MaterialModel MaterialModel::defaults(int num_betas) {
   set("fung_gamma", kSoftTissue, 3.0, 0.0, -0.03);
   set("skin_thickness", kBodyLevel, 0.002, 0.02, 0.04);
   set("tissue_fraction", kBodyLevel, 0.5, 0.01, 0.05);
+  // Body regions (docs/materials.md, "Body regions"): hands, feet and the head are mostly bone,
+  // tendon and thin, fibrous skin-bound tissue (×100: an effective 1–1.5 MPa that also carries
+  // fingers and toes where the mesh has no bone node; ×20 left fingertips and heels moving 1–2
+  // cm); forearms and shins are in between; torso, thighs and upper arms keep the reference
+  // tissue. No slopes of their own: the shape dependence is the body-level one.
+  const double tissue_scale[8] = {1.0, 1.0, 0.4, 0.2, 0.2, 1.0, 0.4, 0.2};
+  const double stiffness_scale[8] = {1.0, 1.0, 5.0, 100.0, 100.0, 1.0, 5.0, 100.0};
+  for (int r = 0; r < numRegions(); ++r) {
+    set("tissue_scale", regionLevel(r), tissue_scale[r], 0.0, 0.0);
+    set("stiffness_scale", regionLevel(r), stiffness_scale[r], 0.0, 0.0);
+  }
   m.validate("MaterialModel::defaults");
   return m;
 }
@@ -265,6 +336,13 @@ void MaterialModel::validate(const std::string& origin, const VecX& betas) const
                        numberText(nu[2]) +
                        "), expected ν12² < E1/E2, ν13² < E1/E3, ν23² < E2/E3 and det > 0");
   }
+  for (int r = 0; r < numRegions(); ++r)
+    for (const auto& q : kRegionQuantities) {
+      const double x = value(q, regionLevel(r), b);
+      if (!(std::isfinite(x) && x > 0))
+        throw InputError(origin + ": regions." + kRegionNames[r] + "." + q + ": value " +
+                         numberText(x) + ", expected finite and > 0");
+    }
   const double skin = value("skin_thickness", kBodyLevel, b),
                fraction = value("tissue_fraction", kBodyLevel, b);
   if (!(std::isfinite(skin) && skin > 0 && skin <= kMaxSkinThickness))
@@ -273,6 +351,15 @@ void MaterialModel::validate(const std::string& origin, const VecX& betas) const
   if (!(std::isfinite(fraction) && fraction > 0 && fraction < 1))
     throw InputError(origin + ": body.tissue_fraction: " + numberText(fraction) +
                      ", expected in (0, 1) (soft-tissue thickness over body radius)");
+  for (int r = 0; r < numRegions(); ++r) {
+    const double scaled = fraction * value("tissue_scale", regionLevel(r), b);
+    if (!(scaled < 1))
+      throw InputError(origin + ": regions." + kRegionNames[r] +
+                       ".tissue_scale: " + numberText(value("tissue_scale", regionLevel(r), b)) +
+                       " times body.tissue_fraction " + numberText(fraction) + " is " +
+                       numberText(scaled) +
+                       ", expected < 1 (soft-tissue thickness over body radius)");
+  }
 }
 
 bool MaterialModel::operator==(const MaterialModel& other) const {
@@ -302,6 +389,9 @@ std::string MaterialModel::canonicalText() const {
     for (const auto& q : kLayerQuantities)
       root["layers"][kLayerNames[layer]][q] = coefficient(q, layer);
   for (const auto& q : kBodyQuantities) root["body"][q] = coefficient(q, kBodyLevel);
+  for (int r = 0; r < numRegions(); ++r)
+    for (const auto& q : kRegionQuantities)
+      root["regions"][kRegionNames[r]][q] = coefficient(q, regionLevel(r));
   std::string text;
   writeCompact(root, 0, text);
   return text + "\n";
@@ -348,19 +438,28 @@ MaterialModel MaterialModel::fromText(const std::string& text, int num_betas,
                          ": unknown key, expected one of " + known);
       }
   };
-  requireObject(root, "(top level)", {"format", "version", "layers", "body"});
+  // The version decides the keys: version 1 has no "regions".
+  if (!root.is_object())
+    throw InputError(origin + ": (top level): expected an object, got " + typeName(root));
+  const json version = root.contains("version") ? root["version"] : json();
+  if (!version.is_number_integer() ||
+      (version.get<long>() != 1 && version.get<long>() != kFormatVersion))
+    throw InputError(origin + ": version: expected " + std::to_string(kFormatVersion) +
+                     " (or 1, without regions), got " +
+                     (root.contains("version") ? version.dump() : std::string("no version")));
+  const bool has_regions = version.get<long>() >= 2;
+  if (has_regions)
+    requireObject(root, "(top level)", {"format", "version", "layers", "body", "regions"});
+  else
+    requireObject(root, "(top level)", {"format", "version", "layers", "body"});
   if (!root["format"].is_string() || root["format"].get<std::string>() != kFormatName)
     throw InputError(origin + ": format: expected \"" + kFormatName + "\", got " +
                      root["format"].dump());
-  if (!root["version"].is_number_integer() || root["version"].get<long>() != kFormatVersion)
-    throw InputError(origin + ": version: expected " + std::to_string(kFormatVersion) + ", got " +
-                     root["version"].dump());
   requireObject(root["layers"], "layers", kLayerNames);
 
   MaterialModel m;
   m.num_betas_ = num_betas;
-  m.coefficients_.assign(kNumLayers * kLayerQuantities.size() + kBodyQuantities.size(),
-                         Coefficient{1.0, VecX::Zero(num_betas)});
+  m.coefficients_.assign(numCoefficients(), Coefficient{1.0, VecX::Zero(num_betas)});
   auto readCoefficient = [&](const json& j, const std::string& key, const std::string& q,
                              int layer) {
     requireObject(j, key, {"value", "log_slopes"});
@@ -402,6 +501,16 @@ MaterialModel MaterialModel::fromText(const std::string& text, int num_betas,
   requireObject(root["body"], "body", kBodyQuantities);
   for (const auto& q : kBodyQuantities)
     readCoefficient(root["body"][q], "body." + q, q, kBodyLevel);
+  if (has_regions) {
+    requireObject(root["regions"], "regions", kRegionNames);
+    for (int r = 0; r < numRegions(); ++r) {
+      const std::string key = "regions." + kRegionNames[r];
+      const json& j = root["regions"][kRegionNames[r]];
+      requireObject(j, key, kRegionQuantities);
+      for (const auto& q : kRegionQuantities)
+        readCoefficient(j[q], key + "." + q, q, regionLevel(r));
+    }
+  }
   m.validate(origin);
   return m;
 }
@@ -479,6 +588,8 @@ VecX surfaceTissueThickness(const MatX3& surface_vertices, const MatX& surface_w
   checkSkeleton(fn, surface_weights, surface_vertices.rows(), joints, parents);
   if (!surface_vertices.allFinite()) throw InputError(fn + "surface_vertices contains NaN or Inf");
   const double fraction = model.value("tissue_fraction", MaterialModel::kBodyLevel, betas);
+  const VecX region_scale = model.blendedRegionValue(
+      "tissue_scale", MaterialModel::regionWeights(surface_weights), betas);
   const std::vector<BoneCapsule> capsules =
       fitBoneCapsules(surface_vertices, surface_weights, joints, parents);
   VecX thickness(surface_vertices.rows());
@@ -489,9 +600,22 @@ VecX surfaceTissueThickness(const MatX3& surface_vertices, const MatX& surface_w
     const Vec3 x = surface_vertices.row(v).transpose(), ab = c.b - c.a;
     const double t =
         ab.squaredNorm() > 0 ? std::clamp((x - c.a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
-    thickness[v] = fraction * (x - c.a - t * ab).norm();
+    thickness[v] = fraction * region_scale[v] * (x - c.a - t * ab).norm();
   }
   return thickness;
+}
+
+VecX tetTissueStiffnessScale(const TetMesh& mesh, const MatX& node_weights,
+                             const MaterialModel& model, const VecX& betas) {
+  if (node_weights.rows() != mesh.numNodes())
+    throw InputError("tetTissueStiffnessScale: node_weights has " +
+                     std::to_string(node_weights.rows()) + " rows, expected " +
+                     std::to_string(mesh.numNodes()) + " (one per node)");
+  const MatX omega = MaterialModel::regionWeights(node_weights);
+  MatX tet_omega = MatX::Zero(mesh.numTets(), omega.cols());
+  for (int t = 0; t < mesh.numTets(); ++t)
+    for (int k = 0; k < 4; ++k) tet_omega.row(t) += 0.25 * omega.row(mesh.tets(t, k));
+  return model.blendedRegionValue("stiffness_scale", tet_omega, betas);
 }
 
 TetMaterials computeTetMaterials(const TetMesh& mesh, const MatX3& shaped_nodes,
@@ -548,6 +672,7 @@ TetMaterials computeTetMaterials(const TetMesh& mesh, const MatX3& shaped_nodes,
   }
 
   TetMaterials out;
+  out.tissue_stiffness_scale = tetTissueStiffnessScale(mesh, node_weights, model, betas);
   out.density.resize(nt);
   out.young.resize(nt, 3);
   out.poisson.resize(nt, 3);
@@ -557,7 +682,7 @@ TetMaterials computeTetMaterials(const TetMesh& mesh, const MatX3& shaped_nodes,
   out.layer.resize(nt);
   out.skin_fraction.resize(nt);
   const Layer& skin = layers[MaterialModel::kSkin];
-  const Layer& tissue = layers[MaterialModel::kSoftTissue];
+  const Layer& reference_tissue = layers[MaterialModel::kSoftTissue];
 #pragma omp parallel for schedule(static)
   for (int t = 0; t < nt; ++t) {
     Vec3 centroid = Vec3::Zero();
@@ -578,6 +703,14 @@ TetMaterials computeTetMaterials(const TetMesh& mesh, const MatX3& shaped_nodes,
       outward = (b - a).cross(c - a);
     }
     out.frame[t] = tissueFrame(-outward, axes[dominant]);
+
+    // The soft-tissue layer of this tet's body region: moduli scaled, ν unchanged (a positive
+    // multiple of a positive-definite stiffness).
+    Layer tissue = reference_tissue;
+    const double k = out.tissue_stiffness_scale[t];
+    tissue.young *= k;
+    tissue.shear *= k;
+    tissue.normal_stiffness *= k;
 
     const double f = skinFraction(boundary_area[t], volume[t], skin_thickness);
     out.skin_fraction[t] = f;

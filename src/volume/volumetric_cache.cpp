@@ -192,8 +192,10 @@ void readDataCacheArrays(const io::NpzFile& f, const VecX& betas, VolumetricData
   }
 
   // Density, Fung exponent and shear moduli mix the two layers' coefficients linearly in the
-  // skin fraction; Young's moduli and Poisson ratios come from the mixed stiffness tensor, so
-  // they are only checked for a physical (positive-definite) compliance.
+  // skin fraction, the soft tissue's moduli scaled by the tet's body-region factor (recomputed
+  // from the template's weights, not stored); Young's moduli and Poisson ratios come from the
+  // mixed stiffness tensor, so they are only checked for a physical (positive-definite)
+  // compliance.
   m.density = f.vector("density", T);
   m.fung = f.vector("fung", T);
   m.young = f.matrix("young", T, 3);
@@ -208,11 +210,14 @@ void readDataCacheArrays(const io::NpzFile& f, const VecX& betas, VolumetricData
                                    value("G12", tissue), value("G13", tissue),
                                    value("G23", tissue)};
   const char* keys[5] = {"density", "fung", "shear", "shear", "shear"};
+  m.tissue_stiffness_scale = tetTissueStiffnessScale(mesh, weights, model, betas);
   for (long t = 0; t < T; ++t) {
     const double s = m.skin_fraction[t];
     const double stored[5] = {m.density[t], m.fung[t], m.shear(t, 0), m.shear(t, 1), m.shear(t, 2)};
     for (int k = 0; k < 5; ++k) {
-      const double expected = s * skin_values[k] + (1 - s) * tissue_values[k];
+      const double tissue_value =
+          k >= 2 ? m.tissue_stiffness_scale[t] * tissue_values[k] : tissue_values[k];
+      const double expected = s * skin_values[k] + (1 - s) * tissue_value;
       if (!close(stored[k], expected))
         throw InputError(keyOf(f, keys[k]) + ": tet " + std::to_string(t) + ": " + str(stored[k]) +
                          ", expected " + str(expected) +

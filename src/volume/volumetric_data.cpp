@@ -63,9 +63,10 @@ std::string dataKey(const std::string& template_key, const VecX& betas,
   h.update("flsh volumetric data");
   const int version = AvatarCache::kFormatVersion;
   h.updateField("version", &version, sizeof(version));
-  // Revision of the shape-level rules (2: bones with too few deep nodes get anchor nodes),
-  // so that data cached under an older rule is rebuilt rather than reused.
-  const int rules = 2;
+  // Revision of the shape-level rules (2: bones with too few deep nodes get anchor nodes; 3:
+  // tissue thickness and soft-tissue stiffness depend on the body region), so that data cached
+  // under an older rule is rebuilt rather than reused.
+  const int rules = 3;
   h.updateField("shape rules", &rules, sizeof(rules));
   h.update(template_key);
   h.updateMatrix("betas", betas);

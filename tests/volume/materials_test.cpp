@@ -57,14 +57,19 @@ TEST(MaterialModel, DefaultsArePlausibleHumanTissue) {
   }
   // Fewer shape components: the same values at β = 0, slopes truncated.
   EXPECT_EQ(MaterialModel::defaults(1).value("E1", kTissue, VecX()), m.value("E1", kTissue, zero));
-  EXPECT_EQ(MaterialModel::defaults(0).numParameters(), 24);
+  // 22 layered + 2 body + 8 regions × 2 coefficients (issue 29's body regions).
+  EXPECT_EQ(MaterialModel::defaults(0).numParameters(), 40);
 }
 
 TEST(MaterialModel, LogLinearValueAndGradient) {
   MaterialModel m = MaterialModel::defaults(10);
   const VecX betas = test::randomVector(10, 1.5, 4);
   for (const auto& [q, layer] : std::vector<std::pair<std::string, int>>{
-           {"E1", kTissue}, {"nu23", kSkin}, {"skin_thickness", kBody}}) {
+           {"E1", kTissue},
+           {"nu23", kSkin},
+           {"skin_thickness", kBody},
+           {"tissue_scale", MaterialModel::regionLevel(3)},
+           {"stiffness_scale", MaterialModel::regionLevel(7)}}) {
     EXPECT_EQ(m.value(q, layer, VecX::Zero(10)), m.baseValue(q, layer));
     EXPECT_NEAR(m.value(q, layer, betas),
                 m.baseValue(q, layer) * std::exp(m.logSlopes(q, layer).dot(betas)),
@@ -186,8 +191,8 @@ TEST(MaterialModel, MalformedFilesAreRejectedWithClearMessages) {
   // A non-zero slope beyond the body's components: the default β₁ slope with a 1-β body.
   m = loadError("slopes_size", "\"format\"", "\"format\"", 1);
   EXPECT_NE(m.find("non-zero one at index 1"), std::string::npos) << m;
-  m = loadError("version", "\"version\": 1", "\"version\": 2");
-  EXPECT_NE(m.find("version: expected 1"), std::string::npos) << m;
+  m = loadError("version", "\"version\": 2", "\"version\": 3");
+  EXPECT_NE(m.find("version: expected 2"), std::string::npos) << m;
   m = loadError("json", "{", "{{");
   EXPECT_NE(m.find("not valid JSON"), std::string::npos) << m;
   const std::string missing = test::freshTempDir("materials_missing") + "/none.json";

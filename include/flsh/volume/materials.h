@@ -22,6 +22,9 @@ class MaterialModel {
   static constexpr int kSoftTissue = 1;  ///< layer index of the tissue below the skin
   static constexpr int kNumLayers = 2;
   static constexpr int kBodyLevel = -1;  ///< "layer" of the body-level quantities
+  /// "Layer" of body region r's quantities: kFirstRegion + r, r in [0, numRegions()).
+  static constexpr int kFirstRegion = 10;
+  static int regionLevel(int region) { return kFirstRegion + region; }
 
   /// Layered quantities, in file and parameter order: density (kg/m³); Young's moduli E1, E2,
   /// E3 (Pa) along a1 (bone direction), a2 (around the limb), a3 (inward normal); Poisson ratios
@@ -33,6 +36,23 @@ class MaterialModel {
   static const std::vector<std::string>& bodyQuantities();
   /// "skin", "soft_tissue".
   static const std::vector<std::string>& layerNames();
+  /// Body regions (docs/materials.md, "Body regions"), in parameter order: torso, thighs, shins,
+  /// feet, head, upper_arms, forearms, hands.
+  static const std::vector<std::string>& regionNames();
+  static int numRegions() { return int(regionNames().size()); }
+  /// Region quantities, in parameter order: tissue_scale (multiplies tissue_fraction) and
+  /// stiffness_scale (multiplies the soft-tissue layer's Young's and shear moduli); both
+  /// dimensionless, > 0.
+  static const std::vector<std::string>& regionQuantities();
+  /// Region of an SMPL bone (joint index; the 24 bones of SMPL's kinematic tree): pelvis, spine
+  /// and collars → torso, hips → thighs, knees → shins, ankles and toes → feet, neck and head →
+  /// head, shoulders → upper_arms, elbows → forearms, wrists and hands → hands. Bones beyond 23
+  /// (other skeletons) → torso. InputError for a negative bone.
+  static int regionOfBone(int bone);
+  /// Region weights of points with skinning weights `bone_weights` (#rows × B, rows ≥ 0 summing
+  /// to 1): ω_r = Σ_{b in region r} w_b, #rows × numRegions(), rows sum to 1. As smooth as the
+  /// skinning weights.
+  static MatX regionWeights(const MatX& bone_weights);
 
   /// Plausible human defaults (docs/materials.md) for a body with num_betas shape components
   /// (log-slopes only on β₀ and β₁; zero beyond). data/materials/default.json holds the same
@@ -58,15 +78,23 @@ class MaterialModel {
   int numBetas() const { return num_betas_; }
 
   /// c(β) of a quantity: layer kSkin / kSoftTissue for layered quantities, kBodyLevel for body
-  /// quantities. β may be shorter than numBetas() (zero padded), not longer. InputError on an
-  /// unknown quantity, a wrong layer or a bad β.
+  /// quantities, regionLevel(r) for region quantities. β may be shorter than numBetas() (zero
+  /// padded), not longer. InputError on an unknown quantity, a wrong layer or a bad β.
   double value(const std::string& quantity, int layer, const VecX& betas) const;
+  /// A region quantity blended at points with region weights ω (#rows × numRegions(), from
+  /// regionWeights): s = exp(Σ_r ω_r log s_r(β)) per row, a weighted geometric mean, so that
+  /// log s stays linear in every coefficient's (a, b) (∂ log s / ∂a_r = ω_r, ∂ log s / ∂b_r =
+  /// ω_r β) and smooth wherever the weights are. InputError on shapes, a non-region quantity or
+  /// a bad β.
+  VecX blendedRegionValue(const std::string& quantity, const MatX& region_weights,
+                          const VecX& betas) const;
   /// d c(β) / d(a, b) (1 + K values): c(β) · [1, β] (β zero padded to K).
   VecX valueGradient(const std::string& quantity, int layer, const VecX& betas) const;
 
   /// All coefficients as one vector for fitting: per coefficient (layered quantities for skin,
-  /// then soft tissue, then body quantities, each in the order above) a = log c₀ followed by its
-  /// K log-slopes b. numParameters() = (2·11 + 2)(1 + K).
+  /// then soft tissue, then body quantities, then region quantities region by region, each in
+  /// the order above) a = log c₀ followed by its K log-slopes b.
+  /// numParameters() = (2·11 + 2 + 8·2)(1 + K).
   VecX parameters() const;
   /// Inverse of parameters(); then validates like load() (InputError naming "parameters").
   void setParameters(const VecX& parameters);
@@ -82,7 +110,7 @@ class MaterialModel {
 
   /// Throws InputError (prefixed by `origin`) unless every coefficient is finite and positive,
   /// the Poisson ratios are < 0.5, each layer's orthotropic compliance at β (or β = 0 when
-  /// empty) is positive definite and tissue_fraction < 1.
+  /// empty) is positive definite and tissue_fraction × every region's tissue_scale is < 1.
   void validate(const std::string& origin, const VecX& betas = VecX()) const;
 
   bool operator==(const MaterialModel& other) const;
@@ -95,7 +123,8 @@ class MaterialModel {
   };
   int index(const std::string& quantity, int layer) const;  // into coefficients_
   int num_betas_ = 0;
-  std::vector<Coefficient> coefficients_;  ///< layered (skin, soft tissue), then body-level
+  /// layered (skin, soft tissue), then body-level, then per region its region quantities
+  std::vector<Coefficient> coefficients_;
 };
 
 /// Materials of every tet of the body at one β.
@@ -118,6 +147,10 @@ struct TetMaterials {
   /// tet's frame, converted back to E, ν, G. A tet with fraction 0 (1) has the soft-tissue
   /// (skin) coefficients exactly.
   VecX skin_fraction;
+  /// #T: the factor on the soft-tissue layer's Young's and shear moduli in this tet (before the
+  /// skin mixture): the regions' stiffness_scale blended at the mean of the tet's four node
+  /// weights (MaterialModel::blendedRegionValue). Empty in data built before body regions.
+  VecX tissue_stiffness_scale;
 };
 
 /// Per-tet materials of the body shape β:
@@ -136,8 +169,16 @@ TetMaterials computeTetMaterials(const TetMesh& mesh, const MatX3& shaped_nodes,
                                  const std::vector<int>& parents, const MaterialModel& model,
                                  const VecX& betas);
 
-/// Local soft-tissue thickness per surface vertex (V, m): tissue_fraction(β) × the local body
-/// radius, the distance of the vertex to its dominant bone's axis segment (fitBoneCapsules).
+/// Per tet (#T) the factor on the soft-tissue layer's moduli: the regions' stiffness_scale at β
+/// blended (MaterialModel::blendedRegionValue) at the mean of the tet's four rows of
+/// node_weights (#N × B). Throws InputError on shapes.
+VecX tetTissueStiffnessScale(const TetMesh& mesh, const MatX& node_weights,
+                             const MaterialModel& model, const VecX& betas);
+
+/// Local soft-tissue thickness per surface vertex (V, m): tissue_fraction(β) × the regions'
+/// tissue_scale blended at the vertex's skinning weights (MaterialModel::blendedRegionValue) ×
+/// the local body radius, the distance of the vertex to its dominant bone's axis segment
+/// (fitBoneCapsules).
 ///   surface_vertices: V × 3 shaped rest vertices (m), surface_weights: V × B, joints: B × 3,
 ///   parents: B.
 VecX surfaceTissueThickness(const MatX3& surface_vertices, const MatX& surface_weights,

@@ -34,11 +34,14 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
+#include "flsh/volume/materials.h"
 
 namespace {
 
@@ -49,11 +52,23 @@ struct Region {
   std::vector<int> bones;
 };
 
+// The material's regions (MaterialModel::regionOfBone) in the order and with the labels of the
+// tables in docs/benchmarks.md.
 const std::vector<Region>& regions() {
-  static const std::vector<Region> r = {
-      {"hands", {20, 21, 22, 23}}, {"forearms", {18, 19}},          {"upper arms", {16, 17}},
-      {"head", {12, 15}},          {"torso", {0, 3, 6, 9, 13, 14}}, {"thighs", {1, 2}},
-      {"shins", {4, 5}},           {"feet", {7, 8, 10, 11}}};
+  static const std::vector<Region> r = [] {
+    const std::pair<const char*, const char*> shown[] = {
+        {"hands", "hands"}, {"forearms", "forearms"}, {"upper arms", "upper_arms"},
+        {"head", "head"},   {"torso", "torso"},       {"thighs", "thighs"},
+        {"shins", "shins"}, {"feet", "feet"}};
+    const std::vector<std::string>& names = MaterialModel::regionNames();
+    std::vector<Region> out;
+    for (const auto& [label, region] : shown) {
+      out.push_back({label, {}});
+      for (int b = 0; b < kNumJoints; ++b)
+        if (names[size_t(MaterialModel::regionOfBone(b))] == region) out.back().bones.push_back(b);
+    }
+    return out;
+  }();
   return r;
 }
 

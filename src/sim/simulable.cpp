@@ -57,7 +57,6 @@ BoneStates bonesFromPose(const Eigen::Ref<const VecX>& pose, const Vec3& trans, 
   return s;
 }
 
-using detail::addBlock;
 
 std::string motionName(const Motion& m) {
   return m.source.empty() ? std::string("mocap") : "mocap '" + m.source + "'";

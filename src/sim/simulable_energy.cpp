@@ -1,5 +1,5 @@
-// Simulable: the energy, gradient and Hessian as sums of its terms (and, with soft tissue, of
-// SoftTissue's node terms), and the scene hooks.
+// Simulable: the energy, gradient and Hessian as sums of its terms (with soft tissue: the bones'
+// springs and SoftTissue's node terms), and the scene hooks.
 #include <omp.h>
 
 #include <algorithm>
@@ -238,12 +238,17 @@ void Simulable::fixMatrixKinematic(std::vector<Triplet>& H, int offset) const {
 
 std::vector<const EnergyTerm*> Simulable::energyTerms() const {
   const Impl& m = *impl_;
-  return m.soft ? m.spring_terms : m.terms;
+  if (!m.soft) return m.terms;
+  std::vector<const EnergyTerm*> terms = m.spring_terms;
+  for (const EnergyTerm* term : m.soft->terms()) terms.push_back(term);
+  return terms;
 }
 
 TermContext Simulable::termContext() const {
-  impl_->ensureContact();
-  return impl_->context();
+  const Impl& m = *impl_;
+  m.ensureContact();
+  if (m.soft) m.prepareSoft();
+  return m.context();
 }
 
 // ---- scene hooks -------------------------------------------------------------------------

@@ -5,14 +5,14 @@
 #include <omp.h>
 
 #include <Eigen/Eigenvalues>
-#include <Eigen/SparseCholesky>
 #include <Eigen/Geometry>
+#include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
-#include <exception>
 #include <cstdio>
+#include <exception>
 #include <random>
 #include <string>
 #include <vector>
@@ -20,7 +20,8 @@
 #include "core/first_failure.h"
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
-#include "flsh/sim/fem_material.h"
+#include "flsh/energy/fem_material.h"
+#include "flsh/volume/material_point.h"
 #include "flsh/volume/volume_fields.h"
 
 namespace flsh {

@@ -314,11 +314,13 @@ class Simulable {
 
   // ---- energy terms (energy_term.h) ---------------------------------------------------------
   /// The terms whose sum is the articulated skeleton's energy: rigid inertia (the dynamic part),
-  /// bone gravity, joint springs, tracking and root springs, collider contact. With soft tissue,
-  /// the bones' joint and tracking springs (SoftTissue carries the node terms, not yet as
-  /// EnergyTerms). Owned by the simulable.
+  /// bone gravity, joint springs, tracking and root springs, collider contact. With soft tissue
+  /// (FEM or ROM): the bones' joint and tracking springs, then the node terms — nodal inertia,
+  /// nodal gravity, elasticity, node contact — that read the soft kinematics (their parameter
+  /// products are not written yet: the soft-tissue adjoint is issue 25). Owned by the simulable.
   std::vector<const EnergyTerm*> energyTerms() const;
-  /// The view the terms read at the current state, with contact up to date. Its references
+  /// The view the terms read at the current state, with contact (and the soft kinematics) up to
+  /// date. Its references
   /// are the simulable's: valid until the state, a parameter or the colliders change.
   TermContext termContext() const;
 

@@ -83,7 +83,7 @@ struct ReducedData {
   ///   E(z) = ½ zᵀ K z + Σ_{e∈S} f_e,  f_e = w_e (Ψ_e − q_e) bounded below by −c_e q_e,
   /// q_e = ½ zᵀ K̃_e z the tet's own rest quadratic. Small deformations (gravity's sag, small
   /// jiggle) thus get the exact stiffness whatever tets the cubature drew. The simulable sets the
-  /// floors c_e = 1 + s w_e once (restSplitFloors in flsh/sim/fem_material.h) so that
+  /// floors c_e = 1 + s w_e once (restSplitFloors in flsh/energy/fem_material.h) so that
   /// Σ_S c_e K̃_e ≼ ½ K: E ≥ ½ · ½ zᵀ K z in every state. Empty without the elastic cubature.
   MatX elastic_rest_stiffness;
   /// Inertial cubature, same conventions (kinetic energy).

@@ -1,7 +1,7 @@
 // The FEM material kernel (orthotropic StVK with Fung saturation) against closed forms and
 // central finite differences, at random, nearly flat, inverted and very large deformations,
 // for several Fung exponents and random material frames.
-#include "flsh/sim/fem_material.h"
+#include "flsh/energy/fem_material.h"
 
 #include <gtest/gtest.h>
 
@@ -172,47 +172,6 @@ TEST(FemMaterialPoint, WorldStiffnessGivesTheFrameEnergy) {
     ASSERT_GT(expected, 0.0);
     EXPECT_NEAR(psiOf(F, m), expected, 1e-12 * expected);
   }
-}
-
-TEST(FemMaterialPoint, BuiltFromATetMaterialsRow) {
-  Random random(4);
-  TetMaterials materials;
-  materials.young.resize(2, 3);
-  materials.poisson.resize(2, 3);
-  materials.shear.resize(2, 3);
-  materials.fung.resize(2);
-  materials.young << kSkinYoung.transpose(), kTissueYoung.transpose();
-  materials.poisson << kSkinPoisson.transpose(), kTissuePoisson.transpose();
-  materials.shear << kSkinShear.transpose(), kTissueShear.transpose();
-  materials.fung << 8.0, 3.0;
-  materials.frame = {random.rotation(), random.rotation()};
-  const FemMaterialPoint m = femMaterialPoint(materials, 1);
-  EXPECT_LT((m.C - orthotropicStiffness(kTissueYoung, kTissuePoisson, kTissueShear))
-                .cwiseAbs()
-                .maxCoeff(),
-            1e-9);
-  EXPECT_EQ(m.frame, materials.frame[1]);
-  EXPECT_DOUBLE_EQ(m.modulus, kTissueYoung.sum() / 3.0);
-  EXPECT_EQ(m.gamma, 3.0);
-
-  const std::string range = messageOf<InputError>([&] { femMaterialPoint(materials, 2); });
-  EXPECT_NE(range.find("tet 2"), std::string::npos) << range;
-  EXPECT_NE(range.find("young"), std::string::npos) << range;
-
-  TetMaterials bad_frame = materials;
-  bad_frame.frame[0] = 2.0 * Mat3::Identity();
-  const std::string frame = messageOf<InputError>([&] { femMaterialPoint(bad_frame, 0); });
-  EXPECT_NE(frame.find("tet 0"), std::string::npos) << frame;
-  EXPECT_NE(frame.find("orthonormal"), std::string::npos) << frame;
-
-  TetMaterials reflected = materials;
-  reflected.frame[0] = -Mat3::Identity();
-  EXPECT_THROW(femMaterialPoint(reflected, 0), InputError);
-
-  TetMaterials bad_gamma = materials;
-  bad_gamma.fung[1] = -1.0;
-  const std::string gamma = messageOf<InputError>([&] { femMaterialPoint(bad_gamma, 1); });
-  EXPECT_NE(gamma.find("gamma"), std::string::npos) << gamma;
 }
 
 TEST(FungEnergyDensity, StressAndTangentMatchFiniteDifferences) {
@@ -588,8 +547,10 @@ TEST(ReducedTetElement, IsTheTetChainedThroughTheBasis) {
         EXPECT_NEAR(Ez, E, 1e-9 * E);  // Z Φᵀ reproduces U to rounding only
         const VecX g_expected = P.transpose() * g;
         const MatX h_expected = P.transpose() * h * P;
-        EXPECT_LT((gz - g_expected).cwiseAbs().maxCoeff(), 1e-10 * g_expected.cwiseAbs().maxCoeff());
-        EXPECT_LT((hz - h_expected).cwiseAbs().maxCoeff(), 1e-10 * h_expected.cwiseAbs().maxCoeff());
+        EXPECT_LT((gz - g_expected).cwiseAbs().maxCoeff(),
+                  1e-10 * g_expected.cwiseAbs().maxCoeff());
+        EXPECT_LT((hz - h_expected).cwiseAbs().maxCoeff(),
+                  1e-10 * h_expected.cwiseAbs().maxCoeff());
         EXPECT_LT((hz - hz.transpose()).cwiseAbs().maxCoeff(), 1e-12 * hz.cwiseAbs().maxCoeff());
       }
     }
@@ -659,9 +620,8 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
     MatX hessian(3 * n, 3 * n);
     Eigen::Ref<VecX> g_view = gradient;
     Eigen::Ref<MatX> h_view = hessian;
-    const double psi = reducedTetElasticEnergy(rest.volume, m, G, unflat(z),
-                                               g || H ? &g_view : nullptr, H ? &h_view : nullptr,
-                                               psd);
+    const double psi = reducedTetElasticEnergy(
+        rest.volume, m, G, unflat(z), g || H ? &g_view : nullptr, H ? &h_view : nullptr, psd);
     const double f = restSplitExcess(psi, z, K, w, g || H ? &g_view : nullptr,
                                      H ? &h_view : nullptr, psd, bounded, lowest);
     if (g) *g = gradient;
@@ -688,14 +648,14 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
     bool bounded;
     double lowest;  // the floor c: f ≥ −c q
   };
-  for (const Case& c : {Case{"moderate, w = 1", moderate, 1.0, false, 2.0},
-                        Case{"moderate, w = 200", moderate, 200.0, false, 2.0},
-                        Case{"compressed, w = 1", compressed, 1.0, false, 2.0},
-                        Case{"compressed, heavy", compressed, 2.5 / x_unit, true, 2.0},
-                        Case{"compressed, heavy, floor 1.5", compressed, 2.5 / x_unit, true, 1.5},
-                        // restSplitFloors' floors grow with the weight (1 + s w).
-                        Case{"compressed, heavy, floor 25", compressed, 2.5 / x_unit, true,
-                             25.0}}) {
+  for (const Case& c :
+       {Case{"moderate, w = 1", moderate, 1.0, false, 2.0},
+        Case{"moderate, w = 200", moderate, 200.0, false, 2.0},
+        Case{"compressed, w = 1", compressed, 1.0, false, 2.0},
+        Case{"compressed, heavy", compressed, 2.5 / x_unit, true, 2.0},
+        Case{"compressed, heavy, floor 1.5", compressed, 2.5 / x_unit, true, 1.5},
+        // restSplitFloors' floors grow with the weight (1 + s w).
+        Case{"compressed, heavy, floor 25", compressed, 2.5 / x_unit, true, 25.0}}) {
     SCOPED_TRACE(c.name);
     const Mat3X Z = c.U * right;
     const VecX z = Eigen::Map<const VecX>(Z.data(), Z.size());
@@ -822,10 +782,10 @@ TEST(ReducedTetElement, RestSplitFloorsKeepTheAskedShareOfTheRestStiffness) {
   }
   // The unweighted samples hold more than 1 − α of K: every floor max(1.05, 0.95 / λ₁).
   const MatX K_small = unit + 0.2 * MatX::Identity(m, m);
-  const double lambda_small = Eigen::GeneralizedSelfAdjointEigenSolver<MatX>(
-                                  unit, K_small, Eigen::EigenvaluesOnly)
-                                  .eigenvalues()
-                                  .maxCoeff();
+  const double lambda_small =
+      Eigen::GeneralizedSelfAdjointEigenSolver<MatX>(unit, K_small, Eigen::EigenvaluesOnly)
+          .eigenvalues()
+          .maxCoeff();
   ASSERT_GT(lambda_small, 1.0 - alpha);
   const VecX fallback = restSplitFloors(K_small, unit, weighted, weights, alpha);
   for (int e = 0; e < count; ++e)
@@ -837,11 +797,13 @@ TEST(ReducedTetElement, RestSplitFloorsKeepTheAskedShareOfTheRestStiffness) {
             std::string::npos);
   VecX bad = weights;
   bad[3] = 0.0;
-  EXPECT_NE(messageOf<InputError>([&] { restSplitFloors(K, unit, weighted, bad); })
-                .find("weights[3] = 0"),
+  EXPECT_NE(messageOf<InputError>([&] {
+              restSplitFloors(K, unit, weighted, bad);
+            }).find("weights[3] = 0"),
             std::string::npos);
-  EXPECT_NE(messageOf<InputError>([&] { restSplitFloors(K, unit, weighted, weights, 1.0); })
-                .find("kept (α) must be in (0, 1)"),
+  EXPECT_NE(messageOf<InputError>([&] {
+              restSplitFloors(K, unit, weighted, weights, 1.0);
+            }).find("kept (α) must be in (0, 1)"),
             std::string::npos);
   EXPECT_NE(messageOf<InputError>([&] {
               restSplitFloors(-K, unit, weighted, weights);
@@ -873,8 +835,9 @@ TEST(ReducedTetElement, SizeMismatchAndNonFiniteInputAreInputErrors) {
             std::string::npos);
   Mat3X nan = Z;
   nan(1, 2) = NAN;
-  EXPECT_NE(messageOf<InputError>([&] { reducedTetElasticEnergy(rest.volume, m, G, nan); })
-                .find("non-finite"),
+  EXPECT_NE(messageOf<InputError>([&] {
+              reducedTetElasticEnergy(rest.volume, m, G, nan);
+            }).find("non-finite"),
             std::string::npos);
   // At Z = 0 the tet is at rest: zero energy and gradient.
   VecX g(9);

@@ -1,6 +1,9 @@
 // Elastic kernel of the FEM soft skeleton (ARCHITECTURE.md §4): orthotropic St. Venant–Kirchhoff
 // with Fung saturation, per material point and per linear tet, as pure functions on fixed-size
-// Eigen types (no heap). The simulable assembles them per tet; the adjoint reuses them.
+// Eigen types (no heap). The energy layer (below volume/ and sim/): it knows no avatar; a tet's
+// material point comes from its coefficients (makeFemMaterialPoint, or femMaterialPoint in
+// flsh/volume/material_point.h from an avatar's TetMaterials). The simulable's elastic terms
+// assemble them per tet; the ROM's precomputation and the adjoint reuse them.
 //
 // Conventions.
 // - F (3 × 3) deformation gradient, E = ½(FᵀF − I) Green strain, A (3 × 3, columns a1 a2 a3,
@@ -27,7 +30,6 @@
 #include <Eigen/Core>
 
 #include "flsh/core/types.h"
-#include "flsh/volume/materials.h"
 
 namespace flsh {
 
@@ -77,11 +79,6 @@ struct FemMaterialPoint {
 /// with det +1 (tolerance 1e-6) or γ not finite and ≥ 0.
 FemMaterialPoint makeFemMaterialPoint(const Vec3& young, const Vec3& poisson, const Vec3& shear,
                                       const Mat3& frame, double gamma);
-
-/// Material point of tet t of `materials` (rows young/poisson/shear/fung/frame at t).
-/// InputError if t is out of range of any of these arrays, or as makeFemMaterialPoint (the
-/// message names the tet).
-FemMaterialPoint femMaterialPoint(const TetMaterials& materials, int t);
 
 /// Energy density Ψ(F) (Pa = J/m³). When not null: P (3 × 3, Pa) = ∂Ψ/∂F = F S with S the second
 /// Piola–Kirchhoff stress; dPdF (9 × 9, Pa) = ∂vec(P)/∂vec(F).

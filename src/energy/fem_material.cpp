@@ -1,4 +1,4 @@
-#include "flsh/sim/fem_material.h"
+#include "flsh/energy/fem_material.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -193,27 +193,6 @@ FemMaterialPoint makeFemMaterialPoint(const Vec3& young, const Vec3& poisson, co
   return material;
 }
 
-FemMaterialPoint femMaterialPoint(const TetMaterials& materials, int t) {
-  const std::string where = "femMaterialPoint: tet " + std::to_string(t);
-  const auto check = [&](long size, const char* field) {
-    if (t < 0 || t >= size)
-      throw InputError(where + ": TetMaterials." + field + " has " + std::to_string(size) +
-                       " rows, expected more than " + std::to_string(t));
-  };
-  check(materials.young.rows(), "young");
-  check(materials.poisson.rows(), "poisson");
-  check(materials.shear.rows(), "shear");
-  check(materials.fung.size(), "fung");
-  check(static_cast<long>(materials.frame.size()), "frame");
-  try {
-    return makeFemMaterialPoint(
-        materials.young.row(t).transpose(), materials.poisson.row(t).transpose(),
-        materials.shear.row(t).transpose(), materials.frame[t], materials.fung[t]);
-  } catch (const InputError& e) {
-    throw InputError(where + ": " + e.what());
-  }
-}
-
 // Inversion guard (fem_material.h): ∂J/∂F = cof(F), columns f1 × f2, f2 × f0, f0 × f1;
 // ∂²J/∂F_ki∂F_lj = ε_klm ε_ijn F_mn.
 Mat3 cofactor(const Mat3& F) {
@@ -342,8 +321,7 @@ double gradientFormEnergy(double volume, const FemMaterialPoint& material, const
     } else {
       for (int j = 0; j < 3 * n; ++j)
         for (int i = 0; i <= j; ++i) {
-          const double value =
-              B.col(i).template head<6>().dot(psi_ee_B.col(j).template head<6>());
+          const double value = B.col(i).template head<6>().dot(psi_ee_B.col(j).template head<6>());
           (*hessian)(i, j) = value;
           (*hessian)(j, i) = value;
         }
@@ -438,8 +416,10 @@ double splitExcess(double psi, const Eigen::Ref<const VecX>& z,
   if (bounded) *bounded = x > 1.0;
   if (x <= 1.0) {
     if (hessian) {
-      if (psd) (*hessian) *= weight;  // w H_psd: PSD (subtracting K̃ would make it indefinite)
-      else (*hessian) = weight * ((*hessian) - rest_hessian);
+      if (psd)
+        (*hessian) *= weight;  // w H_psd: PSD (subtracting K̃ would make it indefinite)
+      else
+        (*hessian) = weight * ((*hessian) - rest_hessian);
     }
     if (gradient) (*gradient) = weight * ((*gradient) - b);
     return weight * r;
@@ -455,8 +435,10 @@ double splitExcess(double psi, const Eigen::Ref<const VecX>& z,
     if (hessian) {
       // PSD form: f_r H_psd (f_r > 0) and the rank-one term; f_q ≤ 0 here, so its K̃ term and
       // f_r's −K̃ (both negative semi-definite) are dropped.
-      if (psd) (*hessian) *= f_r;
-      else (*hessian) = f_r * ((*hessian) - rest_hessian) + f_q * rest_hessian;
+      if (psd)
+        (*hessian) *= f_r;
+      else
+        (*hessian) = f_r * ((*hessian) - rest_hessian) + f_q * rest_hessian;
       hessian->noalias() += (decay / ((lowest - 1.0) * q)) * v * v.transpose();
     }
     (*gradient) = f_r * ((*gradient) - b) + f_q * b;

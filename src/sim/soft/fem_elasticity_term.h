@@ -1,0 +1,36 @@
+// The FEM soft skeleton's elastic energy (ARCHITECTURE.md §4): Σ_e w_e Ψ_e(F_e) over the elastic
+// elements, F_e from the nodal displacements of the tet (fem_material.h: orthotropic StVK with
+// Fung saturation). It depends on u alone (the tissue's deformation in the unposed frame), so its
+// Hessian is one 3 × 3 block per pair of soft nodes sharing a tet, at positions fixed at
+// construction. Private to Simulable.
+#pragma once
+
+#include <utility>
+#include <vector>
+
+#include "sim/soft/elastic_elements.h"
+
+namespace flsh::detail {
+
+class FemElasticityTerm final : public ElasticityTerm {
+ public:
+  FemElasticityTerm(const SoftKinematics& kinematics, ElasticElements elements);
+  using ElasticityTerm::evaluate;
+  /// `blocks` (may be null): the node-pair blocks are returned through it (positions fixed,
+  /// column-major) instead of appended to H.
+  double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                  FixedHessianBlocks* blocks = nullptr) const override;
+
+ private:
+  ElasticElements elements_;
+  // One 3 × 3 block ∂²E/∂u_row∂u_col per pair of soft nodes sharing a tet, at block_dofs_ (row,
+  // column DoF relative to the simulable's first DoF; column-major order); element e's local
+  // block (a, b) adds into block tet_block_[16 e + 4 a + b] (−1: a bone node).
+  std::vector<int> tet_block_;
+  std::vector<std::pair<int, int>> block_dofs_;
+  mutable std::vector<Vec12> element_gradients_;
+  mutable std::vector<Mat12> element_hessians_;
+  mutable std::vector<Mat3> blocks_;
+};
+
+}  // namespace flsh::detail

@@ -1,0 +1,86 @@
+#include "sim/soft/nodal_gravity_term.h"
+
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/core/rotation.h"
+
+namespace flsh::detail {
+
+NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses)
+    : kin_(kinematics), masses_(masses) {
+  if (!kin_.reduced()) return;
+  const int bones = kin_.numBones(), H = kin_.numHandles();
+  std::vector<double> D(size_t(bones) * H, 0.0);
+  for (int j : masses_.nodes)
+    for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf)
+      for (auto* phi = kin_.basisBegin(j); phi != kin_.basisEnd(j); ++phi)
+        D[size_t(inf->bone) * H + phi->first] += masses_.mass[j] * inf->weight * phi->second;
+  for (int b = 0; b < bones; ++b)
+    for (int h = 0; h < H; ++h)
+      if (D[size_t(b) * H + h] != 0.0)
+        handle_blocks_.push_back({kin_.bzSlot(2 * b + 1, h), b, D[size_t(b) * H + h]});
+}
+
+void NodalGravityTerm::addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
+                                  bool psd) const {
+  kin_.beginReduced(1);
+  evaluate(c.options.gravity, nullptr, &H, offset, psd);
+  kin_.flushReduced(1, H, offset);
+}
+
+double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
+                                  bool psd, FixedHessianBlocks* blocks) const {
+  const std::vector<int>& nodes = masses_.nodes;
+  const MatX3& x = kin_.x();
+  double E = 0.0;
+  forces_.resize(nodes.size());
+  for (size_t idx = 0; idx < nodes.size(); ++idx) {
+    const int j = nodes[idx];
+    E -= masses_.mass[j] * gravity.dot(x.row(j).transpose());
+    forces_[idx] = -masses_.mass[j] * gravity;
+  }
+  if (g) kin_.mapForces(nodes, forces_, *g, offset);
+  if (H && kin_.reduced()) {
+    reducedHessian(gravity, *H, offset, psd);
+  } else if (H) {
+    kin_.mapHessian(nodes, nullptr, &forces_, *H, offset, psd, 1, blocks ? &fixed_ : nullptr);
+    if (blocks) *blocks = {&kin_.couplingPositions(), &fixed_, offset};
+  }
+  return E;
+}
+
+void NodalGravityTerm::reducedHessian(const Vec3& gravity, std::vector<Triplet>& H, int offset,
+                                      bool psd) const {
+  // The node forces f_j = −m_j g are constant, so mapHessian's per-node sums collapse to per-bone
+  // ones: the rotation curvature Σ_j w_jb C(f_j, R_b (Y_j − J_b)) = C(−g, R_b v_b) with v_b =
+  // Σ_j m_j w_jb (Y_j − J_b) (C is bilinear), and, in the exact form, the rotation–handle blocks
+  // Σ_j −w_jb φ_jh [f_j]× R_b = D_bh [g]× R_b (D_bh constant).
+  const std::vector<Mat3>& R = kin_.R();
+  const MatX3& Y = kin_.Y();
+  const int bones = kin_.numBones();
+  Vec3 v[kNumJoints];
+  double mass[kNumJoints];
+  for (int b = 0; b < bones; ++b) {
+    v[b].setZero();
+    mass[b] = 0.0;
+  }
+  for (int j : masses_.nodes) {
+    const Vec3 Yj = Y.row(j).transpose();
+    for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf) {
+      const double mw = masses_.mass[j] * inf->weight;
+      v[inf->bone] += mw * Yj;
+      mass[inf->bone] += mw;
+    }
+  }
+  for (int b = 0; b < bones; ++b) {
+    if (mass[b] == 0.0) continue;
+    const Vec3 lever = R[b] * (v[b] - mass[b] * kin_.joints().row(b).transpose());
+    const Mat3 C = rotationCurvature(-gravity, lever);
+    addBlock(H, offset + 6 * b + 3, offset + 6 * b + 3, psd ? projectToPSD<3>(C) : C);
+  }
+  if (psd) return;
+  Mat3* values = kin_.reducedValues(1);
+  const Mat3 G = skew(gravity);
+  for (const HandleBlock& hb : handle_blocks_) values[hb.slot] += hb.weight * (G * R[hb.bone]);
+}
+
+}  // namespace flsh::detail

@@ -1,0 +1,50 @@
+// Gravity on the soft skeletons' mass nodes (ARCHITECTURE.md §4): −Σ_j m_j g · x_j(q). The
+// constant node forces −m_j g go to the state through the kinematics; their Hessian is the
+// curvature of the rotating nodes alone (no node–node blocks). Private to Simulable.
+#pragma once
+
+#include <vector>
+
+#include "flsh/sim/energy_term.h"
+#include "flsh/sim/simulable.h"
+#include "sim/soft/node_masses.h"
+#include "sim/soft/soft_kinematics.h"
+
+namespace flsh::detail {
+
+class NodalGravityTerm final : public EnergyTerm {
+ public:
+  /// Call after the kinematics' buildReducedPattern (the ROM's rotation–handle slots).
+  NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses);
+
+  const char* name() const override { return "nodal gravity"; }
+  double evaluate(const TermContext& c, VecX* g, int offset) const override {
+    return evaluate(c.options.gravity, g, nullptr, offset, true);
+  }
+  void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
+                  bool psd) const override;
+
+  /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM: triplets
+  /// appended to H, or with `blocks` returned at the kinematics' coupling positions — all zero
+  /// in the PSD form, so that the positions stay the same in both; ROM: bone triplets into H,
+  /// rotation–handle blocks into value list 1).
+  double evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                  FixedHessianBlocks* blocks = nullptr) const;
+  /// ROM: the Hessian alone (the node loop of the energy is not needed).
+  void reducedHessian(const Vec3& gravity, std::vector<Triplet>& H, int offset, bool psd) const;
+
+ private:
+  const SoftKinematics& kin_;
+  const NodeMasses& masses_;
+  // ROM: the rotation–handle blocks D_bh [g]× R_b into value list 1 at `slot`, D_bh = Σ_j m_j
+  // w_jb φ_jh over the mass nodes (constant).
+  struct HandleBlock {
+    int slot, bone;
+    double weight;
+  };
+  std::vector<HandleBlock> handle_blocks_;
+  mutable std::vector<Vec3> forces_;
+  mutable std::vector<Mat3> fixed_;
+};
+
+}  // namespace flsh::detail

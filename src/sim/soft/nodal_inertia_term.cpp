@@ -1,0 +1,71 @@
+#include "sim/soft/nodal_inertia_term.h"
+
+namespace flsh::detail {
+
+NodalInertiaTerm::NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
+                                   double time_step)
+    : kin_(kinematics), masses_(masses), h_(time_step), x_hat_(kinematics.restNodes()) {
+  const std::vector<int>& nodes = masses_.nodes;
+  const size_t first = size_t((1.0 - kShareBesidePotential) * double(nodes.size()));
+  parts_[0].assign(nodes.begin(), nodes.begin() + long(first));
+  parts_[1].assign(nodes.begin() + long(first), nodes.end());
+}
+
+void NodalInertiaTerm::setPrediction(const BoneFrames& bones_n, const BoneFrames& bones_nm1) {
+  MatX3 x_n, x_nm1;
+  kin_.positionsOf(masses_.nodes, bones_n, kin_.u_n, x_n);
+  kin_.positionsOf(masses_.nodes, bones_nm1, kin_.u_nm1, x_nm1);
+  for (int j : masses_.nodes) x_hat_.row(j) = 2.0 * x_n.row(j) - x_nm1.row(j);
+}
+
+void NodalInertiaTerm::addHessian(const TermContext&, std::vector<Triplet>& H, int offset,
+                                  bool psd) const {
+  kin_.beginReduced(0);
+  evaluate(nullptr, &H, offset, psd);
+  kin_.flushReduced(0, H, offset);
+}
+
+double NodalInertiaTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                                  FixedHessianBlocks* blocks) const {
+  const double k = 1.0 / (h_ * h_);
+  const std::vector<int>& nodes = masses_.nodes;
+  const MatX3& x = kin_.x();
+  const size_t count = nodes.size();
+  double E = 0.0;
+  forces_.resize(count);
+  for (size_t idx = 0; idx < count; ++idx) {
+    const int j = nodes[idx];
+    const Vec3 d = (x.row(j) - x_hat_.row(j)).transpose();
+    E += 0.5 * k * masses_.mass[j] * d.squaredNorm();
+    forces_[idx] = k * masses_.mass[j] * d;
+  }
+  if (g) kin_.mapForces(nodes, forces_, *g, offset);
+  if (H) {
+    scalars_.resize(count);
+    for (size_t idx = 0; idx < count; ++idx) scalars_[idx] = k * masses_.mass[nodes[idx]];
+    // psd: Gauss–Newton Σ m JᵀJ; exact: plus the curvature of the rotating nodes.
+    const bool fixed = blocks && !kin_.reduced();
+    kin_.mapHessian(nodes, nullptr, psd ? nullptr : &forces_, *H, offset, psd, 0,
+                    fixed ? &fixed_ : nullptr, &scalars_);
+    if (fixed) *blocks = {&kin_.couplingPositions(), &fixed_, offset};
+  }
+  return E;
+}
+
+void NodalInertiaTerm::hessianPart(int part, std::vector<Triplet>& H, int offset, bool psd) const {
+  const double k = 1.0 / (h_ * h_);
+  const std::vector<int>& nodes = parts_[part];
+  const MatX3& x = kin_.x();
+  std::vector<double>& kappa = part_scalars_[part];
+  std::vector<Vec3>& forces = part_forces_[part];
+  kappa.resize(nodes.size());
+  if (!psd) forces.resize(nodes.size());
+  for (size_t idx = 0; idx < nodes.size(); ++idx) {
+    const int j = nodes[idx];
+    kappa[idx] = k * masses_.mass[j];
+    if (!psd) forces[idx] = kappa[idx] * (x.row(j) - x_hat_.row(j)).transpose();
+  }
+  kin_.mapHessian(nodes, nullptr, psd ? nullptr : &forces, H, offset, psd, part, nullptr, &kappa);
+}
+
+}  // namespace flsh::detail

@@ -1,0 +1,57 @@
+// Nodal inertia of the soft skeletons (ARCHITECTURE.md §4): ½ Σ_j m_j ‖x_j(q) − x̂_j‖² / h² over
+// the mass nodes (every tet node with its lumped mass, or the ROM's inertial cubature's nodes),
+// x̂ = 2 x(q_n) − x(q_{n−1}) with the held pose blend. The node forces and the node Hessians
+// m_j / h² I go to the state through the kinematics (its curvature of the rotating nodes in the
+// exact form). Private to Simulable.
+#pragma once
+
+#include <vector>
+
+#include "flsh/sim/energy_term.h"
+#include "sim/soft/node_masses.h"
+#include "sim/soft/soft_kinematics.h"
+
+namespace flsh::detail {
+
+class NodalInertiaTerm final : public EnergyTerm {
+ public:
+  /// The ROM's Hessian on two threads maps this share of the mass nodes beside the potential
+  /// terms (soft_tissue.cpp): hessianPart(1) maps it, hessianPart(0) the rest.
+  static constexpr double kShareBesidePotential = 0.1;
+
+  NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses, double time_step);
+
+  const char* name() const override { return "nodal inertia"; }
+  double evaluate(const TermContext&, VecX* g, int offset) const override {
+    return evaluate(g, nullptr, offset, true);
+  }
+  void addHessian(const TermContext&, std::vector<Triplet>& H, int offset, bool psd) const override;
+
+  /// x̂ = 2 x(q_n) − x(q_{n−1}) of the mass nodes (the kinematics' u_n and u_nm1).
+  void setPrediction(const BoneFrames& bones_n, const BoneFrames& bones_nm1);
+  const MatX3& prediction() const { return x_hat_; }
+  double timeStep() const { return h_; }
+
+  /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM: triplets
+  /// appended to H, or with `blocks` the bone–tissue coupling and node-diagonal blocks returned
+  /// at the kinematics' coupling positions; ROM: into value list 0).
+  double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                  FixedHessianBlocks* blocks = nullptr) const;
+  /// ROM: the Hessian of one share of the mass nodes (see kShareBesidePotential) into value list
+  /// `part` (bone triplets into H).
+  void hessianPart(int part, std::vector<Triplet>& H, int offset, bool psd) const;
+
+ private:
+  const SoftKinematics& kin_;
+  const NodeMasses& masses_;
+  double h_;
+  MatX3 x_hat_;
+  std::vector<int> parts_[2];
+  mutable std::vector<Vec3> forces_;
+  mutable std::vector<double> scalars_;
+  mutable std::vector<Mat3> fixed_;
+  mutable std::vector<double> part_scalars_[2];
+  mutable std::vector<Vec3> part_forces_[2];
+};
+
+}  // namespace flsh::detail

@@ -1,0 +1,47 @@
+// Collider contact of a soft skeleton's surface nodes (ARCHITECTURE.md §5): the penalty energy
+// of contact_energy.h on the skinned surface nodes (the broad phase's candidates), its node
+// forces and 3 × 3 node Hessians taken to the state by the kinematics. Private to Simulable.
+#pragma once
+
+#include <vector>
+
+#include "flsh/contact/collider.h"
+#include "flsh/contact/contact_energy.h"
+#include "flsh/sim/energy_term.h"
+#include "flsh/sim/simulable.h"
+#include "sim/soft/soft_kinematics.h"
+
+namespace flsh::detail {
+
+class NodeContactTerm final : public EnergyTerm {
+ public:
+  /// `areas`: the surface nodes' vertex areas, m².
+  NodeContactTerm(const SoftKinematics& kinematics, VecX areas)
+      : kin_(kinematics), areas_(std::move(areas)) {}
+
+  const char* name() const override { return "node contact"; }
+  /// At the context's colliders, time and broad-phase candidates.
+  double evaluate(const TermContext& c, VecX* g, int offset) const override {
+    return evaluate(c.colliders, c.time, c.options.contact, g, nullptr, offset, true, nullptr,
+                    &c.contact.candidates);
+  }
+  void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
+                  bool psd) const override;
+
+  /// Penalty contact of the surface nodes against colliders at time t: of `candidates`
+  /// (surface node indices; a broad phase's: the others must be out of contact) or, null, every
+  /// one. The ROM skins the nodes first unless `skin` is false (skinned before, e.g. ahead of a
+  /// two-thread evaluation). Hessian: FEM triplets into H, ROM blocks into value list 1.
+  double evaluate(const std::vector<Collider>& colliders, double time,
+                  const ContactOptions& options, VecX* g, std::vector<Triplet>* H, int offset,
+                  bool psd, int* active = nullptr, const std::vector<int>* candidates = nullptr,
+                  bool skin = true) const;
+
+ private:
+  const SoftKinematics& kin_;
+  VecX areas_;
+  mutable MatX3 x_;
+  mutable VecX node_areas_;
+};
+
+}  // namespace flsh::detail

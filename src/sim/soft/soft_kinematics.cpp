@@ -1,0 +1,589 @@
+// The soft skeletons' kinematics: skinning of the tet nodes, the soft state's layout (FEM nodes
+// or ROM basis) and the chain rule to the state; see soft_kinematics.h for the formulas.
+#include "sim/soft/soft_kinematics.h"
+
+#include <algorithm>
+#include <string>
+
+#include "flsh/body/smpl_skeleton.h"
+#include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
+#include "flsh/volume/reduced_data.h"
+#include "flsh/volume/volumetric_data.h"
+
+namespace flsh::detail {
+
+namespace {
+
+// Interior nodes get their skinning weights by harmonic extension, which leaves every weight
+// slightly positive almost everywhere; like SMPL's own weights they are cut to a few
+// influences (weights below kMinInteriorWeight dropped, at most kMaxInteriorInfluences kept,
+// renormalized), so a node couples to ≤ 4 bones. Surface nodes keep SMPL's weights exactly: at
+// u = 0 the simulated surface is the SMPL mesh.
+constexpr double kMinInteriorWeight = 0.01;
+constexpr int kMaxInteriorInfluences = 4;
+
+// Zeroes `count` 3 × 3 blocks stored back to back (one vectorized pass).
+void zeroBlocks(Mat3* blocks, int count) {
+  static_assert(sizeof(Mat3) == 9 * sizeof(double), "Mat3 must be 9 packed doubles");
+  Eigen::Map<VecX>(blocks->data(), 9 * Eigen::Index(count)).setZero();
+}
+
+}  // namespace
+
+SoftKinematics::SoftKinematics(const SoftAvatar& avatar, const MatX3& joints,
+                               const std::vector<int>& parents)
+    : num_bones_(int(joints.rows())),
+      bone_dofs_(6 * int(joints.rows())),
+      parents_(parents),
+      joints_(joints) {
+  const VolumetricData& data = avatar.volumetricData();
+  const VolumetricTemplate& templ = *data.templ;
+  const int n = data.numNodes();
+  rest_ = data.rest_nodes;
+  num_surface_ = templ.mesh.num_surface_nodes;
+  posedirs_ = &templ.fields.posedirs;
+  if (posedirs_->rows() != 3 * n || posedirs_->cols() != 9 * (num_bones_ - 1))
+    throw InputError("Simulable: the avatar's volumetric pose blend shapes are " +
+                     std::to_string(posedirs_->rows()) + " × " + std::to_string(posedirs_->cols()) +
+                     ", expected " + std::to_string(3 * n) + " × " +
+                     std::to_string(9 * (num_bones_ - 1)));
+  blend_ = MatX3::Zero(n, 3);
+
+  // Soft-tissue nodes and their DoF offsets.
+  node_dof_.assign(n, -1);
+  std::vector<int> soft;
+  for (int j = 0; j < n; ++j)
+    if (data.bone_of_node[j] < 0) {
+      node_dof_[j] = 3 * int(soft.size());
+      soft.push_back(j);
+    }
+  reduced_ = avatar.reducedModelEnabled();
+  if (!reduced_) {
+    state_nodes_ = Eigen::Map<const VecXi>(soft.data(), Eigen::Index(soft.size()));
+  } else {
+    const ReducedData& rom = avatar.reducedData();
+    num_handles_ = rom.numHandles();
+    if (rom.basis.rows() != n || rom.basis.cols() != num_handles_)
+      throw InputError("Simulable: the avatar's reduced basis is " +
+                       std::to_string(rom.basis.rows()) + " × " + std::to_string(rom.basis.cols()) +
+                       ", expected #nodes × #handles = " + std::to_string(n) + " × " +
+                       std::to_string(num_handles_));
+    state_nodes_ = rom.handles;
+    state_dof_.assign(n, -1);
+    for (int h = 0; h < num_handles_; ++h) state_dof_[rom.handles[h]] = 3 * h;
+    // Rows of φ (the basis is stored by columns); bone nodes never move (u = 0).
+    const SpMat rows = rom.basis.transpose();
+    phi_start_.assign(n + 1, 0);
+    for (int j = 0; j < n; ++j) {
+      if (node_dof_[j] >= 0)
+        for (SpMat::InnerIterator it(rows, j); it; ++it)
+          phi_.emplace_back(int(it.row()), it.value());
+      phi_start_[j + 1] = int(phi_.size());
+    }
+  }
+  u = u_n = u_nm1 = VecX::Zero(numSoftDofs());
+
+  // Skinning influences.
+  const MatX& surface_weights = avatar.body().weights;
+  const MatX& node_weights = templ.fields.weights;
+  influence_start_.assign(n + 1, 0);
+  std::vector<std::pair<double, int>> ranked;
+  for (int j = 0; j < n; ++j) {
+    if (j < num_surface_) {
+      for (int b = 0; b < num_bones_; ++b)
+        if (surface_weights(j, b) != 0.0) influences_.push_back({b, surface_weights(j, b)});
+    } else {
+      ranked.clear();
+      for (int b = 0; b < num_bones_; ++b)
+        if (node_weights(j, b) >= kMinInteriorWeight) ranked.emplace_back(node_weights(j, b), b);
+      if (ranked.empty()) {  // no weight reaches the threshold: keep the largest one
+        int best = 0;
+        node_weights.row(j).maxCoeff(&best);
+        ranked.emplace_back(1.0, best);
+      }
+      std::sort(ranked.begin(), ranked.end(), [](const auto& a, const auto& b) {
+        return a.first > b.first || (a.first == b.first && a.second < b.second);
+      });
+      if (int(ranked.size()) > kMaxInteriorInfluences) ranked.resize(kMaxInteriorInfluences);
+      double sum = 0.0;
+      for (const auto& r : ranked) sum += r.first;
+      for (const auto& r : ranked) influences_.push_back({r.second, r.first / sum});
+    }
+    influence_start_[j + 1] = int(influences_.size());
+  }
+
+  for (BonePairBlocks& blocks : pair_blocks_) blocks.resize(num_bones_);
+  for (auto& moments : pair_moments_)
+    moments.resize(size_t(num_bones_) * num_bones_, PairMoments{});
+  all_nodes_.resize(n);
+  for (int j = 0; j < n; ++j) all_nodes_[j] = j;
+  surface_nodes_.assign(all_nodes_.begin(), all_nodes_.begin() + num_surface_);
+
+  // Pose blend and the broad-phase bounds.
+  feature_ = VecX::Zero(posedirs_->cols());
+  blend_bound_.resize(num_surface_);
+  for (int i = 0; i < num_surface_; ++i) blend_bound_[i] = posedirs_->middleRows(3 * i, 3).norm();
+  if (reduced_) {
+    phi_sum_ = VecX::Zero(num_surface_);
+    for (int i = 0; i < num_surface_; ++i)
+      for (int k = phi_start_[i]; k < phi_start_[i + 1]; ++k) phi_sum_[i] += phi_[k].second;
+  }
+}
+
+void SoftKinematics::setMassNodes(const std::vector<int>& mass_nodes) {
+  const int n = numNodes();
+  if (!reduced_) {
+    // prepare() skins every node; the fixed coupling positions of inertia's and gravity's
+    // Hessians.
+    eval_nodes_ = all_nodes_;
+    coupling_start_.assign(mass_nodes.size() + 1, 0);
+    coupling_dofs_.clear();
+    for (size_t idx = 0; idx < mass_nodes.size(); ++idx) {
+      const int j = mass_nodes[idx];
+      coupling_start_[idx + 1] = coupling_start_[idx];
+      if (node_dof_[j] < 0) continue;
+      const int u = bone_dofs_ + node_dof_[j];
+      for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
+        const int b = 6 * influences_[k].bone;
+        coupling_dofs_.insert(coupling_dofs_.end(), {{b, u}, {b + 3, u}, {u, b}, {u, b + 3}});
+      }
+      coupling_dofs_.emplace_back(u, u);
+      coupling_start_[idx + 1] = int(coupling_dofs_.size());
+    }
+    return;
+  }
+  // ROM: prepare() skins the mass nodes (the elastic energy reads u only; contact and output
+  // skin the surface nodes they need); the surface and mass nodes keep their posedirs rows
+  // contiguous for blendOf.
+  eval_nodes_ = mass_nodes;
+  blend_stamp_.assign(n, 0);  // pose_stamp_ 0: the zero feature, whose offsets are zero
+  std::vector<int> blend_slot(n, -1);
+  int slots = 0;
+  for (int j = 0; j < num_surface_; ++j) blend_slot[j] = slots++;
+  for (int j : mass_nodes)
+    if (blend_slot[j] < 0) blend_slot[j] = slots++;
+  blend_slot_ = std::move(blend_slot);
+  posedirs_T_.resize(posedirs_->cols(), 3 * slots);
+  for (int j = 0; j < n; ++j)
+    if (blend_slot_[j] >= 0)
+      posedirs_T_.middleCols(3 * blend_slot_[j], 3) = posedirs_->middleRows(3 * j, 3).transpose();
+}
+
+void SoftKinematics::buildReducedPattern(const std::vector<std::pair<int, int>>& handle_pairs) {
+  if (!reduced_) return;
+  // Every (handle, handle) pair some node couples, plus the terms' (elastic tets, rest
+  // stiffness); every (bone row block, handle) pair some node's skinning couples.
+  const int H = num_handles_, rows = 2 * num_bones_;
+  std::vector<char> zz(size_t(H) * H, 0), bz(size_t(rows) * H, 0);
+  for (int j = 0; j < numNodes(); ++j) {
+    for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) {
+      for (int b = phi_start_[j]; b < phi_start_[j + 1]; ++b)
+        zz[size_t(phi_[a].first) * H + phi_[b].first] = 1;
+      for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k)
+        for (int r = 0; r < 2; ++r) bz[size_t(2 * influences_[k].bone + r) * H + phi_[a].first] = 1;
+    }
+  }
+  for (const auto& [a, b] : handle_pairs) zz[size_t(a) * H + b] = 1;
+  // Slots: the z–z blocks, then the bone–z blocks, then their transposes (z–bone).
+  zz_slot_.assign(zz.size(), -1);
+  bz_slot_.assign(bz.size(), -1);
+  reduced_positions_.clear();
+  for (int k = 0; k < H; ++k)  // column-major
+    for (int h = 0; h < H; ++h)
+      if (zz[size_t(h) * H + k]) {
+        zz_slot_[size_t(h) * H + k] = int(reduced_positions_.size());
+        reduced_positions_.emplace_back(bone_dofs_ + 3 * h, bone_dofs_ + 3 * k);
+      }
+  num_zz_ = int(reduced_positions_.size());
+  zz_mirror_
+      .clear();  // the terms sum the upper blocks (h ≤ k); the lower ones are their transposes
+  for (int h = 0; h < H; ++h)
+    for (int k = 0; k < h; ++k)
+      if (zz_slot_[size_t(h) * H + k] >= 0)
+        zz_mirror_.emplace_back(zz_slot_[size_t(h) * H + k], zz_slot_[size_t(k) * H + h]);
+  for (int h = 0; h < H; ++h)
+    for (int r = 0; r < rows; ++r)
+      if (bz[size_t(r) * H + h]) {
+        bz_slot_[size_t(r) * H + h] = int(reduced_positions_.size());
+        reduced_positions_.emplace_back(3 * r, bone_dofs_ + 3 * h);
+      }
+  num_bz_ = int(reduced_positions_.size()) - num_zz_;
+  for (int k = 0; k < num_bz_; ++k) {
+    const auto [row, col] = reduced_positions_[size_t(num_zz_ + k)];
+    reduced_positions_.emplace_back(col, row);
+  }
+  for (auto& values : reduced_values_) values.assign(reduced_positions_.size(), Mat3::Zero());
+}
+
+// ---- positions ----------------------------------------------------------------------------
+
+void SoftKinematics::setPoseBlend(const std::vector<Mat3>& R) {
+  for (int b = 1; b < num_bones_; ++b) {
+    const Mat3 local = R[parents_[b]].transpose() * R[b];
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) feature_[9 * (b - 1) + 3 * r + c] = local(r, c) - (r == c);
+  }
+  if (reduced_) {
+    ++pose_stamp_;
+    return;
+  }
+  const VecX offsets = (*posedirs_) * feature_;  // row 3j + c
+  blend_ = Eigen::Map<const MatX3>(offsets.data(), numNodes(), 3);
+}
+
+Vec3 SoftKinematics::blendOf(int j) const {
+  if (!reduced_ || blend_stamp_[j] == pose_stamp_) return blend_.row(j).transpose();
+  const int slot = blend_slot_[j];
+  const Vec3 P = slot >= 0 ? Vec3(posedirs_T_.middleCols<3>(3 * slot).transpose() * feature_)
+                           : Vec3(posedirs_->middleRows<3>(3 * j) * feature_);
+  blend_.row(j) = P.transpose();
+  blend_stamp_[j] = pose_stamp_;
+  return P;
+}
+
+const MatX3& SoftKinematics::poseBlend() const {
+  if (reduced_)
+    for (int j = 0; j < numNodes(); ++j) blendOf(j);
+  return blend_;
+}
+
+void SoftKinematics::setPoseBlendOffsets(const MatX3& offsets) {
+  blend_ = offsets;
+  if (reduced_) std::fill(blend_stamp_.begin(), blend_stamp_.end(), pose_stamp_);
+}
+
+double SoftKinematics::displacementWeight(int i) const {
+  if (!reduced_) return node_dof_[i] >= 0 ? 1.0 : 0.0;
+  return phi_sum_[i];
+}
+
+double SoftKinematics::largestSoftState() const {
+  double largest = 0.0;
+  for (Eigen::Index k = 0; k + 2 < u.size(); k += 3)
+    largest = std::max(largest, u.segment<3>(k).norm());
+  return largest;
+}
+
+void SoftKinematics::positionsOf(const std::vector<int>& nodes, const BoneFrames& bones,
+                                 const VecX& state, MatX3& x) const {
+  Vec3 shift[kNumJoints];
+  for (int b = 0; b < num_bones_; ++b)
+    shift[b] = bones.t.row(b).transpose() - bones.R[b] * joints_.row(b).transpose();
+  if (x.rows() != numNodes()) x.resize(numNodes(), 3);
+  // Distinct nodes: each writes its own row (and blendOf its own row and stamp).
+  const long count = long(nodes.size());
+#pragma omp parallel for schedule(static) if (count >= 512)
+  for (long idx = 0; idx < count; ++idx) {
+    const int j = nodes[size_t(idx)];
+    const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + nodeDisplacement(state, j);
+    Vec3 p = Vec3::Zero();
+    for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
+      const Influence& inf = influences_[k];
+      p += inf.weight * (bones.R[inf.bone] * Y + shift[inf.bone]);
+    }
+    x.row(j) = p.transpose();
+  }
+}
+
+void SoftKinematics::positions(const BoneFrames& bones, const VecX& displacement, MatX3& x) const {
+  positionsOf(all_nodes_, bones, displacement, x);
+}
+
+void SoftKinematics::prepare(long version, const BoneFrames& bones) const {
+  cur_R_ = &bones.R;
+  cur_t_ = &bones.t;
+  if (version == version_) return;
+  version_ = version;
+  skinNodes(eval_nodes_);
+}
+
+void SoftKinematics::skinNodes(const std::vector<int>& nodes) const {
+  const int n = numNodes();
+  if (Y_.rows() != n) Y_.setZero(n, 3);
+  if (x_.rows() != n) x_.setZero(n, 3);
+  node_M_.resize(n);
+  const std::vector<Mat3>& R = *cur_R_;
+  const MatX3& t = *cur_t_;
+  Vec3 shift[kNumJoints];
+  for (int b = 0; b < num_bones_; ++b)
+    shift[b] = t.row(b).transpose() - R[b] * joints_.row(b).transpose();
+  // Nodes are distinct: each writes its own rows (and blendOf its own row and stamp).
+  const long count = long(nodes.size());
+#pragma omp parallel for schedule(static) if (count >= 512)
+  for (long idx = 0; idx < count; ++idx) {
+    const int j = nodes[size_t(idx)];
+    const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + nodeDisplacement(u, j);
+    Vec3 p = Vec3::Zero();
+    Mat3 M = Mat3::Zero();
+    for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
+      const Influence& inf = influences_[k];
+      p += inf.weight * (R[inf.bone] * Y + shift[inf.bone]);
+      M += inf.weight * R[inf.bone];
+    }
+    Y_.row(j) = Y.transpose();
+    x_.row(j) = p.transpose();
+    node_M_[j] = M;
+  }
+}
+
+void SoftKinematics::surface(MatX3* x, MatX3* Y) const {
+  if (reduced_) skinNodes(surface_nodes_);
+  if (x) *x = x_.topRows(num_surface_);
+  if (Y) *Y = Y_.topRows(num_surface_);
+}
+
+// ---- the chain rule to the soft state -----------------------------------------------------------
+
+void SoftKinematics::displacementBasis(int j, std::vector<std::pair<int, double>>& out) const {
+  out.clear();
+  if (!reduced_) {
+    if (node_dof_[j] >= 0) out.emplace_back(node_dof_[j], 1.0);
+    return;
+  }
+  for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
+    out.emplace_back(3 * phi_[k].first, phi_[k].second);
+}
+
+void SoftKinematics::addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const {
+  const int base = offset + bone_dofs_;
+  if (!reduced_) {
+    if (node_dof_[j] >= 0) g.segment<3>(base + node_dof_[j]) += v;
+    return;
+  }
+  for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
+    g.segment<3>(base + 3 * phi_[k].first) += phi_[k].second * v;
+}
+
+template <int Rows>
+void SoftKinematics::addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
+                                 const Eigen::Matrix<double, Rows, 3>& B, int list) const {
+  if (!reduced_) {
+    if (node_dof_[j] < 0) return;
+    const int u_index = offset + bone_dofs_ + node_dof_[j];
+    addBlock(H, offset + row, u_index, B);
+    addBlock(H, u_index, offset + row, B.transpose());
+    return;
+  }
+  Mat3* values = reduced_values_[size_t(list)].data();
+  const size_t handles = size_t(num_handles_);
+  for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
+    for (int r = 0; r < Rows; r += 3)
+      values[bz_slot_[size_t((row + r) / 3) * handles + size_t(phi_[k].first)]] +=
+          phi_[k].second * B.template middleRows<3>(r);
+}
+
+void SoftKinematics::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B,
+                                 int list) const {
+  if (!reduced_) {
+    if (node_dof_[j] < 0) return;
+    const int u_index = offset + bone_dofs_ + node_dof_[j];
+    addBlock(H, u_index, u_index, B);
+    return;
+  }
+  // B is symmetric: the upper triangle of handle pairs (φ_ rows are sorted by handle);
+  // flushReduced mirrors it.
+  Mat3* values = reduced_values_[size_t(list)].data();
+  const size_t handles = size_t(num_handles_);
+  for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) {
+    const size_t row = size_t(phi_[a].first) * handles;
+    for (int b = a; b < phi_start_[j + 1]; ++b)
+      values[zz_slot_[row + size_t(phi_[b].first)]] += (phi_[a].second * phi_[b].second) * B;
+  }
+}
+
+void SoftKinematics::beginReduced(int list) const {
+  if (!reduced_) return;
+  // The summed slots only (z–z and bone–z; the z–bone ones are written by the mirroring).
+  zeroBlocks(reduced_values_[size_t(list)].data(), num_zz_ + num_bz_);
+  mirrored_[size_t(list)] = false;
+}
+
+void SoftKinematics::mirrorReduced(int list, int part, int parts) const {
+  std::vector<Mat3>& values = reduced_values_[size_t(list)];
+  const size_t mirrors = zz_mirror_.size();
+  for (size_t k = part * mirrors / parts; k < (part + 1) * mirrors / parts; ++k)
+    values[size_t(zz_mirror_[k].first)] = values[size_t(zz_mirror_[k].second)].transpose();
+  for (int k = part * num_bz_ / parts; k < (part + 1) * num_bz_ / parts; ++k)
+    values[size_t(num_zz_ + num_bz_ + k)] = values[size_t(num_zz_ + k)].transpose();
+}
+
+void SoftKinematics::flushReduced(int list, std::vector<Triplet>& H, int offset,
+                                  std::vector<FixedHessianBlocks>* blocks) const {
+  if (!reduced_) return;
+  std::vector<Mat3>& values = reduced_values_[size_t(list)];
+  if (!mirrored_[size_t(list)]) mirrorReduced(list, 0, 1);
+  if (blocks) {
+    blocks->push_back({&reduced_positions_, &values, offset});
+    return;
+  }
+  for (size_t k = 0; k < values.size(); ++k)
+    if (!values[k].isZero(0.0))
+      addBlock(H, offset + reduced_positions_[k].first, offset + reduced_positions_[k].second,
+               values[k]);
+}
+
+// ---- mapping node derivatives to the state ----------------------------------------------------
+
+void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces,
+                               VecX& g, int offset) const {
+  const std::vector<Mat3>& R = *cur_R_;
+  for (size_t idx = 0; idx < nodes.size(); ++idx) {
+    const Vec3& f = forces[idx];
+    if (f.isZero(0.0)) continue;
+    const int j = nodes[idx];
+    const Vec3 Y = Y_.row(j).transpose();
+    for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
+      const int b = influences_[k].bone;
+      const double w = influences_[k].weight;
+      const Vec3 r = R[b] * (Y - joints_.row(b).transpose());
+      g.segment<3>(offset + 6 * b) += w * f;
+      g.segment<3>(offset + 6 * b + 3) += w * r.cross(f);
+    }
+    if (node_dof_[j] >= 0) addSoftGradient(g, offset, j, node_M_[j].transpose() * f);
+  }
+}
+
+void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
+                                const std::vector<Vec3>* forces, std::vector<Triplet>& H,
+                                int offset, bool psd, int list, std::vector<Mat3>* fixed,
+                                const std::vector<double>* K_scalar) const {
+  if (fixed) fixed->assign(coupling_dofs_.size(), Mat3::Zero());
+  const std::vector<Mat3>& R = *cur_R_;
+  BonePairBlocks& pair_blocks = pair_blocks_[size_t(list)];
+  auto block = [&](int b, int c) -> Mat6& { return pair_blocks.block(b, c); };
+  // K_j = κ_j I: J_aᵀ J_c = w_a w_c [I, −[r_c]×; [r_a]×, (r_a·r_c) I − r_c r_aᵀ] is summed over
+  // the nodes as moments per bone pair (κ w w, its r_c- and r_a-weighted sums and Σ κ w w r_c
+  // r_aᵀ), 16 products per pair and node instead of a 6 × 3 × 6 product; blocks at the end.
+  TouchedValues<PairMoments>& moments = pair_moments_[size_t(list)];
+  Mat3 curvature[kNumJoints];
+  bool has_curvature[kNumJoints] = {};
+  Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
+  Vec3 lever[kNumJoints];
+  int bones[kNumJoints];
+  for (size_t idx = 0; idx < nodes.size(); ++idx) {
+    const int j = nodes[idx];
+    const int dof = node_dof_[j];
+    const Vec3 Y = Y_.row(j).transpose();
+    const int count = influence_start_[j + 1] - influence_start_[j];
+    for (int a = 0; a < count; ++a) {
+      const Influence& inf = influences_[influence_start_[j] + a];
+      bones[a] = inf.bone;
+      lever[a] = R[inf.bone] * (Y - joints_.row(inf.bone).transpose());
+      Jb[a].leftCols<3>() = inf.weight * Mat3::Identity();
+      Jb[a].rightCols<3>() = -inf.weight * skew(lever[a]);
+    }
+    // Bone–soft coupling per influence, one 6 × 3 block: Jbᵀ K M from K and, in the exact
+    // form, ∂²(f·x)/∂δω_b∂δu_j = −w [f]× R_b from the force (rows 3..5).
+    const bool force = forces && !(*forces)[idx].isZero(0.0);
+    const bool k_coupling = (K || K_scalar) && dof >= 0, f_coupling = force && !psd && dof >= 0;
+    Eigen::Matrix<double, 6, 3> coupling[kNumJoints];
+    for (int a = 0; a < count && (k_coupling || f_coupling); ++a) coupling[a].setZero();
+    if (K_scalar) {
+      const double kappa = (*K_scalar)[idx];
+      for (int a = 0; a < count; ++a) {
+        const double ka = kappa * influences_[influence_start_[j] + a].weight;
+        for (int c = 0; c < count; ++c) {
+          const double s = ka * influences_[influence_start_[j] + c].weight;
+          PairMoments& m = moments.at(bones[a] * num_bones_ + bones[c]);
+          m.s += s;
+          m.p += s * lever[c];
+          m.q += s * lever[a];
+          m.W.noalias() += (s * lever[c]) * lever[a].transpose();
+        }
+      }
+      if (dof >= 0) {
+        const Mat3& M = node_M_[j];
+        for (int a = 0; a < count; ++a) {
+          const double ka = kappa * influences_[influence_start_[j] + a].weight;
+          coupling[a].topRows<3>() += ka * M;
+          coupling[a].bottomRows<3>().noalias() += ka * (skew(lever[a]) * M);
+        }
+        const Mat3 MtKM = kappa * (M.transpose() * M);
+        if (fixed)
+          (*fixed)[size_t(coupling_start_[idx + 1]) - 1] = MtKM;
+        else
+          addSoftSoft(H, offset, j, MtKM, list);
+      }
+    } else if (K) {
+      const Mat3& Kj = (*K)[idx];
+      for (int a = 0; a < count; ++a) {
+        const Eigen::Matrix<double, 6, 3> JaT_K = Jb[a].transpose() * Kj;
+        for (int c = 0; c < count; ++c) block(bones[a], bones[c]).noalias() += JaT_K * Jb[c];
+      }
+      if (k_coupling) {
+        const Mat3 KM = Kj * node_M_[j];
+        for (int a = 0; a < count; ++a) coupling[a].noalias() += Jb[a].transpose() * KM;
+        if (fixed)
+          (*fixed)[size_t(coupling_start_[idx + 1]) - 1].noalias() = node_M_[j].transpose() * KM;
+        else
+          addSoftSoft(H, offset, j, node_M_[j].transpose() * KM, list);
+      }
+    }
+    if (force) {
+      const Vec3& f = (*forces)[idx];
+      for (int a = 0; a < count; ++a) {
+        const int b = bones[a];
+        const double w = influences_[influence_start_[j] + a].weight;
+        if (!has_curvature[b]) curvature[b].setZero();
+        has_curvature[b] = true;
+        curvature[b] += w * rotationCurvature(f, lever[a]);
+        if (f_coupling) coupling[a].bottomRows<3>() -= w * skew(f) * R[b];
+      }
+    }
+    if (fixed && (k_coupling || f_coupling)) {
+      Mat3* out = fixed->data() + coupling_start_[idx];
+      for (int a = 0; a < count; ++a, out += 4) {
+        out[0] = coupling[a].topRows<3>();
+        out[1] = coupling[a].bottomRows<3>();
+        out[2] = out[0].transpose();
+        out[3] = out[1].transpose();
+      }
+      continue;
+    }
+    for (int a = 0; a < count; ++a) {  // without K only the rotation rows are nonzero
+      if (k_coupling)
+        addBoneSoft<6>(H, offset, 6 * bones[a], j, coupling[a], list);
+      else if (f_coupling)
+        addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval(), list);
+    }
+  }
+  for (int key : moments.touched()) {
+    const PairMoments& m = moments.at(key);
+    Mat6& B = block(key / num_bones_, key % num_bones_);
+    B.topLeftCorner<3, 3>().diagonal().array() += m.s;
+    B.topRightCorner<3, 3>() -= skew(m.p);
+    B.bottomLeftCorner<3, 3>() += skew(m.q);
+    B.bottomRightCorner<3, 3>() += m.W.trace() * Mat3::Identity() - m.W;
+  }
+  moments.forget();
+  for (int b = 0; b < num_bones_; ++b)
+    if (has_curvature[b])
+      block(b, b).bottomRightCorner<3, 3>() += psd ? projectToPSD<3>(curvature[b]) : curvature[b];
+  pair_blocks.emit(H, offset);
+}
+
+void SoftKinematics::surfaceJacobian(std::vector<Triplet>& triplets) const {
+  if (reduced_) skinNodes(surface_nodes_);
+  const std::vector<Mat3>& R = *cur_R_;
+  std::vector<std::pair<int, double>> basis;
+  for (int i = 0; i < num_surface_; ++i) {
+    const Vec3 Y = Y_.row(i).transpose();
+    for (int k = influence_start_[i]; k < influence_start_[i + 1]; ++k) {
+      const int b = influences_[k].bone;
+      const double w = influences_[k].weight;
+      const Mat3 dx_dw = -w * skew(R[b] * (Y - joints_.row(b).transpose()));
+      for (int r = 0; r < 3; ++r) {
+        triplets.emplace_back(3 * i + r, 6 * b + r, w);
+        for (int c = 0; c < 3; ++c) triplets.emplace_back(3 * i + r, 6 * b + 3 + c, dx_dw(r, c));
+      }
+    }
+    displacementBasis(i, basis);
+    for (const auto& [dof, weight] : basis)
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+          triplets.emplace_back(3 * i + r, bone_dofs_ + dof + c, weight * node_M_[i](r, c));
+  }
+}
+
+}  // namespace flsh::detail

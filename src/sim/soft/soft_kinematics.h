@@ -1,0 +1,246 @@
+// The kinematics of the soft skeletons (ARCHITECTURE.md §4), private to Simulable: the map from
+// the state q = (bones, soft state) to the tet nodes' world positions, and the chain rule that
+// takes node derivatives back to q. The node terms (nodal inertia, gravity, elasticity, contact)
+// read positions here and hand their node forces and 3 × 3 node Hessians to mapForces /
+// mapHessian; they never see which soft state the model has.
+//
+// Node j of the tet mesh is at x_j = Σ_b w_jb (R_b (Y_j − J_b) + t_b), Y_j = X̄_j + P_j + u_j
+// (rest node, held pose blend offset, displacement; u = 0 on bone nodes). Its derivatives in the
+// increment chart (δt_b, δω_b, δu_j):
+//   ∂x_j/∂δt_b = w_jb I,  ∂x_j/∂δω_b = −w_jb [r_jb]×  with r_jb = R_b (Y_j − J_b),
+//   ∂x_j/∂δu_j = M_j = Σ_b w_jb R_b.
+// Second derivatives: ∂²(f·x_j)/∂δω_b² = w_jb (½(f r_jbᵀ + r_jb fᵀ) − (f·r_jb) I) and
+// ∂²(f·x_j)/∂δω_b∂δu_j = −w_jb [f]× R_b.
+//
+// Two soft states: the FEM's (u of every soft-tissue node, 3 values each) and the ROM's
+// (SoftAvatar::enableReducedModel: z, 3 per handle, u_j = Σ_h φ_h(j) z_h with the avatar's
+// basis), so every u-derivative maps to z by the chain rule (∂/∂z_h = Σ_j φ_h(j) ∂/∂u_j; Hessian
+// blocks (i, j) go to (h, k) with φ_h(i) φ_k(j)). The FEM's Hessian blocks go out as triplets
+// (or fixed blocks); the ROM's are summed at fixed positions into one of two value lists
+// (0: the dynamic Hessian, 1: the potential one) and handed over by flushReduced. Only the nodes
+// some term reads are skinned per evaluation: the evaluated nodes (all in the FEM, the mass
+// nodes in the ROM) and the surface nodes contact or output ask for; in the ROM a node's pose
+// blend offset is evaluated when first read.
+#pragma once
+
+#include <utility>
+#include <vector>
+
+#include "flsh/core/hessian_blocks.h"
+#include "flsh/core/types.h"
+#include "flsh/volume/soft_avatar.h"
+#include "sim/hessian_blocks.h"
+
+namespace flsh::detail {
+
+/// Bone transforms a soft-tissue evaluation reads (borrowed).
+struct BoneFrames {
+  const std::vector<Mat3>& R;  ///< 24 rotations
+  const MatX3& t;              ///< 24 × 3 joint positions, m
+};
+
+class SoftKinematics {
+ public:
+  struct Influence {
+    int bone;
+    double weight;
+  };
+
+  /// Reads the avatar's volumetric data (soft tissue on, initialized). `joints`: 24 × 3 rest
+  /// joints J(β) (the simulable's).
+  SoftKinematics(const SoftAvatar& avatar, const MatX3& joints, const std::vector<int>& parents);
+
+  /// Sets the nodes that carry mass (read by every evaluation): the ROM skins only these in
+  /// prepare() and keeps their pose blend rows; the FEM lays out the fixed positions of their
+  /// bone–tissue coupling blocks (couplingPositions). Call once, before buildReducedPattern.
+  void setMassNodes(const std::vector<int>& nodes);
+  /// ROM: the fixed positions of every Hessian block: z–z pairs some node's basis row couples,
+  /// plus `handle_pairs` (elastic tets, the rest stiffness), and bone–z pairs some node's
+  /// skinning couples. No-op for the FEM.
+  void buildReducedPattern(const std::vector<std::pair<int, int>>& handle_pairs);
+
+  // ---- layout ----
+  int numBones() const { return num_bones_; }
+  int boneDofs() const { return bone_dofs_; }
+  int numNodes() const { return int(rest_.rows()); }
+  int numSurface() const { return num_surface_; }
+  bool reduced() const { return reduced_; }
+  int numHandles() const { return num_handles_; }
+  int numSoftDofs() const { return 3 * int(state_nodes_.size()); }
+  const VecXi& softNodes() const { return state_nodes_; }
+  /// FEM: offset of u_j in the soft state (−1 on bone nodes); ROM: the handle's z offset at a
+  /// handle node, −1 elsewhere.
+  int nodeDof(int j) const { return reduced_ ? state_dof_[j] : node_dof_[j]; }
+  /// Whether node j moves with the soft state (a soft-tissue node, not a bone node).
+  bool isSoftNode(int j) const { return node_dof_[j] >= 0; }
+  const MatX3& restNodes() const { return rest_; }
+  const MatX3& joints() const { return joints_; }
+  /// ROM: node j's basis row as (handle, φ) pairs, sorted by handle.
+  const std::pair<int, double>* basisBegin(int j) const { return phi_.data() + phi_start_[j]; }
+  const std::pair<int, double>* basisEnd(int j) const { return phi_.data() + phi_start_[j + 1]; }
+  /// Skinning influences of node j.
+  const Influence* influencesBegin(int j) const { return influences_.data() + influence_start_[j]; }
+  const Influence* influencesEnd(int j) const {
+    return influences_.data() + influence_start_[j + 1];
+  }
+
+  // ---- state (the bones live in Simulable) ----
+  VecX u, u_n, u_nm1;  ///< 3 · #soft nodes (FEM, u, m) or 3 · #handles (ROM, z, m)
+
+  /// u_j for a soft state (m, unposed space; zero on bone nodes).
+  Vec3 nodeDisplacement(const VecX& state, int j) const {
+    if (!reduced_) return node_dof_[j] < 0 ? Vec3::Zero() : Vec3(state.segment<3>(node_dof_[j]));
+    Vec3 d = Vec3::Zero();
+    for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
+      d += phi_[k].second * state.segment<3>(3 * phi_[k].first);
+    return d;
+  }
+  /// ∂u_j/∂(soft state) as (state offset, weight) pairs: u_j = Σ weight · state.segment<3>(offset).
+  void displacementBasis(int j, std::vector<std::pair<int, double>>& out) const;
+  /// Σ of node i's basis weights (1 or 0 in the FEM), for the contact broad phase.
+  double displacementWeight(int i) const;
+  double largestSoftState() const;  ///< max over the 3-blocks of the soft state of ‖·‖, m
+
+  // ---- pose blend ----
+  /// Held pose blend offsets P (#N × 3, m) from the bones' rotations (relative rotations
+  /// R_pᵀ R_b give the pose feature). The FEM evaluates every node's; the ROM keeps the feature
+  /// and evaluates a node's offset when first read.
+  void setPoseBlend(const std::vector<Mat3>& R);
+  const MatX3& poseBlend() const;  ///< every node's (evaluates the missing ones)
+  void setPoseBlendOffsets(const MatX3& offsets);
+  /// ‖posedirs rows of surface node i‖_F: ‖P_i‖ ≤ blendBound(i) · poseFeatureNorm().
+  double blendBound(int i) const { return blend_bound_[i]; }
+  double poseFeatureNorm() const { return feature_.norm(); }
+
+  // ---- positions ----
+  /// World positions x (#N × 3) of every node for bones and a soft state.
+  void positions(const BoneFrames& bones, const VecX& state, MatX3& x) const;
+  /// x rows of `nodes` (distinct; split over the threads from 512) for bones and a state.
+  void positionsOf(const std::vector<int>& nodes, const BoneFrames& bones, const VecX& state,
+                   MatX3& x) const;
+  /// Skins the evaluated nodes at the current state (bones + u); cached by `version`.
+  void prepare(long version, const BoneFrames& bones) const;
+  /// Skins `nodes` (distinct) at the prepared state: x, Y and M rows (the ROM's contact and
+  /// output nodes; the FEM's prepare() skins every node).
+  void skinNodes(const std::vector<int>& nodes) const;
+  /// Positions x, unposed nodes Y and M_j of the nodes skinned at the prepared state.
+  const MatX3& x() const { return x_; }
+  const MatX3& Y() const { return Y_; }
+  const Mat3& M(int j) const { return node_M_[j]; }
+  const std::vector<Mat3>& R() const { return *cur_R_; }
+  const std::vector<int>& surfaceNodes() const { return surface_nodes_; }
+  /// World positions and unposed nodes of every surface node (#V × 3) at the prepared state.
+  void surface(MatX3* x, MatX3* Y) const;
+  /// d(surface nodes)/dq rows (3#V × numDofs) as triplets.
+  void surfaceJacobian(std::vector<Triplet>& triplets) const;
+
+  // ---- the chain rule to q (at the prepared state) ----
+  /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g.
+  void mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces, VecX& g,
+                 int offset) const;
+  /// Appends Σ_j J_jᵀ K_j J_j (K_j symmetric 3 × 3; null = none) plus, when `forces` is given,
+  /// the curvature of the rotating points against f_j: exact (psd = false) or, for psd, the PSD
+  /// projection of each bone's rotation curvature (the mixed δω–δu terms dropped).
+  /// `fixed` (FEM, nodes = the mass nodes only; may be null): the bone–tissue coupling and
+  /// node-diagonal blocks go into it, laid out as couplingPositions(), instead of into H.
+  /// `list`: the ROM value list and the scratch to use (0: inertia, 1: the potential terms).
+  /// `K_scalar` (instead of K, which is then null): K_j = K_scalar[idx] · I (inertia).
+  void mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
+                  const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset, bool psd,
+                  int list, std::vector<Mat3>* fixed = nullptr,
+                  const std::vector<double>* K_scalar = nullptr) const;
+  /// g(u_j) += v (FEM: into u_j's entries; ROM: through φ into z).
+  void addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const;
+  /// H(u_j, u_j) += B (symmetric). FEM: a triplet block; ROM: into value list `list`.
+  void addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B, int list) const;
+  /// FEM: the fixed positions (relative to the simulable's first DoF) of the blocks mapHessian
+  /// writes for the mass nodes: per mass node with a DoF, from couplingStart(idx), four per
+  /// influence a of bone b — (6b, u), (6b + 3, u), (u, 6b), (u, 6b + 3) — then (u, u).
+  const std::vector<std::pair<int, int>>& couplingPositions() const { return coupling_dofs_; }
+
+  // ---- the ROM's Hessian value lists ----
+  /// The summed blocks of value list `list` (0: dynamic, 1: potential), at fixed positions:
+  /// z–z blocks (zzSlot(h, k): the upper ones h ≤ k are summed, the lower mirrored), then
+  /// bone–z blocks (bzSlot(r, h), r = 2b for bone b's t rows, 2b + 1 for its ω rows), then
+  /// their transposes (mirrored).
+  Mat3* reducedValues(int list) const { return reduced_values_[size_t(list)].data(); }
+  int zzSlot(int h, int k) const { return zz_slot_[size_t(h) * size_t(num_handles_) + size_t(k)]; }
+  int bzSlot(int r, int h) const { return bz_slot_[size_t(r) * size_t(num_handles_) + size_t(h)]; }
+  /// Zeroes a list (no-op for the FEM).
+  void beginReduced(int list) const;
+  /// After the terms of one evaluation: appends list `list`'s blocks to H as triplets or, with
+  /// `blocks`, returns the list as fixed blocks (valid until the next beginReduced of that
+  /// list). No-op for the FEM.
+  void flushReduced(int list, std::vector<Triplet>& H, int offset,
+                    std::vector<FixedHessianBlocks>* blocks = nullptr) const;
+  /// Lower z–z and z–bone blocks of a list from the summed ones (the part-th of parts ranges).
+  void mirrorReduced(int list, int part, int parts) const;
+  /// Marks both lists mirrored (reducedHessians mirrors them on two threads).
+  void setMirrored(bool on) const { mirrored_[0] = mirrored_[1] = on; }
+
+ private:
+  Vec3 blendOf(int j) const;
+  template <int Rows>
+  void addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
+                   const Eigen::Matrix<double, Rows, 3>& B, int list) const;
+
+  int num_bones_ = 0, num_surface_ = 0, bone_dofs_ = 0;
+  bool reduced_ = false;
+  MatX3 rest_;                      // #N × 3, X̄(β)
+  const MatX* posedirs_ = nullptr;  // 3#N × 207 (owned by the avatar's template)
+  std::vector<int> parents_;
+  MatX3 joints_;  // 24 × 3
+  // Pose blend: the feature (9 · 23) of the held pose; FEM: every node's offsets in blend_.
+  // ROM: blend_ row j is current when blend_stamp_[j] == pose_stamp_, else blendOf evaluates it
+  // from posedirs_T_ (each node's 207 × 3 block contiguous, for the nodes with a slot: the
+  // surface and the mass nodes), else from posedirs.
+  VecX feature_;
+  mutable MatX3 blend_;  // #N × 3
+  int pose_stamp_ = 0;
+  mutable std::vector<int> blend_stamp_;
+  MatX posedirs_T_;
+  std::vector<int> blend_slot_;
+  VecX blend_bound_;  // #V
+  VecX phi_sum_;      // #V (ROM): Σ_h φ_h(i)
+  VecXi state_nodes_;
+  std::vector<int> node_dof_;  // FEM layout: 3 · (rank among soft nodes), −1 on bone nodes
+  // ROM: u_j = Σ φ z_h over phi_[phi_start_[j] .. phi_start_[j + 1]) as (handle, φ); the
+  // handle's z offset (3h) at a handle node, −1 elsewhere.
+  std::vector<int> phi_start_;
+  std::vector<std::pair<int, double>> phi_;
+  std::vector<int> state_dof_;
+  int num_handles_ = 0;
+  std::vector<int> influence_start_;
+  std::vector<Influence> influences_;
+  std::vector<int> eval_nodes_, all_nodes_, surface_nodes_;
+  // FEM: see couplingPositions(); per mass node idx its blocks start at coupling_start_[idx].
+  std::vector<std::pair<int, int>> coupling_dofs_;
+  std::vector<int> coupling_start_;
+
+  // Caches of the prepared state.
+  mutable long version_ = -1;
+  mutable MatX3 x_, Y_;
+  mutable std::vector<Mat3> node_M_;  // M_j = Σ_b w_jb R_b
+  mutable const std::vector<Mat3>* cur_R_ = nullptr;
+  mutable const MatX3* cur_t_ = nullptr;
+  mutable BonePairBlocks pair_blocks_[2];  // mapHessian's, per value list
+  // mapHessian with K_j = κ_j I: per ordered bone pair (b, c) (key b · #bones + c), Σ κ w_b w_c
+  // (s), its sums weighted by r_c (p) and r_b (q), and Σ κ w_b w_c r_c r_bᵀ (W); per value list.
+  struct PairMoments {
+    double s = 0.0;
+    Vec3 p = Vec3::Zero(), q = Vec3::Zero();
+    Mat3 W = Mat3::Zero();
+  };
+  mutable TouchedValues<PairMoments> pair_moments_[2];
+  // ROM Hessian blocks at fixed positions (buildReducedPattern): z–z blocks (zz_slot_[h · H +
+  // k], H handles), bone–z blocks (bz_slot_[r · H + h]), then the bone–z blocks' transposes;
+  // positions relative to the first DoF. Two value lists: 0 (inertia), 1 (the potential terms).
+  std::vector<int> zz_slot_, bz_slot_;
+  int num_zz_ = 0, num_bz_ = 0;
+  std::vector<std::pair<int, int>> zz_mirror_;  // (slot of (h, k), slot of (k, h)) for h > k
+  std::vector<std::pair<int, int>> reduced_positions_;
+  mutable std::vector<Mat3> reduced_values_[2];
+  mutable bool mirrored_[2] = {false, false};  // the lower blocks are current
+};
+
+}  // namespace flsh::detail

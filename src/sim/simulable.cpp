@@ -136,13 +136,30 @@ void Simulable::Impl::buildTerms() {
   tracking_term = std::make_unique<detail::TrackingSpringTerm>(parents);
   contact_term = std::make_unique<detail::SurfaceContactTerm>(num_bones);
   spring_terms = {&joint_term, tracking_term.get()};
-  dynamic_terms = {&inertia_term};
-  potential_terms = {&gravity_term, &joint_term, tracking_term.get(), contact_term.get()};
-  terms = dynamic_terms;
-  terms.insert(terms.end(), potential_terms.begin(), potential_terms.end());
+  dynamic_terms = {{&inertia_term}};
+  potential_terms = {{&gravity_term}, {&joint_term}, {tracking_term.get()}, {contact_term.get()}};
+  value_lists = nullptr;
+  terms.clear();
+  for (const auto* part : {&dynamic_terms, &potential_terms})
+    for (const detail::TermEntry& entry : *part) terms.push_back(entry.term);
+}
+
+void Simulable::Impl::useSoftTerms() {
+  dynamic_terms = soft->dynamicTerms();
+  potential_terms.clear();
+  for (const EnergyTerm* spring : spring_terms) potential_terms.push_back({spring});
+  for (const detail::TermEntry& entry : soft->potentialTerms()) potential_terms.push_back(entry);
+  value_lists = &soft->valueLists();
+  terms = spring_terms;
+  for (const EnergyTerm* term : soft->terms()) terms.push_back(term);
+}
+
+bool Simulable::Impl::runsOnTwoThreads() const {
+  return soft && soft->reduced() && !is_static && omp_get_max_threads() >= 2;
 }
 
 TermContext Simulable::Impl::context() const {
+  if (soft) prepareSoft();
   return {num_bones, parents,  J,         inertia,    options,    mocap && options.track_mocap,
           is_static, q.R,      q.t,       q_n.R,      q_n.t,      q_nm1.R,
           q_nm1.t,   target_R, target_t0, tracking_k, root_k_pos, root_k_rot,
@@ -213,6 +230,7 @@ Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar, std::shared_ptr<c
                        "the avatar has soft tissue enabled but no volumetric data "
                        "(call SoftAvatar::initVolumetricData())");
     m.soft = std::make_unique<detail::SoftTissue>(*m.avatar, m.J, m.parents, m.options.time_step);
+    m.useSoftTerms();
     m.soft->setPoseBlend(m.q.R);
     m.setSoftPrediction();
     m.soft_blend_bound.assign(m.num_bones, 0.0);

@@ -17,20 +17,27 @@ using detail::BoneStates;
 using detail::kDofsPerBone;
 
 // ---- energies ----------------------------------------------------------------------------
-// The skeleton sums its terms (Impl::dynamic_terms, potential_terms); with soft tissue the
-// bones' springs are terms and SoftTissue carries the rest.
+// One loop per quantity over the model's terms (Impl::dynamic_terms, potential_terms: the
+// skeleton's, or the bones' springs and the soft tissue's node terms); the Hessian loops take
+// the terms' block forms where they have one, between a begin and a flush of the model's value
+// lists. The ROM's gradient and Hessian have a second schedule on two threads
+// (runsOnTwoThreads: SoftTissue::reducedGradient, reducedHessians).
+
+namespace {
+
+double sumEnergies(const std::vector<detail::TermEntry>& terms, const TermContext& c, VecX* g,
+                   int offset) {
+  double E = 0.0;
+  for (const detail::TermEntry& entry : terms) E += entry.term->evaluate(c, g, offset);
+  return E;
+}
+
+}  // namespace
 
 double Simulable::getDynamicEnergyScalar() const {
   const Impl& m = *impl_;
   if (m.is_static) return 0.0;
-  if (m.soft) {
-    m.prepareSoft();
-    return m.soft->inertia(nullptr, nullptr, 0, true);
-  }
-  const TermContext c = m.context();
-  double E = 0.0;
-  for (const EnergyTerm* term : m.dynamic_terms) E += term->evaluate(c, nullptr, 0);
-  return E;
+  return sumEnergies(m.dynamic_terms, m.context(), nullptr, 0);
 }
 
 void Simulable::getDynamicGradientVector(VecX& g, int offset) const { dynamicGradient(g, offset); }
@@ -38,14 +45,7 @@ void Simulable::getDynamicGradientVector(VecX& g, int offset) const { dynamicGra
 double Simulable::dynamicGradient(VecX& g, int offset) const {
   const Impl& m = *impl_;
   if (m.is_static) return 0.0;
-  if (m.soft) {
-    m.prepareSoft();
-    return m.soft->inertia(&g, nullptr, offset, true);
-  }
-  const TermContext c = m.context();
-  double E = 0.0;
-  for (const EnergyTerm* term : m.dynamic_terms) E += term->evaluate(c, &g, offset);
-  return E;
+  return sumEnergies(m.dynamic_terms, m.context(), &g, offset);
 }
 
 void Simulable::getDynamicHessianTripletVector(std::vector<Triplet>& H, int offset,
@@ -63,33 +63,17 @@ void Simulable::dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessian
                                int offset, bool psd) const {
   const Impl& m = *impl_;
   if (m.is_static) return;
-  if (m.soft) {
-    m.prepareSoft();
-    m.soft->beginReduced(0);
-    FixedHessianBlocks inertia_blocks;
-    m.soft->inertia(nullptr, &H, offset, psd, blocks ? &inertia_blocks : nullptr);
-    if (blocks && !inertia_blocks.empty()) blocks->push_back(inertia_blocks);
-    m.soft->flushReduced(0, H, offset, blocks);
-    return;
-  }
   const TermContext c = m.context();
-  for (const EnergyTerm* term : m.dynamic_terms) term->addHessian(c, H, offset, psd);
+  if (m.value_lists) m.value_lists->beginList(0);
+  for (const detail::TermEntry& entry : m.dynamic_terms)
+    detail::addTermHessian(entry, c, H, blocks, offset, psd);
+  if (m.value_lists) m.value_lists->flushList(0, H, offset, blocks);
 }
 
 double Simulable::getPotentialEnergyScalar() const {
   const Impl& m = *impl_;
-  const TermContext c = m.context();
-  double E = 0.0;
-  if (!m.soft) {
-    m.ensureContact();
-    for (const EnergyTerm* term : m.potential_terms) E += term->evaluate(c, nullptr, 0);
-    return E;
-  }
-  for (const EnergyTerm* term : m.spring_terms) E += term->evaluate(c, nullptr, 0);
-  m.prepareSoft();
-  E += m.soft->gravity(m.options.gravity, nullptr, nullptr, 0, true) +
-       m.soft->elastic(nullptr, nullptr, 0, true);
-  return E + m.contactEnergy();
+  m.ensureContact();
+  return sumEnergies(m.potential_terms, m.context(), nullptr, 0);
 }
 
 double Simulable::boneSpringGradient(VecX& g, int offset) const {
@@ -102,20 +86,8 @@ double Simulable::boneSpringGradient(VecX& g, int offset) const {
 
 double Simulable::potentialGradient(VecX& g, int offset) const {
   const Impl& m = *impl_;
-  if (!m.soft) {
-    m.ensureContact();
-    const TermContext c = m.context();
-    double E = 0.0;
-    for (const EnergyTerm* term : m.potential_terms) E += term->evaluate(c, &g, offset);
-    return E;
-  }
-  double E = boneSpringGradient(g, offset);
-  m.prepareSoft();
-  E += m.soft->gravity(m.options.gravity, &g, nullptr, offset, true) +
-       m.soft->elastic(&g, nullptr, offset, true);
   m.ensureContact();
-  return E + m.soft->contact(m.colliders, m.time, m.options.contact, &g, nullptr, offset, true,
-                             nullptr, &m.contact.candidates);
+  return sumEnergies(m.potential_terms, m.context(), &g, offset);
 }
 
 void Simulable::getPotentialGradientVector(VecX& g, int offset) const {
@@ -128,9 +100,8 @@ void Simulable::getGradientVector(VecX& g, int offset) const {
 
 double Simulable::getEnergyAndGradientVector(VecX& g, int offset) const {
   const Impl& m = *impl_;
-  if (!m.soft || !m.soft->reduced() || m.is_static || omp_get_max_threads() < 2)
-    return dynamicGradient(g, offset) + potentialGradient(g, offset);
-  // ROM: as getHessianTripletVector.
+  if (!m.runsOnTwoThreads()) return dynamicGradient(g, offset) + potentialGradient(g, offset);
+  // ROM: inertia, gravity and the elastic tets beside contact (as getHessianTripletVector).
   const bool contact = m.prepareSoftForThreads();
   double contact_energy = 0.0;
   const double E = m.soft->reducedGradient(m.options.gravity, g, offset, [&](VecX& part) {
@@ -155,46 +126,33 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H,
 void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
                                  int offset, bool psd, bool soft_done) const {
   const Impl& m = *impl_;
+  m.ensureContact();
   const TermContext c = m.context();
-  if (!m.soft) {
-    m.ensureContact();
-    for (const EnergyTerm* term : m.potential_terms) term->addHessian(c, H, offset, psd);
-    return;
+  if (soft_done) {
+    // The two-thread schedule summed the node terms (value list 1, their bone triplets in its
+    // scratch): the bones' springs remain.
+    for (const EnergyTerm* term : m.spring_terms) term->addHessian(c, H, offset, psd);
+  } else {
+    if (m.value_lists) m.value_lists->beginList(1);
+    for (const detail::TermEntry& entry : m.potential_terms)
+      detail::addTermHessian(entry, c, H, blocks, offset, psd);
   }
-  for (const EnergyTerm* term : m.spring_terms) term->addHessian(c, H, offset, psd);
-  m.prepareSoft();
-  // With soft_done the ROM's gravity, elastic and contact blocks are already in value list
-  // 1, their bone triplets in getHessianTripletVector's scratch.
-  FixedHessianBlocks gravity_blocks, elastic_blocks;
-  if (!soft_done) {
-    m.soft->beginReduced(1);
-    m.soft->gravity(m.options.gravity, nullptr, &H, offset, psd,
-                    blocks ? &gravity_blocks : nullptr);
-    m.soft->elastic(nullptr, &H, offset, psd, blocks ? &elastic_blocks : nullptr);
-  }
-  if (blocks)
-    for (const FixedHessianBlocks& list : {elastic_blocks, gravity_blocks})
-      if (!list.empty()) blocks->push_back(list);
-  if (!soft_done) {
-    m.ensureContact();
-    m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &H, offset, psd, nullptr,
-                    &m.contact.candidates);
-  }
-  m.soft->flushReduced(1, H, offset, blocks);
+  if (m.value_lists) m.value_lists->flushList(1, H, offset, blocks);
 }
 
 size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
                                           std::vector<FixedHessianBlocks>& blocks, int offset,
                                           bool psd) const {
   const Impl& m = *impl_;
-  if (!m.soft || !m.soft->reduced() || m.is_static || omp_get_max_threads() < 2) {
+  if (!m.runsOnTwoThreads()) {
     dynamicHessian(H, &blocks, offset, psd);
     const size_t potential_start = H.size();
     potentialHessian(H, &blocks, offset, psd);
     return potential_start;
   }
   // ROM: inertia beside contact and gravity on two threads, the elastic tets split between
-  // them (SoftTissue::reducedHessians); then the bones' springs.
+  // them (SoftTissue::reducedHessians; both value lists come back summed); then the bones'
+  // springs.
   const bool contact = m.prepareSoftForThreads();
   std::vector<Triplet>& dynamic = m.hessian_scratch[0];
   std::vector<Triplet>& potential = m.hessian_scratch[1];
@@ -236,19 +194,11 @@ void Simulable::fixMatrixKinematic(std::vector<Triplet>& H, int offset) const {
         H.emplace_back(offset + 6 * b + k, offset + 6 * b + k, 1.0);
 }
 
-std::vector<const EnergyTerm*> Simulable::energyTerms() const {
-  const Impl& m = *impl_;
-  if (!m.soft) return m.terms;
-  std::vector<const EnergyTerm*> terms = m.spring_terms;
-  for (const EnergyTerm* term : m.soft->terms()) terms.push_back(term);
-  return terms;
-}
+std::vector<const EnergyTerm*> Simulable::energyTerms() const { return impl_->terms; }
 
 TermContext Simulable::termContext() const {
-  const Impl& m = *impl_;
-  m.ensureContact();
-  if (m.soft) m.prepareSoft();
-  return m.context();
+  impl_->ensureContact();
+  return impl_->context();
 }
 
 // ---- scene hooks -------------------------------------------------------------------------

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "flsh/sim/simulable.h"
+#include "sim/block_hessian_term.h"
 #include "sim/hessian_blocks.h"
 #include "sim/soft_tissue.h"
 #include "sim/terms/bone_gravity_term.h"
@@ -131,18 +132,26 @@ struct Simulable::Impl {
 
   // ---- energy terms (energy_term.h) ----
   // The articulated skeleton's energy is the sum of these terms; with soft tissue the bones
-  // keep their springs (joint_term, tracking_term) and SoftTissue carries inertia, gravity,
-  // elasticity and contact on the tet nodes.
+  // keep their springs (joint_term, tracking_term) and SoftTissue's node terms (inertia,
+  // gravity, elasticity, contact on the tet nodes) replace the rest.
   detail::RigidInertiaTerm inertia_term;
   detail::BoneGravityTerm gravity_term;
   detail::JointSpringTerm joint_term;
   std::unique_ptr<detail::TrackingSpringTerm> tracking_term;
   std::unique_ptr<detail::SurfaceContactTerm> contact_term;
-  /// The skeleton's terms by part (dynamic: inertia; potential: the rest), all of them in
-  /// `terms`; the bone springs alone in `spring_terms` (with soft tissue too).
-  std::vector<const EnergyTerm*> dynamic_terms, potential_terms, terms, spring_terms;
+  /// The model's terms by part (dynamic: inertia; potential: the rest), with their block
+  /// forms where they have one, and the value lists they sum into (null: none, the skeleton);
+  /// all of them in `terms`; the bone springs alone in `spring_terms`.
+  std::vector<detail::TermEntry> dynamic_terms, potential_terms;
+  const detail::HessianValueLists* value_lists = nullptr;
+  std::vector<const EnergyTerm*> terms, spring_terms;
+  /// The skeleton's terms; useSoftTerms: the bones' springs and `soft`'s node terms.
   void buildTerms();
-  /// The view the terms read at the current state (call ensureContact first for contact).
+  void useSoftTerms();
+  /// The ROM's evaluations on two threads (SoftTissue::reducedGradient, reducedHessians) apply.
+  bool runsOnTwoThreads() const;
+  /// The view the terms read at the current state, the soft kinematics prepared (call
+  /// ensureContact first for contact).
   TermContext context() const;
 };
 

@@ -37,6 +37,15 @@ class SoftTissue {
   const SoftKinematics& kinematics() const { return kin_; }
   /// The node terms (inertia, gravity, elasticity, contact), for Simulable::energyTerms.
   std::vector<const EnergyTerm*> terms() const;
+  /// The node terms of the dynamic part (inertia) and of the potential part (gravity,
+  /// elasticity, contact) with their block forms, and the value lists they sum into.
+  std::vector<TermEntry> dynamicTerms() const { return {{inertia_.get(), inertia_.get()}}; }
+  std::vector<TermEntry> potentialTerms() const {
+    return {{gravity_.get(), gravity_.get()},
+            {elastic_.get(), elastic_.get()},
+            {contact_.get(), contact_.get()}};
+  }
+  const HessianValueLists& valueLists() const { return kin_; }
 
   int numNodes() const { return kin_.numNodes(); }
   int numSurface() const { return kin_.numSurface(); }

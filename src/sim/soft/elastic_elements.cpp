@@ -54,11 +54,12 @@ ElasticElements elasticElements(const SoftAvatar& avatar, const SoftKinematics& 
   return out;
 }
 
-void ElasticityTerm::addHessian(const TermContext&, std::vector<Triplet>& H, int offset,
-                                bool psd) const {
-  kin_.beginReduced(1);
-  evaluate(nullptr, &H, offset, psd);
-  kin_.flushReduced(1, H, offset);
+void ElasticityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
+                                      std::vector<FixedHessianBlocks>* blocks, int offset,
+                                      bool psd) const {
+  FixedHessianBlocks fixed;
+  evaluate(nullptr, &H, offset, psd, blocks ? &fixed : nullptr);
+  if (blocks && !fixed.empty()) blocks->push_back(fixed);
 }
 
 }  // namespace flsh::detail

@@ -9,6 +9,7 @@
 #include "flsh/core/hessian_blocks.h"
 #include "flsh/energy/fem_material.h"
 #include "flsh/sim/energy_term.h"
+#include "sim/block_hessian_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
@@ -25,13 +26,20 @@ ElasticElements elasticElements(const SoftAvatar& avatar, const SoftKinematics& 
 
 /// The elastic energy of a soft skeleton (FEM: fem_elasticity_term.h; ROM:
 /// reduced_elasticity_term.h).
-class ElasticityTerm : public EnergyTerm {
+class ElasticityTerm : public EnergyTerm, public BlockHessianTerm {
  public:
   const char* name() const override { return "elasticity"; }
   double evaluate(const TermContext&, VecX* g, int offset) const override {
     return evaluate(g, nullptr, offset, true);
   }
-  void addHessian(const TermContext&, std::vector<Triplet>& H, int offset, bool psd) const override;
+  void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
+                  bool psd) const override {
+    addHessianAlone(*this, kin_, 1, c, H, offset, psd);
+  }
+  /// FEM: the node-pair blocks as fixed blocks; ROM: value list 1.
+  void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
+                        std::vector<FixedHessianBlocks>* blocks, int offset,
+                        bool psd) const override;
   /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM: triplets
   /// appended to H or, with `blocks`, returned at fixed positions; ROM: into value list 1).
   virtual double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,

@@ -20,11 +20,12 @@ NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeM
         handle_blocks_.push_back({kin_.bzSlot(2 * b + 1, h), b, D[size_t(b) * H + h]});
 }
 
-void NodalGravityTerm::addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
-                                  bool psd) const {
-  kin_.beginReduced(1);
-  evaluate(c.options.gravity, nullptr, &H, offset, psd);
-  kin_.flushReduced(1, H, offset);
+void NodalGravityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
+                                        std::vector<FixedHessianBlocks>* blocks, int offset,
+                                        bool psd) const {
+  FixedHessianBlocks fixed;
+  evaluate(c.options.gravity, nullptr, &H, offset, psd, blocks ? &fixed : nullptr);
+  if (blocks && !fixed.empty()) blocks->push_back(fixed);
 }
 
 double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,

@@ -7,12 +7,13 @@
 
 #include "flsh/sim/energy_term.h"
 #include "flsh/sim/simulable.h"
+#include "sim/block_hessian_term.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
-class NodalGravityTerm final : public EnergyTerm {
+class NodalGravityTerm final : public EnergyTerm, public BlockHessianTerm {
  public:
   /// Call after the kinematics' buildReducedPattern (the ROM's rotation–handle slots).
   NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses);
@@ -22,7 +23,13 @@ class NodalGravityTerm final : public EnergyTerm {
     return evaluate(c.options.gravity, g, nullptr, offset, true);
   }
   void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
-                  bool psd) const override;
+                  bool psd) const override {
+    addHessianAlone(*this, kin_, 1, c, H, offset, psd);
+  }
+  /// FEM: the coupling blocks as fixed blocks; ROM: bone triplets, handle blocks into list 1.
+  void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
+                        std::vector<FixedHessianBlocks>* blocks, int offset,
+                        bool psd) const override;
 
   /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM: triplets
   /// appended to H, or with `blocks` returned at the kinematics' coupling positions — all zero

@@ -18,11 +18,12 @@ void NodalInertiaTerm::setPrediction(const BoneFrames& bones_n, const BoneFrames
   for (int j : masses_.nodes) x_hat_.row(j) = 2.0 * x_n.row(j) - x_nm1.row(j);
 }
 
-void NodalInertiaTerm::addHessian(const TermContext&, std::vector<Triplet>& H, int offset,
-                                  bool psd) const {
-  kin_.beginReduced(0);
-  evaluate(nullptr, &H, offset, psd);
-  kin_.flushReduced(0, H, offset);
+void NodalInertiaTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
+                                        std::vector<FixedHessianBlocks>* blocks, int offset,
+                                        bool psd) const {
+  FixedHessianBlocks fixed;
+  evaluate(nullptr, &H, offset, psd, blocks ? &fixed : nullptr);
+  if (blocks && !fixed.empty()) blocks->push_back(fixed);
 }
 
 double NodalInertiaTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,

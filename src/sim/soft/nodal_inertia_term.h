@@ -8,12 +8,13 @@
 #include <vector>
 
 #include "flsh/sim/energy_term.h"
+#include "sim/block_hessian_term.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
-class NodalInertiaTerm final : public EnergyTerm {
+class NodalInertiaTerm final : public EnergyTerm, public BlockHessianTerm {
  public:
   /// The ROM's Hessian on two threads maps this share of the mass nodes beside the potential
   /// terms (soft_tissue.cpp): hessianPart(1) maps it, hessianPart(0) the rest.
@@ -25,7 +26,14 @@ class NodalInertiaTerm final : public EnergyTerm {
   double evaluate(const TermContext&, VecX* g, int offset) const override {
     return evaluate(g, nullptr, offset, true);
   }
-  void addHessian(const TermContext&, std::vector<Triplet>& H, int offset, bool psd) const override;
+  void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
+                  bool psd) const override {
+    addHessianAlone(*this, kin_, 0, c, H, offset, psd);
+  }
+  /// FEM: the bone–tissue coupling and node-diagonal blocks as fixed blocks; ROM: value list 0.
+  void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
+                        std::vector<FixedHessianBlocks>* blocks, int offset,
+                        bool psd) const override;
 
   /// x̂ = 2 x(q_n) − x(q_{n−1}) of the mass nodes (the kinematics' u_n and u_nm1).
   void setPrediction(const BoneFrames& bones_n, const BoneFrames& bones_nm1);

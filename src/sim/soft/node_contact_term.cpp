@@ -2,12 +2,11 @@
 
 namespace flsh::detail {
 
-void NodeContactTerm::addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
-                                 bool psd) const {
-  kin_.beginReduced(1);
+void NodeContactTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
+                                       std::vector<FixedHessianBlocks>* blocks, int offset,
+                                       bool psd) const {
   evaluate(c.colliders, c.time, c.options.contact, nullptr, &H, offset, psd, nullptr,
            &c.contact.candidates);
-  kin_.flushReduced(1, H, offset);
 }
 
 double NodeContactTerm::evaluate(const std::vector<Collider>& colliders, double time,

@@ -9,24 +9,33 @@
 #include "flsh/contact/contact_energy.h"
 #include "flsh/sim/energy_term.h"
 #include "flsh/sim/simulable.h"
+#include "sim/block_hessian_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
-class NodeContactTerm final : public EnergyTerm {
+class NodeContactTerm final : public EnergyTerm, public BlockHessianTerm {
  public:
   /// `areas`: the surface nodes' vertex areas, m².
   NodeContactTerm(const SoftKinematics& kinematics, VecX areas)
       : kin_(kinematics), areas_(std::move(areas)) {}
 
   const char* name() const override { return "node contact"; }
-  /// At the context's colliders, time and broad-phase candidates.
+  /// At the context's colliders, time and broad-phase candidates; the energy alone is the one
+  /// the simulable's broad phase evaluated with them (c.contact.energy).
   double evaluate(const TermContext& c, VecX* g, int offset) const override {
+    if (!g) return c.contact.energy;
     return evaluate(c.colliders, c.time, c.options.contact, g, nullptr, offset, true, nullptr,
                     &c.contact.candidates);
   }
   void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
-                  bool psd) const override;
+                  bool psd) const override {
+    addHessianAlone(*this, kin_, 1, c, H, offset, psd);
+  }
+  /// Triplets (FEM) or bone triplets and the handle blocks into list 1 (ROM).
+  void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
+                        std::vector<FixedHessianBlocks>* blocks, int offset,
+                        bool psd) const override;
 
   /// Penalty contact of the surface nodes against colliders at time t: of `candidates`
   /// (surface node indices; a broad phase's: the others must be out of contact) or, null, every

@@ -29,6 +29,7 @@
 #include "flsh/core/hessian_blocks.h"
 #include "flsh/core/types.h"
 #include "flsh/volume/soft_avatar.h"
+#include "sim/block_hessian_term.h"
 #include "sim/hessian_blocks.h"
 
 namespace flsh::detail {
@@ -39,7 +40,7 @@ struct BoneFrames {
   const MatX3& t;              ///< 24 × 3 joint positions, m
 };
 
-class SoftKinematics {
+class SoftKinematics : public HessianValueLists {
  public:
   struct Influence {
     int bone;
@@ -175,6 +176,11 @@ class SoftKinematics {
                     std::vector<FixedHessianBlocks>* blocks = nullptr) const;
   /// Lower z–z and z–bone blocks of a list from the summed ones (the part-th of parts ranges).
   void mirrorReduced(int list, int part, int parts) const;
+  void beginList(int list) const override { beginReduced(list); }
+  void flushList(int list, std::vector<Triplet>& H, int offset,
+                 std::vector<FixedHessianBlocks>* blocks) const override {
+    flushReduced(list, H, offset, blocks);
+  }
   /// Marks both lists mirrored (reducedHessians mirrors them on two threads).
   void setMirrored(bool on) const { mirrored_[0] = mirrored_[1] = on; }
 

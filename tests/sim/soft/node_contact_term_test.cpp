@@ -16,24 +16,29 @@ TEST_P(NodeContactTerm, DerivativesMatchFiniteDifferences) {
   test::expectSoftTermDerivatives(*sim, term, true, true);
 }
 
-// The broad phase only drops nodes out of contact: the term over its candidates equals the term
-// over every surface node (no colliders: zero).
+// The broad phase only drops nodes out of contact: the energy the simulable's broad phase
+// evaluated over its candidates (what the term returns for the energy alone) equals the term
+// evaluated over every surface node; without colliders it is zero.
 TEST_P(NodeContactTerm, CandidatesGiveTheSameEnergyAsEveryNode) {
   auto sim = test::softTermScenario(GetParam());
   const EnergyTerm& term = test::softTermNamed(*sim, "node contact");
   const TermContext c = sim->termContext();
-  ASSERT_LT(c.contact.candidates.size(), size_t(sim->avatar().restVertices().rows()));
+  const size_t surface = size_t(sim->avatar().restVertices().rows());
+  ASSERT_LT(c.contact.candidates.size(), surface);
   const double E = term.evaluate(c, nullptr, 0);
   SurfaceContactState all;
-  all.candidates.resize(size_t(sim->avatar().restVertices().rows()));
-  for (size_t i = 0; i < all.candidates.size(); ++i) all.candidates[i] = int(i);
+  all.candidates.resize(surface);
+  for (size_t i = 0; i < surface; ++i) all.candidates[i] = int(i);
   const TermContext every{c.num_bones,  c.parents,    c.J,          c.inertia,   c.options,
                           c.tracking,   c.is_static,  c.R,          c.t,         c.R_n,
                           c.t_n,        c.R_nm1,      c.t_nm1,      c.target_R,  c.target_t0,
                           c.tracking_k, c.root_k_pos, c.root_k_rot, c.colliders, c.time,
                           c.avatar,     c.skin,       all};
   ASSERT_GT(E, 0.0);
-  EXPECT_NEAR(term.evaluate(every, nullptr, 0), E, 1e-12 * E);
+  VecX g_candidates = VecX::Zero(sim->numDofs()), g_every = VecX::Zero(sim->numDofs());
+  EXPECT_NEAR(term.evaluate(c, &g_candidates, 0), E, 1e-12 * E);
+  EXPECT_NEAR(term.evaluate(every, &g_every, 0), E, 1e-12 * E);
+  EXPECT_LT((g_every - g_candidates).norm(), 1e-12 * g_every.norm());
   sim->setColliders({});
   EXPECT_EQ(term.evaluate(sim->termContext(), nullptr, 0), 0.0);
 }

@@ -51,13 +51,4 @@ inline void addTermHessian(const TermEntry& entry, const TermContext& c, std::ve
     entry.term->addHessian(c, H, offset, psd);
 }
 
-/// EnergyTerm::addHessian of a term with a block form over value list `list`: begin, the
-/// blocks as triplets, flush (for a term evaluated alone).
-inline void addHessianAlone(const BlockHessianTerm& term, const HessianValueLists& lists, int list,
-                            const TermContext& c, std::vector<Triplet>& H, int offset, bool psd) {
-  lists.beginList(list);
-  term.addHessianBlocks(c, H, nullptr, offset, psd);
-  lists.flushList(list, H, offset, nullptr);
-}
-
 }  // namespace flsh::detail

@@ -37,12 +37,13 @@ class SoftTissue {
   const SoftKinematics& kinematics() const { return kin_; }
   /// The node terms (inertia, gravity, elasticity, contact), for Simulable::energyTerms.
   std::vector<const EnergyTerm*> terms() const;
-  /// The node terms of the dynamic part (inertia) and of the potential part (gravity,
-  /// elasticity, contact) with their block forms, and the value lists they sum into.
+  /// The node terms of the dynamic part (inertia) and of the potential part (elasticity,
+  /// gravity, contact: the FEM's fixed block lists come in this order, the elastic node pairs
+  /// then gravity's coupling blocks) with their block forms, and the value lists they sum into.
   std::vector<TermEntry> dynamicTerms() const { return {{inertia_.get(), inertia_.get()}}; }
   std::vector<TermEntry> potentialTerms() const {
-    return {{gravity_.get(), gravity_.get()},
-            {elastic_.get(), elastic_.get()},
+    return {{elastic_.get(), elastic_.get()},
+            {gravity_.get(), gravity_.get()},
             {contact_.get(), contact_.get()}};
   }
   const HessianValueLists& valueLists() const { return kin_; }

@@ -17,6 +17,7 @@
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/newton.h"
 #include "flsh/solve/scene.h"
+#include "sim/soft/soft_term_checks.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -30,24 +31,9 @@ MatX dense(const std::vector<Triplet>& H, int n) { return test::denseFromTriplet
 
 enum class Model { Fem, Rom };
 
-// Soft avatars of the 800-vertex synthetic body (coarse interior), built once per binary: the FEM
-// soft skeleton, and the ROM with 16 handles and both cubatures (60 tets each).
+// The soft avatars of the node terms' tests (FEM; ROM with 16 handles and both cubatures).
 std::shared_ptr<const SoftAvatar> softAvatar(Model model) {
-  static const std::string cache = test::freshTempDir("soft_tissue_cache");
-  auto make = [](bool reduced) {
-    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(),
-                                          test::smallSoftAvatarSettings(cache));
-    a->enableSoftTissue();
-    a->enableReducedModel(reduced);
-    a->enableElasticCubature(reduced);
-    a->enableInertialCubature(reduced);
-    a->initVolumetricData();
-    return a;
-  };
-  static std::shared_ptr<const SoftAvatar> fem = make(false);
-  if (model == Model::Fem) return fem;
-  static std::shared_ptr<const SoftAvatar> rom = make(true);
-  return rom;
+  return test::smallSoftAvatar(model == Model::Fem ? test::SoftModel::Fem : test::SoftModel::Rom);
 }
 
 class SoftTissueModel : public ::testing::TestWithParam<Model> {

@@ -57,9 +57,8 @@ ElasticElements elasticElements(const SoftAvatar& avatar, const SoftKinematics& 
 void ElasticityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                                       std::vector<FixedHessianBlocks>* blocks, int offset,
                                       bool psd) const {
-  FixedHessianBlocks fixed;
-  evaluate(nullptr, &H, offset, psd, blocks ? &fixed : nullptr);
-  if (blocks && !fixed.empty()) blocks->push_back(fixed);
+  collectFixedBlocks(blocks,
+                     [&](FixedHessianBlocks* fixed) { evaluate(nullptr, &H, offset, psd, fixed); });
 }
 
 }  // namespace flsh::detail

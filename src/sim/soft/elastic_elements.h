@@ -9,7 +9,7 @@
 #include "flsh/core/hessian_blocks.h"
 #include "flsh/energy/fem_material.h"
 #include "flsh/sim/energy_term.h"
-#include "sim/block_hessian_term.h"
+#include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
@@ -26,15 +26,11 @@ ElasticElements elasticElements(const SoftAvatar& avatar, const SoftKinematics& 
 
 /// The elastic energy of a soft skeleton (FEM: fem_elasticity_term.h; ROM:
 /// reduced_elasticity_term.h).
-class ElasticityTerm : public EnergyTerm, public BlockHessianTerm {
+class ElasticityTerm : public NodeTerm<1> {
  public:
   const char* name() const override { return "elasticity"; }
   double evaluate(const TermContext&, VecX* g, int offset) const override {
     return evaluate(g, nullptr, offset, true);
-  }
-  void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
-                  bool psd) const override {
-    addHessianAlone(*this, kin_, 1, c, H, offset, psd);
   }
   /// FEM: the node-pair blocks as fixed blocks; ROM: value list 1.
   void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -46,8 +42,7 @@ class ElasticityTerm : public EnergyTerm, public BlockHessianTerm {
                           FixedHessianBlocks* blocks = nullptr) const = 0;
 
  protected:
-  explicit ElasticityTerm(const SoftKinematics& kinematics) : kin_(kinematics) {}
-  const SoftKinematics& kin_;
+  explicit ElasticityTerm(const SoftKinematics& kinematics) : NodeTerm(kinematics) {}
 };
 
 }  // namespace flsh::detail

@@ -6,7 +6,7 @@
 namespace flsh::detail {
 
 NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses)
-    : kin_(kinematics), masses_(masses) {
+    : NodeTerm(kinematics), masses_(masses) {
   if (!kin_.reduced()) return;
   const int bones = kin_.numBones(), H = kin_.numHandles();
   std::vector<double> D(size_t(bones) * H, 0.0);
@@ -23,9 +23,9 @@ NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeM
 void NodalGravityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                                         std::vector<FixedHessianBlocks>* blocks, int offset,
                                         bool psd) const {
-  FixedHessianBlocks fixed;
-  evaluate(c.options.gravity, nullptr, &H, offset, psd, blocks ? &fixed : nullptr);
-  if (blocks && !fixed.empty()) blocks->push_back(fixed);
+  collectFixedBlocks(blocks, [&](FixedHessianBlocks* fixed) {
+    evaluate(c.options.gravity, nullptr, &H, offset, psd, fixed);
+  });
 }
 
 double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,

@@ -9,11 +9,12 @@
 #include "flsh/sim/simulable.h"
 #include "sim/block_hessian_term.h"
 #include "sim/soft/node_masses.h"
+#include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
-class NodalGravityTerm final : public EnergyTerm, public BlockHessianTerm {
+class NodalGravityTerm final : public NodeTerm<1> {
  public:
   /// Call after the kinematics' buildReducedPattern (the ROM's rotation–handle slots).
   NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses);
@@ -21,10 +22,6 @@ class NodalGravityTerm final : public EnergyTerm, public BlockHessianTerm {
   const char* name() const override { return "nodal gravity"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override {
     return evaluate(c.options.gravity, g, nullptr, offset, true);
-  }
-  void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
-                  bool psd) const override {
-    addHessianAlone(*this, kin_, 1, c, H, offset, psd);
   }
   /// FEM: the coupling blocks as fixed blocks; ROM: bone triplets, handle blocks into list 1.
   void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -41,7 +38,6 @@ class NodalGravityTerm final : public EnergyTerm, public BlockHessianTerm {
   void reducedHessian(const Vec3& gravity, std::vector<Triplet>& H, int offset, bool psd) const;
 
  private:
-  const SoftKinematics& kin_;
   const NodeMasses& masses_;
   // ROM: the rotation–handle blocks D_bh [g]× R_b into value list 1 at `slot`, D_bh = Σ_j m_j
   // w_jb φ_jh over the mass nodes (constant).

@@ -4,7 +4,7 @@ namespace flsh::detail {
 
 NodalInertiaTerm::NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
                                    double time_step)
-    : kin_(kinematics), masses_(masses), h_(time_step), x_hat_(kinematics.restNodes()) {
+    : NodeTerm(kinematics), masses_(masses), h_(time_step), x_hat_(kinematics.restNodes()) {
   const std::vector<int>& nodes = masses_.nodes;
   const size_t first = size_t((1.0 - kShareBesidePotential) * double(nodes.size()));
   parts_[0].assign(nodes.begin(), nodes.begin() + long(first));
@@ -21,9 +21,8 @@ void NodalInertiaTerm::setPrediction(const BoneFrames& bones_n, const BoneFrames
 void NodalInertiaTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                                         std::vector<FixedHessianBlocks>* blocks, int offset,
                                         bool psd) const {
-  FixedHessianBlocks fixed;
-  evaluate(nullptr, &H, offset, psd, blocks ? &fixed : nullptr);
-  if (blocks && !fixed.empty()) blocks->push_back(fixed);
+  collectFixedBlocks(blocks,
+                     [&](FixedHessianBlocks* fixed) { evaluate(nullptr, &H, offset, psd, fixed); });
 }
 
 double NodalInertiaTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,

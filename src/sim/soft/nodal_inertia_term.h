@@ -8,13 +8,13 @@
 #include <vector>
 
 #include "flsh/sim/energy_term.h"
-#include "sim/block_hessian_term.h"
 #include "sim/soft/node_masses.h"
+#include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
-class NodalInertiaTerm final : public EnergyTerm, public BlockHessianTerm {
+class NodalInertiaTerm final : public NodeTerm<0> {
  public:
   /// The ROM's Hessian on two threads maps this share of the mass nodes beside the potential
   /// terms (soft_tissue.cpp): hessianPart(1) maps it, hessianPart(0) the rest.
@@ -25,10 +25,6 @@ class NodalInertiaTerm final : public EnergyTerm, public BlockHessianTerm {
   const char* name() const override { return "nodal inertia"; }
   double evaluate(const TermContext&, VecX* g, int offset) const override {
     return evaluate(g, nullptr, offset, true);
-  }
-  void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
-                  bool psd) const override {
-    addHessianAlone(*this, kin_, 0, c, H, offset, psd);
   }
   /// FEM: the bone–tissue coupling and node-diagonal blocks as fixed blocks; ROM: value list 0.
   void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -50,7 +46,6 @@ class NodalInertiaTerm final : public EnergyTerm, public BlockHessianTerm {
   void hessianPart(int part, std::vector<Triplet>& H, int offset, bool psd) const;
 
  private:
-  const SoftKinematics& kin_;
   const NodeMasses& masses_;
   double h_;
   MatX3 x_hat_;

@@ -10,15 +10,16 @@
 #include "flsh/sim/energy_term.h"
 #include "flsh/sim/simulable.h"
 #include "sim/block_hessian_term.h"
+#include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
-class NodeContactTerm final : public EnergyTerm, public BlockHessianTerm {
+class NodeContactTerm final : public NodeTerm<1> {
  public:
   /// `areas`: the surface nodes' vertex areas, m².
   NodeContactTerm(const SoftKinematics& kinematics, VecX areas)
-      : kin_(kinematics), areas_(std::move(areas)) {}
+      : NodeTerm(kinematics), areas_(std::move(areas)) {}
 
   const char* name() const override { return "node contact"; }
   /// At the context's colliders, time and broad-phase candidates; the energy alone is the one
@@ -27,10 +28,6 @@ class NodeContactTerm final : public EnergyTerm, public BlockHessianTerm {
     if (!g) return c.contact.energy;
     return evaluate(c.colliders, c.time, c.options.contact, g, nullptr, offset, true, nullptr,
                     &c.contact.candidates);
-  }
-  void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
-                  bool psd) const override {
-    addHessianAlone(*this, kin_, 1, c, H, offset, psd);
   }
   /// Triplets (FEM) or bone triplets and the handle blocks into list 1 (ROM).
   void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -47,7 +44,6 @@ class NodeContactTerm final : public EnergyTerm, public BlockHessianTerm {
                   bool skin = true) const;
 
  private:
-  const SoftKinematics& kin_;
   VecX areas_;
   mutable MatX3 x_;
   mutable VecX node_areas_;

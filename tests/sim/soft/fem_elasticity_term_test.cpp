@@ -10,7 +10,7 @@ TEST(FemElasticityTerm, DerivativesMatchFiniteDifferences) {
   auto sim = test::softTermScenario(SoftModel::Fem);
   ASSERT_FALSE(sim->hasReducedModel());
   // Reads u alone (the tissue's deformation in the unposed frame): no bone rows.
-  test::expectSoftTermDerivatives(*sim, test::softTermNamed(*sim, "elasticity"), true, false);
+  test::expectSoftTermDerivatives(*sim, test::termNamed(*sim, "elasticity"), true, false);
 }
 
 // Zero energy and gradient at rest (u = 0) whatever the bones do.
@@ -19,8 +19,8 @@ TEST(FemElasticityTerm, RestIsStressFreeInAnyPose) {
   VecX q = sim->getState();
   q.tail(sim->numDofs() - sim->numBoneDofs()).setZero();
   sim->setState(q);
-  const EnergyTerm& term = test::softTermNamed(*sim, "elasticity");
-  const VecX g = test::softTermGradient(*sim, term);
+  const EnergyTerm& term = test::termNamed(*sim, "elasticity");
+  const VecX g = test::termGradient(*sim, term);
   EXPECT_EQ(term.evaluate(sim->termContext(), nullptr, 0), 0.0);
   EXPECT_EQ(g.norm(), 0.0);
 }

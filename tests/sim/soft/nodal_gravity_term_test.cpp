@@ -11,14 +11,14 @@ class NodalGravityTerm : public ::testing::TestWithParam<SoftModel> {};
 TEST_P(NodalGravityTerm, DerivativesMatchFiniteDifferences) {
   auto sim = test::softTermScenario(GetParam());
   // Linear in the node positions, which are linear in u: no soft–soft blocks.
-  test::expectSoftTermDerivatives(*sim, test::softTermNamed(*sim, "nodal gravity"), false, true);
+  test::expectSoftTermDerivatives(*sim, test::termNamed(*sim, "nodal gravity"), false, true);
 }
 
 // −Σ m_j g · x_j: lifting the whole body by d changes it by −M g · d, M the mass of the nodes
 // (every node's lumped mass, or the inertial cubature's, which keeps the total mass).
 TEST_P(NodalGravityTerm, LiftingTheBodyCostsItsWeight) {
   auto sim = test::softTermScenario(GetParam());
-  const EnergyTerm& term = test::softTermNamed(*sim, "nodal gravity");
+  const EnergyTerm& term = test::termNamed(*sim, "nodal gravity");
   const double E0 = term.evaluate(sim->termContext(), nullptr, 0);
   const int n = sim->numDofs(), nb = sim->numBoneDofs();
   VecX lift = VecX::Zero(n);

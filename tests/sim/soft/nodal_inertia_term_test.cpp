@@ -10,14 +10,14 @@ class NodalInertiaTerm : public ::testing::TestWithParam<SoftModel> {};
 
 TEST_P(NodalInertiaTerm, DerivativesMatchFiniteDifferences) {
   auto sim = test::softTermScenario(GetParam());
-  test::expectSoftTermDerivatives(*sim, test::softTermNamed(*sim, "nodal inertia"), true, true);
+  test::expectSoftTermDerivatives(*sim, test::termNamed(*sim, "nodal inertia"), true, true);
 }
 
 // The energy is ½ Σ m_j ‖x_j − x̂_j‖² / h²: zero at the prediction x̂ = 2 x_n − x_{n−1}, which the
 // state q = 2 q_n − q_{n−1} reaches exactly when the bones do not turn (here: a pure
 // translation history of the whole body and the soft state).
 TEST_P(NodalInertiaTerm, VanishesAtThePredictionOfAUniformMotion) {
-  auto sim = std::make_unique<Simulable>(test::softTermAvatar(GetParam()));
+  auto sim = std::make_unique<Simulable>(test::smallSoftAvatar(GetParam()));
   sim->initialize();
   const int n = sim->numDofs(), nb = sim->numBoneDofs();
   VecX step = VecX::Zero(n);
@@ -27,7 +27,7 @@ TEST_P(NodalInertiaTerm, VanishesAtThePredictionOfAUniformMotion) {
   sim->updateState(step);
   sim->postUpdate();
   sim->preUpdate();  // the state starts at the prediction 2 q_n − q_{n−1}
-  const EnergyTerm& term = test::softTermNamed(*sim, "nodal inertia");
+  const EnergyTerm& term = test::termNamed(*sim, "nodal inertia");
   const double E = term.evaluate(sim->termContext(), nullptr, 0);
   sim->updateState(step);
   const double moved = term.evaluate(sim->termContext(), nullptr, 0);

@@ -11,7 +11,7 @@ class NodeContactTerm : public ::testing::TestWithParam<SoftModel> {};
 
 TEST_P(NodeContactTerm, DerivativesMatchFiniteDifferences) {
   auto sim = test::softTermScenario(GetParam());
-  const EnergyTerm& term = test::softTermNamed(*sim, "node contact");
+  const EnergyTerm& term = test::termNamed(*sim, "node contact");
   ASSERT_GT(term.evaluate(sim->termContext(), nullptr, 0), 0.0) << "no node in contact";
   test::expectSoftTermDerivatives(*sim, term, true, true);
 }
@@ -21,7 +21,7 @@ TEST_P(NodeContactTerm, DerivativesMatchFiniteDifferences) {
 // evaluated over every surface node; without colliders it is zero.
 TEST_P(NodeContactTerm, CandidatesGiveTheSameEnergyAsEveryNode) {
   auto sim = test::softTermScenario(GetParam());
-  const EnergyTerm& term = test::softTermNamed(*sim, "node contact");
+  const EnergyTerm& term = test::termNamed(*sim, "node contact");
   const TermContext c = sim->termContext();
   const size_t surface = size_t(sim->avatar().restVertices().rows());
   ASSERT_LT(c.contact.candidates.size(), surface);

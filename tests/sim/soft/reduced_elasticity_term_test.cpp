@@ -10,7 +10,7 @@ using test::SoftModel;
 TEST(ReducedElasticityTerm, DerivativesMatchFiniteDifferences) {
   auto sim = test::softTermScenario(SoftModel::Rom);
   ASSERT_TRUE(sim->hasReducedModel());
-  test::expectSoftTermDerivatives(*sim, test::softTermNamed(*sim, "elasticity"), true, false);
+  test::expectSoftTermDerivatives(*sim, test::termNamed(*sim, "elasticity"), true, false);
 }
 
 // The split keeps the exact rest stiffness K of the subspace: near z = 0 the energy is ½ zᵀ K z
@@ -18,7 +18,7 @@ TEST(ReducedElasticityTerm, DerivativesMatchFiniteDifferences) {
 TEST(ReducedElasticityTerm, GrowsQuadraticallyFromRest) {
   auto sim = test::softTermScenario(SoftModel::Rom);
   const int n = sim->numDofs(), nb = sim->numBoneDofs();
-  const EnergyTerm& term = test::softTermNamed(*sim, "elasticity");
+  const EnergyTerm& term = test::termNamed(*sim, "elasticity");
   VecX q = sim->getState();
   const VecX direction = test::randomVector(n - nb, 1.0, 21);
   const auto energyAt = [&](double s) {

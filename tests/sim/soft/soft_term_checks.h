@@ -16,6 +16,7 @@
 
 #include "flsh/core/rotation.h"
 #include "flsh/sim/simulable.h"
+#include "sim/terms/term_checks.h"
 #include "support/test_support.h"
 
 namespace flsh::test {
@@ -27,8 +28,8 @@ inline std::string modelName(const ::testing::TestParamInfo<SoftModel>& info) {
 }
 
 /// Soft avatars of the 800-vertex synthetic body (coarse interior), built once per binary: the
-/// FEM soft skeleton, and the ROM with both cubatures.
-inline std::shared_ptr<const SoftAvatar> softTermAvatar(SoftModel model) {
+/// FEM soft skeleton, and the ROM with both cubatures (16 handles, 60 tets each).
+inline std::shared_ptr<const SoftAvatar> smallSoftAvatar(SoftModel model) {
   static const std::string cache = freshTempDir("soft_term_cache");
   auto make = [](bool reduced) {
     auto a =
@@ -50,7 +51,7 @@ inline std::shared_ptr<const SoftAvatar> softTermAvatar(SoftModel model) {
 /// its prediction, a ground plane 1.5 cm above its lowest node and a sphere pressing into its
 /// frontmost node: every node term is active.
 inline std::unique_ptr<Simulable> softTermScenario(SoftModel model) {
-  auto sim = std::make_unique<Simulable>(softTermAvatar(model), smallScene(800).walk);
+  auto sim = std::make_unique<Simulable>(smallSoftAvatar(model), smallScene(800).walk);
   sim->initialize();
   sim->preUpdate();
   const int n = sim->numDofs(), nb = sim->numBoneDofs();
@@ -72,18 +73,6 @@ inline std::unique_ptr<Simulable> softTermScenario(SoftModel model) {
   sim->setColliders({Collider::plane(Vec3(0, nodes(lowest, 1) + 0.015, 0), Vec3::UnitY()),
                      Collider::sphere(tip + Vec3(0, 0, 0.04), 0.05)});
   return sim;
-}
-
-inline const EnergyTerm& softTermNamed(const Simulable& sim, const std::string& name) {
-  for (const EnergyTerm* term : sim.energyTerms())
-    if (name == term->name()) return *term;
-  throw std::runtime_error("no energy term named " + name);
-}
-
-inline VecX softTermGradient(const Simulable& sim, const EnergyTerm& term) {
-  VecX g = VecX::Zero(sim.numDofs());
-  term.evaluate(sim.termContext(), &g, 0);
-  return g;
 }
 
 inline MatX softTermHessian(const Simulable& sim, const EnergyTerm& term, bool psd) {
@@ -122,7 +111,7 @@ inline void expectSoftTermDerivatives(Simulable& sim, const EnergyTerm& term, bo
   const int n = sim.numDofs(), nb = sim.numBoneDofs();
   const VecX q0 = sim.getState();
   const double E0 = term.evaluate(sim.termContext(), nullptr, 0);
-  const VecX g = softTermGradient(sim, term);
+  const VecX g = termGradient(sim, term);
   const MatX H = softTermHessian(sim, term, false);
   ASSERT_GT(g.tail(n - nb).norm(), 0.0) << term.name() << ": soft gradient";
   if (soft_soft) {
@@ -149,7 +138,7 @@ inline void expectSoftTermDerivatives(Simulable& sim, const EnergyTerm& term, bo
   const auto gradient = [&](const VecX& sub) {
     const VecX d = expand(sub);
     return atMovedState(sim, d, [&] {
-      VecX gd = softTermGradient(sim, term);
+      VecX gd = termGradient(sim, term);
       for (int b = 0; b < nb / 6; ++b)
         gd.segment<3>(6 * b + 3) =
             leftJacobianSO3(d.segment<3>(6 * b + 3)).transpose() * gd.segment<3>(6 * b + 3);

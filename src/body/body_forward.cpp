@@ -17,6 +17,7 @@
 #include <string>
 
 #include "body/body_model_derived.h"
+#include "flsh/body/model_finalized.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
@@ -66,12 +67,9 @@ std::string modelName(const BodyModel& m) {
   return m.source.empty() ? std::string("body model") : "body model '" + m.source + "'";
 }
 
-const Derived& requireFinalized(const BodyModel& m, const std::string& fn,
-                                bool needs_smpl_skeleton = true) {
-  if (!m.derived || m.derived->weight_start.size() != size_t(m.numVertices()) + 1 ||
-      m.derived->joint_shapedirs.cols() != m.numBetas())
-    throw InputError(fn + ": " + modelName(m) +
-                     " is not finalized for its current arrays (call BodyModel::finalize())");
+const Derived& requireFinalizedModel(const BodyModel& m, const std::string& fn,
+                                     bool needs_smpl_skeleton = true) {
+  requireFinalized(m, fn);
   if (needs_smpl_skeleton && m.numJoints() != kJ)
     throw InputError(fn + ": " + modelName(m) + " has " + std::to_string(m.numJoints()) +
                      " joints, expected " + std::to_string(kJ) + " (SMPL skeleton)");
@@ -362,7 +360,7 @@ void checkShapeCoefficients(const Eigen::Ref<const VecX>& betas, const std::stri
 PosedBody poseBody(const BodyModel& model, const Eigen::Ref<const VecX>& betas,
                    const Eigen::Ref<const VecX>& pose, const Vec3& trans,
                    PosedBodyJacobians* jacobians) {
-  const Derived& d = requireFinalized(model, "poseBody");
+  const Derived& d = requireFinalizedModel(model, "poseBody");
   const VecX padded = paddedBetas(model, betas, "poseBody");
   const VecX pose72 = toSmplPose(pose, "poseBody: pose");
   if (!trans.allFinite()) throw InputError("poseBody: trans contains NaN or Inf");
@@ -372,7 +370,7 @@ PosedBody poseBody(const BodyModel& model, const Eigen::Ref<const VecX>& betas,
 PosedBatch poseBodyBatch(const BodyModel& model, const Eigen::Ref<const VecX>& betas,
                          const Eigen::Ref<const RowMatX>& poses,
                          const Eigen::Ref<const RowMatX>& trans) {
-  const Derived& d = requireFinalized(model, "poseBodyBatch");
+  const Derived& d = requireFinalizedModel(model, "poseBodyBatch");
   const VecX padded = paddedBetas(model, betas, "poseBodyBatch");
   const RowMatX poses72 = toSmplPoses(poses, "poseBodyBatch: poses");
   if (trans.cols() != 3 || trans.rows() != poses.rows())
@@ -438,7 +436,7 @@ PosedBatch poseBodyBatch(const BodyModel& model, const Eigen::Ref<const VecX>& b
 }
 
 MatX3 shapedVertices(const BodyModel& model, const Eigen::Ref<const VecX>& betas) {
-  requireFinalized(model, "shapedVertices", false);
+  requireFinalizedModel(model, "shapedVertices", false);
   const VecX padded = paddedBetas(model, betas, "shapedVertices");
   MatX3 shaped = model.v_template;
   Eigen::Map<VecX>(shaped.data(), shaped.size()).noalias() += model.shapedirs * padded;

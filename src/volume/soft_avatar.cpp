@@ -16,8 +16,8 @@
 #include <tuple>
 #include <vector>
 
-#include "body/body_model_derived.h"
 #include "flsh/body/body_forward.h"
+#include "flsh/body/model_finalized.h"
 #include "flsh/core/error.h"
 
 namespace flsh {
@@ -68,9 +68,7 @@ SoftAvatar::SoftAvatar(std::shared_ptr<const BodyModel> body, const VecX& betas,
     : body_(std::move(body)), settings_(settings) {
   const std::string fn = "SoftAvatar: ";
   if (!body_) throw InputError(fn + "body is null, expected a body model");
-  if (!body_->derived || body_->derived->weight_start.size() != size_t(body_->numVertices()) + 1)
-    throw InputError(fn + modelName(*body_) +
-                     " is not finalized for its current arrays (call BodyModel::finalize())");
+  requireFinalized(*body_, "SoftAvatar");
   const long K = body_->numBetas();
   if (betas.size() > K)
     throw InputError(fn + "betas has " + std::to_string(betas.size()) +

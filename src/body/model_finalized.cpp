@@ -1,0 +1,21 @@
+#include "flsh/body/model_finalized.h"
+
+#include "body/body_model_derived.h"
+#include "flsh/core/error.h"
+
+namespace flsh {
+
+bool isFinalized(const BodyModel& model) {
+  return model.derived && model.derived->weight_start.size() == size_t(model.numVertices()) + 1 &&
+         model.derived->joint_shapedirs.cols() == model.numBetas();
+}
+
+void requireFinalized(const BodyModel& model, const std::string& who) {
+  if (isFinalized(model)) return;
+  const std::string name =
+      model.source.empty() ? std::string("body model") : "body model '" + model.source + "'";
+  throw InputError(who + ": " + name +
+                   " is not finalized for its current arrays (call BodyModel::finalize())");
+}
+
+}  // namespace flsh

@@ -24,11 +24,10 @@
 #include "flsh/contact/collider.h"
 #include "flsh/core/types.h"
 #include "flsh/sim/sim_parameter.h"
+#include "flsh/sim/simulable_options.h"
 #include "flsh/volume/soft_avatar.h"
 
 namespace flsh {
-
-struct SimulableOptions;
 
 /// Skinning weights as (bone, weight) lists per vertex, the nonzero entries only.
 struct SparseSkinWeights {

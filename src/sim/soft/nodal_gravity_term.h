@@ -6,7 +6,6 @@
 #include <vector>
 
 #include "flsh/sim/energy_term.h"
-#include "flsh/sim/simulable.h"
 #include "sim/block_hessian_term.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/node_term.h"

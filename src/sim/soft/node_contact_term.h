@@ -8,7 +8,6 @@
 #include "flsh/contact/collider.h"
 #include "flsh/contact/contact_energy.h"
 #include "flsh/sim/energy_term.h"
-#include "flsh/sim/simulable.h"
 #include "sim/block_hessian_term.h"
 #include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"

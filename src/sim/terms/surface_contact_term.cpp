@@ -3,7 +3,6 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/contact/contact_energy.h"
 #include "flsh/core/rotation.h"
-#include "flsh/sim/simulable.h"
 #include "flsh/sim/skeleton_energies.h"
 #include "sim/terms/term_products.h"
 

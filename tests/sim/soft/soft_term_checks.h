@@ -65,13 +65,7 @@ inline std::unique_ptr<Simulable> softTermScenario(SoftModel model) {
   sim->postUpdate();
   sim->preUpdate();
   sim->updateState(increment(0.03, 0.003, 5));
-  const MatX3 nodes = sim->getNodes();
-  Eigen::Index lowest, front;
-  nodes.col(1).minCoeff(&lowest);
-  nodes.col(2).maxCoeff(&front);
-  const Vec3 tip = nodes.row(front).transpose();
-  sim->setColliders({Collider::plane(Vec3(0, nodes(lowest, 1) + 0.015, 0), Vec3::UnitY()),
-                     Collider::sphere(tip + Vec3(0, 0, 0.04), 0.05)});
+  placeGroundAndSphere(*sim);
   return sim;
 }
 

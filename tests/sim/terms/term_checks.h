@@ -21,6 +21,18 @@ inline const EnergyTerm& termNamed(const Simulable& sim, const std::string& name
   throw std::runtime_error("no energy term named " + name);
 }
 
+/// A ground plane 1.5 cm above the simulable's lowest node and a sphere pressing into its
+/// frontmost node (a curved collider).
+inline void placeGroundAndSphere(Simulable& sim) {
+  const MatX3 nodes = sim.getNodes();
+  Eigen::Index lowest, front;
+  nodes.col(1).minCoeff(&lowest);
+  nodes.col(2).maxCoeff(&front);
+  const Vec3 tip = nodes.row(front).transpose();
+  sim.setColliders({Collider::plane(Vec3(0, nodes(lowest, 1) + 0.015, 0), Vec3::UnitY()),
+                    Collider::sphere(tip + Vec3(0, 0, 0.04), 0.05)});
+}
+
 /// A walking avatar one step in with a velocity history, moved off its prediction, a ground
 /// plane 1.5 cm above its lowest vertex and a sphere pressing into its frontmost vertex (a
 /// curved collider), tracking its mocap: every term is active (600-vertex synthetic body).
@@ -37,13 +49,7 @@ inline std::unique_ptr<Simulable> termScenario() {
   sim->setState(N);
   sim->postUpdate();
   sim->setState(predicted + randomVector(n, 0.03, 5));
-  const MatX3 nodes = sim->getNodes();
-  Eigen::Index lowest, front;
-  nodes.col(1).minCoeff(&lowest);
-  nodes.col(2).maxCoeff(&front);
-  const Vec3 tip = nodes.row(front).transpose();
-  sim->setColliders({Collider::plane(Vec3(0, nodes(lowest, 1) + 0.015, 0), Vec3::UnitY()),
-                     Collider::sphere(tip + Vec3(0, 0, 0.04), 0.05)});
+  placeGroundAndSphere(*sim);
   return sim;
 }
 

@@ -1,0 +1,26 @@
+// The reduced data's arrays in its cache entry (the avatar cache's third level, reduced_data.h):
+// written as they are, read back with every value checked against the volumetric data and the
+// settings it was built for (a damaged entry is an InputError naming the file and the key).
+// Private to volume/.
+#pragma once
+
+#include "flsh/body/body_model.h"
+#include "flsh/io/npz.h"
+#include "flsh/volume/reduced_data.h"
+
+namespace flsh::detail {
+
+/// Basis entries below this are dropped (they only cost memory and time in the simulation); a
+/// stored basis has none.
+constexpr double kBasisDropThreshold = 1e-12;
+
+/// The arrays of `d` for its cache entry.
+io::NpzWriter reducedDataArrays(const ReducedData& d);
+
+/// The reduced data of a cache entry, checked: distinct soft-tissue surface handles, a
+/// column-major basis of weights in [0, 1] on soft-tissue nodes, cubatures of ascending tets in
+/// range with positive weights (empty when off), finite figures.
+ReducedData readReducedData(const io::NpzFile& f, const VolumetricData& data, const BodyModel& body,
+                            const ReducedSettings& settings, bool elastic, bool inertial);
+
+}  // namespace flsh::detail

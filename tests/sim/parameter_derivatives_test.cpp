@@ -8,6 +8,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/sim/simulable.h"
+#include "sim/terms/term_checks.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -58,13 +59,7 @@ Scenario walkingAvatarInContact() {
   s.M = s.N + randomVector(n, 0.02, 4);
   s.Q = predicted + randomVector(n, 0.03, 5);
   setHistory(sim, s.N, VecX::Zero(n), s.M, VecX::Zero(n), s.Q);
-  const MatX3 nodes = sim.getNodes();
-  Eigen::Index lowest, front;
-  nodes.col(1).minCoeff(&lowest);
-  nodes.col(2).maxCoeff(&front);
-  const Vec3 tip = nodes.row(front).transpose();
-  sim.setColliders({Collider::plane(Vec3(0, nodes(lowest, 1) + 0.015, 0), Vec3::UnitY()),
-                    Collider::sphere(tip + Vec3(0, 0, 0.04), 0.05)});
+  test::placeGroundAndSphere(sim);
   return s;
 }
 

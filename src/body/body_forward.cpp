@@ -63,10 +63,6 @@ struct PoseDerivatives {
   MatX skin_betas;                    // 3J × K, C_j = dp_j/dβ − Rg_j dJ_j/dβ
 };
 
-std::string modelName(const BodyModel& m) {
-  return m.source.empty() ? std::string("body model") : "body model '" + m.source + "'";
-}
-
 const Derived& requireFinalizedModel(const BodyModel& m, const std::string& fn,
                                      bool needs_smpl_skeleton = true) {
   requireFinalized(m, fn);

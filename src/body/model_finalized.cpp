@@ -5,6 +5,10 @@
 
 namespace flsh {
 
+std::string modelName(const BodyModel& model) {
+  return model.source.empty() ? std::string("body model") : "body model '" + model.source + "'";
+}
+
 bool isFinalized(const BodyModel& model) {
   return model.derived && model.derived->weight_start.size() == size_t(model.numVertices()) + 1 &&
          model.derived->joint_shapedirs.cols() == model.numBetas();
@@ -12,9 +16,7 @@ bool isFinalized(const BodyModel& model) {
 
 void requireFinalized(const BodyModel& model, const std::string& who) {
   if (isFinalized(model)) return;
-  const std::string name =
-      model.source.empty() ? std::string("body model") : "body model '" + model.source + "'";
-  throw InputError(who + ": " + name +
+  throw InputError(who + ": " + modelName(model) +
                    " is not finalized for its current arrays (call BodyModel::finalize())");
 }
 

@@ -164,7 +164,7 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
                       nullptr, &m.contact.candidates, false);
   });
   H.insert(H.end(), dynamic.begin(), dynamic.end());
-  m.soft->flushReduced(0, H, offset, &blocks);
+  m.value_lists->flushList(0, H, offset, &blocks);
   const size_t potential_start = H.size();
   potentialHessian(H, &blocks, offset, psd, true);
   H.insert(H.end(), potential.begin(), potential.end());

@@ -92,7 +92,7 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
   const int T = elastic.numElements();
   kin_.setMirrored(false);
   onTwoThreads([&](int part) {
-    kin_.beginReduced(part);
+    kin_.beginList(part);
     if (part == 0) {
       inertia_->hessianPart(0, H_dynamic, offset, psd);
     } else {

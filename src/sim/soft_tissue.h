@@ -82,21 +82,10 @@ class SoftTissue {
   /// nodes (surface() for the surface, positions() for every node).
   const MatX3& currentPositions() const { return kin_.x(); }
 
-  // ---- the terms at the prepared state; gradients ADDED at offset (bones at offset, soft
-  // state at offset + bone DoFs), Hessian triplets APPENDED (both triangles); the ROM's blocks
-  // go to the kinematics' value lists (beginReduced / flushReduced) ----
-  double inertia(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                 FixedHessianBlocks* blocks = nullptr) const {
-    return inertia_->evaluate(g, H, offset, psd, blocks);
-  }
-  double gravity(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                 FixedHessianBlocks* blocks = nullptr) const {
-    return gravity_->evaluate(gravity, g, H, offset, psd, blocks);
-  }
-  double elastic(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                 FixedHessianBlocks* blocks = nullptr) const {
-    return elastic_->evaluate(g, H, offset, psd, blocks);
-  }
+  // ---- at the prepared state (the node terms themselves: terms(), dynamicTerms(),
+  // potentialTerms()) ----
+  /// Node contact (NodeContactTerm::evaluate): the broad phase's energy and the ROM's
+  /// two-thread schedule call it with their candidates.
   double contact(const std::vector<Collider>& colliders, double time, const ContactOptions& options,
                  VecX* g, std::vector<Triplet>* H, int offset, bool psd, int* active = nullptr,
                  const std::vector<int>* candidates = nullptr, bool skin = true) const {
@@ -107,11 +96,6 @@ class SoftTissue {
   /// prepare() skins every node).
   void skinSurfaceNodes(const std::vector<int>& nodes) const {
     if (kin_.reduced()) kin_.skinNodes(nodes);
-  }
-  void beginReduced(int list) const { kin_.beginReduced(list); }
-  void flushReduced(int list, std::vector<Triplet>& H, int offset,
-                    std::vector<FixedHessianBlocks>* blocks = nullptr) const {
-    kin_.flushReduced(list, H, offset, blocks);
   }
   /// ROM: inertia's, gravity's and the elastic term's gradients, and `potential_first`'s
   /// (e.g. contact, on nodes skinned before, with skin = false), added into g on two threads:
@@ -127,7 +111,7 @@ class SoftTissue {
   /// then gravity, the elastic tets and the exact rest-stiffness term (list 1, bone triplets
   /// into H_potential); a share of inertia's mass nodes is mapped on the second thread too
   /// (into list 1 and H_potential), to balance the two. Both lists come back mirrored
-  /// (flushReduced then only hands them over).
+  /// (flushList then only hands them over).
   void reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dynamic,
                        std::vector<Triplet>& H_potential, int offset, bool psd,
                        const std::function<void()>& potential_first) const;

@@ -24,10 +24,6 @@ namespace flsh {
 
 namespace {
 
-std::string modelName(const BodyModel& m) {
-  return m.source.empty() ? std::string("body model") : "body model '" + m.source + "'";
-}
-
 // Template mass moments shared by the avatars of one body model (same density and voxel size):
 // entries stay while their body model is alive, so a second β never re-voxelizes.
 std::shared_ptr<const VertexMassMoments> sharedTemplateMoments(

@@ -8,6 +8,9 @@
 
 namespace flsh {
 
+/// The model as error messages name it: "body model '<source>'" ("body model" without a source).
+std::string modelName(const BodyModel& model);
+
 /// True if finalize() ran on the model's current arrays (vertex count and shape components).
 bool isFinalized(const BodyModel& model);
 

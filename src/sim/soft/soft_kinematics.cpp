@@ -265,11 +265,15 @@ double SoftKinematics::largestSoftState() const {
   return largest;
 }
 
+void SoftKinematics::boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const {
+  for (int b = 0; b < num_bones_; ++b)
+    shift[b] = t.row(b).transpose() - R[b] * joints_.row(b).transpose();
+}
+
 void SoftKinematics::positionsOf(const std::vector<int>& nodes, const BoneFrames& bones,
                                  const VecX& state, MatX3& x) const {
   Vec3 shift[kNumJoints];
-  for (int b = 0; b < num_bones_; ++b)
-    shift[b] = bones.t.row(b).transpose() - bones.R[b] * joints_.row(b).transpose();
+  boneShifts(bones.R, bones.t, shift);
   if (x.rows() != numNodes()) x.resize(numNodes(), 3);
   // Distinct nodes: each writes its own row (and blendOf its own row and stamp).
   const long count = long(nodes.size());
@@ -306,8 +310,7 @@ void SoftKinematics::skinNodes(const std::vector<int>& nodes) const {
   const std::vector<Mat3>& R = *cur_R_;
   const MatX3& t = *cur_t_;
   Vec3 shift[kNumJoints];
-  for (int b = 0; b < num_bones_; ++b)
-    shift[b] = t.row(b).transpose() - R[b] * joints_.row(b).transpose();
+  boneShifts(R, t, shift);
   // Nodes are distinct: each writes its own rows (and blendOf its own row and stamp).
   const long count = long(nodes.size());
 #pragma omp parallel for schedule(static) if (count >= 512)
@@ -382,7 +385,7 @@ void SoftKinematics::addSoftSoft(std::vector<Triplet>& H, int offset, int j, con
     return;
   }
   // B is symmetric: the upper triangle of handle pairs (φ_ rows are sorted by handle);
-  // flushReduced mirrors it.
+  // flushList mirrors it.
   Mat3* values = reduced_values_[size_t(list)].data();
   const size_t handles = size_t(num_handles_);
   for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) {
@@ -392,7 +395,7 @@ void SoftKinematics::addSoftSoft(std::vector<Triplet>& H, int offset, int j, con
   }
 }
 
-void SoftKinematics::beginReduced(int list) const {
+void SoftKinematics::beginList(int list) const {
   if (!reduced_) return;
   // The summed slots only (z–z and bone–z; the z–bone ones are written by the mirroring).
   zeroBlocks(reduced_values_[size_t(list)].data(), num_zz_ + num_bz_);
@@ -408,8 +411,8 @@ void SoftKinematics::mirrorReduced(int list, int part, int parts) const {
     values[size_t(num_zz_ + num_bz_ + k)] = values[size_t(num_zz_ + k)].transpose();
 }
 
-void SoftKinematics::flushReduced(int list, std::vector<Triplet>& H, int offset,
-                                  std::vector<FixedHessianBlocks>* blocks) const {
+void SoftKinematics::flushList(int list, std::vector<Triplet>& H, int offset,
+                               std::vector<FixedHessianBlocks>* blocks) const {
   if (!reduced_) return;
   std::vector<Mat3>& values = reduced_values_[size_t(list)];
   if (!mirrored_[size_t(list)]) mirrorReduced(list, 0, 1);

@@ -17,7 +17,7 @@
 // basis), so every u-derivative maps to z by the chain rule (∂/∂z_h = Σ_j φ_h(j) ∂/∂u_j; Hessian
 // blocks (i, j) go to (h, k) with φ_h(i) φ_k(j)). The FEM's Hessian blocks go out as triplets
 // (or fixed blocks); the ROM's are summed at fixed positions into one of two value lists
-// (0: the dynamic Hessian, 1: the potential one) and handed over by flushReduced. Only the nodes
+// (0: the dynamic Hessian, 1: the potential one) and handed over by flushList. Only the nodes
 // some term reads are skinned per evaluation: the evaluated nodes (all in the FEM, the mass
 // nodes in the ROM) and the surface nodes contact or output ask for; in the ROM a node's pose
 // blend offset is evaluated when first read.
@@ -168,24 +168,21 @@ class SoftKinematics : public HessianValueLists {
   int zzSlot(int h, int k) const { return zz_slot_[size_t(h) * size_t(num_handles_) + size_t(k)]; }
   int bzSlot(int r, int h) const { return bz_slot_[size_t(r) * size_t(num_handles_) + size_t(h)]; }
   /// Zeroes a list (no-op for the FEM).
-  void beginReduced(int list) const;
+  void beginList(int list) const override;
   /// After the terms of one evaluation: appends list `list`'s blocks to H as triplets or, with
-  /// `blocks`, returns the list as fixed blocks (valid until the next beginReduced of that
-  /// list). No-op for the FEM.
-  void flushReduced(int list, std::vector<Triplet>& H, int offset,
-                    std::vector<FixedHessianBlocks>* blocks = nullptr) const;
+  /// `blocks`, returns the list as fixed blocks (valid until the next beginList of that list).
+  /// No-op for the FEM.
+  void flushList(int list, std::vector<Triplet>& H, int offset,
+                 std::vector<FixedHessianBlocks>* blocks) const override;
   /// Lower z–z and z–bone blocks of a list from the summed ones (the part-th of parts ranges).
   void mirrorReduced(int list, int part, int parts) const;
-  void beginList(int list) const override { beginReduced(list); }
-  void flushList(int list, std::vector<Triplet>& H, int offset,
-                 std::vector<FixedHessianBlocks>* blocks) const override {
-    flushReduced(list, H, offset, blocks);
-  }
   /// Marks both lists mirrored (reducedHessians mirrors them on two threads).
   void setMirrored(bool on) const { mirrored_[0] = mirrored_[1] = on; }
 
  private:
   Vec3 blendOf(int j) const;
+  /// t_b − R_b J_b per bone: x_j = Σ_b w_jb (R_b Y_j + shift_b).
+  void boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const;
   template <int Rows>
   void addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
                    const Eigen::Matrix<double, Rows, 3>& B, int list) const;

@@ -13,6 +13,9 @@
 // (rollouts converged to 1e-12 relative for that check; ε = 1e-6, and 1e-4 to show the effect
 // of contact events).
 //
+// Also timed: forward sensitivities (Rollout::forwardSensitivities) along one direction of β and
+// all pose targets.
+//
 // Usage: [OMP_NUM_THREADS=1] adjoint_benchmark [repeats = 5]; every time is the median of
 // `repeats` runs, wall clock and process CPU time.
 #include <algorithm>
@@ -166,9 +169,10 @@ Loss makeLoss(const Rollout& base) {
 
 // Times of one configuration (Eigen's GEMM thread count set by the caller).
 struct Figures {
-  Time plain, forward, loss, backward;
+  Time plain, forward, loss, backward, tangent;
   double plain_iterations = 0, contacts = 0, iterations = 0;
   RolloutVariables gradient;  // kept so that the timed backward's result is used
+  std::vector<RowMatX> sensitivities;  // and the forward sensitivities
 };
 
 Figures measure(const Setup& s, const RolloutInputs& inputs, double tolerance, int repeats,
@@ -204,6 +208,15 @@ Figures measure(const Setup& s, const RolloutInputs& inputs, double tolerance, i
   RolloutVariables direct;
   f.loss = medianTime(repeats, [&] { loss->cotangent(rollout, a, direct); });
   f.backward = medianTime(repeats, [&] { f.gradient = rollout.backward(a, direct); });
+  // Forward sensitivities along one direction of β and every pose target (the tangent sweep:
+  // each step's Jacobian–vector products and a solve with the taped factor).
+  RolloutVariables direction;
+  std::mt19937 rng(9);
+  std::normal_distribution<double> normal;
+  direction.shape = VecX::NullaryExpr(s.avatar->betas().size(), [&] { return normal(rng); });
+  direction.pose_targets = RowMatX::NullaryExpr(kSteps, 72, [&] { return 0.01 * normal(rng); });
+  f.tangent =
+      medianTime(repeats, [&] { f.sensitivities = rollout.forwardSensitivities({direction}); });
   return f;
 }
 
@@ -216,6 +229,7 @@ void print(const char* title, const Figures& f) {
   row("forward with tape (Rollout::run)", f.forward);
   row("loss + cotangents (joints, 4 x all vertices)", f.loss);
   row("backward (Rollout::backward)", f.backward);
+  row("forward sensitivities (1 direction)", f.tangent);
   std::printf("  %-44s %9.3f  (%7.3f)\n", "ratio backward / forward with tape",
               f.backward.wall / f.forward.wall, f.backward.cpu / f.forward.cpu);
   std::printf("  %-44s %9.3f  (%7.3f)\n", "ratio backward / plain forward",

@@ -107,26 +107,17 @@ void SimulableAdjointModel::finishParameterVJPs(std::vector<VecX>& global) const
   chainShapeCotangent(simulable_->avatar(), global[joints], global[inertia], global[shape]);
 }
 
+// The groups are in SimParameter order (allGroups), so a direction's pointers carry over; β's
+// chain through the rest joints and bone inertias is the simulable's (shape_surface_only off).
 void SimulableAdjointModel::parameterJVPs(const std::vector<std::vector<const VecX*>>& directions,
                                           std::vector<VecX>& out) const {
-  const int shape = int(SimParameter::Shape), joints = int(SimParameter::RestJoints),
-            inertia = int(SimParameter::BoneInertia);
-  const std::vector<MatX> jacobians =
-      simulable_->getGradientParameterJacobians(allGroups(), /*shape_surface_only=*/true);
-  const SoftAvatar& avatar = simulable_->avatar();
-  out.assign(directions.size(), VecX::Zero(numDofs()));
+  std::vector<ParameterDirection> given(directions.size());
   for (size_t d = 0; d < directions.size(); ++d) {
-    const auto& dir = directions[d];
-    auto given = [&](int g) { return int(dir.size()) > g && dir[g] && dir[g]->size(); };
-    for (int g = 0; g < kNumSimParameters; ++g)
-      if (given(g)) out[d].noalias() += jacobians[g] * *dir[g];
-    if (given(shape)) {
-      VecX dJ, dI;
-      shapeTangent(avatar, *dir[shape], &dJ, &dI);
-      out[d].noalias() += jacobians[joints] * dJ;
-      out[d].noalias() += jacobians[inertia] * dI;
-    }
+    given[d].fill(nullptr);
+    for (size_t g = 0; g < directions[d].size() && g < given[d].size(); ++g)
+      given[d][g] = directions[d][g];
   }
+  out = simulable_->getGradientParameterJVPs(given);
 }
 
 VecX SimulableAdjointModel::state() const { return simulable_->getState(); }

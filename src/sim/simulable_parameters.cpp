@@ -27,44 +27,6 @@ void checkStateSized(const VecX& x, int n, const char* who, const char* name) {
 
 }  // namespace
 
-/// Λᵀ ∂g/∂p for each group, summed over the terms (Λ: a vector or numDofs × m), with the β
-/// chain through the rest joints and bone inertias unless `shape_surface_only`.
-template <class Lambda, class Block>
-std::vector<Block> parameterProducts(const Simulable& s, const Simulable::Impl& m,
-                                     const Lambda& lambda, const std::vector<SimParameter>& groups,
-                                     bool shape_surface_only) {
-  ParameterProducts<Block> products;
-  bool shape = false;
-  const auto want = [&](SimParameter p) {
-    Block& block = products[p];
-    if (block.rows() == 0) block = Block::Zero(s.parameterSize(p), lambda.cols());
-  };
-  for (SimParameter p : groups) {
-    simParameterInfo(p);  // throws for a value outside the enum
-    want(p);
-    shape = shape || p == SimParameter::Shape;
-  }
-  const bool chain = shape && !shape_surface_only;
-  if (chain) {
-    want(SimParameter::RestJoints);
-    want(SimParameter::BoneInertia);
-  }
-  m.ensureContact();
-  const TermContext c = m.context();
-  for (const EnergyTerm* term : m.terms) term->addParameterProducts(c, lambda, products);
-  Block shape_products;
-  if (chain) {
-    shape_products = products[SimParameter::Shape];
-    chainShapeCotangent(*m.avatar, products[SimParameter::RestJoints],
-                        products[SimParameter::BoneInertia], shape_products);
-  }
-  std::vector<Block> out;
-  out.reserve(groups.size());
-  for (SimParameter p : groups)
-    out.push_back(p == SimParameter::Shape && chain ? shape_products : products[p]);
-  return out;
-}
-
 namespace {
 
 void requireSkeleton(const Simulable::Impl& m, const char* who) {
@@ -84,15 +46,53 @@ MatX Simulable::getGradientParameterJacobian(SimParameter p) const {
   return getGradientParameterJacobians({p}).front();
 }
 
-// The Jacobians are the products with Λ = I, transposed.
+namespace {
+
+/// The groups asked for, checked, and whether Shape is among them (the caller chains it).
+template <class Block>
+bool askFor(const Simulable& s, const std::vector<SimParameter>& groups, int cols,
+            ParameterProducts<Block>& out) {
+  bool shape = false;
+  for (SimParameter p : groups) {
+    simParameterInfo(p);  // throws for a value outside the enum
+    if (!out.wants(p)) {
+      if constexpr (Block::ColsAtCompileTime == 1)
+        out[p] = Block::Zero(s.parameterSize(p));
+      else
+        out[p] = Block::Zero(cols, s.parameterSize(p));
+    }
+    shape = shape || p == SimParameter::Shape;
+  }
+  return shape;
+}
+
+}  // namespace
+
+// The terms' Jacobians (numDofs × size); Shape's chain through the rest joints and bone
+// inertias is the cotangent chain applied to the transposed Jacobians.
 std::vector<MatX> Simulable::getGradientParameterJacobians(const std::vector<SimParameter>& groups,
                                                            bool shape_surface_only) const {
   const Impl& m = *impl_;
   requireSkeleton(m, "getGradientParameterJacobians");
-  const MatX identity = MatX::Identity(numDofs(), numDofs());
-  std::vector<MatX> out =
-      parameterProducts<MatX, MatX>(*this, m, identity, groups, shape_surface_only);
-  for (MatX& D : out) D.transposeInPlace();
+  ParameterProducts<MatX> jacobians;
+  const bool chain = askFor(*this, groups, numDofs(), jacobians) && !shape_surface_only;
+  if (chain)
+    askFor(*this, {SimParameter::RestJoints, SimParameter::BoneInertia}, numDofs(), jacobians);
+  m.ensureContact();
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms) term->addParameterJacobians(c, jacobians);
+  std::vector<MatX> out;
+  out.reserve(groups.size());
+  for (SimParameter p : groups) {
+    if (p == SimParameter::Shape && chain) {
+      MatX shape = jacobians[p].transpose();
+      chainShapeCotangent(*m.avatar, MatX(jacobians[SimParameter::RestJoints].transpose()),
+                          MatX(jacobians[SimParameter::BoneInertia].transpose()), shape);
+      out.push_back(shape.transpose());
+    } else {
+      out.push_back(jacobians[p]);
+    }
+  }
   return out;
 }
 
@@ -102,7 +102,59 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
   const Impl& m = *impl_;
   requireSkeleton(m, "getGradientParameterVJPs");
   checkStateSized(lambda, numDofs(), "getGradientParameterVJPs", "lambda");
-  return parameterProducts<VecX, VecX>(*this, m, lambda, groups, shape_surface_only);
+  ParameterProducts<VecX> products;
+  const bool chain = askFor(*this, groups, 1, products) && !shape_surface_only;
+  if (chain) askFor(*this, {SimParameter::RestJoints, SimParameter::BoneInertia}, 1, products);
+  m.ensureContact();
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms) term->addParameterProducts(c, lambda, products);
+  std::vector<VecX> out;
+  out.reserve(groups.size());
+  for (SimParameter p : groups) {
+    out.push_back(products[p]);
+    if (p == SimParameter::Shape && chain)
+      chainShapeCotangent(*m.avatar, products[SimParameter::RestJoints],
+                          products[SimParameter::BoneInertia], out.back());
+  }
+  return out;
+}
+
+// A Shape direction moves the rest joints and bone inertias too (shapeTangent): those changes
+// join the RestJoints and BoneInertia directions, unless shape_surface_only.
+std::vector<VecX> Simulable::getGradientParameterJVPs(
+    const std::vector<ParameterDirection>& directions, bool shape_surface_only) const {
+  const Impl& m = *impl_;
+  requireSkeleton(m, "getGradientParameterJVPs");
+  std::vector<ParameterDirection> given = directions;
+  std::vector<VecX> chained(2 * directions.size());
+  for (size_t d = 0; d < directions.size(); ++d)
+    for (const SimParameterInfo& info : simParameters()) {
+      const VecX* v = directions[d][size_t(info.id)];
+      if (v && v->size() && v->size() != parameterSize(info.id))
+        throw InputError(
+            std::string("Simulable::getGradientParameterJVPs: direction ") + std::to_string(d) +
+            ", " + info.name + " has " + std::to_string(v->size()) +
+            " values, expected parameterSize() = " + std::to_string(parameterSize(info.id)));
+    }
+  if (!shape_surface_only)
+    for (size_t d = 0; d < directions.size(); ++d) {
+      const VecX* dbeta = directions[d][size_t(SimParameter::Shape)];
+      if (!dbeta || dbeta->size() == 0) continue;
+      VecX& dJ = chained[2 * d];
+      VecX& dI = chained[2 * d + 1];
+      shapeTangent(*m.avatar, *dbeta, &dJ, &dI);
+      for (auto [group, change] :
+           {std::pair{SimParameter::RestJoints, &dJ}, std::pair{SimParameter::BoneInertia, &dI}}) {
+        const VecX* own = directions[d][size_t(group)];
+        if (own && own->size()) *change += *own;
+        given[d][size_t(group)] = change;
+      }
+    }
+  std::vector<VecX> out(directions.size(), VecX::Zero(numDofs()));
+  m.ensureContact();
+  const TermContext c = m.context();
+  for (const EnergyTerm* term : m.terms) term->addParameterTangents(c, given, out);
+  return out;
 }
 
 MatX Simulable::getGradientPreviousStateJacobian(int which) const {

@@ -168,6 +168,49 @@ TEST(ParameterDerivatives, SeveralGroupsAtOnceMatchOneByOne) {
     EXPECT_TRUE(together[k].isApprox(s.sim->getGradientParameterJacobian(groups[k]), 1e-14)) << k;
 }
 
+// The three forms of ∂g/∂p: the Jacobian–vector products of several directions at once (with
+// β's chain through the rest joints and bone inertias) and the vector–Jacobian products equal
+// the Jacobians applied to the same vectors.
+TEST(ParameterDerivatives, ProductsOfSeveralDirectionsMatchTheJacobians) {
+  Scenario s = walkingAvatarInContact();
+  const Simulable& sim = *s.sim;
+  const int n = sim.numDofs();
+  std::vector<SimParameter> groups;
+  for (const SimParameterInfo& info : simParameters()) groups.push_back(info.id);
+  const std::vector<MatX> jacobians = sim.getGradientParameterJacobians(groups);
+  std::vector<VecX> values;  // direction d, group g at values[d * groups + g]
+  std::vector<ParameterDirection> directions(2);
+  values.reserve(2 * groups.size());
+  std::vector<VecX> expected(2, VecX::Zero(n));
+  for (size_t d = 0; d < 2; ++d) {
+    directions[d].fill(nullptr);
+    for (size_t g = 0; g < groups.size(); ++g) {
+      if (d == 1 && g % 2 == 0) continue;  // the second direction leaves every other group alone
+      values.push_back(randomVector(sim.parameterSize(groups[g]), 1.0, int(40 + 10 * d + g)));
+      directions[d][size_t(groups[g])] = &values.back();
+      expected[d] += jacobians[g] * values.back();
+    }
+  }
+  const std::vector<VecX> jvps = sim.getGradientParameterJVPs(directions);
+  ASSERT_EQ(jvps.size(), 2u);
+  for (size_t d = 0; d < 2; ++d) {
+    ASSERT_GT(jvps[d].norm(), 0.0) << d;
+    EXPECT_LT((jvps[d] - expected[d]).norm(), 1e-10 * expected[d].norm()) << d;
+  }
+  const VecX lambda = randomVector(n, 1.0, 60);
+  const std::vector<VecX> vjps = sim.getGradientParameterVJPs(lambda, groups);
+  for (size_t g = 0; g < groups.size(); ++g) {
+    const VecX reference = jacobians[g].transpose() * lambda;
+    EXPECT_LT((vjps[g] - reference).norm(), 1e-10 * (1.0 + reference.norm())) << g;
+  }
+  const VecX wrong = VecX::Zero(5);
+  ParameterDirection bad{};
+  bad[size_t(SimParameter::Stiffnesses)] = &wrong;
+  const std::string msg = messageOf<InputError>([&] { sim.getGradientParameterJVPs({bad}); });
+  EXPECT_NE(msg.find("stiffnesses has 5 values, expected parameterSize() = 4"), std::string::npos)
+      << msg;
+}
+
 TEST(ParameterDerivatives, ShapeIsFixedByTheAvatar) {
   Scenario s = walkingAvatarInContact();
   const std::string msg = messageOf<InputError>(
@@ -240,6 +283,11 @@ TEST(ParameterDerivatives, DerivativeCallsDoNotChangeTheState) {
                          SimParameter::Stiffnesses, SimParameter::ColliderOffsets,
                          SimParameter::Shape})
     sim.getGradientParameterJacobian(p);
+  const VecX targets = VecX::Ones(sim.parameterSize(SimParameter::PoseTargets));
+  ParameterDirection along{};
+  along[size_t(SimParameter::PoseTargets)] = &targets;
+  sim.getGradientParameterJVPs({along});
+  sim.getGradientParameterVJPs(VecX::Ones(sim.numDofs()), {SimParameter::Shape});
   sim.getGradientPreviousStateJacobian(1);
   sim.getGradientPreviousStateJacobian(2);
   EXPECT_EQ(sim.getState(), q);

@@ -6,13 +6,13 @@
 // each call) and adds into the caller's vectors at `offset` (the simulable's first DoF in a
 // scene). Increments are the bones' chart of simulable.h: 6 values per bone, [δt_b, δω_b].
 //
-// Parameter products. For a block of cotangents Λ (numDofs × m), a term adds Λᵀ ∂g/∂p
-// (parameterSize(p) × m) for every parameter group p its gradient g depends on. The adjoint's
-// reverse sweep asks for one column (m = 1, Λ = λ: a vector–Jacobian product); the dense
-// Jacobian ∂g/∂p that forward sensitivities need is the same code applied to Λ = I (transposed
-// by the caller). So every parameter derivative is written once, as a product, and the two
-// uses cannot drift apart. Previous states (q_n, q_{n−1}) are handled likewise, from the
-// term's own 6 × 6 blocks.
+// Parameter derivatives. ∂g/∂p is sparse: a term's gradient on a few bones depends on a few
+// parameters. So each term writes it once, as local dense blocks (a few DoF rows × a few
+// parameter columns, term_blocks.h), and the three uses derive from those blocks: the
+// vector–Jacobian products λᵀ ∂g/∂p of the adjoint's reverse sweep, the Jacobian–vector products
+// ∂g/∂p ṗ of the forward (tangent) sweep and the dense Jacobians ∂g/∂p. None of them forms a
+// dense identity or a second formula. Previous states (q_n, q_{n−1}) are handled likewise, from
+// the term's own 6 × 6 blocks.
 //
 // Terms are built by the simulable for one avatar and hold no state of the simulation; the
 // scratch some keep for assembly is mutable, so a term is not thread-safe per instance.
@@ -77,14 +77,19 @@ struct TermContext {
   const SurfaceContactState& contact;
 };
 
-/// Output of EnergyTerm::addParameterProducts: one block per parameter group, empty (0 rows)
-/// where the group is not asked for. Terms ADD into the non-empty ones.
+/// One block per parameter group, empty (0 rows) where the group is not asked for; terms ADD
+/// into the non-empty ones. Vector–Jacobian products: VecX of parameterSize(p). Jacobians: MatX
+/// of numDofs × parameterSize(p).
 template <class Block>
 struct ParameterProducts {
   std::array<Block, kNumSimParameters> groups;
   bool wants(SimParameter p) const { return groups[size_t(p)].rows() > 0; }
   Block& operator[](SimParameter p) { return groups[size_t(p)]; }
+  const Block& operator[](SimParameter p) const { return groups[size_t(p)]; }
 };
+
+/// A direction in parameter space: one pointer per group (null or empty: no change of it).
+using ParameterDirection = std::array<const VecX*, kNumSimParameters>;
 
 class EnergyTerm {
  public:
@@ -97,14 +102,18 @@ class EnergyTerm {
   /// form Newton uses, else the exact Hessian of the chart.
   virtual void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
                           bool psd) const = 0;
-  /// ADDS Λᵀ ∂g/∂p into out[p] for each group out asks for (Λ: numDofs × m, out[p]:
-  /// parameterSize(p) × m). Groups that do not enter this term's gradient are left alone.
-  /// Shape: only this term's direct dependence on β (e.g. the contact surface X(β)); what goes
-  /// through the rest joints and bone inertias is chained by chainShape (sim_parameter.h).
+  /// ADDS λᵀ ∂g/∂p into out[p] for each group out asks for (λ: numDofs). Groups that do not
+  /// enter this term's gradient are left alone. Shape: only this term's direct dependence on β
+  /// (e.g. the contact surface X(β)); what goes through the rest joints and bone inertias is
+  /// chained by chainShape (sim_parameter.h).
   virtual void addParameterProducts(const TermContext& c, const VecX& lambda,
                                     ParameterProducts<VecX>& out) const {}
-  virtual void addParameterProducts(const TermContext& c, const MatX& lambda,
-                                    ParameterProducts<MatX>& out) const {}
+  /// ADDS Σ_p ∂g/∂p ṗ_p into out[d] for each direction d (out[d]: numDofs); Shape as above.
+  virtual void addParameterTangents(const TermContext& c,
+                                    const std::vector<ParameterDirection>& directions,
+                                    std::vector<VecX>& out) const {}
+  /// ADDS ∂g/∂p into out[p] (numDofs × parameterSize(p)) for each group out asks for.
+  virtual void addParameterJacobians(const TermContext& c, ParameterProducts<MatX>& out) const {}
   /// Terms whose gradient depends on q_n and q_{n−1} (inertia): ADDS (∂g/∂q_n)ᵀ λ into a_n and
   /// (∂g/∂q_{n−1})ᵀ λ into a_nm1 (either may be null), the tangent ∂g/∂q_n dq_n +
   /// ∂g/∂q_{n−1} dq_{n−1} into out, and the dense blocks into D (which = 1: q_n, 2: q_{n−1}).
@@ -116,20 +125,18 @@ class EnergyTerm {
   virtual void addPreviousStateJacobian(const TermContext& c, int which, MatX& D) const {}
 };
 
-/// A term whose parameter products are one template, `template <class Lambda, class Block>
-/// void products(const TermContext&, const Lambda&, ParameterProducts<Block>&) const` in
-/// Derived, instantiated for a vector (reverse sweep) and a matrix (Jacobians).
+/// A term whose parameter derivatives are one template `template <class Sink> void
+/// parameterBlocks(const TermContext&, Sink&) const` in Derived, which hands ∂g/∂p to the sink
+/// as local blocks (src/sim/terms/term_blocks.h); the three products are that template with
+/// three sinks.
 template <class Derived>
-class TermWithProducts : public EnergyTerm {
+class TermWithParameterBlocks : public EnergyTerm {
  public:
   void addParameterProducts(const TermContext& c, const VecX& lambda,
-                            ParameterProducts<VecX>& out) const final {
-    static_cast<const Derived&>(*this).products(c, lambda, out);
-  }
-  void addParameterProducts(const TermContext& c, const MatX& lambda,
-                            ParameterProducts<MatX>& out) const final {
-    static_cast<const Derived&>(*this).products(c, lambda, out);
-  }
+                            ParameterProducts<VecX>& out) const final;
+  void addParameterTangents(const TermContext& c, const std::vector<ParameterDirection>& directions,
+                            std::vector<VecX>& out) const final;
+  void addParameterJacobians(const TermContext& c, ParameterProducts<MatX>& out) const final;
 };
 
 }  // namespace flsh

@@ -281,6 +281,14 @@ class Simulable {
   std::vector<VecX> getGradientParameterVJPs(const VecX& lambda,
                                              const std::vector<SimParameter>& groups,
                                              bool shape_surface_only = false) const;
+  /// Jacobian–vector products Σ_p ∂g/∂p ṗ_p for several directions at once (each: one pointer
+  /// per group, indexed by SimParameter; null or empty = no change), one numDofs vector per
+  /// direction, without forming the matrices (the forward sensitivities' tangent sweep). A Shape
+  /// direction includes the rest joints' and bone inertias' change with β unless
+  /// `shape_surface_only`. Throws InputError on a wrongly sized direction. Does not change the
+  /// state.
+  std::vector<VecX> getGradientParameterJVPs(const std::vector<ParameterDirection>& directions,
+                                             bool shape_surface_only = false) const;
   /// (∂g/∂q_n)ᵀ λ and (∂g/∂q_{n−1})ᵀ λ (numDofs each; either pointer may be null) from the
   /// per-bone 6 × 6 inertia blocks, and the tangent ∂g/∂q_n dq_n + ∂g/∂q_{n−1} dq_{n−1}.
   void getGradientPreviousStatesVJP(const VecX& lambda, VecX* a_n, VecX* a_nm1) const;

@@ -3,7 +3,7 @@
 #include "flsh/core/rotation.h"
 #include "flsh/sim/skeleton_energies.h"
 #include "sim/hessian_blocks.h"
-#include "sim/terms/term_products.h"
+#include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
 
@@ -29,23 +29,20 @@ void BoneGravityTerm::addHessian(const TermContext& c, std::vector<Triplet>& H, 
   }
 }
 
-template <class Lambda, class Block>
-void BoneGravityTerm::products(const TermContext& c, const Lambda& l,
-                               ParameterProducts<Block>& out) const {
-  if (!out.wants(SimParameter::BoneInertia)) return;
-  Block& o = out[SimParameter::BoneInertia];
+// The gradient [−M g; g × (R m̄)] per bone is linear in M and m̄: ∂g_t/∂M = −g and
+// ∂g_ω/∂m̄ = [g]× R.
+template <class Sink>
+void BoneGravityTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
+  if (!sink.wants(SimParameter::BoneInertia)) return;
   const Vec3& gravity = c.options.gravity;
+  const Mat3 turn = skew(gravity);
   for (int b = 0; b < c.num_bones; ++b) {
     const int col = kBoneInertiaValues * b;
-    o.row(col) -= gravity.transpose() * lambdaT(l, b);
-    // λω·(g × R m̄) = m̄ · Rᵀ(λω × g) = −m̄ · Rᵀ [g]× λω.
-    o.template middleRows<3>(col + 1) -= c.R[b].transpose() * skew(gravity) * lambdaW(l, b);
+    sink.add(SimParameter::BoneInertia, translationRow(b), col, -gravity);
+    sink.add(SimParameter::BoneInertia, rotationRow(b), col + 1, turn * c.R[b]);
   }
 }
 
-template void BoneGravityTerm::products(const TermContext&, const VecX&,
-                                        ParameterProducts<VecX>&) const;
-template void BoneGravityTerm::products(const TermContext&, const MatX&,
-                                        ParameterProducts<MatX>&) const;
-
 }  // namespace flsh::detail
+
+template class flsh::TermWithParameterBlocks<flsh::detail::BoneGravityTerm>;

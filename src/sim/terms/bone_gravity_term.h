@@ -7,7 +7,7 @@
 
 namespace flsh::detail {
 
-class BoneGravityTerm final : public TermWithProducts<BoneGravityTerm> {
+class BoneGravityTerm final : public TermWithParameterBlocks<BoneGravityTerm> {
  public:
   const char* name() const override { return "bone gravity"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override;
@@ -15,8 +15,9 @@ class BoneGravityTerm final : public TermWithProducts<BoneGravityTerm> {
   void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
                   bool psd) const override;
   /// BoneInertia: the gradient [−M g; g × R m̄] is linear in M and m̄.
-  template <class Lambda, class Block>
-  void products(const TermContext& c, const Lambda& lambda, ParameterProducts<Block>& out) const;
+  /// ∂g/∂p as local blocks (term_blocks.h).
+  template <class Sink>
+  void parameterBlocks(const TermContext& c, Sink& sink) const;
 };
 
 }  // namespace flsh::detail

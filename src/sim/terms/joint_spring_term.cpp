@@ -1,9 +1,11 @@
 #include "sim/terms/joint_spring_term.h"
 
+#include <utility>
+
 #include "flsh/core/rotation.h"
 #include "flsh/sim/skeleton_energies.h"
 #include "sim/hessian_blocks.h"
-#include "sim/terms/term_products.h"
+#include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
 
@@ -49,37 +51,34 @@ void JointSpringTerm::addHessian(const TermContext& c, std::vector<Triplet>& H, 
 // d = y + t_p − t_b with y = R_p(J_b − J_p): dy = dd = R_p (dJ_b − dJ_p), and the gradient
 // k [d; y × d; −d; 0] gives ∂g/∂J_b = k [R_p; [y − d]× R_p; −R_p; 0] (−that for J_p). The
 // gradient is linear in k.
-template <class Lambda, class Block>
-void JointSpringTerm::products(const TermContext& c, const Lambda& l,
-                               ParameterProducts<Block>& out) const {
+template <class Sink>
+void JointSpringTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   const double kj = c.options.joint_stiffness;
-  const bool joints = out.wants(SimParameter::RestJoints);
-  const bool stiffness = out.wants(SimParameter::Stiffnesses);
+  const bool joints = sink.wants(SimParameter::RestJoints);
+  const bool stiffness = sink.wants(SimParameter::Stiffnesses);
   Vec12 g12;
   for (int b = 0; b < c.num_bones; ++b) {
     const int p = c.parents[b];
     if (p < 0) continue;
     if (joints) {
-      Block& o = out[SimParameter::RestJoints];
       const Vec3 y = c.R[p] * (c.J.row(b) - c.J.row(p)).transpose();
       const Vec3 d = y + c.t.row(p).transpose() - c.t.row(b).transpose();
-      const Rows3Of<Lambda> w =
-          kj * c.R[p].transpose() * (lambdaT(l, p) - lambdaT(l, b) + skew(d - y) * lambdaW(l, p));
-      o.template middleRows<3>(3 * b) += w;
-      o.template middleRows<3>(3 * p) -= w;
+      const Mat3 dt = kj * c.R[p];                // ∂g_t,p/∂J_b (∂g_t,b/∂J_b = −that)
+      const Mat3 dw = kj * skew(y - d) * c.R[p];  // ∂g_ω,p/∂J_b
+      for (const auto& [joint, sign] : {std::pair{b, 1.0}, std::pair{p, -1.0}}) {
+        sink.add(SimParameter::RestJoints, translationRow(p), 3 * joint, sign * dt);
+        sink.add(SimParameter::RestJoints, translationRow(b), 3 * joint, -sign * dt);
+        sink.add(SimParameter::RestJoints, rotationRow(p), 3 * joint, sign * dw);
+      }
     }
     if (stiffness) {
       spring(c, p, b, 1.0, &g12, nullptr, false);
-      out[SimParameter::Stiffnesses].row(0) +=
-          g12.head<6>().transpose() * l.template middleRows<6>(6 * p) +
-          g12.tail<6>().transpose() * l.template middleRows<6>(6 * b);
+      sink.add(SimParameter::Stiffnesses, translationRow(p), 0, g12.head<6>());
+      sink.add(SimParameter::Stiffnesses, translationRow(b), 0, g12.tail<6>());
     }
   }
 }
 
-template void JointSpringTerm::products(const TermContext&, const VecX&,
-                                        ParameterProducts<VecX>&) const;
-template void JointSpringTerm::products(const TermContext&, const MatX&,
-                                        ParameterProducts<MatX>&) const;
-
 }  // namespace flsh::detail
+
+template class flsh::TermWithParameterBlocks<flsh::detail::JointSpringTerm>;

@@ -7,14 +7,15 @@
 
 namespace flsh::detail {
 
-class JointSpringTerm final : public TermWithProducts<JointSpringTerm> {
+class JointSpringTerm final : public TermWithParameterBlocks<JointSpringTerm> {
  public:
   const char* name() const override { return "joint springs"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override;
   void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
                   bool psd) const override;
-  template <class Lambda, class Block>
-  void products(const TermContext& c, const Lambda& lambda, ParameterProducts<Block>& out) const;
+  /// ∂g/∂p as local blocks (term_blocks.h).
+  template <class Sink>
+  void parameterBlocks(const TermContext& c, Sink& sink) const;
 };
 
 }  // namespace flsh::detail

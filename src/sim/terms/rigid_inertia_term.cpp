@@ -3,7 +3,7 @@
 #include "flsh/core/rotation.h"
 #include "flsh/sim/skeleton_energies.h"
 #include "sim/hessian_blocks.h"
-#include "sim/terms/term_products.h"
+#include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
 
@@ -58,32 +58,25 @@ void RigidInertiaTerm::addHessian(const TermContext& c, std::vector<Triplet>& H,
 
 // The gradient inv_h2 [M u + (R − A) m̄; (R m̄) × u + vee(R S Aᵀ − A S Rᵀ)] with A = 2R_n −
 // R_{n−1}, u = t − (2t_n − t_{n−1}), linear in M, m̄, S.
-template <class Lambda, class Block>
-void RigidInertiaTerm::products(const TermContext& c, const Lambda& l,
-                                ParameterProducts<Block>& out) const {
-  if (c.is_static || !out.wants(SimParameter::BoneInertia)) return;
-  Block& o = out[SimParameter::BoneInertia];
+template <class Sink>
+void RigidInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
+  if (c.is_static || !sink.wants(SimParameter::BoneInertia)) return;
   const double inv_h2 = 1.0 / (c.options.time_step * c.options.time_step);
+  Eigen::Matrix<double, 3, 6> dS;  // ∂g_ω/∂S in the basis xx, yy, zz, xy, xz, yz
   for (int b = 0; b < c.num_bones; ++b) {
     const int col = kBoneInertiaValues * b;
-    const auto lt = lambdaT(l, b);
-    const auto lw = lambdaW(l, b);
     const Mat3 A = 2.0 * c.R_n[b] - c.R_nm1[b];
     const Vec3 u = c.t.row(b).transpose() - (2.0 * c.t_n.row(b) - c.t_nm1.row(b)).transpose();
-    o.row(col) += inv_h2 * u.transpose() * lt;
-    o.template middleRows<3>(col + 1) +=
-        inv_h2 * ((c.R[b] - A).transpose() * lt + c.R[b].transpose() * skew(u) * lw);
+    sink.add(SimParameter::BoneInertia, translationRow(b), col, inv_h2 * u);
+    sink.add(SimParameter::BoneInertia, translationRow(b), col + 1, inv_h2 * (c.R[b] - A));
+    sink.add(SimParameter::BoneInertia, rotationRow(b), col + 1, -inv_h2 * skew(u) * c.R[b]);
     for (int k = 0; k < 6; ++k) {
       const Mat3 RSAt = c.R[b] * secondMomentBasis(k) * A.transpose();
-      o.row(col + 4 + k) += inv_h2 * vee(RSAt - RSAt.transpose()).transpose() * lw;
+      dS.col(k) = inv_h2 * vee(RSAt - RSAt.transpose());
     }
+    sink.add(SimParameter::BoneInertia, rotationRow(b), col + 4, dS);
   }
 }
-
-template void RigidInertiaTerm::products(const TermContext&, const VecX&,
-                                         ParameterProducts<VecX>&) const;
-template void RigidInertiaTerm::products(const TermContext&, const MatX&,
-                                         ParameterProducts<MatX>&) const;
 
 void RigidInertiaTerm::addPreviousStatesProducts(const TermContext& c, const VecX& lambda,
                                                  VecX* a_n, VecX* a_nm1) const {
@@ -117,3 +110,5 @@ void RigidInertiaTerm::addPreviousStateJacobian(const TermContext& c, int which,
 }
 
 }  // namespace flsh::detail
+
+template class flsh::TermWithParameterBlocks<flsh::detail::RigidInertiaTerm>;

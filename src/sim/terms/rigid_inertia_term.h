@@ -7,15 +7,16 @@
 
 namespace flsh::detail {
 
-class RigidInertiaTerm final : public TermWithProducts<RigidInertiaTerm> {
+class RigidInertiaTerm final : public TermWithParameterBlocks<RigidInertiaTerm> {
  public:
   const char* name() const override { return "rigid inertia"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override;
   void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
                   bool psd) const override;
   /// BoneInertia: the gradient is linear in M, m̄ and S.
-  template <class Lambda, class Block>
-  void products(const TermContext& c, const Lambda& lambda, ParameterProducts<Block>& out) const;
+  /// ∂g/∂p as local blocks (term_blocks.h).
+  template <class Sink>
+  void parameterBlocks(const TermContext& c, Sink& sink) const;
 
   bool dependsOnPreviousStates() const override { return true; }
   void addPreviousStatesProducts(const TermContext& c, const VecX& lambda, VecX* a_n,

@@ -4,7 +4,7 @@
 #include "flsh/contact/contact_energy.h"
 #include "flsh/core/rotation.h"
 #include "flsh/sim/skeleton_energies.h"
-#include "sim/terms/term_products.h"
+#include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
 
@@ -112,104 +112,86 @@ void SurfaceContactTerm::addHessian(const TermContext& c, std::vector<Triplet>& 
   pair_blocks_.emit(H, offset);
 }
 
-// The node gradient g_x(x, a, k, o) of candidate j is pulled back by g_t,b += w g_x,
-// g_ω,b += w y_ib × g_x, so Λᵀ ∂g/∂p = μ_jᵀ ∂g_x/∂p + (what turns y_ib), with the node cotangent
-// μ_j = Σ_b w_ib (Λt_b − [y_ib]× Λω_b) (3 × m). ∂g_x/∂x = H_x (exact); x moves with J_c by
-// −w_ic R_c and with the rest vertex by Σ_c w_ic R_c; y_ib by −R_b dJ_b and R_b dX_i. g_x is
-// linear in the area and in the stiffness, and depends on x − o_k for collider k.
-template <class Lambda, class Block>
-void SurfaceContactTerm::products(const TermContext& c, const Lambda& l,
-                                  ParameterProducts<Block>& out) const {
+// The node gradient g_x(x, a, k, o) of candidate j reaches the bones as g_t,b += w g_x,
+// g_ω,b += w y_ib × g_x (a SkinnedPoint), so ∂g/∂p = C ∂g_x/∂p + (what turns y_ib).
+// ∂g_x/∂x = H_x (exact); x moves with J_b by −w_ib R_b and with the rest vertex by Σ_b w_ib R_b;
+// y_ib by −R_b dJ_b and R_b dX_i. g_x is linear in the area and in the stiffness, and depends
+// on x − o_k for collider k.
+template <class Sink>
+void SurfaceContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   const SurfaceContactState& s = c.contact;
-  const size_t n = s.candidates.size();
-  if (n == 0 || !(out.wants(SimParameter::RestJoints) || out.wants(SimParameter::Stiffnesses) ||
-                  out.wants(SimParameter::ColliderOffsets) || out.wants(SimParameter::Shape)))
-    return;
+  const int n = int(s.candidates.size());
+  const bool joints = sink.wants(SimParameter::RestJoints);
+  const bool stiffness = sink.wants(SimParameter::Stiffnesses);
+  const bool offsets = sink.wants(SimParameter::ColliderOffsets);
+  const bool shape = sink.wants(SimParameter::Shape);
+  if (n == 0 || !(joints || stiffness || offsets || shape)) return;
   const std::vector<Mat3> H = nodeHessians(c, c.colliders);
-  const auto cotangent = [&](size_t j) {
-    const int i = s.candidates[j];
-    Rows3Of<Lambda> mu = Rows3Of<Lambda>::Zero(3, l.cols());
-    for (int k = c.skin.start[i]; k < c.skin.start[i + 1]; ++k) {
-      const int b = c.skin.entries[k].bone;
-      mu += c.skin.entries[k].weight * (lambdaT(l, b) - skew(leverArm(c, i, b)) * lambdaW(l, b));
-    }
-    return mu;
-  };
-  // Only touching candidates (a nonzero node gradient or Hessian) enter most products.
-  const auto touching = [&](size_t j) {
-    return !(s.gradient.template segment<3>(3 * j).isZero(0.0) && H[j].isZero(0.0));
-  };
-  std::vector<Rows3Of<Lambda>> mu(n);
-  for (size_t j = 0; j < n; ++j)
-    if (touching(j)) mu[j] = cotangent(j);
-
-  if (out.wants(SimParameter::RestJoints)) {
-    Block& D = out[SimParameter::RestJoints];
-    for (size_t j = 0; j < n; ++j) {
-      if (!touching(j)) continue;
-      const int i = s.candidates[j];
-      const Vec3 gx = s.gradient.segment<3>(3 * j);
-      const Rows3Of<Lambda> Hmu = H[j] * mu[j];
-      for (int k = c.skin.start[i]; k < c.skin.start[i + 1]; ++k) {
-        const int b = c.skin.entries[k].bone;
-        const double w = c.skin.entries[k].weight;
-        D.template middleRows<3>(3 * b) -=
-            w * c.R[b].transpose() * (skew(gx) * lambdaW(l, b) + Hmu);
-      }
-    }
-  }
-  if (out.wants(SimParameter::Stiffnesses)) {
+  const int nc = int(c.colliders.size());
+  std::vector<std::vector<Mat3>> H_per_collider;  // with one collider, H itself
+  if (offsets && nc > 1)
+    for (int k = 0; k < nc; ++k) H_per_collider.push_back(nodeHessians(c, {c.colliders[k]}));
+  VecX unit_gradient;  // g_x at unit contact stiffness
+  if (stiffness) {
     ContactOptions unit = c.options.contact;
     unit.stiffness = 1.0;
-    VecX gx = VecX::Zero(3 * Eigen::Index(n));
-    colliderContactEnergy(s.nodes, s.areas, c.colliders, c.time, unit, &gx);
-    Block& D = out[SimParameter::Stiffnesses];
-    for (size_t j = 0; j < n; ++j) {
-      const Vec3 g = gx.segment<3>(3 * j);
-      if (g.isZero(0.0)) continue;
-      // A zero contact stiffness leaves g_x = 0 (not touching) but not the unit gradient.
-      D.row(3) += g.transpose() * (touching(j) ? mu[j] : cotangent(j));
-    }
+    unit_gradient = VecX::Zero(3 * Eigen::Index(n));
+    colliderContactEnergy(s.nodes, s.areas, c.colliders, c.time, unit, &unit_gradient);
   }
-  if (out.wants(SimParameter::ColliderOffsets)) {
-    Block& D = out[SimParameter::ColliderOffsets];
-    const int nc = int(c.colliders.size());
-    for (int k = 0; k < nc; ++k) {
-      // With one collider the all-collider Hessians are its own.
-      const std::vector<Mat3> Hk = nc == 1 ? H : nodeHessians(c, {c.colliders[k]});
-      for (size_t j = 0; j < n; ++j) {
-        if (Hk[j].isZero(0.0)) continue;
-        D.template middleRows<3>(3 * k) -= Hk[j] * (touching(j) ? mu[j] : cotangent(j));
+  const MatX& shapedirs = c.avatar.body().shapedirs;
+  const MatX& areas_jacobian = c.avatar.vertexAreasShapeJacobian();
+  const Mat3 I3 = Mat3::Identity();
+  SkinnedPoint point;
+  for (int j = 0; j < n; ++j) {
+    const Vec3 gx = s.gradient.segment<3>(3 * j);
+    // A zero contact stiffness leaves g_x = 0 and H_x = 0 (not touching), but not the unit
+    // gradient.
+    const bool touching = !(gx.isZero(0.0) && H[size_t(j)].isZero(0.0));
+    const bool unit_touching = stiffness && !unit_gradient.segment<3>(3 * j).isZero(0.0);
+    if (!touching && !unit_touching) continue;
+    const int i = s.candidates[size_t(j)];
+    point.id = j;
+    point.count = c.skin.start[i + 1] - c.skin.start[i];
+    for (int a = 0; a < point.count; ++a) {
+      const Influence& inf = c.skin.entries[size_t(c.skin.start[i] + a)];
+      point.bone[a] = inf.bone;
+      point.weight[a] = inf.weight;
+      point.lever[a] = leverArm(c, i, inf.bone);
+    }
+    if (unit_touching)
+      sink.add(SimParameter::Stiffnesses, point, 3, unit_gradient.segment<3>(3 * j),
+               Eigen::Matrix<double, 1, 1>::Ones());
+    if (!touching) continue;
+    const Mat3 Ht = H[size_t(j)].transpose();
+    const Mat3 turn = skew(gx);  // ∂(y × g_x)/∂y = −[g_x]×
+    if (joints)
+      for (int a = 0; a < point.count; ++a) {
+        const int b = point.bone[a];
+        const double w = point.weight[a];
+        sink.add(SimParameter::RestJoints, rotationRow(b), 3 * b, w * turn * c.R[b]);
+        sink.add(SimParameter::RestJoints, point, 3 * b, Ht, -w * c.R[b]);
       }
-    }
-  }
-  if (out.wants(SimParameter::Shape)) {
-    Block& D = out[SimParameter::Shape];
-    const MatX& shapedirs = c.avatar.body().shapedirs;
-    const MatX& areas_jacobian = c.avatar.vertexAreasShapeJacobian();
-    for (size_t j = 0; j < n; ++j) {
-      if (!touching(j)) continue;
-      const int i = s.candidates[j];
-      const Vec3 gx = s.gradient.segment<3>(3 * j);
+    if (offsets)
+      for (int k = 0; k < nc; ++k) {
+        const Mat3& Hk = nc == 1 ? H[size_t(j)] : H_per_collider[size_t(k)][size_t(j)];
+        if (!Hk.isZero(0.0))
+          sink.add(SimParameter::ColliderOffsets, point, 3 * k, -Hk.transpose(), I3);
+      }
+    if (shape) {
+      const auto S = shapedirs.middleRows<3>(3 * i);  // ∂X_i/∂β
       Mat3 dx_dX = Mat3::Zero();
-      Rows3Of<Lambda> turn = Rows3Of<Lambda>::Zero(3, l.cols());  // the rotating lever arms
-      for (int k = c.skin.start[i]; k < c.skin.start[i + 1]; ++k) {
-        const int b = c.skin.entries[k].bone;
-        const double w = c.skin.entries[k].weight;
-        dx_dX += w * c.R[b];
-        turn -= w * c.R[b].transpose() * skew(gx) * lambdaW(l, b);
+      for (int a = 0; a < point.count; ++a) {
+        const int b = point.bone[a];
+        dx_dX += point.weight[a] * c.R[b];
+        sink.add(SimParameter::Shape, rotationRow(b), 0, -point.weight[a] * turn * c.R[b], S);
       }
-      const Rows3Of<Lambda> node = dx_dX.transpose() * (H[j] * mu[j]) - turn;
-      D.noalias() += shapedirs.middleRows<3>(3 * i).transpose() * node;
+      sink.add(SimParameter::Shape, point, 0, Ht * dx_dX, S);
       if (s.areas[j] > 0.0)
-        D.noalias() += areas_jacobian.row(i).transpose() * ((gx.transpose() * mu[j]) / s.areas[j]);
+        sink.add(SimParameter::Shape, point, 0, gx / s.areas[j], areas_jacobian.row(i));
     }
   }
 }
 
-template void SurfaceContactTerm::products(const TermContext&, const VecX&,
-                                           ParameterProducts<VecX>&) const;
-template void SurfaceContactTerm::products(const TermContext&, const MatX&,
-                                           ParameterProducts<MatX>&) const;
-
 }  // namespace flsh::detail
+
+template class flsh::TermWithParameterBlocks<flsh::detail::SurfaceContactTerm>;

@@ -13,7 +13,7 @@
 
 namespace flsh::detail {
 
-class SurfaceContactTerm final : public TermWithProducts<SurfaceContactTerm> {
+class SurfaceContactTerm final : public TermWithParameterBlocks<SurfaceContactTerm> {
  public:
   explicit SurfaceContactTerm(int num_bones);
   const char* name() const override { return "collider contact"; }
@@ -23,8 +23,9 @@ class SurfaceContactTerm final : public TermWithProducts<SurfaceContactTerm> {
   /// form its projection on the PSD cone).
   void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
                   bool psd) const override;
-  template <class Lambda, class Block>
-  void products(const TermContext& c, const Lambda& lambda, ParameterProducts<Block>& out) const;
+  /// ∂g/∂p as local blocks (term_blocks.h).
+  template <class Sink>
+  void parameterBlocks(const TermContext& c, Sink& sink) const;
 
  private:
   mutable BonePairBlocks pair_blocks_;

@@ -3,7 +3,7 @@
 #include "flsh/core/rotation.h"
 #include "flsh/sim/skeleton_energies.h"
 #include "sim/hessian_blocks.h"
-#include "sim/terms/term_products.h"
+#include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
 
@@ -91,88 +91,80 @@ void TrackingSpringTerm::addHessian(const TermContext& c, std::vector<Triplet>& 
 }
 
 // With unit stiffness the rotation gradient of spring b is u_b = [u_p; u_b] over [δω_p, δω_b]
-// (root: parent I), so ∂g/∂k_b = u_b and every parameter that moves k_b enters through the
-// weight s_b = λᵀ u_b (1 × m). k_b = scale · I_b: ∂I_b/∂J_c = 2(m̄_c + M_c d) for c in the
-// subtree, minus their sum for J_b; ∂I_b/∂(M_c, m̄_c, S_c) = (‖d‖², 2d, tr). The root position
-// spring k_pos (t_0 − (J_0 + trans)) adds −k_pos λt_0 to J_0 and the target, and M's share.
-// The target rotation exp(θ + δ) = exp([J_l(θ)δ]×) exp(θ) moves the rotation gradient
-// w = k R_p log(R_pᵀR_b R_targetᵀ) by −k R_p J_l(e)⁻ᵀ J_l(θ) δ, e = log(R_pᵀR_b R_targetᵀ).
-template <class Lambda, class Block>
-void TrackingSpringTerm::products(const TermContext& c, const Lambda& l,
-                                  ParameterProducts<Block>& out) const {
-  if (!c.tracking ||
-      !(out.wants(SimParameter::RestJoints) || out.wants(SimParameter::BoneInertia) ||
-        out.wants(SimParameter::PoseTargets) || out.wants(SimParameter::RootTranslationTarget) ||
-        out.wants(SimParameter::Stiffnesses)))
-    return;
+// (root: parent I), so ∂g/∂k_b = u_b, and a parameter x that moves k_b by ∂k_b/∂x gives the
+// blocks u ∂k_b/∂x on the rotation rows of b and of its parent. k_b = scale · I_b: ∂I_b/∂J_c =
+// 2(m̄_c + M_c d) for c in the subtree, minus their sum for J_b; ∂I_b/∂(M_c, m̄_c, S_c) = (‖d‖²,
+// 2d, tr). The root position spring k_pos (t_0 − (J_0 + trans)) gives −k_pos I for J_0 and the
+// target, and (t_0 − target) ∂k_pos/∂M_c. The target rotation exp(θ + δ) = exp([J_l(θ)δ]×)
+// exp(θ) moves the rotation gradient w = k R_p log(R_pᵀR_b R_targetᵀ) by −k R_p J_l(e)⁻ᵀ J_l(θ) δ,
+// e = log(R_pᵀR_b R_targetᵀ).
+template <class Sink>
+void TrackingSpringTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
+  const bool joints = sink.wants(SimParameter::RestJoints);
+  const bool inertia = sink.wants(SimParameter::BoneInertia);
+  const bool targets = sink.wants(SimParameter::PoseTargets);
+  const bool root_target = sink.wants(SimParameter::RootTranslationTarget);
+  const bool stiffnesses = sink.wants(SimParameter::Stiffnesses);
+  if (!c.tracking || !(joints || inertia || targets || root_target || stiffnesses)) return;
   const int n = c.num_bones;
   const SimulableOptions& o = c.options;
-  const auto scaleOf = [&](int b) { return b == 0 ? o.root_stiffness : o.tracking_stiffness; };
-  const auto momentOf = [&](int b) { return trackingMoment(c.J, c.inertia, o, subtrees_[b], b); };
-  std::vector<RowOf<Lambda>> weight(static_cast<size_t>(n));
+  const Vec3 root_gap = c.t.row(0).transpose() - c.target_t0;
+  const Mat3 root_pull = -c.root_k_pos * Mat3::Identity();  // ∂g_t,0/∂J_0 and ∂/∂target
   Vec6 u;
   for (int b = 0; b < n; ++b) {
     const int p = c.parents[b];
     trackingSpringEnergy(p < 0 ? Mat3::Identity() : c.R[p], c.R[b], c.target_R[b], 1.0, &u);
-    weight[b] = u.tail<3>().transpose() * lambdaW(l, b);
-    if (p >= 0) weight[b] += u.head<3>().transpose() * lambdaW(l, p);
-  }
-  const Vec3 root_gap = c.t.row(0).transpose() - c.target_t0;
-  const RowOf<Lambda> root_pull = root_gap.transpose() * lambdaT(l, 0);
-  if (out.wants(SimParameter::RestJoints)) {
-    Block& D = out[SimParameter::RestJoints];
-    for (int b = 0; b < n; ++b) {
-      const RowOf<Lambda> s = scaleOf(b) * weight[b];
+    // ∂g/∂x = u ∂k_b/∂x for a row dk = ∂k_b/∂x (1 × cols) at parameter `param` (rank one).
+    const auto stiffnessBlocks = [&](SimParameter group, int param, const auto& dk) {
+      sink.add(group, rotationRow(b), param, u.tail<3>(), dk);
+      if (p >= 0) sink.add(group, rotationRow(p), param, u.head<3>(), dk);
+    };
+    const double scale = b == 0 ? o.root_stiffness : o.tracking_stiffness;
+    if (joints || inertia) {
+      Vec3 sum = Vec3::Zero();  // −∂I_b/∂J_b
+      Eigen::Matrix<double, 1, kBoneInertiaValues> dI = decltype(dI)::Zero();
       for (int k : subtrees_[b]) {
         const Vec3 d = (c.J.row(k) - c.J.row(b)).transpose();
-        const Vec3 dI = 2.0 * (c.inertia[k].first_moment + c.inertia[k].mass * d);
-        D.template middleRows<3>(3 * k) += dI * s;
-        D.template middleRows<3>(3 * b) -= dI * s;
+        const BoneInertia& in = c.inertia[k];
+        if (joints) {
+          const Vec3 dJ = 2.0 * (in.first_moment + in.mass * d);
+          sum += dJ;
+          stiffnessBlocks(SimParameter::RestJoints, 3 * k, scale * dJ.transpose());
+        }
+        if (inertia) {
+          dI(0) = d.squaredNorm();
+          dI.segment<3>(1) = 2.0 * d.transpose();
+          dI.segment<3>(4).setOnes();  // tr(S) = S_xx + S_yy + S_zz
+          stiffnessBlocks(SimParameter::BoneInertia, kBoneInertiaValues * k, scale * dI);
+        }
       }
+      if (joints) stiffnessBlocks(SimParameter::RestJoints, 3 * b, -scale * sum.transpose());
     }
-    D.template topRows<3>() -= c.root_k_pos * lambdaT(l, 0);
-  }
-  if (out.wants(SimParameter::BoneInertia)) {
-    Block& D = out[SimParameter::BoneInertia];
-    for (int b = 0; b < n; ++b) {
-      const RowOf<Lambda> s = scaleOf(b) * weight[b];
-      for (int k : subtrees_[b]) {
-        const Vec3 d = (c.J.row(k) - c.J.row(b)).transpose();
-        const int col = kBoneInertiaValues * k;
-        D.row(col) += d.squaredNorm() * s;
-        D.template middleRows<3>(col + 1) += 2.0 * d * s;
-        for (int e = 0; e < 3; ++e) D.row(col + 4 + e) += s;  // tr(S) = S_xx + S_yy + S_zz
-      }
-    }
-    for (int k = 0; k < n; ++k) D.row(kBoneInertiaValues * k) += o.root_stiffness * root_pull;
-  }
-  if (out.wants(SimParameter::PoseTargets)) {
-    Block& D = out[SimParameter::PoseTargets];
-    for (int b = 0; b < n; ++b) {
-      const int p = c.parents[b];
+    if (inertia)  // k_pos = root_stiffness · Σ M_k
+      sink.add(SimParameter::BoneInertia, translationRow(0), kBoneInertiaValues * b,
+               o.root_stiffness * root_gap);
+    if (targets) {
       const Mat3 R_p = p < 0 ? Mat3::Identity() : c.R[p];
-      const double stiffness = scaleOf(b) * momentOf(b);
+      const double stiffness = scale * trackingMoment(c.J, c.inertia, o, subtrees_[b], b);
       const Vec3 theta = logSO3(c.target_R[b]);
       const Vec3 e = logSO3(R_p.transpose() * c.R[b] * c.target_R[b].transpose());
       const Mat3 dw =
           -stiffness * R_p * leftJacobianInverseSO3(e).transpose() * leftJacobianSO3(theta);
-      Rows3Of<Lambda> lw = lambdaW(l, b);
-      if (p >= 0) lw -= lambdaW(l, p);
-      D.template middleRows<3>(3 * b) += dw.transpose() * lw;
+      sink.add(SimParameter::PoseTargets, rotationRow(b), 3 * b, dw);
+      if (p >= 0) sink.add(SimParameter::PoseTargets, rotationRow(p), 3 * b, -dw);
+    }
+    if (stiffnesses) {
+      const double moment = trackingMoment(c.J, c.inertia, o, subtrees_[b], b);
+      stiffnessBlocks(SimParameter::Stiffnesses, b == 0 ? 2 : 1,
+                      Eigen::Matrix<double, 1, 1>(moment));
     }
   }
-  if (out.wants(SimParameter::RootTranslationTarget))
-    out[SimParameter::RootTranslationTarget] -= c.root_k_pos * lambdaT(l, 0);
-  if (out.wants(SimParameter::Stiffnesses)) {
-    Block& D = out[SimParameter::Stiffnesses];
-    for (int b = 0; b < n; ++b) D.row(b == 0 ? 2 : 1) += momentOf(b) * weight[b];
-    D.row(2) += totalMass(c.inertia) * root_pull;
-  }
+  if (joints) sink.add(SimParameter::RestJoints, translationRow(0), 0, root_pull);
+  if (root_target) sink.add(SimParameter::RootTranslationTarget, translationRow(0), 0, root_pull);
+  if (stiffnesses)
+    sink.add(SimParameter::Stiffnesses, translationRow(0), 2, totalMass(c.inertia) * root_gap);
 }
 
-template void TrackingSpringTerm::products(const TermContext&, const VecX&,
-                                           ParameterProducts<VecX>&) const;
-template void TrackingSpringTerm::products(const TermContext&, const MatX&,
-                                           ParameterProducts<MatX>&) const;
-
 }  // namespace flsh::detail
+
+template class flsh::TermWithParameterBlocks<flsh::detail::TrackingSpringTerm>;

@@ -21,15 +21,16 @@ namespace flsh::detail {
 double trackingMoment(const MatX3& J, const std::vector<BoneInertia>& inertia,
                       const SimulableOptions& options, const std::vector<int>& subtree, int b);
 
-class TrackingSpringTerm final : public TermWithProducts<TrackingSpringTerm> {
+class TrackingSpringTerm final : public TermWithParameterBlocks<TrackingSpringTerm> {
  public:
   explicit TrackingSpringTerm(const std::vector<int>& parents);
   const char* name() const override { return "tracking and root springs"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override;
   void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset,
                   bool psd) const override;
-  template <class Lambda, class Block>
-  void products(const TermContext& c, const Lambda& lambda, ParameterProducts<Block>& out) const;
+  /// ∂g/∂p as local blocks (term_blocks.h).
+  template <class Sink>
+  void parameterBlocks(const TermContext& c, Sink& sink) const;
 
   /// The stiffnesses of the current options, joints and inertias (what TermContext's
   /// tracking_k, root_k_pos and root_k_rot hold).

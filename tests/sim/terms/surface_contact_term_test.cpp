@@ -26,20 +26,29 @@ TEST(SurfaceContactTerm, ParameterProductsMatchFiniteDifferences) {
     test::expectNoParameterProducts(*sim, term, p);
 }
 
+// Shape has no setParameter (β is the avatar's), so its Jacobian is checked against the
+// products here and against central differences over new avatars in parameter_derivatives_test.
 TEST(SurfaceContactTerm, ShapeProductsAreNonzeroAndMatchTheJacobianForm) {
   auto sim = test::termScenario();
   const EnergyTerm& term = test::termNamed(*sim, kTerm);
   const int n = sim->numDofs(), k = sim->parameterSize(SimParameter::Shape);
   ParameterProducts<MatX> jac;
-  jac[SimParameter::Shape] = MatX::Zero(k, n);
-  term.addParameterProducts(sim->termContext(), MatX(MatX::Identity(n, n)), jac);
-  ASSERT_GT(jac[SimParameter::Shape].norm(), 0.0);
+  jac[SimParameter::Shape] = MatX::Zero(n, k);
+  term.addParameterJacobians(sim->termContext(), jac);
+  const MatX& J = jac[SimParameter::Shape];
+  ASSERT_GT(J.norm(), 0.0);
   const VecX lambda = test::randomVector(n, 1.0, 31);
   ParameterProducts<VecX> vjp;
   vjp[SimParameter::Shape] = VecX::Zero(k);
   term.addParameterProducts(sim->termContext(), lambda, vjp);
-  EXPECT_LT((vjp[SimParameter::Shape] - jac[SimParameter::Shape] * lambda).norm(),
+  EXPECT_LT((vjp[SimParameter::Shape] - J.transpose() * lambda).norm(),
             1e-10 * vjp[SimParameter::Shape].norm());
+  const VecX dbeta = test::randomVector(k, 1.0, 32);
+  ParameterDirection along{};
+  along[size_t(SimParameter::Shape)] = &dbeta;
+  std::vector<VecX> jvp(1, VecX::Zero(n));
+  term.addParameterTangents(sim->termContext(), {along}, jvp);
+  EXPECT_LT((jvp[0] - J * dbeta).norm(), 1e-10 * jvp[0].norm());
 }
 
 }  // namespace

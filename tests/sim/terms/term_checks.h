@@ -102,8 +102,9 @@ inline void expectTermDerivatives(Simulable& sim, const EnergyTerm& term, double
       << term.name();
 }
 
-/// The term's parameter products for group p, as a vector–Jacobian product (λ random) and as
-/// the Jacobian (Λ = I), against central differences of its gradient under setParameter.
+/// The term's parameter Jacobian ∂g/∂p against central differences of its gradient under
+/// setParameter; then its vector–Jacobian product (λ random) and Jacobian–vector product (ṗ
+/// random) against the Jacobian: the three forms of the one derivative.
 inline void expectTermParameterProducts(Simulable& sim, const EnergyTerm& term, SimParameter p,
                                         double tol, bool relative_scale = false) {
   const int n = sim.numDofs();
@@ -111,9 +112,9 @@ inline void expectTermParameterProducts(Simulable& sim, const EnergyTerm& term, 
   const int size = int(p0.size());
   const VecX scale = relative_scale ? VecX(p0.cwiseAbs()) : VecX::Ones(size);
   ParameterProducts<MatX> jac;
-  jac[p] = MatX::Zero(size, n);
-  term.addParameterProducts(sim.termContext(), MatX(MatX::Identity(n, n)), jac);
-  const MatX analytic = jac[p].transpose() * scale.asDiagonal();  // n × size
+  jac[p] = MatX::Zero(n, size);
+  term.addParameterJacobians(sim.termContext(), jac);
+  const MatX analytic = jac[p] * scale.asDiagonal();  // n × size
   ASSERT_GT(analytic.norm(), 0.0) << term.name() << ", " << simParameterInfo(p).name;
   const auto gradient = [&](const VecX& delta) {
     sim.setParameter(p, p0 + scale.cwiseProduct(delta));
@@ -122,23 +123,41 @@ inline void expectTermParameterProducts(Simulable& sim, const EnergyTerm& term, 
   EXPECT_TRUE(jacobianMatchesFiniteDifferences(gradient, VecX::Zero(size), analytic, tol))
       << term.name() << ", " << simParameterInfo(p).name;
   sim.setParameter(p, p0);
-  // The vector form is the same product.
   const VecX lambda = randomVector(n, 1.0, 11);
   ParameterProducts<VecX> vjp;
   vjp[p] = VecX::Zero(size);
   term.addParameterProducts(sim.termContext(), lambda, vjp);
-  EXPECT_LT((vjp[p] - jac[p] * lambda).norm(), 1e-10 * (1.0 + vjp[p].norm()))
+  const VecX expected_vjp = jac[p].transpose() * lambda;
+  EXPECT_LT((vjp[p] - expected_vjp).norm(), 1e-10 * (1.0 + expected_vjp.norm()))
+      << term.name() << ", " << simParameterInfo(p).name;
+  const VecX direction = randomVector(size, 1.0, 13);
+  ParameterDirection along{};
+  along[size_t(p)] = &direction;
+  std::vector<VecX> jvp(1, VecX::Zero(n));
+  term.addParameterTangents(sim.termContext(), {along}, jvp);
+  const VecX expected_jvp = jac[p] * direction;
+  EXPECT_LT((jvp[0] - expected_jvp).norm(), 1e-10 * (1.0 + expected_jvp.norm()))
       << term.name() << ", " << simParameterInfo(p).name;
 }
 
-/// A group the term does not depend on is left untouched (zero products).
+/// A group the term does not depend on is left untouched (zero products of each form).
 inline void expectNoParameterProducts(const Simulable& sim, const EnergyTerm& term,
                                       SimParameter p) {
-  const int n = sim.numDofs();
+  const int n = sim.numDofs(), size = sim.parameterSize(p);
   ParameterProducts<VecX> out;
-  out[p] = VecX::Zero(sim.parameterSize(p));
+  out[p] = VecX::Zero(size);
   term.addParameterProducts(sim.termContext(), randomVector(n, 1.0, 12), out);
   EXPECT_EQ(out[p].norm(), 0.0) << term.name() << ", " << simParameterInfo(p).name;
+  ParameterProducts<MatX> jac;
+  jac[p] = MatX::Zero(n, size);
+  term.addParameterJacobians(sim.termContext(), jac);
+  EXPECT_EQ(jac[p].norm(), 0.0) << term.name() << ", " << simParameterInfo(p).name;
+  const VecX direction = randomVector(size, 1.0, 14);
+  ParameterDirection along{};
+  along[size_t(p)] = &direction;
+  std::vector<VecX> jvp(1, VecX::Zero(n));
+  term.addParameterTangents(sim.termContext(), {along}, jvp);
+  EXPECT_EQ(jvp[0].norm(), 0.0) << term.name() << ", " << simParameterInfo(p).name;
 }
 
 }  // namespace flsh::test

@@ -15,5 +15,5 @@ apt-get install -y --no-install-recommends \
   libgtest-dev libgmock-dev libbenchmark-dev \
   nlohmann-json3-dev libcli11-dev libzip-dev libpng-dev libtinygltf-dev libstb-dev \
   pybind11-dev python3-dev python3-pybind11 \
-  python3-numpy python3-scipy python3-pytest python3-torch \
+  python3-numpy python3-scipy python3-pytest python3-torch python3-distributed \
   clang-14 libclang-rt-14-dev libomp-14-dev ccache

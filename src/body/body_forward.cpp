@@ -194,8 +194,8 @@ void blendDerivativeRows(const MatX& posedirs, int r0, int n, int k, const Mat93
 /// Linear blend skinning of vertex i: Σ_j w_ij [Rg_j | p_j − Rg_j J_j].
 inline Mat34 blendedSkin(const Derived& d, const Kinematics& k, int i) {
   Mat34 T = Mat34::Zero();
-  for (int e = d.weight_start[i]; e < d.weight_start[i + 1]; ++e)
-    T += d.weight_value[e] * k.skin[d.weight_joint[e]];
+  for (int e = d.weights.start[i]; e < d.weights.start[i + 1]; ++e)
+    T += d.weights.entries[e].weight * k.skin[d.weights.entries[e].bone];
   return T;
 }
 
@@ -218,9 +218,9 @@ void vertexJacobian(const BodyModel& m, const Derived& d, const Kinematics& k,
   std::array<bool, kJ> touched{};
   std::array<int, kJ> touched_list;
   int touched_count = 0;
-  for (int e = d.weight_start[i]; e < d.weight_start[i + 1]; ++e) {
-    const int j = d.weight_joint[e];
-    const double w = d.weight_value[e];
+  for (int e = d.weights.start[i]; e < d.weights.start[i + 1]; ++e) {
+    const int j = d.weights.entries[e].bone;
+    const double w = d.weights.entries[e].weight;
     const Vec3 x = k.skin[j].leftCols<3>() * v_posed + k.skin[j].col(3);
     for (int a = j; a >= 0; a = m.parents[a]) {
       if (!touched[a]) {
@@ -245,8 +245,9 @@ void vertexJacobian(const BodyModel& m, const Derived& d, const Kinematics& k,
   // Shape: dv/dβ = M_i S_i + Σ_j w_ij (dp_j/dβ − Rg_j dJ_j/dβ).
   auto beta_rows = jac.vertices_betas.middleRows<3>(3 * i);
   beta_rows.noalias() = M * m.shapedirs.middleRows<3>(3 * i);
-  for (int e = d.weight_start[i]; e < d.weight_start[i + 1]; ++e)
-    beta_rows += d.weight_value[e] * pd.skin_betas.middleRows<3>(3 * d.weight_joint[e]);
+  for (int e = d.weights.start[i]; e < d.weights.start[i + 1]; ++e)
+    beta_rows +=
+        d.weights.entries[e].weight * pd.skin_betas.middleRows<3>(3 * d.weights.entries[e].bone);
 }
 
 PosedBody poseOneFrame(const BodyModel& m, const Derived& d, const VecX& betas, const VecX& pose72,

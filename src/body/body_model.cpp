@@ -140,19 +140,8 @@ void BodyModel::validate() const {
 void BodyModel::finalize() {
   validate();
   auto d = std::make_shared<Derived>();
-  const int V = numVertices(), J = numJoints();
-  d->weight_start.reserve(V + 1);
-  d->weight_start.push_back(0);
-  for (int i = 0; i < V; ++i) {
-    for (int j = 0; j < J; ++j) {
-      const double w = weights(i, j);
-      if (w != 0.0) {
-        d->weight_joint.push_back(j);
-        d->weight_value.push_back(w);
-      }
-    }
-    d->weight_start.push_back(int(d->weight_joint.size()));
-  }
+  const int J = numJoints();
+  d->weights = SparseSkinWeights::fromDense(weights);
   const long nnz = (posedirs.array() != 0.0).count();
   d->use_sparse_posedirs = nnz * 2 < posedirs.size();
   if (d->use_sparse_posedirs) d->posedirs_sparse = posedirs.sparseView(1.0, 0.0);

@@ -4,15 +4,13 @@
 #include <vector>
 
 #include "flsh/body/body_model.h"
+#include "flsh/body/skinned_surface.h"
 
 namespace flsh {
 
 struct BodyModel::Derived {
-  /// Per vertex, the joints with a nonzero weight and their weights (CSR layout):
-  /// joints weight_joint[weight_start[i] .. weight_start[i+1]).
-  std::vector<int> weight_start;
-  std::vector<int> weight_joint;
-  std::vector<double> weight_value;
+  /// Per vertex, the joints with a nonzero weight and their weights.
+  SparseSkinWeights weights;
   /// Pose blend shapes as a column-major sparse matrix (3#V × 207) when less than half of
   /// posedirs is nonzero; empty otherwise (the dense posedirs is used).
   SpMat posedirs_sparse;

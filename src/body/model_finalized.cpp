@@ -10,7 +10,7 @@ std::string modelName(const BodyModel& model) {
 }
 
 bool isFinalized(const BodyModel& model) {
-  return model.derived && model.derived->weight_start.size() == size_t(model.numVertices()) + 1 &&
+  return model.derived && model.derived->weights.numVertices() == model.numVertices() &&
          model.derived->joint_shapedirs.cols() == model.numBetas();
 }
 

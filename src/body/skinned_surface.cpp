@@ -60,10 +60,10 @@ SkinnedSurface SkinnedSurface::build(const MatX& weights, const MatX3& X, const 
                                      int cluster_vertices) {
   const int nv = int(weights.rows()), bones = int(weights.cols());
   if (X.rows() != nv || J.rows() != bones)
-    throw InputError("SkinnedSurface::build: weights are " +
-                     shapeString({long(nv), long(bones)}) + " but the rest vertices are " +
-                     shapeString({long(X.rows()), 3}) + " and the rest joints " +
-                     shapeString({long(J.rows()), 3}) + " (expected #V × 3 and #bones × 3)");
+    throw InputError("SkinnedSurface::build: weights are " + shapeString({long(nv), long(bones)}) +
+                     " but the rest vertices are " + shapeString({long(X.rows()), 3}) +
+                     " and the rest joints " + shapeString({long(J.rows()), 3}) +
+                     " (expected #V × 3 and #bones × 3)");
   if (cluster_vertices < 1)
     throw InputError("SkinnedSurface::build: cluster_vertices = " +
                      std::to_string(cluster_vertices) + ", expected >= 1");
@@ -90,9 +90,9 @@ SkinnedSurface SkinnedSurface::build(const MatX& weights, const MatX3& X, const 
       const auto [begin, end] = pending.back();
       pending.pop_back();
       if (end - begin <= cluster_vertices) {
-        s.clusters.push_back({b, begin, end,
-                              restBound(s.weights, X, J, b, verts.data() + begin,
-                                        verts.data() + end)});
+        s.clusters.push_back(
+            {b, begin, end,
+             restBound(s.weights, X, J, b, verts.data() + begin, verts.data() + end)});
         continue;
       }
       Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);

@@ -160,10 +160,10 @@ bool Simulable::Impl::runsOnTwoThreads() const {
 
 TermContext Simulable::Impl::context() const {
   if (soft) prepareSoft();
-  return {num_bones, parents,  J,         inertia,    options,    mocap && options.track_mocap,
-          is_static, q.R,      q.t,       q_n.R,      q_n.t,      q_nm1.R,
-          q_nm1.t,   target_R, target_t0, tracking_k, root_k_pos, root_k_rot,
-          colliders, time,     *avatar,   skin,       contact};
+  return {num_bones, parents,  J,         inertia,         options,    mocap && options.track_mocap,
+          is_static, q.R,      q.t,       q_n.R,           q_n.t,      q_nm1.R,
+          q_nm1.t,   target_R, target_t0, tracking_k,      root_k_pos, root_k_rot,
+          colliders, time,     *avatar,   surface.weights, contact};
 }
 
 Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar, std::shared_ptr<const Motion> mocap,
@@ -236,7 +236,7 @@ Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar, std::shared_ptr<c
     m.soft_blend_bound.assign(m.num_bones, 0.0);
     m.soft_weight_bound.assign(m.num_bones, 0.0);
     for (int b = 0; b < m.num_bones; ++b)
-      for (int i : m.dominated[b]) {
+      for (int i : m.surface.dominated[b]) {
         m.soft_blend_bound[b] = std::max(m.soft_blend_bound[b], m.soft->blendBound(i));
         m.soft_weight_bound[b] = std::max(m.soft_weight_bound[b], m.soft->displacementWeight(i));
       }

@@ -45,26 +45,12 @@ struct Simulable::Impl {
   double root_k_pos = 0.0, root_k_rot = 0.0;
   std::vector<char> kinematic;  // per bone
 
-  // Skinning weights as (bone, weight) lists per vertex (the nonzero entries only).
+  // The skinned surface: sparse weights, each bone's dominated vertices in clusters of at most
+  // kSurfaceClusterVertices, and their rest bounds (body/skinned_surface.h), for the broad
+  // phase of collider contact.
+  static constexpr int kSurfaceClusterVertices = 48;
   using Influence = SparseSkinWeights::Influence;
-  SparseSkinWeights skin;
-
-  // Broad phase: per bone, the vertices it dominates (largest weight), a sphere bounding their
-  // rest offsets X − J_b (centre s_b in the bone frame, radius ρ_b about s_b, extent e_b = max
-  // |X − J_b|), and W_bc = max over those vertices of w_ic for each other bone c that
-  // influences them.
-  std::vector<std::vector<int>> dominated;
-  std::vector<Vec3> sphere_center;
-  std::vector<double> sphere_radius, sphere_extent;
-  // Spatial clusters of each bone's dominated vertices (contiguous ranges of dominated[b]), for
-  // a finer broad phase than the bone sphere; centres are relative to J_b in the rest frame.
-  struct VertexCluster {
-    Vec3 center;
-    double radius;
-    int begin, end;
-  };
-  std::vector<std::vector<VertexCluster>> clusters;
-  std::vector<std::vector<Influence>> co_influence;
+  SkinnedSurface surface;
 
   // ---- mutable data ----
   detail::BoneStates q, q_n, q_nm1;
@@ -123,7 +109,6 @@ struct Simulable::Impl {
   void broadPhase(const double* extra_margin, std::vector<int>& candidates) const;
   // Soft tissue: per bone, the largest blendBound and displacementWeight of its vertices.
   std::vector<double> soft_blend_bound, soft_weight_bound;
-  void buildClusters();
   Vec3 node(int i) const;
   double contactEnergy() const {
     ensureContact();

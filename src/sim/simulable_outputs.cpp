@@ -59,9 +59,10 @@ MatX3 Simulable::getVertices() const {
 Vec3 Simulable::Impl::node(int i) const {
   const Vec3 X = avatar->restVertices().row(i).transpose();
   Vec3 x = Vec3::Zero();
-  for (int k = skin.start[i]; k < skin.start[i + 1]; ++k) {
-    const int b = skin.entries[k].bone;
-    x += skin.entries[k].weight * (q.R[b] * (X - J.row(b).transpose()) + q.t.row(b).transpose());
+  for (int k = surface.weights.start[i]; k < surface.weights.start[i + 1]; ++k) {
+    const int b = surface.weights.entries[k].bone;
+    x += surface.weights.entries[k].weight *
+         (q.R[b] * (X - J.row(b).transpose()) + q.t.row(b).transpose());
   }
   return x;
 }
@@ -92,11 +93,11 @@ SpMat Simulable::getNodesStateJacobian() const {
   }
   const MatX3& X = m.avatar->restVertices();
   std::vector<Triplet> triplets;
-  triplets.reserve(m.skin.entries.size() * 9);
+  triplets.reserve(m.surface.weights.entries.size() * 9);
   for (int i = 0; i < X.rows(); ++i) {
-    for (int k = m.skin.start[i]; k < m.skin.start[i + 1]; ++k) {
-      const int b = m.skin.entries[k].bone;
-      const double w = m.skin.entries[k].weight;
+    for (int k = m.surface.weights.start[i]; k < m.surface.weights.start[i + 1]; ++k) {
+      const int b = m.surface.weights.entries[k].bone;
+      const double w = m.surface.weights.entries[k].weight;
       const Mat3 dx_dw = -w * skew(m.q.R[b] * (X.row(i) - m.J.row(b)).transpose());
       for (int r = 0; r < 3; ++r) {
         triplets.emplace_back(3 * i + r, 6 * b + r, w);

@@ -1,5 +1,5 @@
-// Simulable: the skinned surface (sparse skinning weights, each bone's dominated vertices and
-// their clusters) and the exact contact broad phase that keeps TermContext::contact up to date.
+// Simulable: its skinned surface (body/skinned_surface.h) and the exact contact broad phase
+// that keeps TermContext::contact up to date.
 #include <algorithm>
 #include <cmath>
 
@@ -17,86 +17,8 @@ using detail::BoneStates;
 using detail::kDofsPerBone;
 
 void Simulable::Impl::buildSkinning() {
-  const MatX& W = avatar->body().weights;  // #V × 24
-  const MatX3& X = avatar->restVertices();
-  const int nv = int(X.rows());
-  skin.start.assign(nv + 1, 0);
-  skin.entries.clear();
-  dominated.assign(num_bones, {});
-  std::vector<int> dominant(nv, 0);
-  for (int i = 0; i < nv; ++i) {
-    int best = 0;
-    for (int b = 0; b < num_bones; ++b) {
-      if (W(i, b) != 0.0) skin.entries.push_back({b, W(i, b)});
-      if (W(i, b) > W(i, best)) best = b;
-    }
-    skin.start[i + 1] = int(skin.entries.size());
-    dominant[i] = best;
-    dominated[best].push_back(i);
-  }
-  sphere_center.assign(num_bones, Vec3::Zero());
-  sphere_radius.assign(num_bones, 0.0);
-  sphere_extent.assign(num_bones, 0.0);
-  co_influence.assign(num_bones, {});
-  for (int b = 0; b < num_bones; ++b) {
-    if (dominated[b].empty()) continue;
-    Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
-    for (int i : dominated[b]) {
-      const Vec3 p = X.row(i).transpose() - J.row(b).transpose();
-      lo = lo.cwiseMin(p);
-      hi = hi.cwiseMax(p);
-    }
-    sphere_center[b] = 0.5 * (lo + hi);
-    std::vector<double> max_weight(num_bones, 0.0);
-    for (int i : dominated[b]) {
-      const Vec3 p = X.row(i).transpose() - J.row(b).transpose();
-      sphere_radius[b] = std::max(sphere_radius[b], (p - sphere_center[b]).norm());
-      sphere_extent[b] = std::max(sphere_extent[b], p.norm());
-      for (int k = skin.start[i]; k < skin.start[i + 1]; ++k)
-        if (skin.entries[k].bone != b)
-          max_weight[skin.entries[k].bone] =
-              std::max(max_weight[skin.entries[k].bone], skin.entries[k].weight);
-    }
-    for (int c = 0; c < num_bones; ++c)
-      if (max_weight[c] > 0.0) co_influence[b].push_back({c, max_weight[c]});
-  }
-  buildClusters();
-}
-
-// Median splits along the longest box side until at most kClusterVertices vertices remain.
-void Simulable::Impl::buildClusters() {
-  constexpr int kClusterVertices = 48;
-  const MatX3& X = avatar->restVertices();
-  clusters.assign(num_bones, {});
-  for (int b = 0; b < num_bones; ++b) {
-    std::vector<int>& verts = dominated[b];
-    auto local = [&](int i) -> Vec3 { return (X.row(i) - J.row(b)).transpose(); };
-    std::vector<std::pair<int, int>> pending;
-    if (!verts.empty()) pending.emplace_back(0, int(verts.size()));
-    while (!pending.empty()) {
-      const auto [begin, end] = pending.back();
-      pending.pop_back();
-      Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
-      for (int k = begin; k < end; ++k) {
-        lo = lo.cwiseMin(local(verts[k]));
-        hi = hi.cwiseMax(local(verts[k]));
-      }
-      if (end - begin > kClusterVertices) {
-        int axis = 0;
-        (hi - lo).maxCoeff(&axis);
-        const int mid = (begin + end) / 2;
-        std::nth_element(verts.begin() + begin, verts.begin() + mid, verts.begin() + end,
-                         [&](int i, int j) { return X(i, axis) < X(j, axis); });
-        pending.emplace_back(begin, mid);
-        pending.emplace_back(mid, end);
-        continue;
-      }
-      VertexCluster cluster{0.5 * (lo + hi), 0.0, begin, end};
-      for (int k = begin; k < end; ++k)
-        cluster.radius = std::max(cluster.radius, (local(verts[k]) - cluster.center).norm());
-      clusters[b].push_back(cluster);
-    }
-  }
+  surface = SkinnedSurface::build(avatar->body().weights, avatar->restVertices(), J,
+                                  kSurfaceClusterVertices);
 }
 
 // ---- contact -----------------------------------------------------------------------------
@@ -114,32 +36,35 @@ void Simulable::Impl::broadPhase(const double* extra_margin, std::vector<int>& c
   candidates.clear();
   if (colliders.empty()) return;
   for (int b = 0; b < num_bones; ++b) {
-    if (dominated[b].empty()) continue;
+    const std::vector<int>& dominated = surface.dominated[b];
+    if (dominated.empty()) continue;
+    const SurfaceBound& bound = surface.bone_bound[b];
     double margin = extra_margin ? extra_margin[b] : 0.0;
-    for (const Influence& co : co_influence[b]) {
+    for (const SurfaceBound::CoInfluence& co : bound.co) {
       const int c = co.bone;
       const double rotation_gap =
           std::sqrt(std::max(0.0, 3.0 - (q.R[b].transpose() * q.R[c]).trace()));
       const Vec3 joint_gap = q.R[c] * (J.row(b) - J.row(c)).transpose() + q.t.row(c).transpose() -
                              q.t.row(b).transpose();
-      margin += co.weight * (rotation_gap * sphere_extent[b] + joint_gap.norm());
+      margin += co.weight * (rotation_gap * bound.extent + joint_gap.norm());
     }
-    const Vec3 centre = q.R[b] * sphere_center[b] + q.t.row(b).transpose();
-    const double radius = sphere_radius[b] + margin;
+    const Vec3 centre = q.R[b] * bound.center + q.t.row(b).transpose();
+    const double radius = bound.radius + margin;
     bool near = false;
     for (const Collider& collider : colliders)
       near = near || collider.signedDistance(centre, time) < radius;
     if (!near) continue;
     // The same bound per vertex cluster: |x_i − cluster centre| ≤ cluster radius + margin.
-    for (const VertexCluster& cluster : clusters[b]) {
-      const Vec3 cluster_centre = q.R[b] * cluster.center + q.t.row(b).transpose();
+    for (int k = surface.bone_clusters[b]; k < surface.bone_clusters[b + 1]; ++k) {
+      const SkinnedSurface::Cluster& cluster = surface.clusters[k];
+      const Vec3 cluster_centre = q.R[b] * cluster.bound.center + q.t.row(b).transpose();
       bool cluster_near = false;
       for (const Collider& collider : colliders)
-        cluster_near =
-            cluster_near || collider.signedDistance(cluster_centre, time) < cluster.radius + margin;
+        cluster_near = cluster_near || collider.signedDistance(cluster_centre, time) <
+                                           cluster.bound.radius + margin;
       if (cluster_near)
-        candidates.insert(candidates.end(), dominated[b].begin() + cluster.begin,
-                          dominated[b].begin() + cluster.end);
+        candidates.insert(candidates.end(), dominated.begin() + cluster.begin,
+                          dominated.begin() + cluster.end);
     }
   }
 }
@@ -177,9 +102,9 @@ void Simulable::Impl::ensureContact() const {
       const int i = cc.candidates[j];
       const Vec3 Xi = X.row(i).transpose();
       Vec3 x = Vec3::Zero();
-      for (int k = skin.start[i]; k < skin.start[i + 1]; ++k) {
-        const int b = skin.entries[k].bone;
-        x += skin.entries[k].weight * (q.R[b] * Xi + bone_shift[b]);
+      for (int k = surface.weights.start[i]; k < surface.weights.start[i + 1]; ++k) {
+        const int b = surface.weights.entries[k].bone;
+        x += surface.weights.entries[k].weight * (q.R[b] * Xi + bone_shift[b]);
       }
       cc.nodes.row(j) = x.transpose();
       cc.areas[j] = areas[i];

@@ -18,7 +18,6 @@ namespace {
 // Vertices per broad-phase cluster: small enough to prune, large enough to amortize the test.
 constexpr int kClusterSize = 24;
 using Mat36 = Eigen::Matrix<double, 3, 6>;
-using Box3 = Eigen::AlignedBox3d;
 
 /// ½(g pᵀ + p gᵀ) − (g·p) I: the Hessian of gᵀ exp([δ]×) p at δ = 0 (second-order rotation
 /// term of a point p = R(X − J) rotated by a world-frame increment δ, contracted with g).
@@ -85,80 +84,8 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
         data->soft_start.push_back(int(data->soft_basis.size()));
       }
     }
-    data->weight_start.reserve(V + 1);
-    std::vector<int> dominant(V, 0);
-    for (int v = 0; v < V; ++v) {
-      data->weight_start.push_back(int(data->weight_bone.size()));
-      double best = -1.0;
-      for (int b = 0; b < bones; ++b) {
-        const double w = W(v, b);
-        if (w == 0.0) continue;
-        data->weight_bone.push_back(b);
-        data->weight_value.push_back(w);
-        if (w > best) best = w, dominant[v] = b;
-      }
-    }
-    data->weight_start.push_back(int(data->weight_bone.size()));
-    // Rest bound of a vertex set on bone b.
-    const auto restBound = [&](int b, const int* begin, const int* end) {
-      AvatarContactData::Bound bound;
-      Box3 box;
-      box.setEmpty();
-      for (const int* v = begin; v != end; ++v) box.extend((X.row(*v) - J.row(b)).transpose());
-      bound.offset = box.center();
-      std::vector<double> coweight(bones, 0.0), coextent(bones, 0.0);
-      for (const int* v = begin; v != end; ++v) {
-        const Vec3 offset = (X.row(*v) - J.row(b)).transpose();
-        bound.radius = std::max(bound.radius, (offset - bound.offset).norm());
-        bound.extent = std::max(bound.extent, offset.norm());
-        for (int w = data->weight_start[*v]; w < data->weight_start[*v + 1]; ++w)
-          if (data->weight_bone[w] != b)
-            coweight[data->weight_bone[w]] =
-                std::max(coweight[data->weight_bone[w]], data->weight_value[w]);
-      }
-      for (int c = 0; c < bones; ++c) {
-        if (!(coweight[c] > 0.0)) continue;
-        for (const int* v = begin; v != end; ++v)
-          coextent[c] = std::max(coextent[c], (X.row(*v) - J.row(c)).norm());
-        bound.coweights.push_back({c, coweight[c], coextent[c]});
-      }
-      return bound;
-    };
-    std::vector<std::vector<int>> group(bones);
-    for (int v = 0; v < V; ++v) group[dominant[v]].push_back(v);
-    data->bone_clusters.assign(1, 0);
-    data->cluster_start.assign(1, 0);
-    for (int b = 0; b < bones; ++b) {
-      data->group_rest.push_back(restBound(b, group[b].data(), group[b].data() + group[b].size()));
-      // Median splits along the longest axis until the pieces are small.
-      std::vector<std::pair<int, int>> pending;
-      if (!group[b].empty()) pending.emplace_back(0, int(group[b].size()));
-      while (!pending.empty()) {
-        const auto [begin, end] = pending.back();
-        pending.pop_back();
-        int* first = group[b].data() + begin;
-        int* last = group[b].data() + end;
-        if (end - begin <= kClusterSize) {
-          data->cluster_vertices.insert(data->cluster_vertices.end(), first, last);
-          data->cluster_start.push_back(int(data->cluster_vertices.size()));
-          data->cluster_bone.push_back(b);
-          data->cluster_rest.push_back(restBound(b, first, last));
-          continue;
-        }
-        Box3 box;
-        box.setEmpty();
-        for (const int* v = first; v != last; ++v) box.extend(X.row(*v).transpose());
-        int axis = 0;
-        box.sizes().maxCoeff(&axis);
-        int* middle = first + (end - begin) / 2;
-        std::nth_element(first, middle, last,
-                         [&](int u, int v) { return X(u, axis) < X(v, axis); });
-        pending.emplace_back(begin, begin + (end - begin) / 2);
-        pending.emplace_back(begin + (end - begin) / 2, end);
-      }
-      data->bone_clusters.push_back(int(data->cluster_bone.size()));
-    }
-    const int clusters = int(data->cluster_bone.size());
+    data->skinned = SkinnedSurface::build(W, X, J, kClusterSize);
+    const int clusters = int(data->skinned.clusters.size());
     data->group_center.assign(bones, Vec3::Zero());
     data->group_bound.assign(bones, 0.0);
     data->cluster_center.assign(clusters, Vec3::Zero());
@@ -198,25 +125,26 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
   if (data.soft &&
       !(data.valid && surface.rows() == data.surface.rows() && surface == data.surface)) {
     data.surface = std::move(surface);
-    for (size_t k = 0; k < data.cluster_bone.size(); ++k) {
+    for (size_t k = 0; k < data.skinned.clusters.size(); ++k) {
       double shift = 0.0;
-      for (int c = data.cluster_start[k]; c < data.cluster_start[k + 1]; ++c) {
-        const int v = data.cluster_vertices[c];
+      for (const int* p = data.skinned.clusterBegin(int(k)); p != data.skinned.clusterEnd(int(k));
+           ++p) {
+        const int v = *p;
         double weight_sum = 0.0;
-        for (int w = data.weight_start[v]; w < data.weight_start[v + 1]; ++w)
-          weight_sum += std::abs(data.weight_value[w]);
+        for (int w = data.skinned.weights.start[v]; w < data.skinned.weights.start[v + 1]; ++w)
+          weight_sum += std::abs(data.skinned.weights.entries[w].weight);
         shift = std::max(shift, weight_sum * (data.surface.row(v) - X.row(v)).norm());
       }
       data.cluster_shift[k] = shift;
     }
     for (int b = 0; b < bones; ++b) {
       data.group_shift[b] = 0.0;
-      for (int k = data.bone_clusters[b]; k < data.bone_clusters[b + 1]; ++k)
+      for (int k = data.skinned.bone_clusters[b]; k < data.skinned.bone_clusters[b + 1]; ++k)
         data.group_shift[b] = std::max(data.group_shift[b], data.cluster_shift[k]);
     }
   }
   for (int b = 0; b < bones; ++b) {
-    for (const auto& co : data.group_rest[b].coweights) {
+    for (const auto& co : data.skinned.bone_bound[b].co) {
       const int c = co.bone;
       data.rotation_gap[b * bones + c] =
           std::sqrt(std::max(0.0, 3.0 - (R[b].transpose() * R[c]).trace()));  // ‖R_c − R_b‖₂
@@ -226,24 +154,23 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
       data.joint_gap_c[b * bones + c] = (R[b] * joints + shift).norm();
     }
   }
-  const auto posedBound = [&](int b, const AvatarContactData::Bound& rest, Vec3& center,
-                              double& bound) {
+  const auto posedBound = [&](int b, const SurfaceBound& rest, Vec3& center, double& bound) {
     double margin = 0.0;
-    for (const auto& co : rest.coweights) {
+    for (const auto& co : rest.co) {
       const int pair = b * bones + co.bone;
       margin += co.weight * std::min(data.rotation_gap[pair] * rest.extent + data.joint_gap[pair],
                                      data.rotation_gap[pair] * co.extent + data.joint_gap_c[pair]);
     }
-    center = R[b] * rest.offset + T.row(b).transpose();
+    center = R[b] * rest.center + T.row(b).transpose();
     bound = rest.radius + margin;
   };
   for (int b = 0; b < bones; ++b) {
-    posedBound(b, data.group_rest[b], data.group_center[b], data.group_bound[b]);
+    posedBound(b, data.skinned.bone_bound[b], data.group_center[b], data.group_bound[b]);
     data.group_bound[b] += data.group_shift[b];
   }
-  for (size_t k = 0; k < data.cluster_bone.size(); ++k) {
-    posedBound(data.cluster_bone[k], data.cluster_rest[k], data.cluster_center[k],
-               data.cluster_bound[k]);
+  for (size_t k = 0; k < data.skinned.clusters.size(); ++k) {
+    posedBound(data.skinned.clusters[k].bone, data.skinned.clusters[k].bound,
+               data.cluster_center[k], data.cluster_bound[k]);
     data.cluster_bound[k] += data.cluster_shift[k];
     data.cluster_posed[k] = 0;
   }
@@ -275,13 +202,15 @@ void Scene::poseCluster(int i, int cluster) const {
   const MatX3& J = sim.avatar().restJoints();
   const std::vector<Mat3>& R = sim.boneRotations();
   const MatX3& T = sim.bonePositions();
-  for (int k = data.cluster_start[cluster]; k < data.cluster_start[cluster + 1]; ++k) {
-    const int v = data.cluster_vertices[k];
+  for (const int* p = data.skinned.clusterBegin(cluster); p != data.skinned.clusterEnd(cluster);
+       ++p) {
+    const int v = *p;
     const Vec3 Yv = Y.row(v).transpose();
     Vec3 x = Vec3::Zero();
-    for (int w = data.weight_start[v]; w < data.weight_start[v + 1]; ++w) {
-      const int b = data.weight_bone[w];
-      x += data.weight_value[w] * (R[b] * (Yv - J.row(b).transpose()) + T.row(b).transpose());
+    for (int w = data.skinned.weights.start[v]; w < data.skinned.weights.start[v + 1]; ++w) {
+      const int b = data.skinned.weights.entries[w].bone;
+      x += data.skinned.weights.entries[w].weight *
+           (R[b] * (Yv - J.row(b).transpose()) + T.row(b).transpose());
     }
     data.nodes.row(v) = x.transpose();
   }
@@ -336,17 +265,18 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
           const auto& cap = B.capsules[ci];
           const double bound2 = cap.bound * cap.bound, radius2 = cap.radius * cap.radius;
           for (int bone = 0; bone < A.bones; ++bone) {
-            if (A.bone_clusters[bone] == A.bone_clusters[bone + 1] ||
+            if (A.skinned.bone_clusters[bone] == A.skinned.bone_clusters[bone + 1] ||
                 (A.group_center[bone] - cap.center).norm() > A.group_bound[bone] + cap.bound)
               continue;
-            for (int cluster = A.bone_clusters[bone]; cluster < A.bone_clusters[bone + 1];
-                 ++cluster) {
+            for (int cluster = A.skinned.bone_clusters[bone];
+                 cluster < A.skinned.bone_clusters[bone + 1]; ++cluster) {
               const double reach = A.cluster_bound[cluster] + cap.radius;
               if (segmentDistanceSquared(A.cluster_center[cluster], cap.a, cap.b) > reach * reach)
                 continue;
               poseCluster(ia, cluster);
-              for (int k = A.cluster_start[cluster]; k < A.cluster_start[cluster + 1]; ++k) {
-                const int v = A.cluster_vertices[k];
+              for (const int* p = A.skinned.clusterBegin(cluster);
+                   p != A.skinned.clusterEnd(cluster); ++p) {
+                const int v = *p;
                 const Vec3 x = A.nodes.row(v).transpose();
                 if ((x - cap.center).squaredNorm() > bound2) continue;
                 if (segmentDistanceSquared(x, cap.a, cap.b) >= radius2) continue;
@@ -368,7 +298,7 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
 
         // Chain rule through x = Σ_k w_k (R_k (Y − J_k) + t_k) (+ u: ∂x/∂u = M = Σ_k w_k R_k)
         // and a' = R_b (a − J_b) + t_b.
-        const int w_begin = A.weight_start[v], w_end = A.weight_start[v + 1];
+        const int w_begin = A.skinned.weights.start[v], w_end = A.skinned.weights.start[v + 1];
         const int nw = w_end - w_begin;
         const int s_begin = A.soft ? A.soft_start[v] : 0;
         const int s_end = A.soft ? A.soft_start[v + 1] : 0;
@@ -376,15 +306,15 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
         p_rotated.resize(nw);
         Mat3 M = Mat3::Zero();
         for (int w = 0; w < nw; ++w) {
-          const int bone = A.weight_bone[w_begin + w];
+          const int bone = A.skinned.weights.entries[w_begin + w].bone;
           p_rotated[w] = RA[bone] * (YA.row(v) - JA.row(bone)).transpose();
-          if (has_u) M += A.weight_value[w_begin + w] * RA[bone];
+          if (has_u) M += A.skinned.weights.entries[w_begin + w].weight * RA[bone];
         }
         const Vec3 gx = grad9.segment<3>(0), ga = grad9.segment<3>(3), gb = grad9.segment<3>(6);
         if (g) {
           for (int w = 0; w < nw; ++w) {
-            const int dof = offsets_[ia] + 6 * A.weight_bone[w_begin + w];
-            const double weight = A.weight_value[w_begin + w];
+            const int dof = offsets_[ia] + 6 * A.skinned.weights.entries[w_begin + w].bone;
+            const double weight = A.skinned.weights.entries[w_begin + w].weight;
             g->segment<3>(dof) += weight * gx;
             g->segment<3>(dof + 3) += weight * p_rotated[w].cross(gx);
           }
@@ -402,7 +332,7 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
         HxxP.resize(nw);
         const Mat3 Hxx = hess9.block<3, 3>(0, 0);
         for (int w = 0; w < nw; ++w) {
-          const double weight = A.weight_value[w_begin + w];
+          const double weight = A.skinned.weights.entries[w_begin + w].weight;
           P[w].leftCols<3>() = weight * Mat3::Identity();
           P[w].rightCols<3>() = -weight * skew(p_rotated[w]);
           HxxP[w] = Hxx * P[w];
@@ -418,15 +348,16 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
               rotationCurvature(ga, cap.a_rotated) + rotationCurvature(gb, cap.b_rotated);
         }
         for (int w = 0; w < nw; ++w) {
-          const int bone_k = A.weight_bone[w_begin + w];
+          const int bone_k = A.skinned.weights.entries[w_begin + w].bone;
           for (int u = 0; u < nw; ++u)
-            blocks_->at(bone_k, A.weight_bone[w_begin + u]).noalias() += P[w].transpose() * HxxP[u];
+            blocks_->at(bone_k, A.skinned.weights.entries[w_begin + u].bone).noalias() +=
+                P[w].transpose() * HxxP[u];
           const Mat6 cross = P[w].transpose() * HxyQ;
           blocks_->at(bone_k, bone_b) += cross;
           blocks_->at(bone_b, bone_k) += cross.transpose();
           if (!psd)
             blocks_->at(bone_k, bone_k).bottomRightCorner<3, 3>() +=
-                A.weight_value[w_begin + w] * rotationCurvature(gx, p_rotated[w]);
+                A.skinned.weights.entries[w_begin + w].weight * rotationCurvature(gx, p_rotated[w]);
         }
         if (has_u) {
           // u rows: Mᵀ Hxx M with itself, Mᵀ Hxx P_k with A's bones (plus, exact, the term of
@@ -437,11 +368,11 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
           const Mat36 HuB = M.transpose() * HxyQ;
           Huk.resize(nw);
           for (int w = 0; w < nw; ++w) {
-            const int bone_k = A.weight_bone[w_begin + w];
+            const int bone_k = A.skinned.weights.entries[w_begin + w].bone;
             Huk[w] = MtH * P[w];
             if (!psd)
               Huk[w].rightCols<3>() +=
-                  A.weight_value[w_begin + w] * RA[bone_k].transpose() * skew(gx);
+                  A.skinned.weights.entries[w_begin + w].weight * RA[bone_k].transpose() * skew(gx);
           }
           for (int k = s_begin; k < s_end; ++k) {
             const int du = offsets_[ia] + A.soft_basis[k].first;
@@ -450,7 +381,7 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
               appendBlock(*H, du, offsets_[ia] + A.soft_basis[l].first,
                           (wk * A.soft_basis[l].second) * Huu);
             for (int w = 0; w < nw; ++w) {
-              const int bone_k = A.weight_bone[w_begin + w];
+              const int bone_k = A.skinned.weights.entries[w_begin + w].bone;
               appendBlock(*H, du, offsets_[ia] + 6 * bone_k, wk * Huk[w]);
               appendBlock(*H, offsets_[ia] + 6 * bone_k, du, wk * Huk[w].transpose());
             }

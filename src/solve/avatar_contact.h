@@ -6,6 +6,7 @@
 
 #include <vector>
 
+#include "flsh/body/skinned_surface.h"
 #include "flsh/core/types.h"
 #include "flsh/solve/scene.h"
 
@@ -29,27 +30,9 @@ struct Scene::AvatarContactData {
   std::vector<std::pair<int, double>> soft_basis;
   MatX3 surface;
   std::vector<double> cluster_shift, group_shift;
-  // Per vertex i, its nonzero skinning weights: bones weight_bone[k], values weight_value[k]
-  // for k in [weight_start[i], weight_start[i + 1]).
-  std::vector<int> weight_start, weight_bone;
-  std::vector<double> weight_value;
-  // Vertices grouped by their dominant bone b (group b), each group split into spatial
-  // clusters of at most kClusterSize vertices: cluster k (of bone cluster_bone[k]) holds
-  // cluster_vertices[cluster_start[k] .. cluster_start[k + 1]); the groups of bone b are
-  // clusters bone_clusters[b] .. bone_clusters[b + 1]. In the bone's rest frame (offsets
-  // X − J_b) a cluster lies in the sphere (offset, radius) and within `extent` of J_b.
-  struct Bound {
-    Vec3 offset = Vec3::Zero();
-    double radius = 0.0, extent = 0.0;
-    // Other bones c: max w_ic over the set, and the set's extent about c's joint, max |X − J_c|.
-    struct CoWeight {
-      int bone;
-      double weight, extent;
-    };
-    std::vector<CoWeight> coweights;
-  };
-  std::vector<int> bone_clusters, cluster_start, cluster_vertices, cluster_bone;
-  std::vector<Bound> group_rest, cluster_rest;
+  // The skinned surface (body/skinned_surface.h): nonzero weights per vertex, vertices grouped
+  // by their dominant bone and split into clusters of at most kClusterSize, with rest bounds.
+  SkinnedSurface skinned;
 
   // Cache key: the bone transforms (and for soft tissue the surface Y) the posed data below
   // belong to; `version` counts changes.

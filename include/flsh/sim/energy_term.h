@@ -21,6 +21,7 @@
 #include <array>
 #include <vector>
 
+#include "flsh/body/skinned_surface.h"
 #include "flsh/contact/collider.h"
 #include "flsh/core/types.h"
 #include "flsh/sim/sim_parameter.h"
@@ -28,16 +29,6 @@
 #include "flsh/volume/soft_avatar.h"
 
 namespace flsh {
-
-/// Skinning weights as (bone, weight) lists per vertex, the nonzero entries only.
-struct SparseSkinWeights {
-  struct Influence {
-    int bone;
-    double weight;
-  };
-  std::vector<int> start;  ///< #V + 1: vertex i's influences are [start[i], start[i + 1])
-  std::vector<Influence> entries;
-};
 
 /// Collider contact on the skinned surface at the current state: the broad phase's candidate
 /// vertices, their positions and areas, and the node gradient ∂E/∂x (3 per candidate).

@@ -121,7 +121,8 @@ struct SceneRecorder::AvatarFrames {
   std::vector<VecX> states, poses;
   std::vector<Vec3> trans;
   std::vector<MatX3> vertices, joints;
-  std::vector<double> max_mm;  ///< soft avatars, states.npz
+  std::vector<MatX3> displacements;  ///< soft avatars, states.npz: u per surface vertex, m
+  std::vector<double> max_mm;        ///< soft avatars, states.npz
   std::vector<std::vector<Mat3>> rotations;
   std::vector<MatX3> shown_vertices;
   std::vector<VecX> shown_norms;  ///< soft avatars: ‖u_i‖ per surface vertex, m
@@ -162,7 +163,7 @@ double SceneRecorder::bytesPerFrame(const OutputSpec& outputs,
     const double joints = 3.0 * kNumJoints;
     if (outputs.npz)
       doubles += avatar.simulable->numDofs() + kSmplPoseSize + 3.0 + 3.0 * V + joints +
-                 (avatar.soft ? 1.0 : 0.0);
+                 (avatar.soft ? 1.0 + 3.0 * V : 0.0);
     if (outputs.gltf) doubles += 9.0 * kNumJoints + (outputs.npz ? 0.0 : joints);
   }
   return 3.0 * 8.0 * doubles;  // the frames, their stacked copies and the written buffers
@@ -184,8 +185,10 @@ void SceneRecorder::record(double t) {
     MatX3 vertices;  // skinning every vertex costs: only when an output takes them
     if (outputs_.ply || outputs_.npz || shown) vertices = sim.getVertices();
     VecX norms;
+    MatX3 displacements;
     if (avatars_[i].soft) {
-      norms = sim.getSoftTissueDisplacements().rowwise().norm();
+      displacements = sim.getSoftTissueDisplacements();
+      norms = displacements.rowwise().norm();
       max_displacement_mm_[i] = std::max(max_displacement_mm_[i], maxMm(norms));
     }
     if (frame == 0) d.first_root = sim.bonePositions().row(0).transpose();
@@ -197,7 +200,10 @@ void SceneRecorder::record(double t) {
       d.poses.push_back(sim.getPose());
       d.trans.push_back(sim.getTrans());
       d.vertices.push_back(vertices);
-      if (avatars_[i].soft) d.max_mm.push_back(maxMm(norms));
+      if (avatars_[i].soft) {
+        d.max_mm.push_back(maxMm(norms));
+        d.displacements.push_back(std::move(displacements));
+      }
     }
     if (every_frame) d.joints.push_back(sim.bonePositions());
     if (outputs_.gltf) d.rotations.push_back(sim.boneRotations());
@@ -250,8 +256,10 @@ void SceneRecorder::writeNpz() const {
       for (int c = 0; c < 3; ++c) faces[size_t(3 * f + c)] = body.faces(f, c);
     npz.add(name + "_faces", faces.data(), {F, 3});
     npz.add(name + "_betas", Eigen::Ref<const VecX>(avatar.betas()));
-    if (avatars_[i].soft)
+    if (avatars_[i].soft) {
       npz.add(name + "_max_displacement_mm", Eigen::Map<const VecX>(d.max_mm.data(), T));
+      addStacked(npz, name + "_displacements", d.displacements, {V, 3});
+    }
   }
   for (size_t c = 0; c < colliders_.size(); ++c)
     addStacked(npz, colliders_[c].name + "_offset", collider_offsets_[c], {3});

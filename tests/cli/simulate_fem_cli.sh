@@ -48,7 +48,7 @@ scale_mm = float(sys.argv[1])
 d = np.load("out/states.npz")
 T = 4
 assert d["rigid_states"].shape == (T, 144), d["rigid_states"].shape
-assert "rigid_max_displacement_mm" not in d.files
+assert "rigid_max_displacement_mm" not in d.files and "rigid_displacements" not in d.files
 states = d["soft_states"]
 assert states.shape[0] == T and states.shape[1] > 144 and (states.shape[1] - 144) % 3 == 0, states.shape
 u = states[:, 144:].reshape(T, -1, 3)  # every soft-tissue node, m
@@ -57,6 +57,10 @@ assert m.shape == (T,) and np.isfinite(m).all() and (m >= 0).all(), m
 # Surface vertices are a subset of the soft-tissue nodes: their maximum cannot exceed all nodes'.
 assert (m <= 1000 * np.linalg.norm(u, axis=2).max(axis=1) + 1e-9).all(), (m, u)
 assert m.max() > 0, "the soft tissue should move while walking: max displacement %s mm" % m
+# The surface vertices' displacements: their norms' maximum is the recorded maximum.
+disp = d["soft_displacements"]
+assert disp.shape == (T, d["soft_vertices"].shape[1], 3), disp.shape
+np.testing.assert_allclose(1000 * np.linalg.norm(disp, axis=2).max(axis=1), m, rtol=1e-12)
 # The sheet shows frames 0 and 3 with one robust scale: the 99th percentile of their surface
 # |u| (issue 29), so at most their larger maximum (printed with 3 decimals) and above 0.
 assert 0 < scale_mm <= max(m[0], m[-1]) + 1e-3 + 1e-9, (scale_mm, m)

@@ -55,13 +55,17 @@ scale_mm = float(sys.argv[1])
 d = np.load("out/states.npz")
 T, H = 4, 12
 assert d["rigid_states"].shape == (T, 144), d["rigid_states"].shape
-assert "rigid_max_displacement_mm" not in d.files
+assert "rigid_max_displacement_mm" not in d.files and "rigid_displacements" not in d.files
 states = d["soft_states"]
 assert states.shape == (T, 144 + 3 * H), states.shape  # bones, then z_h per handle
 z = states[:, 144:].reshape(T, H, 3)  # m
 m = d["soft_max_displacement_mm"]
 assert m.shape == (T,) and np.isfinite(m).all() and (m >= 0).all(), m
 assert m.max() > 0, "the soft tissue should move while walking: max displacement %s mm" % m
+# The surface vertices' displacements: their norms' maximum is the recorded maximum.
+disp = d["soft_displacements"]
+assert disp.shape == (T, d["soft_vertices"].shape[1], 3), disp.shape
+np.testing.assert_allclose(1000 * np.linalg.norm(disp, axis=2).max(axis=1), m, rtol=1e-12)
 # Every handle is a surface vertex whose u is its z_h: the surface maximum is at least max |z|.
 assert (m >= 1000 * np.linalg.norm(z, axis=2).max(axis=1) - 1e-9).all(), (m, z)
 # The sheet shows frames 0 and 3 with one robust scale: the 99th percentile of their surface

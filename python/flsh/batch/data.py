@@ -10,24 +10,18 @@
     betas          (K,)        float64     shape used
     faces          (F, 3)      int32       triangles
 
-data_dtype is the spec's (float32 by default). states.npz holds the soft-tissue state per tet
-node (FEM) or per handle (ROM), not per surface vertex: the displacements are computed by
-loading the job's scene again (its avatar comes from the cache) and reading
-Simulable.get_soft_tissue_displacements() after set_state() of each saved frame, which
-equals, bit for bit, reading it while stepping."""
-import json
-
+data_dtype is the spec's (float32 by default). All of it is read off the job's states.npz
+(the soft avatars' `<avatar>_displacements` are flsh's per-vertex soft-tissue displacements,
+Simulable.get_soft_tissue_displacements() of each saved frame)."""
 import numpy as np
-
-import flsh
 
 PER_FRAME = ("times", "vertices", "joints", "displacements", "poses", "trans")
 PER_CLIP = ("betas", "faces")
 
 
-def frame_arrays(scene_path, states_path, avatar, simulation, dtype="float32"):
-    """The data.npz arrays of the job whose scene file is `scene_path` and whose flsh run
-    wrote `states_path`; `avatar` is the avatar's name in the scene."""
+def frame_arrays(states_path, avatar, simulation, dtype="float32"):
+    """The data.npz arrays of the job whose flsh run wrote `states_path`; `avatar` is the
+    avatar's name in the scene."""
     with np.load(states_path) as states:
         get = lambda key: states[f"{avatar}_{key}"]  # noqa: E731
         arrays = {
@@ -42,21 +36,5 @@ def frame_arrays(scene_path, states_path, avatar, simulation, dtype="float32"):
         if simulation == "skeleton":
             arrays["displacements"] = np.zeros_like(arrays["vertices"])
         else:
-            arrays["displacements"] = soft_tissue_displacements(
-                scene_path, get("states"), avatar).astype(dtype)
+            arrays["displacements"] = get("displacements").astype(dtype)
     return arrays
-
-
-def soft_tissue_displacements(scene_path, states, avatar):
-    """(T, V, 3) float64 soft-tissue displacements of the surface vertices of `avatar` for
-    each state of `states` (T, numDofs)."""
-    scene = flsh.load_scene(str(scene_path), verbose=False)
-    with open(scene_path) as f:
-        names = [a["name"] for a in json.load(f)["avatars"]]
-    simulable = scene.simulables[names.index(avatar)]
-    frames = []
-    for state in states:
-        simulable.set_state(state)
-        frames.append(simulable.get_soft_tissue_displacements())
-    return np.stack(frames)
-

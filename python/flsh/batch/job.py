@@ -111,8 +111,8 @@ def run_job(job, out_dir):
             if limit is not None and report["unconverged"] > limit:
                 raise JobFailed(f"{report['unconverged']} of {report['steps']} steps did not "
                                 f"converge, more than max_unconverged_steps = {limit}")
-            arrays = frame_arrays(scene_path, temp / "sim" / "states.npz", job.avatar,
-                                  job.simulation, job.data_dtype)
+            arrays = frame_arrays(temp / "sim" / "states.npz", job.avatar, job.simulation,
+                                  job.data_dtype)
         np.savez(temp / "data.npz", **arrays)
         written = [f"sim/{name}" for name in report["written"]]
         if not job.keep_states:

@@ -26,6 +26,10 @@
 namespace flsh::detail {
 
 class SoftTissue {
+  // Declared (so constructed) before the state references u, u_n, u_nm1 that bind to its
+  // members: referring to a member of an object before its constructor runs is undefined.
+  SoftKinematics kin_;
+
  public:
   /// Reads the avatar's volumetric data (soft tissue on, initialized). `joints`: 24 × 3 rest
   /// joints J(β) (the simulable's).
@@ -128,7 +132,6 @@ class SoftTissue {
   void surfaceJacobian(std::vector<Triplet>& triplets) const { kin_.surfaceJacobian(triplets); }
 
  private:
-  SoftKinematics kin_;
   NodeMasses masses_;
   std::unique_ptr<NodalInertiaTerm> inertia_;
   std::unique_ptr<NodalGravityTerm> gravity_;

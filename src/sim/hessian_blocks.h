@@ -5,7 +5,7 @@
 #include <vector>
 
 #include "flsh/core/types.h"
-#include "flsh/sim/skeleton_energies.h"
+#include "flsh/energy/skeleton_energies.h"
 
 namespace flsh::detail {
 

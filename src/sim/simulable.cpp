@@ -17,7 +17,7 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/sim/skeleton_energies.h"
+#include "flsh/energy/skeleton_energies.h"
 #include "sim/simulable_impl.h"
 
 namespace flsh {

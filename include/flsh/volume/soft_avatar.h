@@ -25,19 +25,11 @@
 
 #include "flsh/body/body_model.h"
 #include "flsh/core/types.h"
+#include "flsh/energy/bone_inertia.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
 
 namespace flsh {
-
-/// Mass properties of one bone in the rest pose, about the bone's joint centre J_b, in the
-/// world-aligned rest frame: a material point X of the bone moves as x = R_b (X − J_b) + t_b.
-struct BoneInertia {
-  double mass = 0.0;                   ///< Σ m, kg
-  Vec3 first_moment = Vec3::Zero();    ///< Σ m (X − J_b), kg·m
-  Mat3 second_moment = Mat3::Zero();   ///< Σ m (X − J_b)(X − J_b)ᵀ, kg·m²
-  Vec3 centerOfMass(const Vec3& joint) const { return joint + first_moment / mass; }
-};
 
 /// A capsule attached to a bone: segment from a to b (rest pose, world) and radius, m.
 struct BoneCapsule {

@@ -1,7 +1,7 @@
 #include "sim/terms/bone_gravity_term.h"
 
 #include "flsh/core/rotation.h"
-#include "flsh/sim/skeleton_energies.h"
+#include "flsh/energy/skeleton_energies.h"
 #include "sim/hessian_blocks.h"
 #include "sim/terms/term_blocks.h"
 

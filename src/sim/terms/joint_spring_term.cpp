@@ -3,7 +3,7 @@
 #include <utility>
 
 #include "flsh/core/rotation.h"
-#include "flsh/sim/skeleton_energies.h"
+#include "flsh/energy/skeleton_energies.h"
 #include "sim/hessian_blocks.h"
 #include "sim/terms/term_blocks.h"
 

@@ -3,7 +3,7 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/contact/contact_energy.h"
 #include "flsh/core/rotation.h"
-#include "flsh/sim/skeleton_energies.h"
+#include "flsh/energy/skeleton_energies.h"
 #include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {

@@ -1,7 +1,7 @@
 // The skeleton's local energy kernels against brute-force values and finite differences taken
 // through the increment chart (t + δt, exp([δω]×) R), at random, near-zero and near-π
 // rotations.
-#include "flsh/sim/skeleton_energies.h"
+#include "flsh/energy/skeleton_energies.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "flsh/sim/skeleton_energies.h"
+#include "flsh/energy/skeleton_energies.h"
 
 #include "flsh/core/rotation.h"
 

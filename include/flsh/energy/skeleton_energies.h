@@ -20,7 +20,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "flsh/core/types.h"
-#include "flsh/volume/soft_avatar.h"
+#include "flsh/energy/bone_inertia.h"
 
 namespace flsh {
 

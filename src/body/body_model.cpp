@@ -78,6 +78,7 @@ VecX regressedJoints(const SpMatR& J_regressor, const MatX3& v_template) {
 /// 3J × K joint shape directions J_regressor · shapedirs (row 3j + c).
 MatX regressedJointShapedirs(const SpMatR& J_regressor, const MatX& shapedirs) {
   MatX dirs = MatX::Zero(3 * J_regressor.rows(), shapedirs.cols());
+  if (shapedirs.cols() == 0) return dirs;  // no shape components: no rows to take (null data)
   for (int j = 0; j < J_regressor.outerSize(); ++j)
     for (SpMatR::InnerIterator it(J_regressor, j); it; ++it)
       dirs.middleRows<3>(3 * j) += it.value() * shapedirs.middleRows<3>(3 * it.col());

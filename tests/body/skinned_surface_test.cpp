@@ -139,9 +139,8 @@ TEST(SkinnedSurface, BoundsContainTheirVertices) {
 
 TEST(SkinnedSurface, MismatchedSizesAreInputErrors) {
   const Surface& s = surface();
-  const std::string msg = test::messageOf<InputError>([&] {
-    SkinnedSurface::build(s.body.weights, MatX3(s.body.v_template.topRows(10)), s.J, 8);
-  });
+  const std::string msg = test::messageOf<InputError>(
+      [&] { SkinnedSurface::build(s.body.weights, MatX3(s.body.v_template.topRows(10)), s.J, 8); });
   EXPECT_NE(msg.find("rest vertices are (10, 3)"), std::string::npos) << msg;
   EXPECT_NE(test::messageOf<InputError>([&] {
               SkinnedSurface::build(s.body.weights, s.body.v_template, s.J, 0);

@@ -30,14 +30,14 @@
 #include <sstream>
 
 #include "flsh/body/body_forward.h"
+#include "flsh/body/motion.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
 #include "flsh/core/memory_check.h"
-#include "flsh/io/atomic_file.h"
-#include "flsh/io/mesh_io.h"
-#include "flsh/io/motion.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/atomic_file.h"
+#include "flsh/format/mesh_io.h"
+#include "flsh/format/npz.h"
 #include "flsh/io/output_dir.h"
 #include "flsh/io/scene_build.h"
 #include "flsh/io/scene_file.h"

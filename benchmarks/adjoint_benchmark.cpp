@@ -18,6 +18,7 @@
 //
 // Usage: [OMP_NUM_THREADS=1] adjoint_benchmark [repeats = 5]; every time is the median of
 // `repeats` runs, wall clock and process CPU time.
+#include <Eigen/Core>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -30,11 +31,9 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Core>
-
+#include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/diff/rollout.h"
-#include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
 
 namespace {

@@ -35,8 +35,8 @@
 #include <memory>
 #include <string>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
-#include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
 
 namespace {

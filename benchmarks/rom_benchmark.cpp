@@ -59,6 +59,8 @@
 // (a constrained solve).
 #include <omp.h>
 
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseLU>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -72,13 +74,10 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/SparseCholesky>
-#include <Eigen/SparseLU>
-
+#include "flsh/body/motion.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
-#include "flsh/io/motion.h"
 #include "flsh/render/plot.h"
 #include "flsh/render/render.h"
 #include "flsh/solve/scene.h"

@@ -11,8 +11,8 @@
 
 #include <memory>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
-#include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
 
 namespace {

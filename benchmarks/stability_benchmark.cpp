@@ -76,10 +76,10 @@
 #include <string>
 #include <vector>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
-#include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
 #include "flsh/volume/materials.h"
 

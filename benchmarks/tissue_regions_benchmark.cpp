@@ -37,9 +37,9 @@
 #include <utility>
 #include <vector>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
-#include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
 #include "flsh/volume/materials.h"
 

@@ -4,14 +4,13 @@
 //
 //   ./build/bin/example_solver_example [frames]
 #include <Eigen/SparseCholesky>
-
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/contact/collider.h"
-#include "flsh/io/motion.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/volume/soft_avatar.h"
 

@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "flsh/core/error.h"
-#include "flsh/io/mesh_io.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/mesh_io.h"
+#include "flsh/format/npz.h"
 #include "flsh/io/scene_file.h"
 #include "flsh/volume/avatar_cache.h"
 #include "tiny_avatar.h"

@@ -22,6 +22,7 @@ namespace flsh::python {
 
 void bind_core(py::module_& m);
 void bind_body(py::module_& m);
+void bind_format(py::module_& m);
 void bind_io(py::module_& m);
 void bind_render(py::module_& m);
 void bind_volume(py::module_& m);

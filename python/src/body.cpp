@@ -1,13 +1,17 @@
 // Bindings of include/flsh/body: the SMPL skeleton tables, BodyModel (read-only numpy views of
-// its arrays), the synthetic body, and the forward pass with its Jacobians.
+// its arrays), the synthetic body, the forward pass with its Jacobians, and motions.
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <Eigen/LU>
+#include <cmath>
 #include <memory>
 
 #include "bindings.h"
 #include "flsh/body/body_forward.h"
 #include "flsh/body/body_model.h"
+#include "flsh/body/motion.h"
+#include "flsh/body/motion_frame.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 
@@ -60,6 +64,169 @@ const BodyModel& model_of(const py::object& self) { return self.cast<const BodyM
 py::array blend_shapes_view(const MatX& m, const py::object& owner) {
   const py::ssize_t d = sizeof(double);
   return readonly_view(m.data(), {m.rows() / 3, 3, m.cols()}, {3 * d, d, m.rows() * d}, owner);
+}
+
+const Motion& motion_of(const py::object& self) { return self.cast<const Motion&>(); }
+
+Motion make_motion(const py::object& poses, const py::object& trans, const py::object& betas,
+                   double fps, const std::string& gender, const std::string& source,
+                   const std::string& up) {
+  const Mat3 world = worldFromUpAxis(up, "up");
+  auto a = as_float64(poses, "poses");
+  if (a.ndim() != 2 || (a.shape(1) != kSmplPoseSize && a.shape(1) != kSmplhPoseSize))
+    check_shape(a, "poses", {-1, kSmplPoseSize}, "(T, 72) or (T, 156)");
+  if (!(std::isfinite(fps) && fps > 0))
+    throw py::value_error("fps: expected a positive frame rate, got " + std::to_string(fps));
+  Motion motion;
+  motion.poses = toSmplPoses(Eigen::Map<const RowMatX>(a.data(), a.shape(0), a.shape(1)));
+  const long frames = long(a.shape(0));
+  motion.trans =
+      trans.is_none() ? RowMatX(RowMatX::Zero(frames, 3)) : to_matrix(trans, "trans", frames, 3);
+  if (!betas.is_none()) motion.betas = to_vector(betas, "betas", -1, "(K,)");
+  motion.fps = fps;
+  motion.gender = gender;
+  motion.source = source;
+  motion.up = up;
+  if (up != "y") rotateMotion(motion, world);
+  return motion;
+}
+
+// Motion: plain data beside the body (include/flsh/body/motion.h, motion_frame.h).
+void bind_motion(py::module_& m) {
+  // --- Motion --------------------------------------------------------------------------------
+  const py::ssize_t d = sizeof(double);
+  py::class_<Motion, std::shared_ptr<Motion>>(
+      m, "Motion", "A motion in SMPL's 72-value pose layout. Array properties are read-only.")
+      .def(py::init(&make_motion), py::arg("poses"), py::arg("trans") = py::none(),
+           py::arg("betas") = py::none(), py::arg("fps") = 30.0, py::arg("gender") = "",
+           py::arg("source") = "", py::arg("up") = "y",
+           "poses (T, 72) or SMPL-H (T, 156) axis-angle, rad (stored as (T, 72)); trans (T, 3) "
+           "m or None (zeros); betas (K,) or None; fps > 0; up: the up axis the arrays were "
+           "recorded in, 'y' (flsh's world) or 'z' (AMASS: the motion is turned upright, "
+           "rotate_motion).")
+      .def_property_readonly(
+          "poses",
+          [d](py::object self) {
+            const RowMatX& p = motion_of(self).poses;
+            return readonly_view(p.data(), {p.rows(), p.cols()}, {p.cols() * d, d}, self);
+          },
+          "(T, 72) axis-angle joint rotations, rad.")
+      .def_property_readonly(
+          "trans",
+          [d](py::object self) {
+            const RowMatX& t = motion_of(self).trans;
+            return readonly_view(t.data(), {t.rows(), t.cols()}, {t.cols() * d, d}, self);
+          },
+          "(T, 3) root translation, m.")
+      .def_property_readonly(
+          "betas",
+          [d](py::object self) {
+            const VecX& b = motion_of(self).betas;
+            return readonly_view(b.data(), {b.size()}, {d}, self);
+          },
+          "(K,) shape coefficients stored with the motion (may be empty).")
+      .def_property_readonly(
+          "fps", [](const Motion& mo) { return mo.fps; }, "Frames per second.")
+      .def_property_readonly("gender", [](const Motion& mo) { return mo.gender; })
+      .def_property_readonly(
+          "up", [](const Motion& mo) { return mo.up; },
+          "Up axis the source was recorded in, 'y' or 'z'; poses and trans "
+          "are in flsh's y-up world either way.")
+      .def_property_readonly(
+          "source", [](const Motion& mo) { return mo.source; }, "File path or 'builtin:NAME'.")
+      .def_property_readonly("num_frames", &Motion::numFrames, "T")
+      .def_property_readonly("duration", &Motion::duration, "(T − 1) / fps, s.")
+      .def("__len__", &Motion::numFrames)
+      .def("__repr__", [](const Motion& mo) {
+        return "Motion(source='" + mo.source + "', frames=" + std::to_string(mo.numFrames()) +
+               ", fps=" + py::repr(py::float_(mo.fps)).cast<std::string>() + ")";
+      });
+
+  m.def(
+      "load_motion",
+      [](const std::filesystem::path& path, const py::object& up) {
+        const std::string p = path_string(path);
+        require_existing_file(p, "load_motion");
+        const std::string axis = up.is_none() ? std::string() : up.cast<std::string>();
+        py::gil_scoped_release release;
+        return loadMotion(p, axis);
+      },
+      py::arg("path"), py::arg("up") = py::none(),
+      "Reads an AMASS-style .npz (poses (T, 72|156), trans (T, 3), optional betas, "
+      "mocap_framerate, gender, up) as a Motion with (T, 72) poses in flsh's y-up world. "
+      "up: 'y' or 'z', the axis the clip was recorded with; None = the file's 'up' key, "
+      "else 'z' (AMASS). Warns on stderr if the body is not upright at frame 0.");
+  m.def(
+      "save_motion",
+      [](const Motion& motion, const std::filesystem::path& path, const std::string& up) {
+        const std::string p = path_string(path);
+        py::gil_scoped_release release;
+        saveMotion(motion, p, up);
+      },
+      py::arg("motion"), py::arg("path"), py::arg("up") = "y",
+      "Writes an AMASS-style .npz (poses (T, 72), trans, betas, mocap_framerate, gender, up), "
+      "atomically: up='y' as the motion is in flsh's world, 'z' turned z up as AMASS stores "
+      "clips (load_motion reads either back).");
+  m.def("builtin_motion_names", &builtinMotionNames, "Names of the built-in motions.");
+  m.def(
+      "world_from_up_axis",
+      [](const std::string& up) { return to_numpy(RowMatX(worldFromUpAxis(up))); }, py::arg("up"),
+      "(3, 3) rotation from a frame whose up axis is 'y' or 'z' to flsh's y-up world "
+      "('z': (x, y, z) -> (x, z, -y)).");
+  m.def(
+      "rotate_motion",
+      [](const Motion& motion, const py::object& rotation) {
+        const Mat3 R = to_matrix(rotation, "rotation", 3, 3);
+        if (!((R.transpose() * R - Mat3::Identity()).norm() < 1e-9 && R.determinant() > 0))
+          throw py::value_error(
+              "rotation: expected a (3, 3) rotation matrix (orthonormal, "
+              "determinant +1)");
+        Motion turned = motion;
+        rotateMotion(turned, R);
+        return turned;
+      },
+      py::arg("motion"), py::arg("rotation"),
+      "A copy of `motion` turned by the (3, 3) rotation about the root joint's rest position "
+      "(trans <- R trans, root <- R root): every posed vertex v -> J0 + R (v - J0).");
+  m.def(
+      "placed_motion",
+      [](const Motion& motion, double yaw, const py::object& offset) {
+        return placedMotion(motion, yaw, to_vec3(offset, "offset"));
+      },
+      py::arg("motion"), py::arg("yaw") = 0.0, py::arg("offset") = py::make_tuple(0.0, 0.0, 0.0),
+      "A copy of `motion` turned by `yaw` rad about +y through the root's rest position, then "
+      "moved by `offset` (3,) m, as a scene file's yaw_degrees and offset do.");
+  m.def(
+      "lowest_point_height",
+      [](const BodyModel& body, const py::object& betas, const Motion& motion, double seconds) {
+        const VecX b =
+            betas.is_none() ? VecX::Zero(body.numBetas()) : to_vector(betas, "betas", -1, "(K,)");
+        py::gil_scoped_release release;
+        return lowestPointHeight(body, b, motion, seconds);
+      },
+      py::arg("body"), py::arg("betas"), py::arg("motion"), py::arg("seconds") = 1.0,
+      "World height y (m) of the body's lowest vertex posed by `motion` over its first "
+      "`seconds`: where to put the ground under a clip (a scene file's \"ground\": \"auto\").");
+  m.def("upright_warning", &uprightWarning, py::arg("motion"),
+        "A warning sentence if the body leans more than 60 degrees from +y at frame 0 (the usual "
+        "sign of a wrong up axis), else ''.");
+  m.def(
+      "make_builtin_motion",
+      [](const std::string& name, double seconds, double fps) {
+        py::gil_scoped_release release;
+        return makeBuiltinMotion(name, seconds, fps);
+      },
+      py::arg("name"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0,
+      "A built-in procedural motion `seconds` long (s) at `fps`; ValueError for unknown names.");
+  m.def(
+      "load_or_make_motion",
+      [](const std::string& spec, double seconds, double fps, const py::object& up) {
+        const std::string axis = up.is_none() ? std::string() : up.cast<std::string>();
+        py::gil_scoped_release release;
+        return loadOrMakeMotion(spec, seconds, fps, axis);
+      },
+      py::arg("spec"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0, py::arg("up") = py::none(),
+      "A motion file path if it exists, else 'builtin:NAME' or NAME of a built-in motion.");
 }
 
 }  // namespace
@@ -308,6 +475,7 @@ void bind_body(py::module_& m) {
         },
         py::arg("model"), py::arg("betas"),
         "Shaped T-pose vertices v_template + shapedirs·β, (V, 3), m.");
+  bind_motion(m);
 }
 
 }  // namespace flsh::python

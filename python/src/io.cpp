@@ -1,168 +1,20 @@
-// Bindings of include/flsh/io: motions (AMASS-style .npz, built-in motions), meshes (PLY / OBJ)
-// and scene files (a read-only view of the parsed SceneSpec).
+// Bindings of include/flsh/io: scene files (a read-only view of the parsed SceneSpec), and
+// building and running them (load_scene, run_scene).
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
 #include <Eigen/LU>
-#include <cmath>
 #include <cstdio>
 #include <memory>
 
 #include "bindings.h"
-#include "flsh/body/smpl_skeleton.h"
-#include "flsh/io/mesh_io.h"
-#include "flsh/io/motion.h"
-#include "flsh/io/motion_frame.h"
 #include "flsh/io/scene_build.h"
 #include "flsh/io/scene_file.h"
 #include "flsh/io/scene_run.h"
 
 namespace flsh::python {
 
-namespace {
-
-const Motion& motion_of(const py::object& self) { return self.cast<const Motion&>(); }
-
-Motion make_motion(const py::object& poses, const py::object& trans, const py::object& betas,
-                   double fps, const std::string& gender, const std::string& source,
-                   const std::string& up) {
-  const Mat3 world = worldFromUpAxis(up, "up");
-  auto a = as_float64(poses, "poses");
-  if (a.ndim() != 2 || (a.shape(1) != kSmplPoseSize && a.shape(1) != kSmplhPoseSize))
-    check_shape(a, "poses", {-1, kSmplPoseSize}, "(T, 72) or (T, 156)");
-  if (!(std::isfinite(fps) && fps > 0))
-    throw py::value_error("fps: expected a positive frame rate, got " + std::to_string(fps));
-  Motion motion;
-  motion.poses = toSmplPoses(Eigen::Map<const RowMatX>(a.data(), a.shape(0), a.shape(1)));
-  const long frames = long(a.shape(0));
-  motion.trans = trans.is_none() ? RowMatX(RowMatX::Zero(frames, 3))
-                                 : to_matrix(trans, "trans", frames, 3);
-  if (!betas.is_none()) motion.betas = to_vector(betas, "betas", -1, "(K,)");
-  motion.fps = fps;
-  motion.gender = gender;
-  motion.source = source;
-  motion.up = up;
-  if (up != "y") rotateMotion(motion, world);
-  return motion;
-}
-
-}  // namespace
-
 void bind_io(py::module_& m) {
-  // --- Motion --------------------------------------------------------------------------------
-  const py::ssize_t d = sizeof(double);
-  py::class_<Motion, std::shared_ptr<Motion>>(
-      m, "Motion", "A motion in SMPL's 72-value pose layout. Array properties are read-only.")
-      .def(py::init(&make_motion), py::arg("poses"), py::arg("trans") = py::none(),
-           py::arg("betas") = py::none(), py::arg("fps") = 30.0, py::arg("gender") = "",
-           py::arg("source") = "", py::arg("up") = "y",
-           "poses (T, 72) or SMPL-H (T, 156) axis-angle, rad (stored as (T, 72)); trans (T, 3) "
-           "m or None (zeros); betas (K,) or None; fps > 0; up: the up axis the arrays were "
-           "recorded in, 'y' (flsh's world) or 'z' (AMASS: the motion is turned upright, "
-           "rotate_motion).")
-      .def_property_readonly(
-          "poses",
-          [d](py::object self) {
-            const RowMatX& p = motion_of(self).poses;
-            return readonly_view(p.data(), {p.rows(), p.cols()}, {p.cols() * d, d}, self);
-          },
-          "(T, 72) axis-angle joint rotations, rad.")
-      .def_property_readonly(
-          "trans",
-          [d](py::object self) {
-            const RowMatX& t = motion_of(self).trans;
-            return readonly_view(t.data(), {t.rows(), t.cols()}, {t.cols() * d, d}, self);
-          },
-          "(T, 3) root translation, m.")
-      .def_property_readonly(
-          "betas",
-          [d](py::object self) {
-            const VecX& b = motion_of(self).betas;
-            return readonly_view(b.data(), {b.size()}, {d}, self);
-          },
-          "(K,) shape coefficients stored with the motion (may be empty).")
-      .def_property_readonly(
-          "fps", [](const Motion& mo) { return mo.fps; }, "Frames per second.")
-      .def_property_readonly("gender", [](const Motion& mo) { return mo.gender; })
-      .def_property_readonly(
-          "up", [](const Motion& mo) { return mo.up; },
-          "Up axis the source was recorded in, 'y' or 'z'; poses and trans "
-          "are in flsh's y-up world either way.")
-      .def_property_readonly(
-          "source", [](const Motion& mo) { return mo.source; }, "File path or 'builtin:NAME'.")
-      .def_property_readonly("num_frames", &Motion::numFrames, "T")
-      .def_property_readonly("duration", &Motion::duration, "(T − 1) / fps, s.")
-      .def("__len__", &Motion::numFrames)
-      .def("__repr__", [](const Motion& mo) {
-        return "Motion(source='" + mo.source + "', frames=" + std::to_string(mo.numFrames()) +
-               ", fps=" + py::repr(py::float_(mo.fps)).cast<std::string>() + ")";
-      });
-
-  m.def(
-      "load_motion",
-      [](const std::filesystem::path& path, const py::object& up) {
-        const std::string p = path_string(path);
-        require_existing_file(p, "load_motion");
-        const std::string axis = up.is_none() ? std::string() : up.cast<std::string>();
-        py::gil_scoped_release release;
-        return loadMotion(p, axis);
-      },
-      py::arg("path"), py::arg("up") = py::none(),
-      "Reads an AMASS-style .npz (poses (T, 72|156), trans (T, 3), optional betas, "
-      "mocap_framerate, gender, up) as a Motion with (T, 72) poses in flsh's y-up world. "
-      "up: 'y' or 'z', the axis the clip was recorded with; None = the file's 'up' key, "
-      "else 'z' (AMASS). Warns on stderr if the body is not upright at frame 0.");
-  m.def(
-      "save_motion",
-      [](const Motion& motion, const std::filesystem::path& path, const std::string& up) {
-        const std::string p = path_string(path);
-        py::gil_scoped_release release;
-        saveMotion(motion, p, up);
-      },
-      py::arg("motion"), py::arg("path"), py::arg("up") = "y",
-      "Writes an AMASS-style .npz (poses (T, 72), trans, betas, mocap_framerate, gender, up), "
-      "atomically: up='y' as the motion is in flsh's world, 'z' turned z up as AMASS stores "
-      "clips (load_motion reads either back).");
-  m.def("builtin_motion_names", &builtinMotionNames, "Names of the built-in motions.");
-  m.def(
-      "world_from_up_axis",
-      [](const std::string& up) { return to_numpy(RowMatX(worldFromUpAxis(up))); }, py::arg("up"),
-      "(3, 3) rotation from a frame whose up axis is 'y' or 'z' to flsh's y-up world "
-      "('z': (x, y, z) -> (x, z, -y)).");
-  m.def(
-      "rotate_motion",
-      [](const Motion& motion, const py::object& rotation) {
-        const Mat3 R = to_matrix(rotation, "rotation", 3, 3);
-        if (!((R.transpose() * R - Mat3::Identity()).norm() < 1e-9 && R.determinant() > 0))
-          throw py::value_error(
-              "rotation: expected a (3, 3) rotation matrix (orthonormal, "
-              "determinant +1)");
-        Motion turned = motion;
-        rotateMotion(turned, R);
-        return turned;
-      },
-      py::arg("motion"), py::arg("rotation"),
-      "A copy of `motion` turned by the (3, 3) rotation about the root joint's rest position "
-      "(trans <- R trans, root <- R root): every posed vertex v -> J0 + R (v - J0).");
-  m.def(
-      "placed_motion",
-      [](const Motion& motion, double yaw, const py::object& offset) {
-        return placedMotion(motion, yaw, to_vec3(offset, "offset"));
-      },
-      py::arg("motion"), py::arg("yaw") = 0.0, py::arg("offset") = py::make_tuple(0.0, 0.0, 0.0),
-      "A copy of `motion` turned by `yaw` rad about +y through the root's rest position, then "
-      "moved by `offset` (3,) m, as a scene file's yaw_degrees and offset do.");
-  m.def(
-      "lowest_point_height",
-      [](const BodyModel& body, const py::object& betas, const Motion& motion, double seconds) {
-        const VecX b =
-            betas.is_none() ? VecX::Zero(body.numBetas()) : to_vector(betas, "betas", -1, "(K,)");
-        py::gil_scoped_release release;
-        return lowestPointHeight(body, b, motion, seconds);
-      },
-      py::arg("body"), py::arg("betas"), py::arg("motion"), py::arg("seconds") = 1.0,
-      "World height y (m) of the body's lowest vertex posed by `motion` over its first "
-      "`seconds`: where to put the ground under a clip (a scene file's \"ground\": \"auto\").");
   m.def(
       "fit_betas",
       [](const py::object& betas, const BodyModel& body, const std::string& origin) {
@@ -177,25 +29,6 @@ void bind_io(py::module_& m) {
       py::arg("betas"), py::arg("body"), py::arg("origin") = "betas",
       "`betas` for `body`'s K shape components: shorter stays, longer is cut to K with a "
       "UserWarning naming `origin` if a dropped value is nonzero (AMASS clips carry 16).");
-  m.def("upright_warning", &uprightWarning, py::arg("motion"),
-        "A warning sentence if the body leans more than 60 degrees from +y at frame 0 (the usual "
-        "sign of a wrong up axis), else ''.");
-  m.def("make_builtin_motion", [](const std::string& name, double seconds, double fps) {
-          py::gil_scoped_release release;
-          return makeBuiltinMotion(name, seconds, fps);
-        },
-        py::arg("name"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0,
-        "A built-in procedural motion `seconds` long (s) at `fps`; ValueError for unknown names.");
-  m.def(
-      "load_or_make_motion",
-      [](const std::string& spec, double seconds, double fps, const py::object& up) {
-        const std::string axis = up.is_none() ? std::string() : up.cast<std::string>();
-        py::gil_scoped_release release;
-        return loadOrMakeMotion(spec, seconds, fps, axis);
-      },
-      py::arg("spec"), py::arg("seconds") = 2.0, py::arg("fps") = 30.0, py::arg("up") = py::none(),
-      "A motion file path if it exists, else 'builtin:NAME' or NAME of a built-in motion.");
-
   // --- Scene files (read-only views) ---------------------------------------------------------
   py::class_<AvatarSpec>(m, "AvatarSpec", "One avatar of a scene file (read-only).")
       .def_readonly("name", &AvatarSpec::name)
@@ -373,45 +206,6 @@ void bind_io(py::module_& m) {
       "stderr (progress=True). Returns a dict of the run's figures (steps, Newton "
       "iterations, contacts, max_displacement_mm per soft avatar, written files, times, "
       "summary). Overrides (0 = keep): duration s, time_step s.");
-
-  // --- Meshes --------------------------------------------------------------------------------
-  m.def("write_ply",
-        [](const std::filesystem::path& path, const py::object& vertices, const py::object& faces,
-           const py::object& colors, bool binary) {
-          const MatX3 V = to_points(vertices, "vertices");
-          const MatX3i F = to_triangles(faces, "faces");
-          const io::Colors C =
-              colors.is_none() ? io::Colors() : to_points(colors, "colors", V.rows());
-          const std::string p = path_string(path);
-          py::gil_scoped_release release;
-          io::writePly(p, V, F, C, binary);
-        },
-        py::arg("path"), py::arg("vertices"), py::arg("faces"), py::arg("colors") = py::none(),
-        py::arg("binary") = true,
-        "Writes a PLY (binary little-endian or ASCII) atomically: vertices (V, 3) m, faces (F, 3) "
-        "int, colors (V, 3) RGB in [0, 1] or None.");
-  m.def("write_obj",
-        [](const std::filesystem::path& path, const py::object& vertices, const py::object& faces) {
-          const MatX3 V = to_points(vertices, "vertices");
-          const MatX3i F = to_triangles(faces, "faces");
-          const std::string p = path_string(path);
-          py::gil_scoped_release release;
-          io::writeObj(p, V, F);
-        },
-        py::arg("path"), py::arg("vertices"), py::arg("faces"),
-        "Writes an OBJ atomically: vertices (V, 3) m, faces (F, 3) int.");
-  m.def("read_mesh", [](const std::filesystem::path& path) {
-          const std::string p = path_string(path);
-          require_existing_file(p, "read_mesh");
-          MatX3 V;
-          MatX3i F;
-          {
-            py::gil_scoped_release release;
-            io::readMesh(p, V, F);
-          }
-          return py::make_tuple(to_numpy(V), to_numpy(F));
-        },
-        py::arg("path"), "Reads a PLY or OBJ triangle mesh: (vertices (V, 3) float64, faces (F, 3) int32).");
 }
 
 }  // namespace flsh::python

@@ -4,6 +4,7 @@
 PYBIND11_MODULE(_flsh, m) {
   m.doc() = "flsh: differentiable physics of SMPL human bodies (C++ core)";
   flsh::python::bind_core(m);  // first: registers the exception translation
+  flsh::python::bind_format(m);
   flsh::python::bind_body(m);
   flsh::python::bind_io(m);
   flsh::python::bind_render(m);

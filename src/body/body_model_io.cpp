@@ -8,7 +8,7 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/smplh.h"
 #include "flsh/core/error.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 
 namespace flsh {
 

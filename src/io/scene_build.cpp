@@ -10,11 +10,11 @@
 #include <map>
 
 #include "flsh/body/body_forward.h"
+#include "flsh/body/motion_frame.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/io/motion_frame.h"
 
 namespace flsh::io {
 

@@ -10,9 +10,9 @@
 #include <set>
 #include <sstream>
 
+#include "flsh/body/motion.h"
 #include "flsh/core/error.h"
-#include "flsh/io/input_file.h"
-#include "flsh/io/motion.h"
+#include "flsh/format/input_file.h"
 
 namespace flsh {
 namespace {

@@ -7,10 +7,10 @@
 
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
-#include "flsh/io/atomic_file.h"
-#include "flsh/io/gltf.h"
-#include "flsh/io/mesh_io.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/atomic_file.h"
+#include "flsh/format/gltf.h"
+#include "flsh/format/mesh_io.h"
+#include "flsh/format/npz.h"
 #include "flsh/render/plot.h"
 #include "flsh/render/render.h"
 

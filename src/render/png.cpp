@@ -12,8 +12,8 @@
 #include <vector>
 
 #include "flsh/core/error.h"
-#include "flsh/io/atomic_file.h"
-#include "flsh/io/input_file.h"
+#include "flsh/format/atomic_file.h"
+#include "flsh/format/input_file.h"
 #include "flsh/render/render.h"
 
 namespace flsh::render {

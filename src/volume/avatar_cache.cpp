@@ -6,7 +6,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
-#include "flsh/io/atomic_file.h"
+#include "flsh/format/atomic_file.h"
 
 namespace flsh {
 

@@ -11,8 +11,8 @@
 #include <sstream>
 
 #include "flsh/core/error.h"
-#include "flsh/io/atomic_file.h"
-#include "flsh/io/input_file.h"
+#include "flsh/format/atomic_file.h"
+#include "flsh/format/input_file.h"
 #include "flsh/volume/soft_avatar.h"
 #include "volume/kinematic_tree.h"
 #include "volume/surface_query.h"

@@ -5,7 +5,7 @@
 #pragma once
 
 #include "flsh/body/body_model.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 #include "flsh/volume/reduced_data.h"
 
 namespace flsh::detail {

@@ -5,7 +5,7 @@
 // of simulated.
 #pragma once
 
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 #include "flsh/volume/volumetric_data.h"
 
 namespace flsh {

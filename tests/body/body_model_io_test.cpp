@@ -10,8 +10,8 @@
 #include "body/body_model_derived.h"
 #include "flsh/body/body_model.h"
 #include "flsh/core/error.h"
-#include "flsh/io/npz.h"
-#include "io/raw_npz.h"
+#include "flsh/format/npz.h"
+#include "format/raw_npz.h"
 #include "support/test_support.h"
 
 namespace flsh {

@@ -12,7 +12,7 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 #include "support/test_support.h"
 
 namespace flsh {

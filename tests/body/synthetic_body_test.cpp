@@ -14,7 +14,7 @@
 #include "body/synthetic_mesh_checks.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
-#include "flsh/io/mesh_io.h"
+#include "flsh/format/mesh_io.h"
 #include "support/test_support.h"
 
 namespace flsh {

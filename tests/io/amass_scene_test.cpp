@@ -8,12 +8,12 @@
 #include <fstream>
 #include <random>
 
+#include "flsh/body/motion.h"
+#include "flsh/body/motion_frame.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/io/motion.h"
-#include "flsh/io/motion_frame.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 #include "flsh/io/scene_build.h"
 #include "flsh/io/scene_file.h"
 #include "flsh/solve/scene.h"

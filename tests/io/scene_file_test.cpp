@@ -9,9 +9,9 @@
 #include <initializer_list>
 
 #include "flsh/body/body_forward.h"
+#include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
-#include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
 #include "support/test_support.h"
 

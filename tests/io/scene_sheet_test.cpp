@@ -6,8 +6,8 @@
 #include <filesystem>
 #include <memory>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
-#include "flsh/io/motion.h"
 #include "flsh/io/scene_outputs.h"
 #include "flsh/render/render.h"
 #include "flsh/solve/scene.h"

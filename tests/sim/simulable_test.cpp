@@ -12,11 +12,11 @@
 #include <random>
 
 #include "flsh/body/body_forward.h"
+#include "flsh/body/motion.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/io/motion.h"
 #include "support/test_support.h"
 
 namespace flsh {

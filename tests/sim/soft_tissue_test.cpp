@@ -11,9 +11,9 @@
 #include <random>
 
 #include "flsh/body/body_forward.h"
+#include "flsh/body/motion.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/io/motion.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/newton.h"
 #include "flsh/solve/scene.h"

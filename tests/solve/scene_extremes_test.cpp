@@ -7,10 +7,10 @@
 #include <cmath>
 #include <memory>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
-#include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
 #include "support/test_support.h"
 

@@ -11,11 +11,11 @@
 #include <memory>
 #include <random>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/contact/contact_energy.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/io/motion.h"
 #include "support/test_support.h"
 
 namespace flsh {

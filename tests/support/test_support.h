@@ -9,10 +9,10 @@
 #include <vector>
 
 #include "flsh/body/body_model.h"
-#include "flsh/io/motion.h"
+#include "flsh/body/motion.h"
+#include "flsh/core/types.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/volume/soft_avatar.h"
-#include "flsh/core/types.h"
 
 namespace flsh::test {
 

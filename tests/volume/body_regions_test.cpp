@@ -11,9 +11,9 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
-#include "flsh/io/motion.h"
 #include "flsh/solve/scene.h"
 #include "flsh/volume/materials.h"
 #include "flsh/volume/volumetric_data.h"

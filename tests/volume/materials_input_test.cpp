@@ -9,7 +9,7 @@
 #include <fstream>
 
 #include "flsh/core/error.h"
-#include "flsh/io/input_file.h"
+#include "flsh/format/input_file.h"
 #include "flsh/volume/materials.h"
 #include "support/test_support.h"
 

@@ -43,10 +43,10 @@
 #include <string>
 #include <vector>
 
+#include "flsh/body/motion.h"
 #include "flsh/contact/collider.h"
 #include "flsh/core/types.h"
 #include "flsh/diff/rollout.h"
-#include "flsh/io/motion.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/volume/soft_avatar.h"
 

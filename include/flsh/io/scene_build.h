@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "flsh/io/motion.h"
+#include "flsh/body/motion.h"
 #include "flsh/io/scene_file.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/scene.h"

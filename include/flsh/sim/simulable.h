@@ -21,11 +21,11 @@
 #include <utility>
 #include <vector>
 
+#include "flsh/body/motion.h"
 #include "flsh/contact/collider.h"
 #include "flsh/contact/contact_energy.h"
 #include "flsh/core/hessian_blocks.h"
 #include "flsh/core/types.h"
-#include "flsh/io/motion.h"
 #include "flsh/sim/energy_term.h"
 #include "flsh/sim/sim_parameter.h"
 #include "flsh/sim/simulable_options.h"

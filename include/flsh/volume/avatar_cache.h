@@ -16,7 +16,7 @@
 #include <optional>
 #include <string>
 
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 
 namespace flsh {
 

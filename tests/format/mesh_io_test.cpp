@@ -1,6 +1,6 @@
 // Tests of PLY/OBJ mesh files: exact round trips, colours, foreign PLY layouts (extra
 // properties, other elements, float coordinates), OBJ index forms, and rejected input.
-#include "flsh/io/mesh_io.h"
+#include "flsh/format/mesh_io.h"
 
 #include <gtest/gtest.h>
 

@@ -5,17 +5,16 @@
 //   hip flexion (leg forward)   = rotation about −x;  knee flexion (shin back) = about +x
 //   left arm down               = about −z;           right arm down           = about +z
 //   left leg sideways (abduct)  = about +z;           right leg                = about −z
+#include <Eigen/Geometry>
 #include <cmath>
 #include <filesystem>
 #include <functional>
 #include <map>
 
-#include <Eigen/Geometry>
-
+#include "flsh/body/motion.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/io/motion.h"
 
 namespace flsh {
 
@@ -128,9 +127,12 @@ void stand(double, Frame& f) { relaxedArms(f); }
 void tPose(double, Frame&) {}
 
 const std::map<std::string, FrameFunction>& registry() {
-  static const std::map<std::string, FrameFunction> motions = {
-      {"walk", walk},   {"jumping_jacks", jumpingJacks}, {"arm_swings", armSwings},
-      {"jump", jump},   {"stand", stand},                {"t_pose", tPose}};
+  static const std::map<std::string, FrameFunction> motions = {{"walk", walk},
+                                                               {"jumping_jacks", jumpingJacks},
+                                                               {"arm_swings", armSwings},
+                                                               {"jump", jump},
+                                                               {"stand", stand},
+                                                               {"t_pose", tPose}};
   return motions;
 }
 

@@ -1,6 +1,6 @@
 // Binary glTF 2.0 writer (the JSON chunk with nlohmann-json, the binary chunk by hand).
 // Layout: one buffer; one tightly packed bufferView per accessor, 4-byte aligned.
-#include "flsh/io/gltf.h"
+#include "flsh/format/gltf.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -11,7 +11,7 @@
 #include <numeric>
 
 #include "flsh/core/error.h"
-#include "flsh/io/atomic_file.h"
+#include "flsh/format/atomic_file.h"
 
 namespace flsh::io {
 namespace {

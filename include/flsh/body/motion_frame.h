@@ -6,8 +6,8 @@
 #include <string>
 
 #include "flsh/body/body_model.h"
+#include "flsh/body/motion.h"
 #include "flsh/core/types.h"
-#include "flsh/io/motion.h"
 
 namespace flsh {
 

@@ -1,5 +1,5 @@
 // Motions in flsh's y-up world: up axes, placement, the floor under a clip, uprightness.
-#include "flsh/io/motion_frame.h"
+#include "flsh/body/motion_frame.h"
 
 #include <Eigen/Geometry>
 #include <algorithm>

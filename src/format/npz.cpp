@@ -2,7 +2,7 @@
 //
 // Format references: the `.npy` format (numpy/lib/format.py, versions 1.0–3.0) and `.npz` =
 // a zip archive with one member "KEY.npy" per array, stored or deflated.
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 
 #include <zip.h>
 
@@ -13,8 +13,8 @@
 #include <limits>
 
 #include "flsh/core/error.h"
-#include "flsh/io/atomic_file.h"
-#include "flsh/io/input_file.h"
+#include "flsh/format/atomic_file.h"
+#include "flsh/format/input_file.h"
 #include "npy_format.h"
 
 #if !defined(__BYTE_ORDER__) || __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__

@@ -19,7 +19,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/io/gltf.h"
+#include "flsh/format/gltf.h"
 #include "support/test_support.h"
 
 namespace flsh {

@@ -1,6 +1,6 @@
 // Motions in flsh's y-up world (motion_frame.h): AMASS's z-up clips turned upright on loading,
 // exactly; placement by yaw and offset; the floor under a clip; the upright check.
-#include "flsh/io/motion_frame.h"
+#include "flsh/body/motion_frame.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -9,10 +9,10 @@
 #include <random>
 
 #include "flsh/body/body_forward.h"
+#include "flsh/body/motion.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/io/motion.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 #include "support/test_support.h"
 
 namespace flsh {

@@ -1,4 +1,4 @@
-#include "flsh/io/atomic_file.h"
+#include "flsh/format/atomic_file.h"
 
 #include <unistd.h>
 
@@ -40,12 +40,12 @@ void AtomicPath::commit() {
   committed_ = true;
 }
 
-void writeFileAtomically(const std::string& path,
-                         const std::function<void(std::ostream&)>& write) {
+void writeFileAtomically(const std::string& path, const std::function<void(std::ostream&)>& write) {
   AtomicPath tmp(path);
   {
     std::ofstream out(tmp.tempPath(), std::ios::binary | std::ios::trunc);
-    if (!out) throw FileError("cannot open '" + tmp.tempPath() + "' for writing (target '" + path + "')");
+    if (!out)
+      throw FileError("cannot open '" + tmp.tempPath() + "' for writing (target '" + path + "')");
     write(out);
     out.flush();
     if (!out) throw FileError("write failed for '" + path + "' (disk full?)");

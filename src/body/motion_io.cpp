@@ -3,11 +3,11 @@
 #include <iostream>
 #include <string>
 
+#include "flsh/body/motion.h"
+#include "flsh/body/motion_frame.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
-#include "flsh/io/motion.h"
-#include "flsh/io/motion_frame.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 
 namespace flsh {
 

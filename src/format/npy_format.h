@@ -1,4 +1,4 @@
-// The `.npy` array format (numpy/lib/format.py, versions 1.0–3.0), internal to src/io: dtype
+// The `.npy` array format (numpy/lib/format.py, versions 1.0–3.0), internal to src/format: dtype
 // descriptors, the header dict, and the size checks that keep a crafted header from claiming
 // more elements than its member holds (npz.cpp reads the archives around it).
 #pragma once
@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 
 namespace flsh::io {
 

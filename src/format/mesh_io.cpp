@@ -1,7 +1,7 @@
 // PLY and OBJ triangle meshes. Writers store x, y, z as double (binary PLY) or with the
 // shortest round-trip decimal form (ASCII PLY, OBJ), so every write → read round trip of V
 // is exact. Numbers are formatted and parsed with <charconv>: independent of the C locale.
-#include "flsh/io/mesh_io.h"
+#include "flsh/format/mesh_io.h"
 
 #include <algorithm>
 #include <cctype>
@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "flsh/core/error.h"
-#include "flsh/io/atomic_file.h"
-#include "flsh/io/input_file.h"
+#include "flsh/format/atomic_file.h"
+#include "flsh/format/input_file.h"
 
 namespace flsh::io {
 namespace {

@@ -5,10 +5,10 @@
 
 #include <cstring>
 
+#include "flsh/body/motion.h"
 #include "flsh/core/error.h"
-#include "flsh/io/motion.h"
-#include "flsh/io/npz.h"
-#include "io/raw_npz.h"
+#include "flsh/format/npz.h"
+#include "format/raw_npz.h"
 #include "support/test_support.h"
 
 namespace flsh::io {

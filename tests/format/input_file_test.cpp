@@ -1,7 +1,7 @@
 // Input paths that are not regular files: a FIFO blocked every reader forever (the open waits
 // for a writer), a directory or device misbehaved. Each reader now refuses them with an
 // InputError naming the path, before opening anything (issue 23).
-#include "flsh/io/input_file.h"
+#include "flsh/format/input_file.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -10,10 +10,10 @@
 #include <filesystem>
 #include <fstream>
 
+#include "flsh/body/motion.h"
 #include "flsh/core/error.h"
-#include "flsh/io/mesh_io.h"
-#include "flsh/io/motion.h"
-#include "flsh/io/npz.h"
+#include "flsh/format/mesh_io.h"
+#include "flsh/format/npz.h"
 #include "flsh/io/scene_file.h"
 #include "support/test_support.h"
 

@@ -1,16 +1,17 @@
 #include <gtest/gtest.h>
 
+#include "flsh/body/motion.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/io/motion.h"
 
 namespace flsh {
 namespace {
 
 Mat3 jointRotation(const Motion& m, int frame, const std::string& joint) {
   const int j = smplJointIndex(joint);
-  return rodrigues(Vec3(m.poses(frame, 3 * j), m.poses(frame, 3 * j + 1), m.poses(frame, 3 * j + 2)));
+  return rodrigues(
+      Vec3(m.poses(frame, 3 * j), m.poses(frame, 3 * j + 1), m.poses(frame, 3 * j + 2)));
 }
 
 TEST(BuiltinMotion, EveryMotionHasTheRequestedFramesAndIsFinite) {
@@ -28,7 +29,8 @@ TEST(BuiltinMotion, EveryMotionHasTheRequestedFramesAndIsFinite) {
 }
 
 TEST(BuiltinMotion, RequiredMotionsExist) {
-  for (const char* name : {"walk", "jumping_jacks", "arm_swings"}) EXPECT_NO_THROW(makeBuiltinMotion(name));
+  for (const char* name : {"walk", "jumping_jacks", "arm_swings"})
+    EXPECT_NO_THROW(makeBuiltinMotion(name));
 }
 
 TEST(BuiltinMotion, StandingArmsHangDown) {
@@ -43,7 +45,7 @@ TEST(BuiltinMotion, WalkSwingsLegsForwardAlternatelyAndAdvances) {
   const Motion m = makeBuiltinMotion("walk", 1.1, fps);
   const int quarter = int(0.275 * fps), three_quarters = int(0.825 * fps);  // sin(phase) = ±1
   const Vec3 down(0, -1, 0);
-  EXPECT_GT((jointRotation(m, quarter, "left_hip") * down).z(), 0.3);   // left leg forward
+  EXPECT_GT((jointRotation(m, quarter, "left_hip") * down).z(), 0.3);    // left leg forward
   EXPECT_LT((jointRotation(m, quarter, "right_hip") * down).z(), -0.3);  // right leg back
   EXPECT_LT((jointRotation(m, three_quarters, "left_hip") * down).z(), -0.3);
   EXPECT_GT(m.trans(m.numFrames() - 1, 2), 1.0);  // about 1.2 m/s along +z

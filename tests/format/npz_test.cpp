@@ -1,4 +1,4 @@
-#include "flsh/io/npz.h"
+#include "flsh/format/npz.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -11,7 +11,7 @@
 #include <limits>
 
 #include "flsh/core/error.h"
-#include "io/raw_npz.h"
+#include "format/raw_npz.h"
 #include "support/test_support.h"
 
 namespace flsh::io {

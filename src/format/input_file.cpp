@@ -1,5 +1,5 @@
 // Reading input files whole, regular files only; the JSON nesting bound (input_file.h).
-#include "flsh/io/input_file.h"
+#include "flsh/format/input_file.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>

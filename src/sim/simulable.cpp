@@ -134,7 +134,9 @@ void Simulable::Impl::buildStiffnesses() {
 
 void Simulable::Impl::buildTerms() {
   tracking_term = std::make_unique<detail::TrackingSpringTerm>(parents);
-  contact_term = std::make_unique<detail::SurfaceContactTerm>(num_bones);
+  contact_term = std::make_unique<detail::SurfaceContactTerm>(*skeleton_kinematics, num_bones);
+  kinematics = skeleton_kinematics.get();
+  model_contact = contact_term.get();
   spring_terms = {&joint_term, tracking_term.get()};
   dynamic_terms = {{&inertia_term}};
   potential_terms = {{&gravity_term}, {&joint_term}, {tracking_term.get()}, {contact_term.get()}};
@@ -150,16 +152,20 @@ void Simulable::Impl::useSoftTerms() {
   for (const EnergyTerm* spring : spring_terms) potential_terms.push_back({spring});
   for (const detail::TermEntry& entry : soft->potentialTerms()) potential_terms.push_back(entry);
   value_lists = &soft->valueLists();
+  kinematics = &soft->kinematics();
+  model_contact = &soft->contactTerm();
+  schedule = soft->reduced() ? soft.get() : nullptr;
+  soft->setContactBones(surface.dominated);
   terms = spring_terms;
   for (const EnergyTerm* term : soft->terms()) terms.push_back(term);
 }
 
 bool Simulable::Impl::runsOnTwoThreads() const {
-  return soft && soft->reduced() && !is_static && omp_get_max_threads() >= 2;
+  return schedule && !is_static && omp_get_max_threads() >= 2;
 }
 
 TermContext Simulable::Impl::context() const {
-  if (soft) prepareSoft();
+  prepare();
   return {num_bones, parents,  J,         inertia,         options,    mocap && options.track_mocap,
           is_static, q.R,      q.t,       q_n.R,           q_n.t,      q_nm1.R,
           q_nm1.t,   target_R, target_t0, tracking_k,      root_k_pos, root_k_rot,
@@ -221,6 +227,8 @@ Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar, std::shared_ptr<c
   m.kinematic.assign(m.num_bones, 0);
   for (int b : m.options.kinematic_bones) m.kinematic[b] = 1;
   m.buildSkinning();
+  m.skeleton_kinematics =
+      std::make_unique<detail::SkeletonKinematics>(m.surface, m.avatar->restVertices(), m.J);
   m.buildTerms();
   m.buildStiffnesses();
   m.q = m.q_n = m.q_nm1 = restBones(m.J);
@@ -233,13 +241,6 @@ Simulable::Simulable(std::shared_ptr<const SoftAvatar> avatar, std::shared_ptr<c
     m.useSoftTerms();
     m.soft->setPoseBlend(m.q.R);
     m.setSoftPrediction();
-    m.soft_blend_bound.assign(m.num_bones, 0.0);
-    m.soft_weight_bound.assign(m.num_bones, 0.0);
-    for (int b = 0; b < m.num_bones; ++b)
-      for (int i : m.surface.dominated[b]) {
-        m.soft_blend_bound[b] = std::max(m.soft_blend_bound[b], m.soft->blendBound(i));
-        m.soft_weight_bound[b] = std::max(m.soft_weight_bound[b], m.soft->displacementWeight(i));
-      }
   }
   m.updateTargets(0.0);
 }

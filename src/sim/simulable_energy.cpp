@@ -20,8 +20,8 @@ using detail::kDofsPerBone;
 // One loop per quantity over the model's terms (Impl::dynamic_terms, potential_terms: the
 // skeleton's, or the bones' springs and the soft tissue's node terms); the Hessian loops take
 // the terms' block forms where they have one, between a begin and a flush of the model's value
-// lists. The ROM's gradient and Hessian have a second schedule on two threads
-// (runsOnTwoThreads: SoftTissue::reducedGradient, reducedHessians).
+// lists. A model may have its own schedule of its node terms on two threads (the ROM's:
+// TwoThreadSchedule, runsOnTwoThreads).
 
 namespace {
 
@@ -101,15 +101,11 @@ void Simulable::getGradientVector(VecX& g, int offset) const {
 double Simulable::getEnergyAndGradientVector(VecX& g, int offset) const {
   const Impl& m = *impl_;
   if (!m.runsOnTwoThreads()) return dynamicGradient(g, offset) + potentialGradient(g, offset);
-  // ROM: inertia, gravity and the elastic tets beside contact (as getHessianTripletVector).
-  const bool contact = m.prepareSoftForThreads();
-  double contact_energy = 0.0;
-  const double E = m.soft->reducedGradient(m.options.gravity, g, offset, [&](VecX& part) {
-    if (contact)
-      contact_energy = m.soft->contact(m.colliders, m.time, m.options.contact, &part, nullptr,
-                                       offset, true, nullptr, &m.contact.candidates, false);
-  });
-  return E + contact_energy + boneSpringGradient(g, offset);
+  // The model's schedule (the ROM: inertia, gravity and the elastic tets beside contact), then
+  // the bones' springs.
+  m.ensureContact();
+  const double E = m.schedule->gradient(m.context(), g, offset);
+  return E + boneSpringGradient(g, offset);
 }
 
 void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset,
@@ -153,16 +149,12 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
   // ROM: inertia beside contact and gravity on two threads, the elastic tets split between
   // them (SoftTissue::reducedHessians; both value lists come back summed); then the bones'
   // springs.
-  const bool contact = m.prepareSoftForThreads();
+  m.ensureContact();
   std::vector<Triplet>& dynamic = m.hessian_scratch[0];
   std::vector<Triplet>& potential = m.hessian_scratch[1];
   dynamic.clear();
   potential.clear();
-  m.soft->reducedHessians(m.options.gravity, dynamic, potential, offset, psd, [&] {
-    if (contact)
-      m.soft->contact(m.colliders, m.time, m.options.contact, nullptr, &potential, offset, psd,
-                      nullptr, &m.contact.candidates, false);
-  });
+  m.schedule->hessians(m.context(), dynamic, potential, offset, psd);
   H.insert(H.end(), dynamic.begin(), dynamic.end());
   m.value_lists->flushList(0, H, offset, &blocks);
   const size_t potential_start = H.size();

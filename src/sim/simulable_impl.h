@@ -10,7 +10,10 @@
 
 #include "flsh/sim/simulable.h"
 #include "sim/block_hessian_term.h"
+#include "sim/contact_term.h"
 #include "sim/hessian_blocks.h"
+#include "sim/model_kinematics.h"
+#include "sim/skeleton_kinematics.h"
 #include "sim/soft_tissue.h"
 #include "sim/terms/bone_gravity_term.h"
 #include "sim/terms/joint_spring_term.h"
@@ -80,22 +83,23 @@ struct Simulable::Impl {
   std::unique_ptr<detail::SoftTissue> soft;
   std::vector<VecX> u_stack;  // displacements saved with `stack` (same depth)
 
+  // The model's kinematics (the skeleton's skinned surface, or soft->kinematics()) and its
+  // collider-contact term, as the model-independent code asks them (contact broad phase,
+  // surface outputs).
+  std::unique_ptr<detail::SkeletonKinematics> skeleton_kinematics;
+  const detail::ModelKinematics* kinematics = nullptr;
+  const detail::ContactTerm* model_contact = nullptr;
+  /// The model's own two-thread schedule of its node terms (the ROM's; null: none).
+  const detail::TwoThreadSchedule* schedule = nullptr;
+
   void touch() { ++state_version; }
   int boneDofs() const { return detail::kDofsPerBone * num_bones; }
-  int dofs() const { return boneDofs() + (soft ? soft->numSoftDofs() : 0); }
+  int dofs() const { return boneDofs() + kinematics->numSoftDofs(); }
+  /// Prepares the kinematics at the current state (cached by state_version).
+  void prepare() const { kinematics->prepare(state_version, frames(q)); }
   detail::BoneFrames frames(const detail::BoneStates& s) const { return {s.R, s.t}; }
   // Node positions of the current state (soft tissue only).
   void prepareSoft() const { soft->prepare(state_version, frames(q)); }
-  /// prepareSoft, the contact broad phase and the skinning of its candidates, before terms run
-  /// on two threads (skinning writes node rows inertia reads); true if contact has candidates
-  /// (then call SoftTissue::contact with skin = false).
-  bool prepareSoftForThreads() const {
-    prepareSoft();
-    ensureContact();
-    const bool any = !colliders.empty() && !contact.candidates.empty();
-    if (any) soft->skinSurfaceNodes(contact.candidates);
-    return any;
-  }
   void setSoftPrediction() { soft->setPrediction(frames(q_n), frames(q_nm1)); }
 
   void validateOptions() const;
@@ -105,11 +109,8 @@ struct Simulable::Impl {
   void placeKinematicBones();
   void ensureContact() const;
   /// Surface vertices that may touch a collider (see ensureContact); `extra_margin`: per bone,
-  /// added to its bound (null: none).
+  /// added to its bound.
   void broadPhase(const double* extra_margin, std::vector<int>& candidates) const;
-  // Soft tissue: per bone, the largest blendBound and displacementWeight of its vertices.
-  std::vector<double> soft_blend_bound, soft_weight_bound;
-  Vec3 node(int i) const;
   double contactEnergy() const {
     ensureContact();
     return contact.energy;
@@ -133,7 +134,7 @@ struct Simulable::Impl {
   /// The skeleton's terms; useSoftTerms: the bones' springs and `soft`'s node terms.
   void buildTerms();
   void useSoftTerms();
-  /// The ROM's evaluations on two threads (SoftTissue::reducedGradient, reducedHessians) apply.
+  /// The model's two-thread schedule applies (it has one, inertia is on, two threads).
   bool runsOnTwoThreads() const;
   /// The view the terms read at the current state, the soft kinematics prepared (call
   /// ensureContact first for contact).

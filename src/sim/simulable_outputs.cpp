@@ -56,56 +56,21 @@ MatX3 Simulable::getVertices() const {
   return poseBody(avatar.body(), avatar.betas(), getPose(), getTrans()).vertices;
 }
 
-Vec3 Simulable::Impl::node(int i) const {
-  const Vec3 X = avatar->restVertices().row(i).transpose();
-  Vec3 x = Vec3::Zero();
-  for (int k = surface.weights.start[i]; k < surface.weights.start[i + 1]; ++k) {
-    const int b = surface.weights.entries[k].bone;
-    x += surface.weights.entries[k].weight *
-         (q.R[b] * (X - J.row(b).transpose()) + q.t.row(b).transpose());
-  }
+MatX3 Simulable::getNodes() const {
+  const Impl& m = *impl_;
+  m.prepare();
+  MatX3 x;
+  m.kinematics->surface(&x, nullptr);
   return x;
 }
 
-MatX3 Simulable::getNodes() const {
-  const Impl& m = *impl_;
-  if (m.soft) {
-    m.prepareSoft();
-    MatX3 x;
-    m.soft->surface(&x, nullptr);
-    return x;
-  }
-  MatX3 nodes(m.avatar->restVertices().rows(), 3);
-  for (int i = 0; i < nodes.rows(); ++i) nodes.row(i) = m.node(i).transpose();
-  return nodes;
-}
-
-// ∂x_i/∂t_b = w_ib I, ∂x_i/∂δω_b = −w_ib [R_b(X_i − J_b)]×.
+// ∂x_i/∂t_b = w_ib I, ∂x_i/∂δω_b = −w_ib [R_b(X_i − J_b)]× (skeleton); soft: SoftKinematics.
 SpMat Simulable::getNodesStateJacobian() const {
   const Impl& m = *impl_;
-  if (m.soft) {
-    m.prepareSoft();
-    std::vector<Triplet> triplets;
-    m.soft->surfaceJacobian(triplets);
-    SpMat D(3 * m.soft->numSurface(), m.dofs());
-    D.setFromTriplets(triplets.begin(), triplets.end());
-    return D;
-  }
-  const MatX3& X = m.avatar->restVertices();
+  m.prepare();
   std::vector<Triplet> triplets;
-  triplets.reserve(m.surface.weights.entries.size() * 9);
-  for (int i = 0; i < X.rows(); ++i) {
-    for (int k = m.surface.weights.start[i]; k < m.surface.weights.start[i + 1]; ++k) {
-      const int b = m.surface.weights.entries[k].bone;
-      const double w = m.surface.weights.entries[k].weight;
-      const Mat3 dx_dw = -w * skew(m.q.R[b] * (X.row(i) - m.J.row(b)).transpose());
-      for (int r = 0; r < 3; ++r) {
-        triplets.emplace_back(3 * i + r, 6 * b + r, w);
-        for (int c = 0; c < 3; ++c) triplets.emplace_back(3 * i + r, 6 * b + 3 + c, dx_dw(r, c));
-      }
-    }
-  }
-  SpMat D(3 * X.rows(), m.dofs());
+  m.kinematics->surfaceJacobian(triplets);
+  SpMat D(3 * m.kinematics->numSurface(), m.dofs());
   D.setFromTriplets(triplets.begin(), triplets.end());
   return D;
 }
@@ -150,10 +115,9 @@ std::vector<std::pair<int, double>> Simulable::nodeDisplacementBasis(int j) cons
 }
 MatX3 Simulable::getUnposedSurface() const {
   const Impl& m = *impl_;
-  if (!m.soft) return m.avatar->restVertices();
-  m.prepareSoft();
+  m.prepare();
   MatX3 Y;
-  m.soft->surface(nullptr, &Y);
+  m.kinematics->surface(nullptr, &Y);
   return Y;
 }
 MatX3 Simulable::getVolumeNodes() const {

@@ -31,7 +31,7 @@ void Simulable::Impl::buildSkinning() {
 // bound: the skipped vertices have exactly zero contact energy. With soft tissue the skinned
 // point is Y_i = X_i + D_i (pose blend and displacement) instead of X_i, which moves x_i by
 // ‖Σ_k w_k R_k D_i‖ ≤ ‖D_i‖ more: the bone's margin grows by the largest bound on ‖D_i‖ over its
-// vertices (SoftTissue::blendBound, displacementWeight).
+// vertices (ModelKinematics::contactMargins).
 void Simulable::Impl::broadPhase(const double* extra_margin, std::vector<int>& candidates) const {
   candidates.clear();
   if (colliders.empty()) return;
@@ -39,7 +39,7 @@ void Simulable::Impl::broadPhase(const double* extra_margin, std::vector<int>& c
     const std::vector<int>& dominated = surface.dominated[b];
     if (dominated.empty()) continue;
     const SurfaceBound& bound = surface.bone_bound[b];
-    double margin = extra_margin ? extra_margin[b] : 0.0;
+    double margin = extra_margin[b];
     for (const SurfaceBound::CoInfluence& co : bound.co) {
       const int c = co.bone;
       const double rotation_gap =
@@ -69,52 +69,16 @@ void Simulable::Impl::broadPhase(const double* extra_margin, std::vector<int>& c
   }
 }
 
+// The kinematics' margins (pose blend and soft displacement), the broad phase, then the model's
+// contact term at the candidates.
 void Simulable::Impl::ensureContact() const {
   ContactCache& cc = contact;
   if (cc.version == state_version) return;
-  if (soft) {
-    prepareSoft();
-    double extra[kNumJoints];
-    const double feature = soft->poseFeatureNorm(), largest = soft->largestSoftState();
-    for (int b = 0; b < num_bones; ++b)
-      extra[b] = soft_blend_bound[b] * feature + soft_weight_bound[b] * largest;
-    broadPhase(extra, cc.candidates);
-    cc.energy = soft->contact(colliders, time, options.contact, nullptr, nullptr, 0, true,
-                              &cc.active, &cc.candidates);
-    cc.version = state_version;
-    return;
-  }
-  cc.points.clear();
-  cc.energy = 0.0;
-  cc.active = 0;
-  broadPhase(nullptr, cc.candidates);
-  const int n = int(cc.candidates.size());
-  cc.nodes.resize(n, 3);
-  cc.areas.resize(n);
-  const VecX& areas = avatar->vertexAreas();
-  if (n > 0) {
-    // node(i) with each bone's translation t_b − R_b J_b formed once per state, not per vertex.
-    Vec3 bone_shift[kNumJoints];
-    for (int b = 0; b < num_bones; ++b)
-      bone_shift[b] = q.t.row(b).transpose() - q.R[b] * J.row(b).transpose();
-    const MatX3& X = avatar->restVertices();
-    for (int j = 0; j < n; ++j) {
-      const int i = cc.candidates[j];
-      const Vec3 Xi = X.row(i).transpose();
-      Vec3 x = Vec3::Zero();
-      for (int k = surface.weights.start[i]; k < surface.weights.start[i + 1]; ++k) {
-        const int b = surface.weights.entries[k].bone;
-        x += surface.weights.entries[k].weight * (q.R[b] * Xi + bone_shift[b]);
-      }
-      cc.nodes.row(j) = x.transpose();
-      cc.areas[j] = areas[i];
-    }
-  }
-  cc.gradient.setZero(3 * n);
-  if (n > 0)
-    cc.energy = colliderContactEnergy(cc.nodes, cc.areas, colliders, time, options.contact,
-                                      &cc.gradient, nullptr, 0, &cc.points);
-  cc.active = int(cc.points.size());
+  prepare();
+  double margin[kNumJoints];
+  kinematics->contactMargins(margin);
+  broadPhase(margin, cc.candidates);
+  model_contact->refresh(context(), cc);
   cc.version = state_version;
 }
 

@@ -29,7 +29,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
       u_nm1(kin_.u_nm1),
       masses_(nodeMasses(avatar)) {
   kin_.setMassNodes(masses_.nodes);
-  ElasticElements elements = elasticElements(avatar, kin_);
+  ElasticElements elements = elasticElements(avatar);
   if (kin_.reduced()) {
     auto reduced = std::make_unique<ReducedElasticityTerm>(avatar, kin_, std::move(elements));
     kin_.buildReducedPattern(reduced->handlePairs());
@@ -45,6 +45,31 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
 
 std::vector<const EnergyTerm*> SoftTissue::terms() const {
   return {inertia_.get(), gravity_.get(), elastic_.get(), contact_.get()};
+}
+
+double SoftTissue::gradient(const TermContext& c, VecX& g, int offset) const {
+  // Contact's surface nodes skinned here, not on the thread beside inertia (skinning writes
+  // node rows inertia reads).
+  const bool contact = !c.colliders.empty() && !c.contact.candidates.empty();
+  if (contact && kin_.reduced()) kin_.skinNodes(c.contact.candidates);
+  double contact_energy = 0.0;
+  const double E = reducedGradient(c.options.gravity, g, offset, [&](VecX& part) {
+    if (contact)
+      contact_energy = contact_->evaluate(c.colliders, c.time, c.options.contact, &part, nullptr,
+                                          offset, true, nullptr, &c.contact.candidates, false);
+  });
+  return E + contact_energy;
+}
+
+void SoftTissue::hessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
+                          std::vector<Triplet>& H_potential, int offset, bool psd) const {
+  const bool contact = !c.colliders.empty() && !c.contact.candidates.empty();
+  if (contact && kin_.reduced()) kin_.skinNodes(c.contact.candidates);
+  reducedHessians(c.options.gravity, H_dynamic, H_potential, offset, psd, [&] {
+    if (contact)
+      contact_->evaluate(c.colliders, c.time, c.options.contact, nullptr, &H_potential, offset, psd,
+                         nullptr, &c.contact.candidates, false);
+  });
 }
 
 double SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,

@@ -22,10 +22,11 @@
 #include "sim/soft/node_masses.h"
 #include "sim/soft/reduced_elasticity_term.h"
 #include "sim/soft/soft_kinematics.h"
+#include "sim/two_thread_schedule.h"
 
 namespace flsh::detail {
 
-class SoftTissue {
+class SoftTissue final : public TwoThreadSchedule {
   // Declared (so constructed) before the state references u, u_n, u_nm1 that bind to its
   // members: referring to a member of an object before its constructor runs is undefined.
   SoftKinematics kin_;
@@ -88,19 +89,11 @@ class SoftTissue {
 
   // ---- at the prepared state (the node terms themselves: terms(), dynamicTerms(),
   // potentialTerms()) ----
-  /// Node contact (NodeContactTerm::evaluate): the broad phase's energy and the ROM's
-  /// two-thread schedule call it with their candidates.
-  double contact(const std::vector<Collider>& colliders, double time, const ContactOptions& options,
-                 VecX* g, std::vector<Triplet>* H, int offset, bool psd, int* active = nullptr,
-                 const std::vector<int>* candidates = nullptr, bool skin = true) const {
-    return contact_->evaluate(colliders, time, options, g, H, offset, psd, active, candidates,
-                              skin);
-  }
-  /// ROM: skins surface nodes for a later contact(..., skin = false) (no-op for the FEM, whose
-  /// prepare() skins every node).
-  void skinSurfaceNodes(const std::vector<int>& nodes) const {
-    if (kin_.reduced()) kin_.skinNodes(nodes);
-  }
+  /// The ROM's two-thread schedule (TwoThreadSchedule; throws for the FEM): reducedGradient,
+  /// reducedHessians with contact at c.contact's candidates (skinned first) beside inertia.
+  double gradient(const TermContext& c, VecX& g, int offset) const override;
+  void hessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
+                std::vector<Triplet>& H_potential, int offset, bool psd) const override;
   /// ROM: inertia's, gravity's and the elastic term's gradients, and `potential_first`'s
   /// (e.g. contact, on nodes skinned before, with skin = false), added into g on two threads:
   /// inertia and gravity (one mapping of their summed node forces) with the first elastic tets
@@ -120,12 +113,13 @@ class SoftTissue {
                        std::vector<Triplet>& H_potential, int offset, bool psd,
                        const std::function<void()>& potential_first) const;
 
-  /// Bounds for a contact broad phase: ‖Y_i − X̄_i‖ ≤ blendBound(i) · poseFeatureNorm() +
-  /// displacementWeight(i) · largestSoftState() for surface node i.
-  double blendBound(int i) const { return kin_.blendBound(i); }
-  double displacementWeight(int i) const { return kin_.displacementWeight(i); }
-  double poseFeatureNorm() const { return kin_.poseFeatureNorm(); }
-  double largestSoftState() const { return kin_.largestSoftState(); }
+  /// The contact broad phase's margins (SoftKinematics::contactMargins) from the surface nodes
+  /// each bone dominates.
+  void setContactBones(const std::vector<std::vector<int>>& dominated) {
+    kin_.setContactBones(dominated);
+  }
+  /// The node contact term, as the broad phase asks it (refresh).
+  const ContactTerm& contactTerm() const { return *contact_; }
   /// World positions and unposed nodes of every surface node (#V × 3) at the prepared state.
   void surface(MatX3* x, MatX3* Y) const { kin_.surface(x, Y); }
   /// d(surface nodes)/dq rows (3#V × numDofs) as triplets.

@@ -21,7 +21,7 @@
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
 #include "flsh/energy/fem_material.h"
-#include "flsh/volume/material_point.h"
+#include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/volume_fields.h"
 #include "volume/reduced_data_file.h"
 
@@ -268,37 +268,10 @@ MatX surfacePartitionOfUnity(const VolumetricData& data, const MatX& weights) {
   return out;
 }
 
-// Elastic training data: the tets that can deform (at least one soft node), with their rest
-// geometry and material, built once for every sample.
-struct ElasticElements {
-  std::vector<int> tets;  // template tet indices, ascending
-  std::vector<TetElementRest> rest;
-  std::vector<FemMaterialPoint> materials;
-};
-
-ElasticElements elasticElements(const VolumetricData& data) {
-  const MatX4i& tets = data.templ->mesh.tets;
-  ElasticElements out;
-  for (int t = 0; t < tets.rows(); ++t) {
-    bool soft = false;
-    for (int a = 0; a < 4; ++a) soft = soft || data.bone_of_node[tets(t, a)] < 0;
-    if (soft) out.tets.push_back(t);
-  }
-  const int E = int(out.tets.size());
-  out.rest.resize(size_t(E));
-  out.materials.resize(size_t(E));
-  parallelFor(E, [&](int c) {
-    const int t = out.tets[size_t(c)];
-    out.rest[size_t(c)] = tetElementRest(tetNodes(data.rest_nodes, tets, t), t);
-    out.materials[size_t(c)] = femMaterialPoint(data.materials, t);
-  });
-  return out;
-}
-
 // Σ_e Φ̂_eᵀ K_e Φ̂_e over the elastic elements, K_e the element's elastic Hessian at rest
 // (12 × 12) and Φ̂_e its nodes' basis rows (3H × 3H, N/m), exactly symmetric.
 MatX subspaceRestStiffness(const VolumetricData& data, const SpMat& basis,
-                           const ElasticElements& elements) {
+                           const ElasticTets& elements) {
   const int H = int(basis.cols()), E = int(elements.tets.size());
   const MatX4i& tets = data.templ->mesh.tets;
   const SpMat rows = basis.transpose();  // column j = node j's weights
@@ -337,7 +310,7 @@ MatX subspaceRestStiffness(const VolumetricData& data, const SpMat& basis,
 // samples × #elastic elements: the elastic energy (J) of each tet under u = Φ z for random z:
 // every handle moves in a random direction by a random fraction of the sample's amplitude
 // (log-uniform in [1 mm, training_amplitude]), at most its reach (handle_reach, H, m).
-MatX elasticSamples(const VolumetricData& data, const SpMat& basis, const ElasticElements& elements,
+MatX elasticSamples(const VolumetricData& data, const SpMat& basis, const ElasticTets& elements,
                     const VecX& handle_reach, int samples, double amplitude, std::uint64_t seed) {
   const int H = int(basis.cols()), E = int(elements.tets.size());
   const double smallest = std::min(kSmallestTrainingAmplitude, amplitude);
@@ -625,7 +598,7 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
   const int samples = settings.training_samples;
   if (elastic_cubature) {
     t0 = Clock::now();
-    const ElasticElements elements = elasticElements(data);
+    const ElasticTets elements = deformableTets(data);
     VecX handle_reach(d.numHandles());
     for (int h = 0; h < d.numHandles(); ++h)
       handle_reach[h] = std::max(kMaxTrainingShear * data.tissue_thickness[d.handles[h]],
@@ -675,7 +648,7 @@ MatX elasticRestStiffness(const VolumetricData& data, const SpMat& basis) {
   if (basis.rows() != data.numNodes())
     throw InputError("elasticRestStiffness: the basis has " + std::to_string(basis.rows()) +
                      " rows, expected one per node (" + std::to_string(data.numNodes()) + ")");
-  return subspaceRestStiffness(data, basis, elasticElements(data));
+  return subspaceRestStiffness(data, basis, deformableTets(data));
 }
 
 VecX inertialNodeMasses(const VolumetricData& data, const Cubature& inertial) {

@@ -22,7 +22,9 @@ struct ElasticElements {
   int size() const { return int(tets.rows()); }
 };
 
-ElasticElements elasticElements(const SoftAvatar& avatar, const SoftKinematics& kinematics);
+/// The avatar's elastic elements (volume/elastic_tets.h: the tets with a soft-tissue node, at
+/// the avatar's rest nodes X̄(β)), all of them or the ROM's elastic cubature's.
+ElasticElements elasticElements(const SoftAvatar& avatar);
 
 /// The elastic energy of a soft skeleton (FEM: fem_elasticity_term.h; ROM:
 /// reduced_elasticity_term.h).

@@ -23,6 +23,8 @@ NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeM
 void NodalGravityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                                         std::vector<FixedHessianBlocks>* blocks, int offset,
                                         bool psd) const {
+  // The ROM's blocks need no node forces (reducedHessian); the FEM maps them.
+  if (kin_.reduced()) return reducedHessian(c.options.gravity, H, offset, psd);
   collectFixedBlocks(blocks, [&](FixedHessianBlocks* fixed) {
     evaluate(c.options.gravity, nullptr, &H, offset, psd, fixed);
   });

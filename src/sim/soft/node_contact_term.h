@@ -9,18 +9,25 @@
 #include "flsh/contact/contact_energy.h"
 #include "flsh/sim/energy_term.h"
 #include "sim/block_hessian_term.h"
+#include "sim/contact_term.h"
 #include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
-class NodeContactTerm final : public NodeTerm<1> {
+class NodeContactTerm final : public NodeTerm<1>, public ContactTerm {
  public:
   /// `areas`: the surface nodes' vertex areas, m².
   NodeContactTerm(const SoftKinematics& kinematics, VecX areas)
       : NodeTerm(kinematics), areas_(std::move(areas)) {}
 
   const char* name() const override { return "node contact"; }
+  /// The energy and the touching pairs at the broad phase's candidates (skinning them first in
+  /// the ROM).
+  void refresh(const TermContext& c, SurfaceContactState& s) const override {
+    s.energy = evaluate(c.colliders, c.time, c.options.contact, nullptr, nullptr, 0, true,
+                        &s.active, &s.candidates);
+  }
   /// At the context's colliders, time and broad-phase candidates; the energy alone is the one
   /// the simulable's broad phase evaluated with them (c.contact.energy).
   double evaluate(const TermContext& c, VecX* g, int offset) const override {

@@ -265,6 +265,23 @@ double SoftKinematics::largestSoftState() const {
   return largest;
 }
 
+void SoftKinematics::setContactBones(const std::vector<std::vector<int>>& dominated) {
+  bone_blend_bound_.assign(size_t(num_bones_), 0.0);
+  bone_weight_bound_.assign(size_t(num_bones_), 0.0);
+  for (int b = 0; b < num_bones_ && b < int(dominated.size()); ++b)
+    for (int i : dominated[size_t(b)]) {
+      bone_blend_bound_[size_t(b)] = std::max(bone_blend_bound_[size_t(b)], blendBound(i));
+      bone_weight_bound_[size_t(b)] =
+          std::max(bone_weight_bound_[size_t(b)], displacementWeight(i));
+    }
+}
+
+void SoftKinematics::contactMargins(double* margin) const {
+  const double feature = poseFeatureNorm(), largest = largestSoftState();
+  for (int b = 0; b < num_bones_; ++b)
+    margin[b] = bone_blend_bound_[size_t(b)] * feature + bone_weight_bound_[size_t(b)] * largest;
+}
+
 void SoftKinematics::boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const {
   for (int b = 0; b < num_bones_; ++b)
     shift[b] = t.row(b).transpose() - R[b] * joints_.row(b).transpose();

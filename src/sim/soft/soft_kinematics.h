@@ -31,16 +31,11 @@
 #include "flsh/volume/soft_avatar.h"
 #include "sim/block_hessian_term.h"
 #include "sim/hessian_blocks.h"
+#include "sim/model_kinematics.h"
 
 namespace flsh::detail {
 
-/// Bone transforms a soft-tissue evaluation reads (borrowed).
-struct BoneFrames {
-  const std::vector<Mat3>& R;  ///< 24 rotations
-  const MatX3& t;              ///< 24 × 3 joint positions, m
-};
-
-class SoftKinematics : public HessianValueLists {
+class SoftKinematics final : public HessianValueLists, public ModelKinematics {
  public:
   struct Influence {
     int bone;
@@ -64,10 +59,10 @@ class SoftKinematics : public HessianValueLists {
   int numBones() const { return num_bones_; }
   int boneDofs() const { return bone_dofs_; }
   int numNodes() const { return int(rest_.rows()); }
-  int numSurface() const { return num_surface_; }
+  int numSurface() const override { return num_surface_; }
   bool reduced() const { return reduced_; }
   int numHandles() const { return num_handles_; }
-  int numSoftDofs() const { return 3 * int(state_nodes_.size()); }
+  int numSoftDofs() const override { return 3 * int(state_nodes_.size()); }
   const VecXi& softNodes() const { return state_nodes_; }
   /// FEM: offset of u_j in the soft state (−1 on bone nodes); ROM: the handle's z offset at a
   /// handle node, −1 elsewhere.
@@ -101,6 +96,12 @@ class SoftKinematics : public HessianValueLists {
   /// Σ of node i's basis weights (1 or 0 in the FEM), for the contact broad phase.
   double displacementWeight(int i) const;
   double largestSoftState() const;  ///< max over the 3-blocks of the soft state of ‖·‖, m
+  /// Sets the surface nodes each bone dominates (SkinnedSurface::dominated) for contactMargins:
+  /// per bone the largest blendBound and displacementWeight of its nodes.
+  void setContactBones(const std::vector<std::vector<int>>& dominated);
+  /// Per bone: max blendBound · poseFeatureNorm() + max displacementWeight ·
+  /// largestSoftState() over the surface nodes it dominates (≥ ‖Y_i − X̄_i‖ there).
+  void contactMargins(double* margin) const override;
 
   // ---- pose blend ----
   /// Held pose blend offsets P (#N × 3, m) from the bones' rotations (relative rotations
@@ -120,7 +121,7 @@ class SoftKinematics : public HessianValueLists {
   void positionsOf(const std::vector<int>& nodes, const BoneFrames& bones, const VecX& state,
                    MatX3& x) const;
   /// Skins the evaluated nodes at the current state (bones + u); cached by `version`.
-  void prepare(long version, const BoneFrames& bones) const;
+  void prepare(long version, const BoneFrames& bones) const override;
   /// Skins `nodes` (distinct) at the prepared state: x, Y and M rows (the ROM's contact and
   /// output nodes; the FEM's prepare() skins every node).
   void skinNodes(const std::vector<int>& nodes) const;
@@ -131,9 +132,9 @@ class SoftKinematics : public HessianValueLists {
   const std::vector<Mat3>& R() const { return *cur_R_; }
   const std::vector<int>& surfaceNodes() const { return surface_nodes_; }
   /// World positions and unposed nodes of every surface node (#V × 3) at the prepared state.
-  void surface(MatX3* x, MatX3* Y) const;
+  void surface(MatX3* x, MatX3* Y) const override;
   /// d(surface nodes)/dq rows (3#V × numDofs) as triplets.
-  void surfaceJacobian(std::vector<Triplet>& triplets) const;
+  void surfaceJacobian(std::vector<Triplet>& triplets) const override;
 
   // ---- the chain rule to q (at the prepared state) ----
   /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g.
@@ -204,6 +205,8 @@ class SoftKinematics : public HessianValueLists {
   MatX posedirs_T_;
   std::vector<int> blend_slot_;
   VecX blend_bound_;  // #V
+  // Per bone: the largest blend_bound_ and displacementWeight of its dominated surface nodes.
+  std::vector<double> bone_blend_bound_, bone_weight_bound_;
   VecX phi_sum_;      // #V (ROM): Σ_h φ_h(i)
   VecXi state_nodes_;
   std::vector<int> node_dof_;  // FEM layout: 3 · (rank among soft nodes), −1 on bone nodes

@@ -10,13 +10,6 @@ namespace flsh::detail {
 
 namespace {
 
-using Influence = SparseSkinWeights::Influence;
-
-// y_ib = R_b (X_i − J_b): vertex i's lever arm on bone b.
-Vec3 leverArm(const TermContext& c, int i, int b) {
-  return c.R[b] * (c.avatar.restVertices().row(i) - c.J.row(b)).transpose();
-}
-
 // Exact contact node Hessians (3 × 3 per candidate) against the given colliders.
 std::vector<Mat3> nodeHessians(const TermContext& c, const std::vector<Collider>& colliders) {
   const SurfaceContactState& s = c.contact;
@@ -37,23 +30,28 @@ std::vector<Mat3> nodeHessians(const TermContext& c, const std::vector<Collider>
 
 }  // namespace
 
-SurfaceContactTerm::SurfaceContactTerm(int num_bones) : pair_blocks_(num_bones) {}
+SurfaceContactTerm::SurfaceContactTerm(const SkeletonKinematics& kinematics, int num_bones)
+    : kin_(kinematics), pair_blocks_(num_bones) {}
+
+void SurfaceContactTerm::refresh(const TermContext& c, SurfaceContactState& s) const {
+  points_.clear();
+  s.energy = 0.0;
+  s.active = 0;
+  const int n = int(s.candidates.size());
+  kin_.positions(s.candidates, {c.R, c.t}, s.nodes);
+  s.areas.resize(n);
+  const VecX& areas = c.avatar.vertexAreas();
+  for (int j = 0; j < n; ++j) s.areas[j] = areas[s.candidates[size_t(j)]];
+  s.gradient.setZero(3 * n);
+  if (n > 0)
+    s.energy = colliderContactEnergy(s.nodes, s.areas, c.colliders, c.time, c.options.contact,
+                                     &s.gradient, nullptr, 0, &points_);
+  s.active = int(points_.size());
+}
 
 double SurfaceContactTerm::evaluate(const TermContext& c, VecX* g, int offset) const {
   const SurfaceContactState& s = c.contact;
-  if (!g) return s.energy;
-  for (size_t j = 0; j < s.candidates.size(); ++j) {
-    const Vec3 gx = s.gradient.segment<3>(3 * j);
-    if (gx.isZero(0.0)) continue;
-    const int i = s.candidates[j];
-    for (int k = c.skin.start[i]; k < c.skin.start[i + 1]; ++k) {
-      const int b = c.skin.entries[k].bone;
-      const double w = c.skin.entries[k].weight;
-      const Vec3 y = leverArm(c, i, b);
-      g->segment<3>(offset + 6 * b) += w * gx;
-      g->segment<3>(offset + 6 * b + 3) += w * y.cross(gx);
-    }
-  }
+  if (g) kin_.mapForces(s.candidates, s.gradient, c.R, *g, offset);
   return s.energy;
 }
 
@@ -67,8 +65,7 @@ void SurfaceContactTerm::addHessian(const TermContext& c, std::vector<Triplet>& 
   colliderContactEnergy(s.nodes, s.areas, c.colliders, c.time, contact_options, nullptr,
                         &node_hessian_, 0, nullptr);
   // colliderContactEnergy emits 9 consecutive triplets (one 3 × 3 block) per active pair.
-  Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
-  int bones[kNumJoints];
+  node_blocks_.clear();
   for (size_t start = 0; start + 9 <= node_hessian_.size(); start += 9) {
     const int j = node_hessian_[start].row() / 3;
     Mat3 Hx;
@@ -76,39 +73,9 @@ void SurfaceContactTerm::addHessian(const TermContext& c, std::vector<Triplet>& 
       const Triplet& t = node_hessian_[start + e];
       Hx(t.row() - 3 * j, t.col() - 3 * j) = t.value();
     }
-    const int i = s.candidates[size_t(j)];
-    const int count = c.skin.start[i + 1] - c.skin.start[i];
-    for (int a = 0; a < count; ++a) {
-      const Influence& inf = c.skin.entries[size_t(c.skin.start[i] + a)];
-      const Vec3 y = leverArm(c, i, inf.bone);
-      bones[a] = inf.bone;
-      Jb[a].leftCols<3>() = inf.weight * Mat3::Identity();
-      Jb[a].rightCols<3>() = -inf.weight * skew(y);
-    }
-    for (int a = 0; a < count; ++a) {
-      const Eigen::Matrix<double, 6, 3> JaT_H = Jb[a].transpose() * Hx;
-      for (int b = 0; b < count; ++b) pair_blocks_.block(bones[a], bones[b]) += JaT_H * Jb[b];
-    }
+    node_blocks_.emplace_back(j, Hx);
   }
-  // Curvature of the rotating contact points, summed per bone (Σ_i w_ib g_i·∂²y_ib); the PSD
-  // form keeps its projection on the PSD cone (the stabilizing part) instead of dropping it.
-  Mat3 curvature[kNumJoints];
-  bool has_curvature[kNumJoints] = {};
-  for (size_t j = 0; j < s.candidates.size(); ++j) {
-    const Vec3 gx = s.gradient.segment<3>(3 * j);
-    if (gx.isZero(0.0)) continue;
-    const int i = s.candidates[j];
-    for (int k = c.skin.start[i]; k < c.skin.start[i + 1]; ++k) {
-      const int b = c.skin.entries[k].bone;
-      if (!has_curvature[b]) curvature[b].setZero();
-      has_curvature[b] = true;
-      curvature[b] += c.skin.entries[k].weight * rotationCurvature(gx, leverArm(c, i, b));
-    }
-  }
-  for (int b = 0; b < c.num_bones; ++b)
-    if (has_curvature[b])
-      pair_blocks_.block(b, b).bottomRightCorner<3, 3>() +=
-          psd ? projectToPSD<3>(curvature[b]) : curvature[b];
+  kin_.mapHessian(s.candidates, node_blocks_, s.gradient, c.R, psd, pair_blocks_);
   pair_blocks_.emit(H, offset);
 }
 
@@ -151,13 +118,7 @@ void SurfaceContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const
     if (!touching && !unit_touching) continue;
     const int i = s.candidates[size_t(j)];
     point.id = j;
-    point.count = c.skin.start[i + 1] - c.skin.start[i];
-    for (int a = 0; a < point.count; ++a) {
-      const Influence& inf = c.skin.entries[size_t(c.skin.start[i] + a)];
-      point.bone[a] = inf.bone;
-      point.weight[a] = inf.weight;
-      point.lever[a] = leverArm(c, i, inf.bone);
-    }
+    kin_.point(i, c.R, point);
     if (unit_touching)
       sink.add(SimParameter::Stiffnesses, point, 3, unit_gradient.segment<3>(3 * j),
                Eigen::Matrix<double, 1, 1>::Ones());

@@ -1,0 +1,43 @@
+// A model's kinematics (issue 24 item 3), private to Simulable: the map from the state q to the
+// positions of the nodes its terms read, and the chain rule that takes node derivatives back to
+// q. Two models of it: SkeletonKinematics (the articulated skeleton: surface vertices skinned by
+// the bones, no state of their own) and SoftKinematics (the FEM and ROM soft skeletons: tet
+// nodes skinned by the bones plus a soft state). Simulable asks this interface what every model
+// answers; the terms use their own model's kinematics directly.
+#pragma once
+
+#include <vector>
+
+#include "flsh/core/types.h"
+
+namespace flsh::detail {
+
+/// Bone transforms an evaluation reads (borrowed).
+struct BoneFrames {
+  const std::vector<Mat3>& R;  ///< 24 rotations
+  const MatX3& t;              ///< 24 × 3 joint positions, m
+};
+
+class ModelKinematics {
+ public:
+  virtual ~ModelKinematics() = default;
+  /// Values of the state beyond the bones' 6 per bone (0 for the skeleton).
+  virtual int numSoftDofs() const = 0;
+  /// Skins the nodes every evaluation reads at the current state (bones + soft state); cached
+  /// by `version`.
+  virtual void prepare(long version, const BoneFrames& bones) const = 0;
+  /// For the contact broad phase, at the prepared state: per bone b (`margin`, 24 values), a
+  /// bound on how far the surface nodes b dominates are from their skinned rest positions
+  /// beyond what the bones' motion explains (pose blend and soft displacement; 0 for the
+  /// skeleton).
+  virtual void contactMargins(double* margin) const = 0;
+  /// Surface nodes (the mesh's vertices, in its order).
+  virtual int numSurface() const = 0;
+  /// World positions and unposed nodes of every surface node (#V × 3) at the prepared state
+  /// (either may be null).
+  virtual void surface(MatX3* x, MatX3* Y) const = 0;
+  /// d(surface nodes)/dq rows (3#V × numDofs) at the prepared state, as triplets.
+  virtual void surfaceJacobian(std::vector<Triplet>& triplets) const = 0;
+};
+
+}  // namespace flsh::detail

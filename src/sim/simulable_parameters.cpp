@@ -17,6 +17,8 @@ using detail::kDofsPerBone;
 namespace {
 
 void requireSkeleton(const Simulable::Impl& m, const char* who);
+void requireDifferentiable(const Simulable::Impl& m, const std::vector<SimParameter>& groups,
+                           const char* who);
 
 void checkStateSized(const VecX& x, int n, const char* who, const char* name) {
   if (x.size() != n)
@@ -32,8 +34,39 @@ namespace {
 void requireSkeleton(const Simulable::Impl& m, const char* who) {
   if (m.soft)
     throw Error(std::string("Simulable::") + who +
-                ": parameter derivatives (the adjoint layer) are available for the articulated "
-                "skeleton only; this avatar has soft tissue (the FEM or ROM soft skeleton)");
+                ": previous-state derivatives (the adjoint's time coupling) are available for "
+                "the articulated skeleton only; this avatar has soft tissue (the FEM or ROM soft "
+                "skeleton)");
+}
+
+// The groups every term of a soft skeleton differentiates so far: those the node terms do not
+// depend on (pose and root targets, bone inertias: the bones' springs alone) and the contact
+// stiffness and collider offsets (the node contact term). The rest joints and β also move the
+// tet nodes (skinning, X̄(β), masses, materials): not written yet (issue 25).
+bool softDifferentiable(SimParameter p) {
+  switch (p) {
+    case SimParameter::PoseTargets:
+    case SimParameter::RootTranslationTarget:
+    case SimParameter::BoneInertia:
+    case SimParameter::Stiffnesses:
+    case SimParameter::ColliderOffsets:
+      return true;
+    default:
+      return false;
+  }
+}
+
+void requireDifferentiable(const Simulable::Impl& m, const std::vector<SimParameter>& groups,
+                           const char* who) {
+  if (!m.soft) return;
+  for (SimParameter p : groups) {
+    simParameterInfo(p);  // throws for a value outside the enum
+    if (!softDifferentiable(p))
+      throw Error(std::string("Simulable::") + who + ": " + simParameterInfo(p).enum_name +
+                  ": parameter derivatives of a soft-tissue avatar (the FEM or ROM soft "
+                  "skeleton) cover PoseTargets, RootTranslationTarget, BoneInertia, Stiffnesses "
+                  "and ColliderOffsets so far; the articulated skeleton has every group");
+  }
 }
 
 }  // namespace
@@ -73,7 +106,7 @@ bool askFor(const Simulable& s, const std::vector<SimParameter>& groups, int col
 std::vector<MatX> Simulable::getGradientParameterJacobians(const std::vector<SimParameter>& groups,
                                                            bool shape_surface_only) const {
   const Impl& m = *impl_;
-  requireSkeleton(m, "getGradientParameterJacobians");
+  requireDifferentiable(m, groups, "getGradientParameterJacobians");
   ParameterProducts<MatX> jacobians;
   const bool chain = askFor(*this, groups, numDofs(), jacobians) && !shape_surface_only;
   if (chain)
@@ -100,7 +133,7 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
                                                       const std::vector<SimParameter>& groups,
                                                       bool shape_surface_only) const {
   const Impl& m = *impl_;
-  requireSkeleton(m, "getGradientParameterVJPs");
+  requireDifferentiable(m, groups, "getGradientParameterVJPs");
   checkStateSized(lambda, numDofs(), "getGradientParameterVJPs", "lambda");
   ParameterProducts<VecX> products;
   const bool chain = askFor(*this, groups, 1, products) && !shape_surface_only;
@@ -124,8 +157,12 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
 std::vector<VecX> Simulable::getGradientParameterJVPs(
     const std::vector<ParameterDirection>& directions, bool shape_surface_only) const {
   const Impl& m = *impl_;
-  requireSkeleton(m, "getGradientParameterJVPs");
   std::vector<ParameterDirection> given = directions;
+  if (m.soft)
+    for (const ParameterDirection& d : directions)
+      for (const SimParameterInfo& info : simParameters())
+        if (d[size_t(info.id)] && d[size_t(info.id)]->size())
+          requireDifferentiable(m, {info.id}, "getGradientParameterJVPs");
   std::vector<VecX> chained(2 * directions.size());
   for (size_t d = 0; d < directions.size(); ++d)
     for (const SimParameterInfo& info : simParameters()) {

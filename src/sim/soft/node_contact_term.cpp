@@ -1,5 +1,7 @@
 #include "sim/soft/node_contact_term.h"
 
+#include "sim/terms/term_blocks.h"
+
 namespace flsh::detail {
 
 void NodeContactTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -9,14 +11,10 @@ void NodeContactTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet
            &c.contact.candidates);
 }
 
-double NodeContactTerm::evaluate(const std::vector<Collider>& colliders, double time,
-                                 const ContactOptions& options, VecX* g, std::vector<Triplet>* H,
-                                 int offset, bool psd, int* active,
-                                 const std::vector<int>* candidates, bool skin) const {
-  if (active) *active = 0;
-  if (colliders.empty()) return 0.0;
+const std::vector<int>& NodeContactTerm::gather(const std::vector<int>* candidates,
+                                                bool skin) const {
   const std::vector<int>& list = candidates ? *candidates : kin_.surfaceNodes();
-  if (list.empty()) return 0.0;
+  if (list.empty()) return list;
   if (kin_.reduced() && skin) kin_.skinNodes(list);  // the ROM's prepare() skins the mass nodes
   const int V = int(list.size());
   const MatX3& x = kin_.x();
@@ -26,6 +24,18 @@ double NodeContactTerm::evaluate(const std::vector<Collider>& colliders, double 
     x_.row(k) = x.row(list[k]);
     node_areas_[k] = areas_[list[k]];
   }
+  return list;
+}
+
+double NodeContactTerm::evaluate(const std::vector<Collider>& colliders, double time,
+                                 const ContactOptions& options, VecX* g, std::vector<Triplet>* H,
+                                 int offset, bool psd, int* active,
+                                 const std::vector<int>* candidates, bool skin) const {
+  if (active) *active = 0;
+  if (colliders.empty()) return 0.0;
+  const std::vector<int>& list = gather(candidates, skin);
+  if (list.empty()) return 0.0;
+  const int V = int(list.size());
   ContactOptions contact_options = options;
   contact_options.exact_hessian = !psd;
   VecX gradient = VecX::Zero(3 * V);
@@ -57,4 +67,57 @@ double NodeContactTerm::evaluate(const std::vector<Collider>& colliders, double 
   return E;
 }
 
+// g = Σ_j J_jᵀ g_x,j (J_j: node j's row block of ∂x/∂q, a SkinnedPoint with its soft DoFs).
+// g_x is linear in the contact stiffness, and depends on x − o_k for collider k: ∂g_x/∂o_k =
+// −H_x,k (the exact node Hessian against collider k alone).
+template <class Sink>
+void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
+  const bool stiffness = sink.wants(SimParameter::Stiffnesses);
+  const bool offsets = sink.wants(SimParameter::ColliderOffsets);
+  if (!(stiffness || offsets) || c.colliders.empty()) return;
+  const std::vector<int>& list = gather(&c.contact.candidates, true);
+  const int V = int(list.size());
+  if (V == 0) return;
+  VecX unit_gradient;  // g_x at unit contact stiffness
+  if (stiffness) {
+    ContactOptions unit = c.options.contact;
+    unit.stiffness = 1.0;
+    unit_gradient = VecX::Zero(3 * V);
+    colliderContactEnergy(x_, node_areas_, c.colliders, c.time, unit, &unit_gradient);
+  }
+  const int nc = int(c.colliders.size());
+  std::vector<std::vector<Mat3>> H(offsets ? size_t(nc) : 0);  // per collider, per candidate
+  for (int k = 0; k < int(H.size()); ++k) {
+    H[size_t(k)].assign(size_t(V), Mat3::Zero());
+    ContactOptions exact = c.options.contact;
+    exact.exact_hessian = true;
+    std::vector<Triplet> triplets;
+    colliderContactEnergy(x_, node_areas_, {c.colliders[size_t(k)]}, c.time, exact, nullptr,
+                          &triplets, 0, nullptr);
+    for (const Triplet& e : triplets) {
+      const int j = e.row() / 3;
+      H[size_t(k)][size_t(j)](e.row() - 3 * j, e.col() - 3 * j) += e.value();
+    }
+  }
+  SkinnedPoint point;
+  const Mat3 I3 = Mat3::Identity();
+  for (int idx = 0; idx < V; ++idx) {
+    const bool unit_touching = stiffness && !unit_gradient.segment<3>(3 * idx).isZero(0.0);
+    bool touching = false;
+    for (const std::vector<Mat3>& Hk : H) touching = touching || !Hk[size_t(idx)].isZero(0.0);
+    if (!unit_touching && !touching) continue;
+    kin_.point(list[size_t(idx)], point);
+    point.id = idx;
+    if (unit_touching)
+      sink.add(SimParameter::Stiffnesses, point, 3, unit_gradient.segment<3>(3 * idx),
+               Eigen::Matrix<double, 1, 1>::Ones());
+    for (int k = 0; k < int(H.size()); ++k)
+      if (!H[size_t(k)][size_t(idx)].isZero(0.0))
+        sink.add(SimParameter::ColliderOffsets, point, 3 * k,
+                 -H[size_t(k)][size_t(idx)].transpose(), I3);
+  }
+}
+
 }  // namespace flsh::detail
+
+template class flsh::TermWithParameterBlocks<flsh::detail::NodeContactTerm>;

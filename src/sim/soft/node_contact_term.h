@@ -1,6 +1,9 @@
 // Collider contact of a soft skeleton's surface nodes (ARCHITECTURE.md §5): the penalty energy
 // of contact_energy.h on the skinned surface nodes (the broad phase's candidates), its node
 // forces and 3 × 3 node Hessians taken to the state by the kinematics. Private to Simulable.
+// Parameter derivatives: Stiffnesses[3] (the contact stiffness, linear) and the collider
+// offsets; its dependence on the rest joints and on β (the rest nodes, areas) is not written yet
+// (issue 25), so Simulable refuses those groups for soft avatars.
 #pragma once
 
 #include <vector>
@@ -15,11 +18,15 @@
 
 namespace flsh::detail {
 
-class NodeContactTerm final : public NodeTerm<1>, public ContactTerm {
+class NodeContactTerm final : public NodeTerm<1, TermWithParameterBlocks<NodeContactTerm>>,
+                              public ContactTerm {
  public:
   /// `areas`: the surface nodes' vertex areas, m².
   NodeContactTerm(const SoftKinematics& kinematics, VecX areas)
       : NodeTerm(kinematics), areas_(std::move(areas)) {}
+  /// ∂g/∂p as local blocks (term_blocks.h), at the broad phase's candidates.
+  template <class Sink>
+  void parameterBlocks(const TermContext& c, Sink& sink) const;
 
   const char* name() const override { return "node contact"; }
   /// The energy and the touching pairs at the broad phase's candidates (skinning them first in
@@ -50,6 +57,8 @@ class NodeContactTerm final : public NodeTerm<1>, public ContactTerm {
                   bool skin = true) const;
 
  private:
+  /// The candidates' positions and areas into x_, node_areas_ (skinning them in the ROM).
+  const std::vector<int>& gather(const std::vector<int>* candidates, bool skin) const;
   VecX areas_;
   mutable MatX3 x_;
   mutable VecX node_areas_;

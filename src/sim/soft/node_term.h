@@ -1,7 +1,8 @@
 // The base of the soft skeletons' node terms (private to Simulable): each reads the soft
 // kinematics and gives its Hessian in block form (BlockHessianTerm); evaluated alone
 // (EnergyTerm::addHessian), that is its blocks as triplets between a begin and a flush of its
-// value list (List: 0 for the dynamic part, 1 for the potential part).
+// value list (List: 0 for the dynamic part, 1 for the potential part). Base: EnergyTerm, or
+// TermWithParameterBlocks<Derived> for a term with parameter derivatives (term_blocks.h).
 #pragma once
 
 #include <vector>
@@ -12,8 +13,8 @@
 
 namespace flsh::detail {
 
-template <int List>
-class NodeTerm : public EnergyTerm, public BlockHessianTerm {
+template <int List, class Base = EnergyTerm>
+class NodeTerm : public Base, public BlockHessianTerm {
  public:
   void addHessian(const TermContext& c, std::vector<Triplet>& H, int offset, bool psd) const final {
     kin_.beginList(List);

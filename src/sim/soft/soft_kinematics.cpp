@@ -10,6 +10,7 @@
 #include "flsh/core/rotation.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
+#include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
 
@@ -444,6 +445,26 @@ void SoftKinematics::flushList(int list, std::vector<Triplet>& H, int offset,
 }
 
 // ---- mapping node derivatives to the state ----------------------------------------------------
+
+void SoftKinematics::point(int j, SkinnedPoint& p) const {
+  const std::vector<Mat3>& R = *cur_R_;
+  const Vec3 Y = Y_.row(j).transpose();
+  p.count = influence_start_[j + 1] - influence_start_[j];
+  for (int a = 0; a < p.count; ++a) {
+    const Influence& inf = influences_[influence_start_[j] + a];
+    p.bone[a] = inf.bone;
+    p.weight[a] = inf.weight;
+    p.lever[a] = R[inf.bone] * (Y - joints_.row(inf.bone).transpose());
+  }
+  p.soft.clear();
+  if (node_dof_[j] < 0) return;
+  if (!reduced_) {
+    p.soft.emplace_back(bone_dofs_ + node_dof_[j], node_M_[j]);
+    return;
+  }
+  for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
+    p.soft.emplace_back(bone_dofs_ + 3 * phi_[k].first, phi_[k].second * node_M_[j]);
+}
 
 void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces,
                                VecX& g, int offset) const {

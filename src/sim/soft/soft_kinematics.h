@@ -35,6 +35,8 @@
 
 namespace flsh::detail {
 
+struct SkinnedPoint;
+
 class SoftKinematics final : public HessianValueLists, public ModelKinematics {
  public:
   struct Influence {
@@ -135,6 +137,10 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   void surface(MatX3* x, MatX3* Y) const override;
   /// d(surface nodes)/dq rows (3#V × numDofs) as triplets.
   void surfaceJacobian(std::vector<Triplet>& triplets) const override;
+  /// Node j (skinned at the prepared state) as a SkinnedPoint (sim/terms/term_blocks.h: its
+  /// bones' weights and lever arms, and its soft DoFs' blocks; id set by the caller), for the
+  /// node terms' parameter blocks.
+  void point(int j, SkinnedPoint& p) const;
 
   // ---- the chain rule to q (at the prepared state) ----
   /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g.

@@ -19,6 +19,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <utility>
 #include <vector>
 
 #include "flsh/body/smpl_skeleton.h"
@@ -35,20 +36,33 @@ inline int rotationRow(int b) { return 6 * b + 3; }
 /// A point on the skinned surface, x = Σ_a w_a (y_a + t_a) with lever arms y_a = R_a (X − J_a):
 /// ∂x/∂q_a = w_a [I, −[y_a]×], so a node-space row block of the gradient reaches bone a's six
 /// rows through C_a = (∂x/∂q_a)ᵀ = w_a [I; [y_a]×], and the point's cotangent of λ is
-/// μ = Σ_a C_aᵀ λ_a = Σ_a w_a (λt_a − [y_a]× λω_a).
+/// μ = Σ_a C_aᵀ λ_a = Σ_a w_a (λt_a − [y_a]× λω_a). A soft skeleton's node also moves with soft
+/// DoFs: `soft` lists (first DoF s, S = ∂x/∂q[s, s + 3)), 3 × 3 each (FEM: its own u_j, S = M_j;
+/// ROM: every handle of its basis row, S = φ_h M_j); they reach rows s through Sᵀ and add S λ_s
+/// to μ. Empty for the articulated skeleton.
 struct SkinnedPoint {
   int id = -1;  ///< unique within one parameterBlocks call (a sink may keep the last μ)
   int count = 0;
   int bone[kNumJoints];
   double weight[kNumJoints];
   Vec3 lever[kNumJoints];
+  std::vector<std::pair<int, Mat3>> soft;
 
   Vec3 cotangent(const VecX& lambda) const {
     Vec3 mu = Vec3::Zero();
     for (int a = 0; a < count; ++a)
       mu += weight[a] * (lambda.segment<3>(translationRow(bone[a])) -
                          lever[a].cross(lambda.segment<3>(rotationRow(bone[a]))));
+    for (const auto& [s, S] : soft) mu += S * lambda.segment<3>(s);
     return mu;
+  }
+  /// g += Σ_a C_a f (+ Sᵀ f at the soft rows): the point's node-space force f on the DoFs.
+  void addForce(const Vec3& f, VecX& g) const {
+    for (int k = 0; k < count; ++k) {
+      g.segment<3>(translationRow(bone[k])) += weight[k] * f;
+      g.segment<3>(rotationRow(bone[k])) += weight[k] * lever[k].cross(f);
+    }
+    for (const auto& [s, S] : soft) g.segment<3>(s) += S.transpose() * f;
   }
 };
 
@@ -125,11 +139,7 @@ class JacobianVectorSink {
     for (size_t d = 0; d < directions_.size(); ++d) {
       if (!given(directions_[d], p)) continue;
       const Vec3 dx = a * (b * source<B::ColsAtCompileTime>(d, p, param, b.cols()));
-      for (int k = 0; k < point.count; ++k) {
-        const int bone = point.bone[k];
-        out_[d].segment<3>(translationRow(bone)) += point.weight[k] * dx;
-        out_[d].segment<3>(rotationRow(bone)) += point.weight[k] * point.lever[k].cross(dx);
-      }
+      point.addForce(dx, out_[d]);
     }
   }
 
@@ -170,6 +180,7 @@ class JacobianSink {
       add(p, translationRow(bone), param, point.weight[k] * x);
       add(p, rotationRow(bone), param, point.weight[k] * skew(point.lever[k]) * x);
     }
+    for (const auto& [s, S] : point.soft) add(p, s, param, S.transpose() * x);
   }
 
  private:

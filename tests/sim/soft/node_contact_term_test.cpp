@@ -16,6 +16,27 @@ TEST_P(NodeContactTerm, DerivativesMatchFiniteDifferences) {
   test::expectSoftTermDerivatives(*sim, term, true, true);
 }
 
+// ∂g/∂p of the contact stiffness and the collider offsets against central differences of the
+// term's gradient under setParameter, reaching bones and soft DoFs (FEM: the node's own u; ROM:
+// its basis row's handles); the VJP and the JVP against the Jacobian; nothing for the groups
+// the term does not depend on.
+TEST_P(NodeContactTerm, ParameterProductsMatchFiniteDifferences) {
+  auto sim = test::softTermScenario(GetParam());
+  const EnergyTerm& term = test::termNamed(*sim, "node contact");
+  test::expectTermParameterProducts(*sim, term, SimParameter::ColliderOffsets, 1e-5);
+  test::expectTermParameterProducts(*sim, term, SimParameter::Stiffnesses, 1e-5, true);
+  ParameterProducts<MatX> jac;
+  const int n = sim->numDofs(), nb = sim->numBoneDofs();
+  jac[SimParameter::ColliderOffsets] =
+      MatX::Zero(n, sim->parameterSize(SimParameter::ColliderOffsets));
+  term.addParameterJacobians(sim->termContext(), jac);
+  EXPECT_GT(jac[SimParameter::ColliderOffsets].bottomRows(n - nb).norm(), 0.0)
+      << "the offsets move the soft DoFs too";
+  for (SimParameter p :
+       {SimParameter::BoneInertia, SimParameter::PoseTargets, SimParameter::RootTranslationTarget})
+    test::expectNoParameterProducts(*sim, term, p);
+}
+
 // The broad phase only drops nodes out of contact: the energy the simulable's broad phase
 // evaluated over its candidates (what the term returns for the energy alone) equals the term
 // evaluated over every surface node; without colliders it is zero.

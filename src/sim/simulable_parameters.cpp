@@ -40,11 +40,13 @@ void requireSkeleton(const Simulable::Impl& m, const char* who) {
 }
 
 // The groups every term of a soft skeleton differentiates so far: those the node terms do not
-// depend on (pose and root targets, bone inertias: the bones' springs alone) and the contact
-// stiffness and collider offsets (the node contact term). The rest joints and β also move the
-// tet nodes (skinning, X̄(β), masses, materials): not written yet (issue 25).
+// depend on (pose and root targets, bone inertias: the bones' springs alone), the contact
+// stiffness and collider offsets (the node contact term) and the rest joints (the tet nodes'
+// skinning in inertia, its prediction, gravity and contact). β also moves the rest nodes X̄(β),
+// the masses and the materials: not written yet (issue 25).
 bool softDifferentiable(SimParameter p) {
   switch (p) {
+    case SimParameter::RestJoints:
     case SimParameter::PoseTargets:
     case SimParameter::RootTranslationTarget:
     case SimParameter::BoneInertia:
@@ -64,8 +66,9 @@ void requireDifferentiable(const Simulable::Impl& m, const std::vector<SimParame
     if (!softDifferentiable(p))
       throw Error(std::string("Simulable::") + who + ": " + simParameterInfo(p).enum_name +
                   ": parameter derivatives of a soft-tissue avatar (the FEM or ROM soft "
-                  "skeleton) cover PoseTargets, RootTranslationTarget, BoneInertia, Stiffnesses "
-                  "and ColliderOffsets so far; the articulated skeleton has every group");
+                  "skeleton) cover RestJoints, PoseTargets, RootTranslationTarget, BoneInertia, "
+                  "Stiffnesses and ColliderOffsets so far; the articulated skeleton has every "
+                  "group");
   }
 }
 
@@ -283,6 +286,11 @@ void Simulable::setParameter(SimParameter p, const VecX& value) {
       m.target_t0 += root_shift;  // the root target is J_0 + trans
       m.buildSkinning();
       m.buildStiffnesses();
+      if (m.soft) {  // the tet nodes' skinning, and x̂ = 2 x(q_n) − x(q_{n−1}) with it
+        m.soft->setJoints(m.J);
+        m.soft->setContactBones(m.surface.dominated);
+        m.setSoftPrediction();
+      }
       break;
     }
     case SimParameter::BoneInertia:

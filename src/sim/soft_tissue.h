@@ -118,6 +118,8 @@ class SoftTissue final : public TwoThreadSchedule {
   void setContactBones(const std::vector<std::vector<int>>& dominated) {
     kin_.setContactBones(dominated);
   }
+  /// New rest joints (Simulable::setParameter(RestJoints)); call setPrediction after.
+  void setJoints(const MatX3& joints) { kin_.setJoints(joints); }
   /// The node contact term, as the broad phase asks it (refresh).
   const ContactTerm& contactTerm() const { return *contact_; }
   /// World positions and unposed nodes of every surface node (#V × 3) at the prepared state.

@@ -2,11 +2,16 @@
 
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/rotation.h"
+#include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
 
 NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses)
     : NodeTerm(kinematics), masses_(masses) {
+  bone_mass_.assign(size_t(kin_.numBones()), 0.0);
+  for (int j : masses_.nodes)
+    for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf)
+      bone_mass_[size_t(inf->bone)] += masses_.mass[j] * inf->weight;
   if (!kin_.reduced()) return;
   const int bones = kin_.numBones(), H = kin_.numHandles();
   std::vector<double> D(size_t(bones) * H, 0.0);
@@ -86,4 +91,18 @@ void NodalGravityTerm::reducedHessian(const Vec3& gravity, std::vector<Triplet>&
   for (const HandleBlock& hb : handle_blocks_) values[hb.slot] += hb.weight * (G * R[hb.bone]);
 }
 
+// g = Σ_j J_jᵀ f_j with the constant f_j = −m_j g: the rest joint J_b turns only the lever
+// arms of bone b's rotation rows, Σ_j w_jb [f_j]× R_b = [−g]× R_b Σ_j m_j w_jb.
+template <class Sink>
+void NodalGravityTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
+  if (!sink.wants(SimParameter::RestJoints)) return;
+  const Mat3 turn = skew(Vec3(-c.options.gravity));
+  for (int b = 0; b < kin_.numBones(); ++b)
+    if (bone_mass_[size_t(b)] != 0.0)
+      sink.add(SimParameter::RestJoints, rotationRow(b), 3 * b,
+               bone_mass_[size_t(b)] * turn * c.R[b]);
+}
+
 }  // namespace flsh::detail
+
+template class flsh::TermWithParameterBlocks<flsh::detail::NodalGravityTerm>;

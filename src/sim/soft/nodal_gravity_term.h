@@ -1,6 +1,7 @@
 // Gravity on the soft skeletons' mass nodes (ARCHITECTURE.md §4): −Σ_j m_j g · x_j(q). The
 // constant node forces −m_j g go to the state through the kinematics; their Hessian is the
-// curvature of the rotating nodes alone (no node–node blocks). Private to Simulable.
+// curvature of the rotating nodes alone (no node–node blocks). Parameter derivatives: the rest
+// joints (the lever arms of the rotation rows). Private to Simulable.
 #pragma once
 
 #include <vector>
@@ -13,7 +14,7 @@
 
 namespace flsh::detail {
 
-class NodalGravityTerm final : public NodeTerm<1> {
+class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalGravityTerm>> {
  public:
   /// Call after the kinematics' buildReducedPattern (the ROM's rotation–handle slots).
   NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses);
@@ -33,6 +34,9 @@ class NodalGravityTerm final : public NodeTerm<1> {
   /// rotation–handle blocks into value list 1).
   double evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                   FixedHessianBlocks* blocks = nullptr) const;
+  /// ∂g/∂p as local blocks (term_blocks.h).
+  template <class Sink>
+  void parameterBlocks(const TermContext& c, Sink& sink) const;
   /// ROM: the Hessian alone (the node loop of the energy is not needed).
   void reducedHessian(const Vec3& gravity, std::vector<Triplet>& H, int offset, bool psd) const;
 
@@ -45,6 +49,7 @@ class NodalGravityTerm final : public NodeTerm<1> {
     double weight;
   };
   std::vector<HandleBlock> handle_blocks_;
+  std::vector<double> bone_mass_;  // Σ_j m_j w_jb per bone over the mass nodes (constant)
   mutable std::vector<Vec3> forces_;
   mutable std::vector<Mat3> fixed_;
 };

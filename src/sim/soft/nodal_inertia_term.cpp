@@ -1,5 +1,8 @@
 #include "sim/soft/nodal_inertia_term.h"
 
+#include "flsh/core/rotation.h"
+#include "sim/terms/term_blocks.h"
+
 namespace flsh::detail {
 
 NodalInertiaTerm::NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
@@ -68,4 +71,34 @@ void NodalInertiaTerm::hessianPart(int part, std::vector<Triplet>& H, int offset
   kin_.mapHessian(nodes, nullptr, psd ? nullptr : &forces, H, offset, psd, part, nullptr, &kappa);
 }
 
+// g = Σ_j J_jᵀ f_j, f_j = κ_j (x_j − x̂_j), κ_j = m_j / h². The rest joint J_b moves x_j by
+// −w_jb R_b, the prediction x̂_j = 2 x_j(q_n) − x_j(q_{n−1}) by −w_jb (2 R_b,n − R_b,n−1), and
+// turns the lever arm of J_jᵀ's rotation rows (∂(r × f)/∂J_b = w [f]× R_b): per node and bone,
+// a rotation-row block w [f]× R_b and a node block κ · (−w (R_b − 2 R_b,n + R_b,n−1)).
+template <class Sink>
+void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
+  if (c.is_static || !sink.wants(SimParameter::RestJoints)) return;
+  const double k = 1.0 / (h_ * h_);
+  const std::vector<int>& nodes = masses_.nodes;
+  const MatX3& x = kin_.x();
+  SkinnedPoint point;
+  for (size_t idx = 0; idx < nodes.size(); ++idx) {
+    const int j = nodes[idx];
+    const double kappa = k * masses_.mass[j];
+    const Vec3 f = kappa * (x.row(j) - x_hat_.row(j)).transpose();
+    kin_.point(j, point);
+    point.id = int(idx);
+    const Mat3 turn = skew(f);
+    for (int a = 0; a < point.count; ++a) {
+      const int b = point.bone[a];
+      const double w = point.weight[a];
+      sink.add(SimParameter::RestJoints, rotationRow(b), 3 * b, w * turn * c.R[b]);
+      sink.add(SimParameter::RestJoints, point, 3 * b, kappa * Mat3::Identity(),
+               -w * (c.R[b] - 2.0 * c.R_n[b] + c.R_nm1[b]));
+    }
+  }
+}
+
 }  // namespace flsh::detail
+
+template class flsh::TermWithParameterBlocks<flsh::detail::NodalInertiaTerm>;

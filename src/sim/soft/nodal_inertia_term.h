@@ -2,7 +2,8 @@
 // the mass nodes (every tet node with its lumped mass, or the ROM's inertial cubature's nodes),
 // x̂ = 2 x(q_n) − x(q_{n−1}) with the held pose blend. The node forces and the node Hessians
 // m_j / h² I go to the state through the kinematics (its curvature of the rotating nodes in the
-// exact form). Private to Simulable.
+// exact form). Parameter derivatives: the rest joints (the nodes' skinning, in x and in x̂).
+// Private to Simulable.
 #pragma once
 
 #include <vector>
@@ -14,7 +15,7 @@
 
 namespace flsh::detail {
 
-class NodalInertiaTerm final : public NodeTerm<0> {
+class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalInertiaTerm>> {
  public:
   /// The ROM's Hessian on two threads maps this share of the mass nodes beside the potential
   /// terms (soft_tissue.cpp): hessianPart(1) maps it, hessianPart(0) the rest.
@@ -30,6 +31,10 @@ class NodalInertiaTerm final : public NodeTerm<0> {
   void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                         std::vector<FixedHessianBlocks>* blocks, int offset,
                         bool psd) const override;
+
+  /// ∂g/∂p as local blocks (term_blocks.h).
+  template <class Sink>
+  void parameterBlocks(const TermContext& c, Sink& sink) const;
 
   /// x̂ = 2 x(q_n) − x(q_{n−1}) of the mass nodes (the kinematics' u_n and u_nm1).
   void setPrediction(const BoneFrames& bones_n, const BoneFrames& bones_nm1);

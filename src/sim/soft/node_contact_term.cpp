@@ -1,5 +1,6 @@
 #include "sim/soft/node_contact_term.h"
 
+#include "flsh/core/rotation.h"
 #include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
@@ -69,12 +70,14 @@ double NodeContactTerm::evaluate(const std::vector<Collider>& colliders, double 
 
 // g = Σ_j J_jᵀ g_x,j (J_j: node j's row block of ∂x/∂q, a SkinnedPoint with its soft DoFs).
 // g_x is linear in the contact stiffness, and depends on x − o_k for collider k: ∂g_x/∂o_k =
-// −H_x,k (the exact node Hessian against collider k alone).
+// −H_x,k (the exact node Hessian against collider k alone). The rest joint J_b moves x_j by
+// −w_jb R_b and turns the lever arm of bone b's rotation rows (as the skeleton's contact).
 template <class Sink>
 void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   const bool stiffness = sink.wants(SimParameter::Stiffnesses);
   const bool offsets = sink.wants(SimParameter::ColliderOffsets);
-  if (!(stiffness || offsets) || c.colliders.empty()) return;
+  const bool joints = sink.wants(SimParameter::RestJoints);
+  if (!(stiffness || offsets || joints) || c.colliders.empty()) return;
   const std::vector<int>& list = gather(&c.contact.candidates, true);
   const int V = int(list.size());
   if (V == 0) return;
@@ -84,6 +87,21 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
     unit.stiffness = 1.0;
     unit_gradient = VecX::Zero(3 * V);
     colliderContactEnergy(x_, node_areas_, c.colliders, c.time, unit, &unit_gradient);
+  }
+  VecX gradient;              // g_x (joints)
+  std::vector<Mat3> H_total;  // the exact node Hessian against every collider (joints)
+  if (joints) {
+    ContactOptions exact = c.options.contact;
+    exact.exact_hessian = true;
+    gradient = VecX::Zero(3 * V);
+    std::vector<Triplet> triplets;
+    colliderContactEnergy(x_, node_areas_, c.colliders, c.time, exact, &gradient, &triplets, 0,
+                          nullptr);
+    H_total.assign(size_t(V), Mat3::Zero());
+    for (const Triplet& e : triplets) {
+      const int j = e.row() / 3;
+      H_total[size_t(j)](e.row() - 3 * j, e.col() - 3 * j) += e.value();
+    }
   }
   const int nc = int(c.colliders.size());
   std::vector<std::vector<Mat3>> H(offsets ? size_t(nc) : 0);  // per collider, per candidate
@@ -105,7 +123,9 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
     const bool unit_touching = stiffness && !unit_gradient.segment<3>(3 * idx).isZero(0.0);
     bool touching = false;
     for (const std::vector<Mat3>& Hk : H) touching = touching || !Hk[size_t(idx)].isZero(0.0);
-    if (!unit_touching && !touching) continue;
+    const bool joint_touching =
+        joints && !(gradient.segment<3>(3 * idx).isZero(0.0) && H_total[size_t(idx)].isZero(0.0));
+    if (!unit_touching && !touching && !joint_touching) continue;
     kin_.point(list[size_t(idx)], point);
     point.id = idx;
     if (unit_touching)
@@ -115,6 +135,17 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
       if (!H[size_t(k)][size_t(idx)].isZero(0.0))
         sink.add(SimParameter::ColliderOffsets, point, 3 * k,
                  -H[size_t(k)][size_t(idx)].transpose(), I3);
+    // J_b moves x_j by −w R_b and turns the lever arm of bone b's rotation rows.
+    if (joint_touching) {
+      const Mat3 turn = skew(Vec3(gradient.segment<3>(3 * idx)));
+      const Mat3 Ht = H_total[size_t(idx)].transpose();
+      for (int a = 0; a < point.count; ++a) {
+        const int b = point.bone[a];
+        const double w = point.weight[a];
+        sink.add(SimParameter::RestJoints, rotationRow(b), 3 * b, w * turn * c.R[b]);
+        sink.add(SimParameter::RestJoints, point, 3 * b, Ht, -w * c.R[b]);
+      }
+    }
   }
 }
 

@@ -73,6 +73,12 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   bool isSoftNode(int j) const { return node_dof_[j] >= 0; }
   const MatX3& restNodes() const { return rest_; }
   const MatX3& joints() const { return joints_; }
+  /// New rest joints J (24 × 3, m; Simulable::setParameter(RestJoints)): the next prepare()
+  /// skins again.
+  void setJoints(const MatX3& joints) {
+    joints_ = joints;
+    version_ = -1;
+  }
   /// ROM: node j's basis row as (handle, φ) pairs, sorted by handle.
   const std::pair<int, double>* basisBegin(int j) const { return phi_.data() + phi_start_[j]; }
   const std::pair<int, double>* basisEnd(int j) const { return phi_.data() + phi_start_[j + 1]; }

@@ -32,6 +32,17 @@ TEST_P(NodalGravityTerm, LiftingTheBodyCostsItsWeight) {
   EXPECT_NEAR(mass, sim->avatar().volumetricData().totalMass(), 0.05 * mass);
 }
 
+// ∂g/∂J (the lever arms of the rotation rows) against central differences of the term's
+// gradient under setParameter(RestJoints); nothing for the groups it does not depend on.
+TEST_P(NodalGravityTerm, RestJointProductsMatchFiniteDifferences) {
+  auto sim = test::softTermScenario(GetParam());
+  const EnergyTerm& term = test::termNamed(*sim, "nodal gravity");
+  test::expectTermParameterProducts(*sim, term, SimParameter::RestJoints, 1e-5);
+  for (SimParameter p : {SimParameter::Stiffnesses, SimParameter::ColliderOffsets,
+                         SimParameter::PoseTargets, SimParameter::BoneInertia})
+    test::expectNoParameterProducts(*sim, term, p);
+}
+
 INSTANTIATE_TEST_SUITE_P(Models, NodalGravityTerm,
                          ::testing::Values(SoftModel::Fem, SoftModel::Rom), test::modelName);
 

@@ -35,6 +35,18 @@ TEST_P(NodalInertiaTerm, VanishesAtThePredictionOfAUniformMotion) {
   EXPECT_LT(E, 1e-12 * moved);
 }
 
+// ∂g/∂J (the nodes' skinning at q, in the prediction x̂ = 2 x(q_n) − x(q_{n−1}), and the lever
+// arms) against central differences of the term's gradient under setParameter(RestJoints),
+// which predicts again; nothing for the groups it does not depend on.
+TEST_P(NodalInertiaTerm, RestJointProductsMatchFiniteDifferences) {
+  auto sim = test::softTermScenario(GetParam());
+  const EnergyTerm& term = test::termNamed(*sim, "nodal inertia");
+  test::expectTermParameterProducts(*sim, term, SimParameter::RestJoints, 1e-5);
+  for (SimParameter p : {SimParameter::Stiffnesses, SimParameter::ColliderOffsets,
+                         SimParameter::PoseTargets, SimParameter::BoneInertia})
+    test::expectNoParameterProducts(*sim, term, p);
+}
+
 INSTANTIATE_TEST_SUITE_P(Models, NodalInertiaTerm,
                          ::testing::Values(SoftModel::Fem, SoftModel::Rom), test::modelName);
 

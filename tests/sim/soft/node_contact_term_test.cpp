@@ -16,15 +16,16 @@ TEST_P(NodeContactTerm, DerivativesMatchFiniteDifferences) {
   test::expectSoftTermDerivatives(*sim, term, true, true);
 }
 
-// ∂g/∂p of the contact stiffness and the collider offsets against central differences of the
-// term's gradient under setParameter, reaching bones and soft DoFs (FEM: the node's own u; ROM:
-// its basis row's handles); the VJP and the JVP against the Jacobian; nothing for the groups
-// the term does not depend on.
+// ∂g/∂p of the contact stiffness, the collider offsets and the rest joints against central
+// differences of the term's gradient under setParameter, reaching bones and soft DoFs (FEM: the
+// node's own u; ROM: its basis row's handles); the VJP and the JVP against the Jacobian; nothing
+// for the groups the term does not depend on.
 TEST_P(NodeContactTerm, ParameterProductsMatchFiniteDifferences) {
   auto sim = test::softTermScenario(GetParam());
   const EnergyTerm& term = test::termNamed(*sim, "node contact");
   test::expectTermParameterProducts(*sim, term, SimParameter::ColliderOffsets, 1e-5);
   test::expectTermParameterProducts(*sim, term, SimParameter::Stiffnesses, 1e-5, true);
+  test::expectTermParameterProducts(*sim, term, SimParameter::RestJoints, 1e-5);
   ParameterProducts<MatX> jac;
   const int n = sim->numDofs(), nb = sim->numBoneDofs();
   jac[SimParameter::ColliderOffsets] =

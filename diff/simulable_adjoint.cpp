@@ -35,6 +35,12 @@ void checkSize(const VecX& v, int n, const char* who, const char* what) {
 SimulableAdjointModel::SimulableAdjointModel(std::shared_ptr<Simulable> simulable)
     : simulable_(std::move(simulable)) {
   if (!simulable_) throw InputError("SimulableAdjointModel: simulable is null");
+  if (simulable_->hasSoftTissue())
+    throw Error(
+        "SimulableAdjointModel: the simulable has soft tissue (the FEM or ROM soft skeleton); "
+        "rollout gradients through soft-tissue models are not available yet (their "
+        "previous-state and shape derivatives are being written): use the articulated "
+        "skeleton");
   if (!simulable_->options().kinematic_bones.empty())
     throw Error(
         "SimulableAdjointModel: the simulable has kinematic bones (options.kinematic_bones, " +

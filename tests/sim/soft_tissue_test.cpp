@@ -14,6 +14,7 @@
 #include "flsh/body/motion.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
+#include "flsh/diff/rollout.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/newton.h"
 #include "flsh/solve/scene.h"
@@ -417,12 +418,22 @@ TEST_P(SoftTissueModel, InvertedElementsGiveFiniteEnergies) {
   for (const Triplet& t : H) ASSERT_TRUE(std::isfinite(t.value()));
 }
 
-TEST_P(SoftTissueModel, AdjointCallsSayTheyCoverTheSkeletonOnly) {
+// The adjoint's calls a soft avatar does not have yet (issue 25) say so; the parameter groups
+// it has are checked in sim/soft/soft_parameter_derivatives_test.cpp.
+TEST_P(SoftTissueModel, AdjointCallsNotWrittenYetSaySo) {
   auto sim = movedSoftAvatar(avatar(), 18);
   const std::string msg =
-      test::messageOf<Error>([&] { sim->getGradientParameterJacobian(SimParameter::PoseTargets); });
+      test::messageOf<Error>([&] { sim->getGradientParameterJacobian(SimParameter::Shape); });
   EXPECT_NE(msg.find("skeleton"), std::string::npos) << msg;
+  const std::string previous =
+      test::messageOf<Error>([&] { sim->getGradientPreviousStateJacobian(1); });
+  EXPECT_NE(previous.find("skeleton"), std::string::npos) << previous;
   EXPECT_THROW(sim->getInitialStateRestJointsJacobian(nullptr, nullptr), Error);
+  EXPECT_GT(sim->getGradientParameterJacobian(SimParameter::PoseTargets).norm(), 0.0);
+  // A rollout is refused up front, not after its forward pass.
+  const std::string rollout =
+      test::messageOf<Error>([&] { Rollout r(std::shared_ptr<Simulable>(std::move(sim))); });
+  EXPECT_NE(rollout.find("soft-tissue"), std::string::npos) << rollout;
 }
 
 // ---- dynamics -----------------------------------------------------------------------------------

@@ -49,7 +49,9 @@ TEST(SkinnedSurface, SparseWeightsAreTheNonzeroDenseWeights) {
   for (int i = 0; i < W.rows(); ++i)
     for (int k = w.start[i]; k < w.start[i + 1]; ++k) {
       EXPECT_NE(w.entries[k].weight, 0.0);
-      if (k > w.start[i]) EXPECT_LT(w.entries[k - 1].bone, w.entries[k].bone);
+      if (k > w.start[i]) {
+        EXPECT_LT(w.entries[k - 1].bone, w.entries[k].bone);
+      }
       rebuilt(i, w.entries[k].bone) = w.entries[k].weight;
     }
   EXPECT_EQ(rebuilt, W);

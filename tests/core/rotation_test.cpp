@@ -52,7 +52,9 @@ TEST(Rotation, RodriguesOfHugeFiniteAnglesIsARotation) {
     EXPECT_LT((R * axis - axis).norm(), 1e-13) << "the axis is fixed, angle " << angle;
     // The angle: the one of |θ| as computed, here within an ulp of the stable norm's.
     const double t = theta.stableNorm();
-    if (angle <= 1e6) EXPECT_NEAR(R.trace(), 1.0 + 2.0 * std::cos(t), 1e-9) << angle;
+    if (angle <= 1e6) {
+      EXPECT_NEAR(R.trace(), 1.0 + 2.0 * std::cos(t), 1e-9) << angle;
+    }
   }
   // NaN in, NaN out: callers check (toSmplPose, Simulable::setState).
   EXPECT_FALSE(rodrigues(Vec3(std::nan(""), 0, 0)).allFinite());

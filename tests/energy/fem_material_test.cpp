@@ -478,7 +478,9 @@ TEST(TetElement, GradientAndHessianMatchFiniteDifferences) {
       const double energy = tetElasticEnergy(rest, m, u, &gradient, &hessian, false);
       const Mat3 F = tetDeformationGradient(rest, u);
       // The inverting case must exercise the inversion guard's derivatives too.
-      if (inverts) ASSERT_LT(F.determinant(), kInversionOnset);
+      if (inverts) {
+        ASSERT_LT(F.determinant(), kInversionOnset);
+      }
       EXPECT_NEAR(energy, rest.volume * psiOf(F, m), 1e-12 * energy);
       // Quantities of a 2 cm tet are small in J: tighten the absolute tolerance accordingly.
       EXPECT_TRUE(jacobianMatchesFiniteDifferences(
@@ -532,7 +534,9 @@ TEST(ReducedTetElement, IsTheTetChainedThroughTheBasis) {
       const Mat34 U = inverts ? inverting : moderate;
       const Mat3X Z = U * right;
       ASSERT_LT((Z * Phi.transpose() - U).cwiseAbs().maxCoeff(), 1e-12);
-      if (inverts) ASSERT_LT(tetDeformationGradient(rest, U).determinant(), kInversionOnset);
+      if (inverts) {
+        ASSERT_LT(tetDeformationGradient(rest, U).determinant(), kInversionOnset);
+      }
       for (const bool psd : {false, true}) {
         Vec12 g;
         Mat12 h;

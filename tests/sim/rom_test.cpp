@@ -419,7 +419,9 @@ TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
       for (size_t k = 0; k < both_blocks.size(); ++k) {
         double largest = 0.0;  // 0 for the FEM's gravity list in the PSD form
         for (const Mat3& B : part_values[k]) largest = std::max(largest, B.cwiseAbs().maxCoeff());
-        if (k < 2) ASSERT_GT(largest, 0.0) << "list " << k;
+        if (k < 2) {
+          ASSERT_GT(largest, 0.0) << "list " << k;
+        }
         for (size_t b = 0; b < part_values[k].size(); ++b) {
           const Mat3& got_block = (*both_blocks[k].values)[b];
           if (k < dynamic_lists)

@@ -539,7 +539,9 @@ TEST(ReducedData, SurfacePartitionOfUnityOption) {
     EXPECT_NEAR(B.row(pou.handles[h]).sum(), 1.0, 1e-12);
   }
   for (int j = V; j < v.numNodes(); ++j)
-    if (v.bone_of_node[j] >= 0) EXPECT_EQ(B.row(j).norm(), 0.0);
+    if (v.bone_of_node[j] >= 0) {
+      EXPECT_EQ(B.row(j).norm(), 0.0);
+    }
 }
 
 }  // namespace

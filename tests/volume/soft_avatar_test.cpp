@@ -18,6 +18,13 @@
 namespace flsh {
 namespace {
 
+SoftAvatarSettings densityAndVoxel(double density, double voxel_size) {
+  SoftAvatarSettings settings;
+  settings.density = density;
+  settings.voxel_size = voxel_size;
+  return settings;
+}
+
 using test::messageOf;
 using test::smallSyntheticBody;
 
@@ -41,12 +48,15 @@ TEST(SoftAvatar, RejectsBadConstruction) {
   nan_betas[1] = std::numeric_limits<double>::quiet_NaN();
   msg = messageOf<InputError>([&] { SoftAvatar(body, nan_betas); });
   EXPECT_NE(msg.find("NaN"), std::string::npos) << msg;
-  msg = messageOf<InputError>([&] { SoftAvatar(body, VecX::Zero(10), {0.0, 0.01}); });
+  msg =
+      messageOf<InputError>([&] { SoftAvatar(body, VecX::Zero(10), densityAndVoxel(0.0, 0.01)); });
   EXPECT_NE(msg.find("density"), std::string::npos) << msg;
-  msg = messageOf<InputError>([&] { SoftAvatar(body, VecX::Zero(10), {1000.0, 0.0}); });
+  msg = messageOf<InputError>(
+      [&] { SoftAvatar(body, VecX::Zero(10), densityAndVoxel(1000.0, 0.0)); });
   EXPECT_NE(msg.find("voxel_size"), std::string::npos) << msg;
   msg = messageOf<InputError>([&] {
-    SoftAvatar(body, VecX::Zero(10), {1000.0, std::numeric_limits<double>::infinity()});
+    SoftAvatar(body, VecX::Zero(10),
+               densityAndVoxel(1000.0, std::numeric_limits<double>::infinity()));
   });
   EXPECT_NE(msg.find("voxel_size"), std::string::npos) << msg;
   auto unfinalized = std::make_shared<BodyModel>(*body);
@@ -247,7 +257,7 @@ TEST(SoftAvatar, BetasShapeTheBody) {
 }
 
 TEST(SoftAvatar, UsesTheDensitySetting) {
-  SoftAvatar light(smallSyntheticBody(), VecX::Zero(0), {505.0, 0.01});
+  SoftAvatar light(smallSyntheticBody(), VecX::Zero(0), densityAndVoxel(505.0, 0.01));
   light.initVolumetricData();
   EXPECT_NEAR(light.totalMass(), 0.5 * meanAvatar().totalMass(), 1e-9 * light.totalMass());
 }

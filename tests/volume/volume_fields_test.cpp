@@ -264,7 +264,9 @@ TEST(BoneNodes, ExactOnABox) {
       if (bone[i] >= 0) farthest_anchor = std::max(farthest_anchor, boneDistance(i, b));
       else nearest_soft = std::min(nearest_soft, boneDistance(i, b));
     }
-    if (anchors[b] > 0) EXPECT_LE(farthest_anchor, nearest_soft) << "bone " << b;
+    if (anchors[b] > 0) {
+      EXPECT_LE(farthest_anchor, nearest_soft) << "bone " << b;
+    }
   }
   EXPECT_GT(deep_count[0] + deep_count[1], 10);
   int soft_interior = 0;

@@ -23,6 +23,8 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <list>
+#include <mutex>
 #include <numeric>
 #include <string>
 #include <vector>
@@ -377,6 +379,36 @@ SyntheticBodyBuild buildSyntheticBody(const SyntheticBodyOptions& options) {
 
 BodyModel makeSyntheticBody(const SyntheticBodyOptions& options) {
   return synthetic::buildSyntheticBody(options).model;
+}
+
+std::shared_ptr<const BodyModel> sharedSyntheticBody(const SyntheticBodyOptions& options) {
+  struct Entry {
+    SyntheticBodyOptions options;
+    std::shared_ptr<const BodyModel> body;
+  };
+  static std::mutex mutex;
+  static std::list<Entry> recent;  // most recent first, at most kKept
+  constexpr size_t kKept = 2;
+  const auto same = [&](const Entry& e) {
+    return e.options.vertices == options.vertices && e.options.height == options.height;
+  };
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    for (auto it = recent.begin(); it != recent.end(); ++it)
+      if (same(*it)) {
+        recent.splice(recent.begin(), recent, it);
+        return recent.front().body;
+      }
+  }
+  // Generated outside the lock (seconds at full size); two threads asking for the same new body
+  // at once may both generate it, and the first one kept wins.
+  auto body = std::make_shared<const BodyModel>(makeSyntheticBody(options));
+  std::lock_guard<std::mutex> lock(mutex);
+  for (const Entry& e : recent)
+    if (same(e)) return e.body;
+  recent.push_front({options, body});
+  if (recent.size() > kKept) recent.pop_back();
+  return body;
 }
 
 }  // namespace flsh

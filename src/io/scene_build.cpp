@@ -148,7 +148,7 @@ std::vector<SceneAvatar> buildSceneAvatars(const SceneSpec& scene, const SceneBu
             " vertices)...");
         SyntheticBodyOptions options;
         options.vertices = spec.synthetic_vertices;
-        body = std::make_shared<const BodyModel>(makeSyntheticBody(options));
+        body = sharedSyntheticBody(options);
       } else {
         body = std::make_shared<const BodyModel>(loadBodyModel(model));
         if (body->family != "SMPL")

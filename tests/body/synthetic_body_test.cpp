@@ -65,6 +65,27 @@ std::set<std::pair<int, int>> meshEdges(const MatX3i& F) {
   return edges;
 }
 
+// One body per option set per process: the same object again, another one for other options,
+// equal to a freshly generated body; bad options throw as makeSyntheticBody's.
+TEST(SyntheticBody, SharedBodyIsGeneratedOncePerOptions) {
+  SyntheticBodyOptions small;
+  small.vertices = 400;
+  SyntheticBodyOptions other = small;
+  other.vertices = 420;
+  const std::shared_ptr<const BodyModel> a = sharedSyntheticBody(small);
+  EXPECT_EQ(sharedSyntheticBody(small).get(), a.get());
+  const std::shared_ptr<const BodyModel> b = sharedSyntheticBody(other);
+  EXPECT_NE(b.get(), a.get());
+  EXPECT_EQ(b->numVertices(), 420);
+  EXPECT_EQ(sharedSyntheticBody(small).get(), a.get());  // both kept
+  const BodyModel fresh = makeSyntheticBody(small);
+  EXPECT_EQ((fresh.v_template - a->v_template).norm(), 0.0);
+  EXPECT_EQ((fresh.shapedirs - a->shapedirs).norm(), 0.0);
+  SyntheticBodyOptions bad;
+  bad.vertices = 10;
+  EXPECT_THROW(sharedSyntheticBody(bad), InputError);
+}
+
 TEST(SyntheticBody, RejectsBadOptions) {
   EXPECT_THROW(makeSyntheticBody({199, 1.70}), InputError);
   EXPECT_THROW(makeSyntheticBody({-5, 1.70}), InputError);

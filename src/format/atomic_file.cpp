@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -18,6 +19,26 @@ void ensureDirectory(const std::string& dir) {
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) throw FileError("cannot create directory '" + dir + "': " + ec.message());
+}
+
+int removeStaleTemporaries(const std::string& dir, double min_age_seconds) {
+  std::error_code ec;
+  fs::directory_iterator it(dir, ec), end;
+  if (ec) return 0;
+  const auto now = fs::file_time_type::clock::now();
+  int removed = 0;
+  for (; it != end; it.increment(ec)) {
+    if (ec) break;
+    const std::string name = it->path().filename().string();
+    if (name.size() < 2 || name[0] != '.' || name.find(".tmp.") == std::string::npos) continue;
+    std::error_code stat_ec;
+    if (!it->is_regular_file(stat_ec) || stat_ec) continue;
+    const auto written = fs::last_write_time(it->path(), stat_ec);
+    if (stat_ec) continue;
+    const double age = std::chrono::duration<double>(now - written).count();
+    if (age > min_age_seconds && fs::remove(it->path(), stat_ec) && !stat_ec) ++removed;
+  }
+  return removed;
 }
 
 AtomicPath::AtomicPath(std::string target) : target_(std::move(target)) {

@@ -112,6 +112,10 @@ std::optional<io::NpzFile> AvatarCache::load(const std::string& key, std::string
   }
 }
 
+namespace {
+constexpr double kStaleTemporarySeconds = 3600.0;
+}  // namespace
+
 void AvatarCache::store(const std::string& key, const io::NpzWriter& arrays) const {
   const std::string path = pathFor(key);
   for (const auto& [name, array] : arrays.arrays())
@@ -123,6 +127,9 @@ void AvatarCache::store(const std::string& key, const io::NpzWriter& arrays) con
   out.addString("__key__", key);
   out.addString("__checksum__", npzContentChecksum(arrays.arrays()));
   io::ensureDirectory(dir_);
+  // A writer killed before its rename leaves its temporary file behind (e.g. a batch worker);
+  // an hour is far longer than any entry takes to write.
+  io::removeStaleTemporaries(dir_, kStaleTemporarySeconds);
   out.save(path);
 }
 

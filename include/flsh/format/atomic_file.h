@@ -35,4 +35,10 @@ void writeFileAtomically(const std::string& path, const std::function<void(std::
 /// Creates `dir` and its parents if missing (throws FileError on failure).
 void ensureDirectory(const std::string& dir);
 
+/// Removes the temporary files AtomicPath leaves in `dir` when its process is killed before
+/// commit (".NAME.tmp.PID.N") that were last written more than `min_age_seconds` ago: on a
+/// folder shared by several machines a process id says nothing, an age does. Entries it cannot
+/// remove are left alone. Returns how many it removed.
+int removeStaleTemporaries(const std::string& dir, double min_age_seconds);
+
 }  // namespace flsh::io

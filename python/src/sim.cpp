@@ -215,9 +215,15 @@ void bind_sim(py::module_& m) {
   sim.def("getState", [](const S& s) { return to_numpy(s.getState()); },
           "(numDofs,) state: per bone [t_b (m, 3), r_b rotation vector (rad, 3)].");
   alias("getState", "get_state");
-  sim.def("setState",
-          [](S& s, const py::object& q) { s.setState(dof_vector(s, q, "q")); }, py::arg("q"),
-          "Sets the state q (numDofs,) in getState's layout.");
+  sim.def(
+      "setState", [](S& s, const py::object& q) { s.setState(dof_vector(s, q, "q")); },
+      py::arg("q"),
+      "Sets the state q (numDofs,) in getState's layout. With soft tissue, the pose blend "
+      "shapes stay those held at the last preUpdate (the previous converged pose, as during "
+      "a step): on a fresh simulable, get_vertices() after set_state differs from the "
+      "surface a simulation reached there by its pose blend (mm), while "
+      "get_soft_tissue_displacements() does not depend on it (C++ restoreStep puts a "
+      "step's held pose blend back too).");
   alias("setState", "set_state");
   sim.def("updateState",
           [](S& s, const py::object& dq) { s.updateState(dof_vector(s, dq, "dq")); },
@@ -259,16 +265,18 @@ void bind_sim(py::module_& m) {
           },
           "(75, numDofs) d(pose (72), trans (3)) / dq.");
   alias("getStateJacobian", "get_state_jacobian");
-  sim.def("getVertices",
-          [](const S& s) {
-            MatX3 V;
-            {
-              py::gil_scoped_release release;
-              V = s.getVertices();
-            }
-            return to_numpy(V);
-          },
-          "(V, 3) mesh vertices: SMPL skinning of getPose()/getTrans(), m.");
+  sim.def(
+      "getVertices",
+      [](const S& s) {
+        MatX3 V;
+        {
+          py::gil_scoped_release release;
+          V = s.getVertices();
+        }
+        return to_numpy(V);
+      },
+      "(V, 3) mesh vertices, m: SMPL skinning of getPose()/getTrans(); with soft tissue the "
+      "simulated surface get_nodes() (held pose blend and displacements included).");
   alias("getVertices", "get_vertices");
   sim.def("getNodes", [](const S& s) { return to_numpy(s.getNodes()); },
           "(V, 3) simulation nodes (linear blend skinning of the bone transforms), m.");

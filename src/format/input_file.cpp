@@ -64,7 +64,8 @@ void readInto(const std::string& path, const std::string& what, Buffer& out) {
   out.resize(filled);
 }
 
-/// Line and column (1-based) of the 1-based byte position `byte` of `text`, for editors.
+}  // namespace
+
 std::string lineColumn(const std::string& text, size_t byte) {
   byte = std::min(byte, text.size());
   size_t line = 1, column = 1;
@@ -78,8 +79,6 @@ std::string lineColumn(const std::string& text, size_t byte) {
   }
   return "line " + std::to_string(line) + ", column " + std::to_string(column);
 }
-
-}  // namespace
 
 std::string nonRegularFileKind(const std::string& path) {
   struct stat st;

@@ -59,21 +59,6 @@ std::string joinNames(const std::vector<std::string>& names) {
   return text;
 }
 
-/// Line and column (1-based) of byte `byte` of `text`, for editors.
-std::string lineColumn(const std::string& text, size_t byte) {
-  byte = std::min(byte, text.size());
-  size_t line = 1, column = 1;
-  for (size_t k = 0; k + 1 < byte; ++k) {
-    if (text[k] == '\n') {
-      ++line;
-      column = 1;
-    } else {
-      ++column;
-    }
-  }
-  return "line " + std::to_string(line) + ", column " + std::to_string(column);
-}
-
 /// Appends compact JSON text of `value` to `out` (as dump() writes it) but stops adding
 /// elements, and cuts strings, once `out` holds `limit` characters: a message never renders a
 /// whole value of arbitrary size.
@@ -736,7 +721,7 @@ SceneSpec parseSceneJson(const std::string& text, const std::string& origin,
     root = json::parse(text);
   } catch (const json::parse_error& e) {
     throw InputError(origin + ": malformed JSON at byte " + std::to_string(e.byte) + " (" +
-                     lineColumn(text, e.byte) + "): " + e.what());
+                     io::lineColumn(text, e.byte) + "): " + e.what());
   } catch (const json::exception& e) {
     // E.g. a number too large for a double (out_of_range.406).
     throw InputError(origin + ": invalid JSON: " + e.what());

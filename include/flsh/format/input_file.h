@@ -27,6 +27,10 @@ std::vector<uint8_t> readRegularFileBytes(const std::string& path, const std::st
 /// As readRegularFileBytes, as text.
 std::string readRegularFileText(const std::string& path, const std::string& what);
 
+/// "line L, column C" (1-based) of the 1-based byte position `byte` of `text`, for editors
+/// (clamped to the text's end).
+std::string lineColumn(const std::string& text, size_t byte);
+
 /// How deep JSON input files may nest arrays and objects. flsh's files nest a few levels; 64 is
 /// far beyond any of them and far below what overflows a stack: nlohmann's dump() and copies
 /// recurse once per level, and 200 000 nested '[' crashed the readers.

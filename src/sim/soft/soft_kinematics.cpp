@@ -50,6 +50,9 @@ SoftKinematics::SoftKinematics(const SoftAvatar& avatar, const MatX3& joints,
                      ", expected " + std::to_string(3 * n) + " × " +
                      std::to_string(9 * (num_bones_ - 1)));
   blend_ = MatX3::Zero(n, 3);
+  // ROM: every node's offsets from posedirs until setMassNodes gives some a contiguous slot.
+  blend_stamp_.assign(n, 0);
+  blend_slot_.assign(n, -1);
 
   // Soft-tissue nodes and their DoF offsets.
   node_dof_.assign(n, -1);
@@ -231,6 +234,43 @@ void SoftKinematics::setPoseBlend(const std::vector<Mat3>& R) {
   }
   const VecX offsets = (*posedirs_) * feature_;  // row 3j + c
   blend_ = Eigen::Map<const MatX3>(offsets.data(), numNodes(), 3);
+}
+
+// dL_b = R_pᵀ ([δω_b]× − [δω_p]×) R_b for L_b = R_pᵀ R_b, the feature block of bone b ≥ 1.
+void SoftKinematics::poseBlendTangent(const std::vector<Mat3>& R, const VecX& delta_omega,
+                                      const std::vector<int>& nodes, MatX3& dP) const {
+  VecX d_feature(feature_.size());
+  for (int b = 1; b < num_bones_; ++b) {
+    const int p = parents_[b];
+    const Mat3 dL = R[p].transpose() *
+                    (skew(Vec3(delta_omega.segment<3>(3 * b) - delta_omega.segment<3>(3 * p)))) *
+                    R[b];
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) d_feature[9 * (b - 1) + 3 * r + c] = dL(r, c);
+  }
+  dP.resize(Eigen::Index(nodes.size()), 3);
+  for (size_t k = 0; k < nodes.size(); ++k)
+    dP.row(Eigen::Index(k)) = (posedirs_->middleRows<3>(3 * nodes[k]) * d_feature).transpose();
+}
+
+// ⟨L̄_b, R_pᵀ [w]× R_b⟩ = ⟨A, [w]×⟩ = w · vee(A − Aᵀ) with A = R_p L̄_b R_bᵀ: +vee to bone b,
+// −vee to its parent.
+void SoftKinematics::poseBlendCotangent(const std::vector<Mat3>& R, const std::vector<int>& nodes,
+                                        const std::vector<Vec3>& mu,
+                                        VecX& rotation_cotangent) const {
+  VecX feature_bar = VecX::Zero(feature_.size());
+  for (size_t k = 0; k < nodes.size(); ++k)
+    feature_bar.noalias() += posedirs_->middleRows<3>(3 * nodes[k]).transpose() * mu[k];
+  for (int b = 1; b < num_bones_; ++b) {
+    const int p = parents_[b];
+    Mat3 L_bar;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) L_bar(r, c) = feature_bar[9 * (b - 1) + 3 * r + c];
+    const Mat3 A = R[p] * L_bar * R[b].transpose();
+    const Vec3 v(A(2, 1) - A(1, 2), A(0, 2) - A(2, 0), A(1, 0) - A(0, 1));
+    rotation_cotangent.segment<3>(3 * b) += v;
+    rotation_cotangent.segment<3>(3 * p) -= v;
+  }
 }
 
 Vec3 SoftKinematics::blendOf(int j) const {

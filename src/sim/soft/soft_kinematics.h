@@ -118,6 +118,15 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   void setPoseBlend(const std::vector<Mat3>& R);
   const MatX3& poseBlend() const;  ///< every node's (evaluates the missing ones)
   void setPoseBlendOffsets(const MatX3& offsets);
+  /// Derivatives of the pose blend offsets P_j = posedirs_j · feature(R) in the rotations R it
+  /// was set from (the increment chart R_b ← exp([δω_b]×) R_b; feature: R_pᵀ R_b − I per bone
+  /// b ≥ 1), for the adjoint (the held pose blend is a function of q_n). Tangent: δP_j of
+  /// `nodes` (rows in their order) for δω (3 per bone). Cotangent: ADDS Σ_j (∂P_j/∂ω)ᵀ μ_j
+  /// (μ: a 3-vector per listed node) into rotation_cotangent (3 per bone).
+  void poseBlendTangent(const std::vector<Mat3>& R, const VecX& delta_omega,
+                        const std::vector<int>& nodes, MatX3& dP) const;
+  void poseBlendCotangent(const std::vector<Mat3>& R, const std::vector<int>& nodes,
+                          const std::vector<Vec3>& mu, VecX& rotation_cotangent) const;
   /// ‖posedirs rows of surface node i‖_F: ‖P_i‖ ≤ blendBound(i) · poseFeatureNorm().
   double blendBound(int i) const { return blend_bound_[i]; }
   double poseFeatureNorm() const { return feature_.norm(); }

@@ -24,11 +24,14 @@ TEST_P(SoftParameterDerivatives, SupportedGroupsMatchFiniteDifferences) {
   auto sim = test::softTermScenario(GetParam());
   const int n = sim->numDofs();
   const VecX q0 = sim->getState();
-  for (auto [p, relative] :
-       {std::pair{SimParameter::PoseTargets, false},
+  for (const auto& [group, relative_scale] :
+       {std::pair{SimParameter::RestJoints, false}, std::pair{SimParameter::PoseTargets, false},
         std::pair{SimParameter::RootTranslationTarget, false},
         std::pair{SimParameter::BoneInertia, true}, std::pair{SimParameter::Stiffnesses, true},
         std::pair{SimParameter::ColliderOffsets, false}}) {
+    // Copies: a lambda may not capture a structured binding before C++20 (clang rejects it).
+    const SimParameter p = group;
+    const bool relative = relative_scale;
     SCOPED_TRACE(simParameterInfo(p).name);
     const VecX p0 = sim->getParameter(p);
     VecX scale = relative ? VecX(p0.cwiseAbs()) : VecX::Ones(p0.size());

@@ -72,7 +72,6 @@ struct Simulable::Impl {
   // The candidates are the vertices dominated by bones near colliders (broadPhase).
   struct ContactCache : SurfaceContactState {
     long version = -1;
-    std::vector<ContactPoint> points;
   };
   mutable ContactCache contact;
   // Scratch of getHessianTripletVector: the ROM's inertia and gravity triplets, summed on two
@@ -98,8 +97,6 @@ struct Simulable::Impl {
   /// Prepares the kinematics at the current state (cached by state_version).
   void prepare() const { kinematics->prepare(state_version, frames(q)); }
   detail::BoneFrames frames(const detail::BoneStates& s) const { return {s.R, s.t}; }
-  // Node positions of the current state (soft tissue only).
-  void prepareSoft() const { soft->prepare(state_version, frames(q)); }
   void setSoftPrediction() { soft->setPrediction(frames(q_n), frames(q_nm1)); }
 
   void validateOptions() const;
@@ -111,10 +108,6 @@ struct Simulable::Impl {
   /// Surface vertices that may touch a collider (see ensureContact); `extra_margin`: per bone,
   /// added to its bound.
   void broadPhase(const double* extra_margin, std::vector<int>& candidates) const;
-  double contactEnergy() const {
-    ensureContact();
-    return contact.energy;
-  }
 
   // ---- energy terms (energy_term.h) ----
   // The articulated skeleton's energy is the sum of these terms; with soft tissue the bones

@@ -124,7 +124,7 @@ MatX3 Simulable::getVolumeNodes() const {
   const Impl& m = *impl_;
   if (!m.soft) return getNodes();
   if (!m.soft->reduced()) {
-    m.prepareSoft();
+    m.prepare();
     return m.soft->currentPositions();
   }
   MatX3 x;  // the ROM skins only the nodes its energies read

@@ -154,4 +154,19 @@ double vertexCapsulePenalty(const Vec3& x, const Vec3& a, const Vec3& b, double 
   return 0.5 * stiffness_area * d * d;
 }
 
+double colliderContactBlocks(const Eigen::Ref<const MatX3>& X, const Eigen::Ref<const VecX>& areas,
+                             const std::vector<Collider>& colliders, double t,
+                             const ContactOptions& options, VecX* gradient,
+                             std::vector<Mat3>& blocks, std::vector<ContactPoint>* active) {
+  std::vector<Triplet> triplets;
+  const double E =
+      colliderContactEnergy(X, areas, colliders, t, options, gradient, &triplets, 0, active);
+  blocks.assign(size_t(X.rows()), Mat3::Zero());
+  for (const Triplet& e : triplets) {
+    const int i = e.row() / 3;
+    blocks[size_t(i)](e.row() - 3 * i, e.col() - 3 * i) += e.value();
+  }
+  return E;
+}
+
 }  // namespace flsh

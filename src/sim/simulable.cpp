@@ -528,7 +528,7 @@ void Simulable::restoreStep(const SimulableStep& s) {
   if (m.soft) {
     const Eigen::Index nu = m.soft->numSoftDofs();
     if (s.u.size() != nu || s.u_n.size() != nu || s.u_nm1.size() != nu ||
-        s.pose_blend.rows() != m.soft->numNodes())
+        (s.pose_blend.rows() != m.soft->numNodes() && s.pose_blend.rows() != 0))
       throw InputError("Simulable::restoreStep: the snapshot's soft-tissue displacements have " +
                        std::to_string(s.u.size()) + " values, expected " + std::to_string(nu));
   }
@@ -592,7 +592,10 @@ void Simulable::restoreStep(const SimulableStep& s) {
     m.soft->u = s.u;
     m.soft->u_n = s.u_n;
     m.soft->u_nm1 = s.u_nm1;
-    m.soft->setPoseBlendOffsets(s.pose_blend);
+    if (s.pose_blend.rows())
+      m.soft->setPoseBlendOffsets(s.pose_blend);
+    else
+      m.soft->setPoseBlend(m.q_n.R);  // held from q_n, as preUpdate holds it
     m.setSoftPrediction();
   }
   m.touch();
@@ -603,11 +606,7 @@ void Simulable::restoreStep(const SimulableStep& s) {
 // (rest pose: t_b = J_b), velocity (t(frame 1) − t(frame 0))·fps.
 void Simulable::getInitialStateRestJointsJacobian(MatX* state_jacobian,
                                                   MatX* velocity_jacobian) const {
-  const Impl& m = *impl_;
-  if (m.soft)
-    throw Error(
-        "Simulable::getInitialStateRestJointsJacobian: available for the articulated skeleton "
-        "only (the adjoint layer does not cover the soft-tissue models, FEM or ROM)");
+  const Impl& m = *impl_;  // soft tissue starts at rest (u = 0, no velocity): zero rows
   const int nb = m.num_bones;
   auto translationJacobian = [&](const std::vector<Mat3>& R) {
     MatX T = MatX::Zero(3 * nb, 3 * nb);

@@ -16,7 +16,6 @@ using detail::kDofsPerBone;
 
 namespace {
 
-void requireSkeleton(const Simulable::Impl& m, const char* who);
 void requireDifferentiable(const Simulable::Impl& m, const std::vector<SimParameter>& groups,
                            const char* who);
 
@@ -30,14 +29,6 @@ void checkStateSized(const VecX& x, int n, const char* who, const char* name) {
 }  // namespace
 
 namespace {
-
-void requireSkeleton(const Simulable::Impl& m, const char* who) {
-  if (m.soft)
-    throw Error(std::string("Simulable::") + who +
-                ": previous-state derivatives (the adjoint's time coupling) are available for "
-                "the articulated skeleton only; this avatar has soft tissue (the FEM or ROM soft "
-                "skeleton)");
-}
 
 // The groups every term of a soft skeleton differentiates so far: those the node terms do not
 // depend on (pose and root targets, bone inertias: the bones' springs alone), the contact
@@ -197,13 +188,26 @@ std::vector<VecX> Simulable::getGradientParameterJVPs(
   return out;
 }
 
+// The inertia term's blocks (the skeleton's 6 × 6 per bone; the soft skeletons' prediction
+// x̂ = 2 x(q_n) − x(q_{n−1})) and, with soft tissue, the pose blend held from q_n's rotations,
+// which moves the node terms' gradients (SoftTissue::addPoseBlendProducts): also when static.
 MatX Simulable::getGradientPreviousStateJacobian(int which) const {
   const Impl& m = *impl_;
-  requireSkeleton(m, "getGradientPreviousStateJacobian");
   if (which != 1 && which != 2)
     throw InputError("Simulable::getGradientPreviousStateJacobian: which = " +
                      std::to_string(which) + ", expected 1 (q_n) or 2 (q_{n-1})");
-  MatX D = MatX::Zero(numDofs(), numDofs());
+  const int n = numDofs();
+  MatX D = MatX::Zero(n, n);
+  if (m.soft) {  // columns of the tangent: n products (small models, tests)
+    const VecX zero = VecX::Zero(n);
+    VecX unit = zero;
+    for (int col = 0; col < n; ++col) {
+      unit[col] = 1.0;
+      D.col(col) = getGradientPreviousStatesJVP(which == 1 ? unit : zero, which == 2 ? unit : zero);
+      unit[col] = 0.0;
+    }
+    return D;
+  }
   const TermContext c = m.context();
   for (const EnergyTerm* term : m.terms)
     if (term->dependsOnPreviousStates()) term->addPreviousStateJacobian(c, which, D);
@@ -212,24 +216,26 @@ MatX Simulable::getGradientPreviousStateJacobian(int which) const {
 
 void Simulable::getGradientPreviousStatesVJP(const VecX& lambda, VecX* a_n, VecX* a_nm1) const {
   const Impl& m = *impl_;
-  requireSkeleton(m, "getGradientPreviousStatesVJP");
   checkStateSized(lambda, numDofs(), "getGradientPreviousStatesVJP", "lambda");
   if (a_n) a_n->setZero(lambda.size());
   if (a_nm1) a_nm1->setZero(lambda.size());
+  if (m.soft) m.ensureContact();
   const TermContext c = m.context();
   for (const EnergyTerm* term : m.terms)
     if (term->dependsOnPreviousStates()) term->addPreviousStatesProducts(c, lambda, a_n, a_nm1);
+  if (m.soft && a_n) m.soft->addPoseBlendProducts(c, lambda, *a_n);
 }
 
 VecX Simulable::getGradientPreviousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const {
   const Impl& m = *impl_;
-  requireSkeleton(m, "getGradientPreviousStatesJVP");
   checkStateSized(dq_n, numDofs(), "getGradientPreviousStatesJVP", "dq_n");
   checkStateSized(dq_nm1, numDofs(), "getGradientPreviousStatesJVP", "dq_nm1");
   VecX out = VecX::Zero(dq_n.size());
+  if (m.soft) m.ensureContact();
   const TermContext c = m.context();
   for (const EnergyTerm* term : m.terms)
     if (term->dependsOnPreviousStates()) term->addPreviousStatesTangent(c, dq_n, dq_nm1, out);
+  if (m.soft) m.soft->addPoseBlendTangent(c, dq_n, out);
   return out;
 }
 

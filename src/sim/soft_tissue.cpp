@@ -7,6 +7,7 @@
 #include "flsh/core/error.h"
 #include "sim/soft/fem_elasticity_term.h"
 #include "sim/soft/on_two_threads.h"
+#include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
 
@@ -41,6 +42,43 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
   inertia_ = std::make_unique<NodalInertiaTerm>(kin_, masses_, time_step);
   gravity_ = std::make_unique<NodalGravityTerm>(kin_, masses_);
   contact_ = std::make_unique<NodeContactTerm>(kin_, avatar.vertexAreas());
+}
+
+void SoftTissue::addPoseBlendProducts(const TermContext& c, const VecX& lambda, VecX& a_n) const {
+  MatX3 node_cotangent = MatX3::Zero(numNodes(), 3);
+  for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
+    term->addNodeOffsetProducts(c, lambda, node_cotangent);
+  std::vector<int> nodes;
+  std::vector<Vec3> mu;
+  for (int j = 0; j < numNodes(); ++j)
+    if (!node_cotangent.row(j).isZero(0.0)) {
+      nodes.push_back(j);
+      mu.push_back(node_cotangent.row(j).transpose());
+    }
+  VecX rotations = VecX::Zero(3 * kin_.numBones());
+  kin_.poseBlendCotangent(c.R_n, nodes, mu, rotations);
+  for (int b = 0; b < kin_.numBones(); ++b)
+    a_n.segment<3>(rotationRow(b)) += rotations.segment<3>(3 * b);
+}
+
+void SoftTissue::addPoseBlendTangent(const TermContext& c, const VecX& dq_n, VecX& out) const {
+  VecX rotations(3 * kin_.numBones());
+  for (int b = 0; b < kin_.numBones(); ++b)
+    rotations.segment<3>(3 * b) = dq_n.segment<3>(rotationRow(b));
+  if (rotations.isZero(0.0)) return;
+  // The nodes the terms read: the mass nodes and contact's candidates.
+  std::vector<char> read(size_t(numNodes()), 0);
+  for (int j : masses_.nodes) read[size_t(j)] = 1;
+  for (int j : c.contact.candidates) read[size_t(j)] = 1;
+  std::vector<int> nodes;
+  for (int j = 0; j < numNodes(); ++j)
+    if (read[size_t(j)]) nodes.push_back(j);
+  MatX3 dP;
+  kin_.poseBlendTangent(c.R_n, rotations, nodes, dP);
+  MatX3 dY = MatX3::Zero(numNodes(), 3);
+  for (size_t k = 0; k < nodes.size(); ++k) dY.row(nodes[k]) = dP.row(Eigen::Index(k));
+  for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
+    term->addNodeOffsetTangent(c, dY, out);
 }
 
 std::vector<const EnergyTerm*> SoftTissue::terms() const {

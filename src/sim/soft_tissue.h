@@ -113,6 +113,16 @@ class SoftTissue final : public TwoThreadSchedule {
                        std::vector<Triplet>& H_potential, int offset, bool psd,
                        const std::function<void()>& potential_first) const;
 
+  // ---- the held pose blend's share of the previous-state derivatives (the adjoint) ----
+  // P = P(R_n) moves every node term's gradient through Y (node_offset_derivatives.h: inertia,
+  // with its prediction, gravity and contact), chained to q_n's rotation increments by the
+  // kinematics (poseBlendTangent / poseBlendCotangent). The inertia's own dependence on q_n and
+  // q_{n−1} through x̂ is the term's (EnergyTerm::addPreviousStatesProducts).
+  /// ADDS (∂g/∂ω_n)ᵀ λ into a_n's rotation rows (λ, a_n: the simulable's own DoFs).
+  void addPoseBlendProducts(const TermContext& c, const VecX& lambda, VecX& a_n) const;
+  /// ADDS ∂g/∂ω_n δω_n (δω_n: dq_n's rotation entries) into out.
+  void addPoseBlendTangent(const TermContext& c, const VecX& dq_n, VecX& out) const;
+
   /// The contact broad phase's margins (SoftKinematics::contactMargins) from the surface nodes
   /// each bone dominates.
   void setContactBones(const std::vector<std::vector<int>>& dominated) {
@@ -128,6 +138,9 @@ class SoftTissue final : public TwoThreadSchedule {
   void surfaceJacobian(std::vector<Triplet>& triplets) const { kin_.surfaceJacobian(triplets); }
 
  private:
+  std::vector<const NodeOffsetDerivatives*> nodeOffsetTerms() const {
+    return {inertia_.get(), gravity_.get(), contact_.get()};
+  }
   NodeMasses masses_;
   std::unique_ptr<NodalInertiaTerm> inertia_;
   std::unique_ptr<NodalGravityTerm> gravity_;

@@ -33,6 +33,16 @@ double colliderContactEnergy(const Eigen::Ref<const MatX3>& X, const Eigen::Ref<
                              std::vector<Triplet>* hessian = nullptr, int offset = 0,
                              std::vector<ContactPoint>* active = nullptr);
 
+/// The same energy with its gradient (optional, ADDED as above) and each point's 3 × 3 Hessian
+/// block (`blocks` resized to #X; zero where a point touches nothing; exact or Gauss–Newton as
+/// `options` says): the energy couples a point with itself only, so this is the whole Hessian,
+/// in the form kinematics that map per-point forces and blocks to a state want.
+double colliderContactBlocks(const Eigen::Ref<const MatX3>& X, const Eigen::Ref<const VecX>& areas,
+                             const std::vector<Collider>& colliders, double t,
+                             const ContactOptions& options, VecX* gradient,
+                             std::vector<Mat3>& blocks,
+                             std::vector<ContactPoint>* active = nullptr);
+
 /// Penalty of one vertex against one capsule (a, b, r) with weight k·area: value and its
 /// derivatives w.r.t. (x, a, b). Returns 0 (and zero derivatives) when not penetrating.
 double vertexCapsulePenalty(const Vec3& x, const Vec3& a, const Vec3& b, double r,

@@ -58,7 +58,8 @@ struct SimulableStep {
   std::vector<Collider> colliders;  ///< with their paths
   bool is_static = false;
   /// Soft tissue only (empty otherwise): displacements of q, q_n, q_{n−1} (3 per soft node, m)
-  /// and the held pose blend offsets (#N × 3, m).
+  /// and the held pose blend offsets (#N × 3, m). restoreStep with an empty pose_blend (0 rows)
+  /// holds it from R_n, as preUpdate does (e.g. after changing q_n in a snapshot).
   VecX u, u_n, u_nm1;
   MatX3 pose_blend;
 };
@@ -269,8 +270,11 @@ class Simulable {
   std::vector<MatX> getGradientParameterJacobians(const std::vector<SimParameter>& groups,
                                                   bool shape_surface_only = false) const;
   /// ∂g/∂q_n (which = 1) or ∂g/∂q_{n−1} (which = 2): numDofs × numDofs, with respect to
-  /// increments of that previous state in the same chart (only the inertia term depends on
-  /// them; zero when static). Does not change the state.
+  /// increments of that previous state in the same chart. The articulated skeleton: the inertia
+  /// term alone (zero when static). Soft tissue: the nodal inertia's prediction x̂ (bones and
+  /// soft state of both), and the pose blend offsets held from q_n's rotations, which move the
+  /// nodes of inertia, gravity and contact (also when static); formed from numDofs tangents
+  /// (small models and tests; the adjoint uses the products below). Does not change the state.
   MatX getGradientPreviousStateJacobian(int which) const;
   /// Vector–Jacobian products (∂g/∂p)ᵀ λ for several groups (λ: numDofs), one vector of
   /// parameterSize(p) per entry of `groups`, without forming the matrices (the adjoint's reverse
@@ -289,8 +293,9 @@ class Simulable {
   /// state.
   std::vector<VecX> getGradientParameterJVPs(const std::vector<ParameterDirection>& directions,
                                              bool shape_surface_only = false) const;
-  /// (∂g/∂q_n)ᵀ λ and (∂g/∂q_{n−1})ᵀ λ (numDofs each; either pointer may be null) from the
-  /// per-bone 6 × 6 inertia blocks, and the tangent ∂g/∂q_n dq_n + ∂g/∂q_{n−1} dq_{n−1}.
+  /// (∂g/∂q_n)ᵀ λ and (∂g/∂q_{n−1})ᵀ λ (numDofs each; either pointer may be null), and the
+  /// tangent ∂g/∂q_n dq_n + ∂g/∂q_{n−1} dq_{n−1}, without forming the matrices (the skeleton:
+  /// per-bone 6 × 6 inertia blocks; soft tissue: per node, and the held pose blend's chain).
   void getGradientPreviousStatesVJP(const VecX& lambda, VecX* a_n, VecX* a_nm1) const;
   VecX getGradientPreviousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const;
 

@@ -2,6 +2,7 @@
 
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/rotation.h"
+#include "sim/soft/node_offset_blocks.h"
 #include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
@@ -103,6 +104,17 @@ void NodalGravityTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
                bone_mass_[size_t(b)] * turn * c.R[b]);
 }
 
+// The constant forces f_j = −m_j g do not move with Y_j; the lever arms do: −w_jb [f_j]× R_b
+// per influence (the rest joints' blocks with the opposite sign, node by node).
+template <class Sink>
+void NodalGravityTerm::nodeOffsetBlocks(const TermContext& c, Sink& sink) const {
+  const Mat3 turn = skew(Vec3(c.options.gravity));  // −[f_j]× / m_j
+  for (int j : masses_.nodes)
+    for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf)
+      sink.addRotation(inf->bone, j, (masses_.mass[j] * inf->weight) * turn * c.R[inf->bone]);
+}
+
 }  // namespace flsh::detail
 
 template class flsh::TermWithParameterBlocks<flsh::detail::NodalGravityTerm>;
+template class flsh::detail::WithNodeOffsetBlocks<flsh::detail::NodalGravityTerm>;

@@ -1,7 +1,8 @@
 // Gravity on the soft skeletons' mass nodes (ARCHITECTURE.md §4): −Σ_j m_j g · x_j(q). The
 // constant node forces −m_j g go to the state through the kinematics; their Hessian is the
 // curvature of the rotating nodes alone (no node–node blocks). Parameter derivatives: the rest
-// joints (the lever arms of the rotation rows). Private to Simulable.
+// joints and the nodes' unposed positions (node_offset_derivatives.h), both through the lever
+// arms of the rotation rows. Private to Simulable.
 #pragma once
 
 #include <vector>
@@ -9,12 +10,14 @@
 #include "flsh/sim/energy_term.h"
 #include "sim/block_hessian_term.h"
 #include "sim/soft/node_masses.h"
+#include "sim/soft/node_offset_derivatives.h"
 #include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
-class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalGravityTerm>> {
+class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalGravityTerm>>,
+                               public WithNodeOffsetBlocks<NodalGravityTerm> {
  public:
   /// Call after the kinematics' buildReducedPattern (the ROM's rotation–handle slots).
   NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses);
@@ -37,6 +40,9 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
   /// ∂g/∂p as local blocks (term_blocks.h).
   template <class Sink>
   void parameterBlocks(const TermContext& c, Sink& sink) const;
+  /// ∂g/∂Y as local blocks (node_offset_blocks.h).
+  template <class Sink>
+  void nodeOffsetBlocks(const TermContext& c, Sink& sink) const;
   /// ROM: the Hessian alone (the node loop of the energy is not needed).
   void reducedHessian(const Vec3& gravity, std::vector<Triplet>& H, int offset, bool psd) const;
 

@@ -1,6 +1,7 @@
 #include "sim/soft/nodal_inertia_term.h"
 
 #include "flsh/core/rotation.h"
+#include "sim/soft/node_offset_blocks.h"
 #include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
@@ -99,6 +100,82 @@ void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   }
 }
 
+// An offset d_j of Y_j (in q, q_n and q_{n−1} alike) moves x_j by M_j d_j and x̂_j by
+// (2 M_j(R_n) − M_j(R_{n−1})) d_j, so the node block is κ_j (M_j − 2 M_j(R_n) + M_j(R_{n−1})),
+// and turns the lever arms of J_jᵀ's rotation rows: −w_jb [f_j]× R_b.
+template <class Sink>
+void NodalInertiaTerm::nodeOffsetBlocks(const TermContext& c, Sink& sink) const {
+  if (c.is_static) return;
+  const double k = 1.0 / (h_ * h_);
+  const std::vector<int>& nodes = masses_.nodes;
+  const MatX3& x = kin_.x();
+  SkinnedPoint point;
+  for (size_t idx = 0; idx < nodes.size(); ++idx) {
+    const int j = nodes[idx];
+    const double kappa = k * masses_.mass[j];
+    const Vec3 f = kappa * (x.row(j) - x_hat_.row(j)).transpose();
+    kin_.point(j, point);
+    point.id = int(idx);
+    sink.add(point, j,
+             kappa * (kin_.M(j) - 2.0 * kin_.blendMatrix(j, c.R_n) + kin_.blendMatrix(j, c.R_nm1)));
+    const Mat3 turn = skew(f);
+    for (int a = 0; a < point.count; ++a)
+      sink.addRotation(point.bone[a], j, -point.weight[a] * turn * c.R[point.bone[a]]);
+  }
+}
+
+// g = Σ_j J_jᵀ κ_j (x_j − x̂_j) with x̂_j = 2 x_j(q_n) − x_j(q_{n−1}): (∂g/∂q_n)ᵀ λ =
+// −2 Σ_j κ_j J_j(q_n)ᵀ J_j λ and (∂g/∂q_{n−1})ᵀ λ = Σ_j κ_j J_j(q_{n−1})ᵀ J_j λ.
+void NodalInertiaTerm::addPreviousStatesProducts(const TermContext& c, const VecX& lambda,
+                                                 VecX* a_n, VecX* a_nm1) const {
+  if (c.is_static) return;
+  const double k = 1.0 / (h_ * h_);
+  SkinnedPoint point, previous;
+  for (int j : masses_.nodes) {
+    const double kappa = k * masses_.mass[j];
+    kin_.point(j, point);
+    const Vec3 mu = point.cotangent(lambda);  // J_j λ
+    if (a_n) {
+      kin_.pointAt(j, c.R_n, kin_.u_n, previous);
+      previous.addForce(-2.0 * kappa * mu, *a_n);
+    }
+    if (a_nm1) {
+      kin_.pointAt(j, c.R_nm1, kin_.u_nm1, previous);
+      previous.addForce(kappa * mu, *a_nm1);
+    }
+  }
+}
+
+void NodalInertiaTerm::addPreviousStatesTangent(const TermContext& c, const VecX& dq_n,
+                                                const VecX& dq_nm1, VecX& out) const {
+  if (c.is_static) return;
+  const double k = 1.0 / (h_ * h_);
+  SkinnedPoint point, previous;
+  for (int j : masses_.nodes) {
+    const double kappa = k * masses_.mass[j];
+    kin_.pointAt(j, c.R_n, kin_.u_n, previous);
+    Vec3 dx_hat = 2.0 * previous.cotangent(dq_n);  // J_j(q_n) dq_n
+    kin_.pointAt(j, c.R_nm1, kin_.u_nm1, previous);
+    dx_hat -= previous.cotangent(dq_nm1);
+    kin_.point(j, point);
+    point.addForce(-kappa * dx_hat, out);
+  }
+}
+
+void NodalInertiaTerm::addPreviousStateJacobian(const TermContext& c, int which, MatX& D) const {
+  const Eigen::Index n = D.cols();
+  const VecX zero = VecX::Zero(n);
+  VecX unit = zero, column(n);
+  for (Eigen::Index col = 0; col < n; ++col) {
+    unit[col] = 1.0;
+    column.setZero();
+    addPreviousStatesTangent(c, which == 1 ? unit : zero, which == 2 ? unit : zero, column);
+    D.col(col) += column;
+    unit[col] = 0.0;
+  }
+}
+
 }  // namespace flsh::detail
 
 template class flsh::TermWithParameterBlocks<flsh::detail::NodalInertiaTerm>;
+template class flsh::detail::WithNodeOffsetBlocks<flsh::detail::NodalInertiaTerm>;

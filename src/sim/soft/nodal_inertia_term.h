@@ -2,20 +2,23 @@
 // the mass nodes (every tet node with its lumped mass, or the ROM's inertial cubature's nodes),
 // x̂ = 2 x(q_n) − x(q_{n−1}) with the held pose blend. The node forces and the node Hessians
 // m_j / h² I go to the state through the kinematics (its curvature of the rotating nodes in the
-// exact form). Parameter derivatives: the rest joints (the nodes' skinning, in x and in x̂).
-// Private to Simulable.
+// exact form). Parameter derivatives: the rest joints (the nodes' skinning, in x and in x̂);
+// the nodes' unposed positions (node_offset_derivatives.h); the previous states q_n, q_{n−1}
+// through x̂ (the held pose blend's share is SoftTissue's). Private to Simulable.
 #pragma once
 
 #include <vector>
 
 #include "flsh/sim/energy_term.h"
 #include "sim/soft/node_masses.h"
+#include "sim/soft/node_offset_derivatives.h"
 #include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
-class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalInertiaTerm>> {
+class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalInertiaTerm>>,
+                               public WithNodeOffsetBlocks<NodalInertiaTerm> {
  public:
   /// The ROM's Hessian on two threads maps this share of the mass nodes beside the potential
   /// terms (soft_tissue.cpp): hessianPart(1) maps it, hessianPart(0) the rest.
@@ -35,6 +38,19 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   /// ∂g/∂p as local blocks (term_blocks.h).
   template <class Sink>
   void parameterBlocks(const TermContext& c, Sink& sink) const;
+  /// ∂g/∂Y as local blocks (node_offset_blocks.h).
+  template <class Sink>
+  void nodeOffsetBlocks(const TermContext& c, Sink& sink) const;
+
+  /// x̂'s own dependence on q_n and q_{n−1} (bones and soft state, skinned with the held pose
+  /// blend): ∂g/∂x̂_j = −κ_j J_jᵀ, ∂x̂_j = 2 J_j(q_n) dq_n − J_j(q_{n−1}) dq_{n−1}. None when
+  /// static. The dense blocks: columns of the tangent (numDofs products; for tests).
+  bool dependsOnPreviousStates() const override { return true; }
+  void addPreviousStatesProducts(const TermContext& c, const VecX& lambda, VecX* a_n,
+                                 VecX* a_nm1) const override;
+  void addPreviousStatesTangent(const TermContext& c, const VecX& dq_n, const VecX& dq_nm1,
+                                VecX& out) const override;
+  void addPreviousStateJacobian(const TermContext& c, int which, MatX& D) const override;
 
   /// x̂ = 2 x(q_n) − x(q_{n−1}) of the mass nodes (the kinematics' u_n and u_nm1).
   void setPrediction(const BoneFrames& bones_n, const BoneFrames& bones_nm1);

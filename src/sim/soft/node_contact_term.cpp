@@ -1,6 +1,7 @@
 #include "sim/soft/node_contact_term.h"
 
 #include "flsh/core/rotation.h"
+#include "sim/soft/node_offset_blocks.h"
 #include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
@@ -40,10 +41,12 @@ double NodeContactTerm::evaluate(const std::vector<Collider>& colliders, double 
   ContactOptions contact_options = options;
   contact_options.exact_hessian = !psd;
   VecX gradient = VecX::Zero(3 * V);
-  std::vector<Triplet> node_hessian;
+  std::vector<Mat3> node_hessian;
   std::vector<ContactPoint> points;
-  const double E = colliderContactEnergy(x_, node_areas_, colliders, time, contact_options,
-                                         &gradient, H ? &node_hessian : nullptr, 0, &points);
+  const double E = H ? colliderContactBlocks(x_, node_areas_, colliders, time, contact_options,
+                                             &gradient, node_hessian, &points)
+                     : colliderContactEnergy(x_, node_areas_, colliders, time, contact_options,
+                                             &gradient, nullptr, 0, &points);
   if (active) *active = int(points.size());
   if (!g && !H) return E;
   // The touching vertices, their forces and (for H) their 3 × 3 blocks (p.vertex indexes list).
@@ -58,11 +61,9 @@ double NodeContactTerm::evaluate(const std::vector<Collider>& colliders, double 
     }
   if (g) kin_.mapForces(nodes, forces, *g, offset);
   if (H) {
-    std::vector<Mat3> K(nodes.size(), Mat3::Zero());
-    for (const Triplet& t : node_hessian) {
-      const int i = t.row() / 3;
-      if (slot[i] >= 0) K[slot[i]](t.row() - 3 * i, t.col() - 3 * i) += t.value();
-    }
+    std::vector<Mat3> K(nodes.size());
+    for (int i = 0; i < V; ++i)
+      if (slot[i] >= 0) K[size_t(slot[i])] = node_hessian[size_t(i)];
     kin_.mapHessian(nodes, &K, &forces, *H, offset, psd, 1);
   }
   return E;
@@ -88,35 +89,19 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
     unit_gradient = VecX::Zero(3 * V);
     colliderContactEnergy(x_, node_areas_, c.colliders, c.time, unit, &unit_gradient);
   }
+  ContactOptions exact = c.options.contact;
+  exact.exact_hessian = true;
   VecX gradient;              // g_x (joints)
   std::vector<Mat3> H_total;  // the exact node Hessian against every collider (joints)
   if (joints) {
-    ContactOptions exact = c.options.contact;
-    exact.exact_hessian = true;
     gradient = VecX::Zero(3 * V);
-    std::vector<Triplet> triplets;
-    colliderContactEnergy(x_, node_areas_, c.colliders, c.time, exact, &gradient, &triplets, 0,
-                          nullptr);
-    H_total.assign(size_t(V), Mat3::Zero());
-    for (const Triplet& e : triplets) {
-      const int j = e.row() / 3;
-      H_total[size_t(j)](e.row() - 3 * j, e.col() - 3 * j) += e.value();
-    }
+    colliderContactBlocks(x_, node_areas_, c.colliders, c.time, exact, &gradient, H_total);
   }
   const int nc = int(c.colliders.size());
   std::vector<std::vector<Mat3>> H(offsets ? size_t(nc) : 0);  // per collider, per candidate
-  for (int k = 0; k < int(H.size()); ++k) {
-    H[size_t(k)].assign(size_t(V), Mat3::Zero());
-    ContactOptions exact = c.options.contact;
-    exact.exact_hessian = true;
-    std::vector<Triplet> triplets;
-    colliderContactEnergy(x_, node_areas_, {c.colliders[size_t(k)]}, c.time, exact, nullptr,
-                          &triplets, 0, nullptr);
-    for (const Triplet& e : triplets) {
-      const int j = e.row() / 3;
-      H[size_t(k)][size_t(j)](e.row() - 3 * j, e.col() - 3 * j) += e.value();
-    }
-  }
+  for (int k = 0; k < int(H.size()); ++k)
+    colliderContactBlocks(x_, node_areas_, {c.colliders[size_t(k)]}, c.time, exact, nullptr,
+                          H[size_t(k)]);
   SkinnedPoint point;
   const Mat3 I3 = Mat3::Identity();
   for (int idx = 0; idx < V; ++idx) {
@@ -149,6 +134,34 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   }
 }
 
+// g = Σ_j J_jᵀ g_x,j: an offset d_j of Y_j moves x_j by M_j d_j (the force by H_x,j M_j d_j,
+// the exact node Hessian) and turns the lever arms of J_jᵀ's rotation rows (−w_jb [g_x,j]× R_b).
+template <class Sink>
+void NodeContactTerm::nodeOffsetBlocks(const TermContext& c, Sink& sink) const {
+  if (c.colliders.empty()) return;
+  const std::vector<int>& list = gather(&c.contact.candidates, true);
+  const int V = int(list.size());
+  if (V == 0) return;
+  ContactOptions exact = c.options.contact;
+  exact.exact_hessian = true;
+  VecX gradient = VecX::Zero(3 * V);
+  std::vector<Mat3> H;
+  colliderContactBlocks(x_, node_areas_, c.colliders, c.time, exact, &gradient, H);
+  SkinnedPoint point;
+  for (int idx = 0; idx < V; ++idx) {
+    const Vec3 f = gradient.segment<3>(3 * idx);
+    if (f.isZero(0.0) && H[size_t(idx)].isZero(0.0)) continue;
+    const int j = list[size_t(idx)];
+    kin_.point(j, point);
+    point.id = idx;
+    sink.add(point, j, H[size_t(idx)] * kin_.M(j));
+    const Mat3 turn = skew(f);
+    for (int a = 0; a < point.count; ++a)
+      sink.addRotation(point.bone[a], j, -point.weight[a] * turn * c.R[point.bone[a]]);
+  }
+}
+
 }  // namespace flsh::detail
 
 template class flsh::TermWithParameterBlocks<flsh::detail::NodeContactTerm>;
+template class flsh::detail::WithNodeOffsetBlocks<flsh::detail::NodeContactTerm>;

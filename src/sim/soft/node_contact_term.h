@@ -2,8 +2,8 @@
 // of contact_energy.h on the skinned surface nodes (the broad phase's candidates), its node
 // forces and 3 × 3 node Hessians taken to the state by the kinematics. Private to Simulable.
 // Parameter derivatives: Stiffnesses[3] (the contact stiffness, linear), the collider offsets
-// and the rest joints; its dependence on β (the rest nodes, areas) is not written yet (issue 25),
-// so Simulable refuses Shape for soft avatars.
+// and the rest joints, and the nodes' unposed positions; its dependence on β (the rest nodes,
+// areas) is not written yet (issue 25), so Simulable refuses Shape for soft avatars.
 #pragma once
 
 #include <vector>
@@ -13,12 +13,14 @@
 #include "flsh/sim/energy_term.h"
 #include "sim/block_hessian_term.h"
 #include "sim/contact_term.h"
+#include "sim/soft/node_offset_derivatives.h"
 #include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
 class NodeContactTerm final : public NodeTerm<1, TermWithParameterBlocks<NodeContactTerm>>,
+                              public WithNodeOffsetBlocks<NodeContactTerm>,
                               public ContactTerm {
  public:
   /// `areas`: the surface nodes' vertex areas, m².
@@ -27,6 +29,9 @@ class NodeContactTerm final : public NodeTerm<1, TermWithParameterBlocks<NodeCon
   /// ∂g/∂p as local blocks (term_blocks.h), at the broad phase's candidates.
   template <class Sink>
   void parameterBlocks(const TermContext& c, Sink& sink) const;
+  /// ∂g/∂Y as local blocks (node_offset_blocks.h), at the broad phase's candidates.
+  template <class Sink>
+  void nodeOffsetBlocks(const TermContext& c, Sink& sink) const;
 
   const char* name() const override { return "node contact"; }
   /// The energy and the touching pairs at the broad phase's candidates (skinning them first in

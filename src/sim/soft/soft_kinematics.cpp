@@ -487,8 +487,17 @@ void SoftKinematics::flushList(int list, std::vector<Triplet>& H, int offset,
 // ---- mapping node derivatives to the state ----------------------------------------------------
 
 void SoftKinematics::point(int j, SkinnedPoint& p) const {
-  const std::vector<Mat3>& R = *cur_R_;
-  const Vec3 Y = Y_.row(j).transpose();
+  fillPoint(j, *cur_R_, Y_.row(j).transpose(), node_M_[j], p);
+}
+
+void SoftKinematics::pointAt(int j, const std::vector<Mat3>& R, const VecX& state,
+                             SkinnedPoint& p) const {
+  const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + nodeDisplacement(state, j);
+  fillPoint(j, R, Y, blendMatrix(j, R), p);
+}
+
+void SoftKinematics::fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y, const Mat3& M,
+                               SkinnedPoint& p) const {
   p.count = influence_start_[j + 1] - influence_start_[j];
   for (int a = 0; a < p.count; ++a) {
     const Influence& inf = influences_[influence_start_[j] + a];
@@ -499,11 +508,11 @@ void SoftKinematics::point(int j, SkinnedPoint& p) const {
   p.soft.clear();
   if (node_dof_[j] < 0) return;
   if (!reduced_) {
-    p.soft.emplace_back(bone_dofs_ + node_dof_[j], node_M_[j]);
+    p.soft.emplace_back(bone_dofs_ + node_dof_[j], M);
     return;
   }
   for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
-    p.soft.emplace_back(bone_dofs_ + 3 * phi_[k].first, phi_[k].second * node_M_[j]);
+    p.soft.emplace_back(bone_dofs_ + 3 * phi_[k].first, phi_[k].second * M);
 }
 
 void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces,

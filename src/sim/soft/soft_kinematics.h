@@ -156,6 +156,17 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// bones' weights and lever arms, and its soft DoFs' blocks; id set by the caller), for the
   /// node terms' parameter blocks.
   void point(int j, SkinnedPoint& p) const;
+  /// Node j as a SkinnedPoint at other bones and soft state (e.g. q_n or q_{n−1}, for the
+  /// inertia's prediction x̂), with the held pose blend: lever arms R_b (Y_j − J_b) with
+  /// Y_j = X̄_j + P_j + u_j(state), soft blocks from Σ_b w_jb R_b of these bones.
+  void pointAt(int j, const std::vector<Mat3>& R, const VecX& state, SkinnedPoint& p) const;
+  /// M_j = Σ_b w_jb R_b (= ∂x_j/∂Y_j) for the given rotations.
+  Mat3 blendMatrix(int j, const std::vector<Mat3>& R) const {
+    Mat3 M = Mat3::Zero();
+    for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k)
+      M += influences_[k].weight * R[influences_[k].bone];
+    return M;
+  }
 
   // ---- the chain rule to q (at the prepared state) ----
   /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g.
@@ -203,6 +214,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
 
  private:
   Vec3 blendOf(int j) const;
+  /// p from node j's influences, rotations R, unposed position Y and M_j = Σ_b w_jb R_b.
+  void fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y, const Mat3& M,
+                 SkinnedPoint& p) const;
   /// t_b − R_b J_b per bone: x_j = Σ_b w_jb (R_b Y_j + shift_b).
   void boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const;
   template <int Rows>

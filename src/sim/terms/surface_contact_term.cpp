@@ -18,13 +18,7 @@ std::vector<Mat3> nodeHessians(const TermContext& c, const std::vector<Collider>
   if (n == 0) return H;
   ContactOptions options = c.options.contact;
   options.exact_hessian = true;
-  std::vector<Triplet> triplets;
-  colliderContactEnergy(s.nodes, s.areas, colliders, c.time, options, nullptr, &triplets, 0,
-                        nullptr);
-  for (const Triplet& e : triplets) {
-    const int j = e.row() / 3;
-    H[size_t(j)](e.row() - 3 * j, e.col() - 3 * j) += e.value();
-  }
+  colliderContactBlocks(s.nodes, s.areas, colliders, c.time, options, nullptr, H);
   return H;
 }
 

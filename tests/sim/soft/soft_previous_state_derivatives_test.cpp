@@ -1,0 +1,111 @@
+// A soft skeleton's (FEM and ROM) previous-state derivatives, the whole simulable: ∂g/∂q_n and
+// ∂g/∂q_{n−1} (the nodal inertia's prediction x̂, and the pose blend held from q_n's rotations,
+// which moves the nodes of inertia, gravity and contact) against central differences of the
+// total gradient with the previous state moved in a snapshot (restoreStep with an empty pose
+// blend holds it from the moved R_n, as preUpdate does); the products against the Jacobians.
+#include <memory>
+
+#include "flsh/core/rotation.h"
+#include "sim/soft/soft_term_checks.h"
+
+namespace flsh {
+namespace {
+
+using test::SoftModel;
+
+VecX totalGradient(const Simulable& sim) {
+  VecX g = VecX::Zero(sim.numDofs());
+  sim.getDynamicGradientVector(g);
+  sim.getPotentialGradientVector(g);
+  return g;
+}
+
+// The snapshot with q_n (which = 1) or q_{n−1} (which = 2) moved by increments d (bones:
+// t += δt, R ← exp([δω]×) R; soft state: u += δu), its pose blend to be held again.
+SimulableStep movedHistory(const SimulableStep& base, int which, const VecX& d) {
+  SimulableStep s = base;
+  std::vector<Mat3>& R = which == 1 ? s.R_n : s.R_nm1;
+  MatX3& t = which == 1 ? s.t_n : s.t_nm1;
+  VecX& u = which == 1 ? s.u_n : s.u_nm1;
+  for (size_t b = 0; b < R.size(); ++b) {
+    t.row(Eigen::Index(b)) += d.segment<3>(6 * Eigen::Index(b)).transpose();
+    R[b] = rodrigues(Vec3(d.segment<3>(6 * Eigen::Index(b) + 3))) * R[b];
+  }
+  u += d.tail(u.size());
+  s.pose_blend.resize(0, 3);
+  return s;
+}
+
+// D(:, idx) against differences of the total gradient along the coordinates idx of q_n or
+// q_{n−1}; then the products against D.
+void expectPreviousStateDerivatives(Simulable& sim, double tol, std::vector<int> states = {1, 2},
+                                    double eps = 1e-6) {
+  const int n = sim.numDofs();
+  const SimulableStep base = sim.saveStep();
+  const VecX q0 = sim.getState(), g0 = totalGradient(sim);
+  const std::vector<int> idx = test::softTermCoordinates(sim, g0);
+  const int m = int(idx.size());
+  const MatX D[2] = {sim.getGradientPreviousStateJacobian(1),
+                     sim.getGradientPreviousStateJacobian(2)};
+  for (int which : states) {
+    SCOPED_TRACE(which == 1 ? "q_n" : "q_{n-1}");
+    ASSERT_EQ(D[which - 1].rows(), n);
+    ASSERT_EQ(D[which - 1].cols(), n);
+    const auto gradient = [&](const VecX& sub) {
+      VecX d = VecX::Zero(n);
+      for (int k = 0; k < m; ++k) d[idx[size_t(k)]] = sub[k];
+      sim.restoreStep(movedHistory(base, which, d));
+      const VecX g = totalGradient(sim);
+      sim.restoreStep(base);
+      return g;
+    };
+    EXPECT_TRUE(test::jacobianMatchesFiniteDifferences(gradient, VecX::Zero(m),
+                                                       D[which - 1](Eigen::all, idx), tol, eps));
+  }
+  const VecX lambda = test::randomVector(n, 1.0, 31);
+  VecX a_n, a_nm1;
+  sim.getGradientPreviousStatesVJP(lambda, &a_n, &a_nm1);
+  EXPECT_LT((a_n - D[0].transpose() * lambda).norm(), 1e-10 * (1.0 + a_n.norm()));
+  EXPECT_LT((a_nm1 - D[1].transpose() * lambda).norm(), 1e-10 * (1.0 + a_nm1.norm()));
+  const VecX dq_n = test::randomVector(n, 1.0, 32), dq_nm1 = test::randomVector(n, 1.0, 33);
+  const VecX jvp = sim.getGradientPreviousStatesJVP(dq_n, dq_nm1);
+  const VecX expected = D[0] * dq_n + D[1] * dq_nm1;
+  EXPECT_LT((jvp - expected).norm(), 1e-10 * (1.0 + expected.norm()));
+  // Derivative calls leave the state and the step as they found them.
+  EXPECT_EQ((sim.getState() - q0).norm(), 0.0);
+  EXPECT_EQ((totalGradient(sim) - g0).norm(), 0.0);
+}
+
+class SoftPreviousStateDerivatives : public ::testing::TestWithParam<SoftModel> {};
+
+TEST_P(SoftPreviousStateDerivatives, MatchFiniteDifferences) {
+  auto sim = test::softTermScenario(GetParam());
+  totalGradient(*sim);
+  ASSERT_GT(sim->stats().active_contacts, 0);
+  expectPreviousStateDerivatives(*sim, 1e-5);
+}
+
+// Static, only the held pose blend couples a step to q_n (through gravity and contact, with no
+// inertia to dwarf it): the rotation columns of ∂g/∂q_n alone, and nothing from q_{n−1}. Its
+// entries (~1e-2) are small beside the gradient's (~1e3), whose round-off a 1e-6 difference
+// would amplify to ~1e-7: steps of 1e-4 rad (the gradient is smooth in R_n: P is linear in
+// R_pᵀ R_b).
+TEST_P(SoftPreviousStateDerivatives, StaticKeepsThePoseBlendShare) {
+  auto sim = test::softTermScenario(GetParam());
+  sim->setStatic(true);
+  const MatX D1 = sim->getGradientPreviousStateJacobian(1);
+  const int nb = sim->numBoneDofs();
+  double rotations = 0.0, others = 0.0;
+  for (int col = 0; col < sim->numDofs(); ++col)
+    (col < nb && col % 6 >= 3 ? rotations : others) += D1.col(col).squaredNorm();
+  ASSERT_GT(rotations, 0.0);
+  EXPECT_EQ(others, 0.0);
+  EXPECT_TRUE(sim->getGradientPreviousStateJacobian(2).isZero(0.0));
+  expectPreviousStateDerivatives(*sim, 1e-6, {1}, 1e-4);
+}
+
+INSTANTIATE_TEST_SUITE_P(Models, SoftPreviousStateDerivatives,
+                         ::testing::Values(SoftModel::Fem, SoftModel::Rom), test::modelName);
+
+}  // namespace
+}  // namespace flsh

@@ -1,5 +1,5 @@
 // Rollout: forward simulation with a recorded tape, reverse pass and forward sensitivities of
-// one articulated-skeleton Simulable, in the user's coordinates (see rollout.h).
+// one Simulable (skeleton, FEM or ROM), in the user's coordinates (see rollout.h).
 #include "flsh/diff/rollout.h"
 
 #include <string>
@@ -137,6 +137,10 @@ void Rollout::checkVariables(const RolloutVariables& v, const std::string& who) 
   const int T = numSteps(), n = numDofs();
   const Simulable& sim = *simulable_;
   checkVector(v.shape, sim.parameterSize(SimParameter::Shape), who, "shape");
+  if (sim.hasSoftTissue() && v.shape.size())
+    throw Error(who +
+                ": shape: β's derivatives through a soft-tissue avatar (FEM or ROM: its rest "
+                "nodes, masses and materials) are not available yet; leave shape empty");
   checkVector(v.rest_joints, 72, who, "rest_joints");
   checkVector(v.bone_inertia, sim.parameterSize(SimParameter::BoneInertia), who, "bone_inertia");
   checkMatrix(v.pose_targets, T, 72, who, "pose_targets");
@@ -150,6 +154,19 @@ void Rollout::checkVariables(const RolloutVariables& v, const std::string& who) 
 void Rollout::requireRun(const char* who) const {
   if (numSteps() == 0)
     throw Error(std::string("Rollout::") + who + ": no rollout recorded (call run() first)");
+}
+
+// Derivatives are exact for converged steps only: a step Newton left unconverged is reported,
+// never differentiated.
+void Rollout::requireConverged(const char* who) const {
+  for (int t = 1; t <= numSteps(); ++t) {
+    const TapeStepInfo& info = tape_.stepInfo(t);
+    if (!info.converged)
+      throw Error(std::string("Rollout::") + who + ": step " + std::to_string(t) +
+                  " did not converge (" + info.newton_message +
+                  "), so its derivatives would not be those of the simulated motion; raise "
+                  "RolloutOptions::newton.max_iterations or loosen its gradient_tolerance");
+  }
 }
 
 void Rollout::run(int steps, const RolloutInputs& in) {
@@ -184,15 +201,13 @@ void Rollout::run(int steps, const RolloutInputs& in) {
       }
       for (Vec3& o : path.offsets) o += shift;
     }
-  Scene scene;
+  SceneOptions scene_options;
+  scene_options.newton = options_.newton;
+  scene_options.soft_tissue_newton = options_.soft_tissue_newton;
+  scene_options.reduced_newton = options_.reduced_newton;
+  Scene scene(scene_options);
   scene.addSimulable(simulable_);
   for (const Collider& c : colliders) scene.addCollider(c);
-  if (!solver_) {
-    const LinearSolverType type = options_.newton.linear_solver == LinearSolverType::Auto
-                                      ? LinearSolverType::SparseLLT
-                                      : options_.newton.linear_solver;
-    solver_ = makeLinearSolver(type, n);
-  }
 
   // Initial conditions.
   sim.initialize();
@@ -204,6 +219,11 @@ void Rollout::run(int steps, const RolloutInputs& in) {
     const VecX v = velocity_from_initialize_ ? sim.getVelocity() : in.initial_velocity;
     sim.setState(in.initial_state);
     sim.postUpdate();  // q_n = q_0
+    if (sim.hasSoftTissue()) {  // the pose blend held from q_0, as step 1 will hold it
+      SimulableStep step = sim.saveStep();
+      step.pose_blend.resize(0, 3);
+      sim.restoreStep(step);
+    }
     sim.setVelocity(v);
   } else if (!velocity_from_initialize_) {
     sim.setVelocity(in.initial_velocity);
@@ -212,8 +232,11 @@ void Rollout::run(int steps, const RolloutInputs& in) {
   initial_state_ = sim.getState();
   states_.resize(steps, n);
 
-  for (int t = 1; t <= steps; ++t) {
-    sim.preUpdate();
+  // Each step is the scene's (its Newton settings per model, its solver kept across steps),
+  // with the target overrides after preUpdate and the tape recorded before postUpdate.
+  Scene::StepHooks hooks;
+  int t = 0;
+  hooks.after_pre_update = [&] {
     if (in.pose_targets.size())
       sim.setParameter(SimParameter::PoseTargets, in.pose_targets.row(t - 1).transpose());
     if (in.root_targets.size()) {
@@ -221,15 +244,17 @@ void Rollout::run(int steps, const RolloutInputs& in) {
       sim.setParameter(SimParameter::RootTranslationTarget,
                        J0 + in.root_targets.row(t - 1).transpose());
     }
-    const NewtonResult result = newtonSolve(scene, options_.newton, solver_.get());
+  };
+  hooks.before_post_update = [&](const NewtonResult& result) {
     TapeStepInfo info;
     info.converged = result.converged;
     info.newton_iterations = result.iterations;
     info.gradient_norm = result.gradient_norm;
+    info.newton_message = result.message;
     tape_.recordStep(model_, info);
     states_.row(t - 1) = sim.getState().transpose();
-    sim.postUpdate();
-  }
+  };
+  for (t = 1; t <= steps; ++t) scene.step(hooks);
 }
 
 RowMatX Rollout::joints() const {
@@ -278,14 +303,30 @@ Rollout::VerticesCotangent Rollout::verticesCotangent(int t, const MatX3& dL_dve
                      std::to_string(numSteps()));
   RestoreStepOnExit restore(*simulable_);
   auto& model = const_cast<SimulableAdjointModel&>(model_);
-  model.restoreStep(t == 0 ? tape_.initialSnapshot() : tape_.stepSnapshot(t));
+  const auto snapshot = [&](int step) -> const StepSnapshot& {
+    return step == 0 ? tape_.initialSnapshot() : tape_.stepSnapshot(step);
+  };
+  model.restoreStep(snapshot(t));
+  const Eigen::Map<const VecX> g(dL_dvertices.data(), 3 * nv);  // row-major: 3i + c
+  VerticesCotangent out;
+  if (simulable_->hasSoftTissue()) {
+    // The simulated surface x(q_t), skinned with the pose blend held from q_{t−1} (at t = 0:
+    // from q_0 itself).
+    VecX increments = simulable_->getNodesStateJacobian().transpose() * g, previous;
+    simulable_->getNodesCotangents(dL_dvertices, &previous, &out.direct.rest_joints);
+    if (t == 0) increments += previous;
+    out.state = model.incrementToStateCotangent(increments);
+    if (t > 0) {
+      model.restoreStep(snapshot(t - 1));
+      out.previous_state = model.incrementToStateCotangent(previous);
+    }
+    return out;
+  }
   PosedBodyJacobians jac;
   poseBody(avatar.body(), avatar.betas(), simulable_->getPose(), simulable_->getTrans(), &jac);
-  const Eigen::Map<const VecX> g(dL_dvertices.data(), 3 * nv);  // row-major: 3i + c
   VecX pose_trans(75);
   pose_trans.head<72>() = jac.vertices_pose.transpose() * g;
   pose_trans.tail<3>() = jac.vertices_trans.transpose() * g;
-  VerticesCotangent out;
   out.state =
       model.incrementToStateCotangent(simulable_->getStateJacobian().transpose() * pose_trans);
   // trans = t_0 − J_0 moves with the root joint, and J_0 with β.
@@ -296,8 +337,37 @@ Rollout::VerticesCotangent Rollout::verticesCotangent(int t, const MatX3& dL_dve
   return out;
 }
 
+Rollout::TrajectoryCotangent Rollout::trajectoryCotangent(const RowMatX& dL_djoints,
+                                                          const RowMatX& dL_dvertices) const {
+  requireRun("trajectoryCotangent");
+  const std::string who = "Rollout::trajectoryCotangent";
+  const int T = numSteps();
+  const long nv = simulable_->avatar().body().numVertices();
+  checkMatrix(dL_djoints, T, 72, who, "dL_djoints (steps × 72)");
+  checkMatrix(dL_dvertices, T, 3 * nv, who, "dL_dvertices (steps × 3·#vertices)");
+  TrajectoryCotangent out;
+  out.states = RowMatX::Zero(T, numDofs());
+  for (int t = 1; t <= T && dL_djoints.size(); ++t)
+    out.states.row(t - 1) +=
+        jointsCotangent(Eigen::Map<const MatX3>(dL_djoints.row(t - 1).data(), 24, 3)).transpose();
+  for (int t = 1; t <= T && dL_dvertices.size(); ++t) {
+    const VerticesCotangent c =
+        verticesCotangent(t, Eigen::Map<const MatX3>(dL_dvertices.row(t - 1).data(), nv, 3));
+    out.states.row(t - 1) += c.state.transpose();
+    if (c.previous_state.size()) {
+      if (t > 1)
+        out.states.row(t - 2) += c.previous_state.transpose();
+      else
+        addMember(out.direct.initial_state, c.previous_state, "initial_state");
+    }
+    accumulate(out.direct, c.direct);
+  }
+  return out;
+}
+
 RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVariables& direct) {
   requireRun("backward");
+  requireConverged("backward");
   const std::string who = "Rollout::backward";
   checkMatrix(dL_dstates, numSteps(), numDofs(), who, "dL_dstates (steps × numDofs)", false);
   checkVariables(direct, who + ": direct");
@@ -318,7 +388,7 @@ RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVaria
   if (velocity_from_initialize_)
     initial_joints += initial_velocity_joints_jacobian_.transpose() * r.initial_velocity;
   g.rest_joints += initial_joints;
-  chainShapeCotangent(simulable_->avatar(), initial_joints, VecX(), g.shape);
+  if (g.shape.size()) chainShapeCotangent(simulable_->avatar(), initial_joints, VecX(), g.shape);
   accumulate(g, direct);
   return g;
 }
@@ -326,6 +396,7 @@ RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVaria
 std::vector<RowMatX> Rollout::forwardSensitivities(
     const std::vector<RolloutVariables>& directions) {
   requireRun("forwardSensitivities");
+  requireConverged("forwardSensitivities");
   const std::vector<ParameterGroupInfo> groups = model_.parameterGroups();
   std::vector<TangentDirection> tangents;
   tangents.reserve(directions.size());

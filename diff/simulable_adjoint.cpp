@@ -16,11 +16,22 @@ struct SimulableSnapshot final : StepSnapshot {
   SimulableStep step;
 };
 
-// The adjoint's groups are the registry's, in SimParameter order.
-std::vector<SimParameter> allGroups() {
+// The adjoint's groups are the registry's, in SimParameter order; a soft skeleton's Shape group
+// is empty (β's soft-tissue derivatives — rest nodes, masses, materials — are not written yet).
+std::vector<SimParameter> differentiatedGroups(const Simulable& s) {
   std::vector<SimParameter> groups;
-  for (const SimParameterInfo& info : simParameters()) groups.push_back(info.id);
+  for (const SimParameterInfo& info : simParameters())
+    if (!(s.hasSoftTissue() && info.id == SimParameter::Shape)) groups.push_back(info.id);
   return groups;
+}
+
+// Results per differentiated group into registry order, the groups left out empty.
+template <class Block>
+std::vector<Block> inRegistryOrder(const std::vector<SimParameter>& groups,
+                                   std::vector<Block> values, const Block& empty) {
+  std::vector<Block> out(size_t(kNumSimParameters), empty);
+  for (size_t k = 0; k < groups.size(); ++k) out[size_t(groups[k])] = std::move(values[k]);
+  return out;
 }
 
 void checkSize(const VecX& v, int n, const char* who, const char* what) {
@@ -35,12 +46,6 @@ void checkSize(const VecX& v, int n, const char* who, const char* what) {
 SimulableAdjointModel::SimulableAdjointModel(std::shared_ptr<Simulable> simulable)
     : simulable_(std::move(simulable)) {
   if (!simulable_) throw InputError("SimulableAdjointModel: simulable is null");
-  if (simulable_->hasSoftTissue())
-    throw Error(
-        "SimulableAdjointModel: the simulable has soft tissue (the FEM or ROM soft skeleton); "
-        "rollout gradients through soft-tissue models are not available yet (their "
-        "previous-state and shape derivatives are being written): use the articulated "
-        "skeleton");
   if (!simulable_->options().kinematic_bones.empty())
     throw Error(
         "SimulableAdjointModel: the simulable has kinematic bones (options.kinematic_bones, " +
@@ -54,7 +59,11 @@ int SimulableAdjointModel::numDofs() const { return simulable_->numDofs(); }
 std::vector<ParameterGroupInfo> SimulableAdjointModel::parameterGroups() const {
   std::vector<ParameterGroupInfo> groups;
   for (const SimParameterInfo& info : simParameters())
-    groups.push_back({info.name, simulable_->parameterSize(info.id), info.per_step});
+    groups.push_back({info.name,
+                      info.id == SimParameter::Shape && simulable_->hasSoftTissue()
+                          ? 0
+                          : simulable_->parameterSize(info.id),
+                      info.per_step});
   return groups;
 }
 
@@ -84,12 +93,14 @@ void SimulableAdjointModel::exactHessian(SpMat& H) const {
 }
 
 SpMat SimulableAdjointModel::previousStateJacobian(int which) const {
-  // Block diagonal (one 6 × 6 inertia block per bone): sparse for the sweeps' products.
+  // The skeleton's is block diagonal (one 6 × 6 inertia block per bone): sparse for products.
   return simulable_->getGradientPreviousStateJacobian(which).sparseView(1.0, 0.0);
 }
 
 void SimulableAdjointModel::parameterJacobians(std::vector<MatX>& out) const {
-  out = simulable_->getGradientParameterJacobians(allGroups());
+  const std::vector<SimParameter> groups = differentiatedGroups(*simulable_);
+  out = inRegistryOrder(groups, simulable_->getGradientParameterJacobians(groups),
+                        MatX(numDofs(), 0));
 }
 
 void SimulableAdjointModel::previousStatesVJP(const VecX& lambda, VecX& a_n, VecX& a_nm1) const {
@@ -101,7 +112,10 @@ VecX SimulableAdjointModel::previousStatesJVP(const VecX& dq_n, const VecX& dq_n
 }
 
 void SimulableAdjointModel::parameterVJPs(const VecX& lambda, std::vector<VecX>& out) const {
-  out = simulable_->getGradientParameterVJPs(lambda, allGroups(), /*shape_surface_only=*/true);
+  const std::vector<SimParameter> groups = differentiatedGroups(*simulable_);
+  out = inRegistryOrder(
+      groups, simulable_->getGradientParameterVJPs(lambda, groups, /*shape_surface_only=*/true),
+      VecX());
 }
 
 // p̄_β = Σ_t (dJ/dβ)ᵀ (∂g_t/∂J)ᵀ λ_t + (dI/dβ)ᵀ (∂g_t/∂I)ᵀ λ_t + surface: the first two sums are
@@ -133,7 +147,7 @@ VecX SimulableAdjointModel::incrementToStateTangent(const VecX& dq) const {
   checkSize(dq, numDofs(), "incrementToStateTangent", "dq");
   const VecX s = state();
   VecX out = dq;
-  for (int b = 0; b < s.size() / 6; ++b)
+  for (int b = 0; b < simulable_->numBoneDofs() / 6; ++b)
     out.segment<3>(6 * b + 3) =
         leftJacobianInverseSO3(s.segment<3>(6 * b + 3)) * dq.segment<3>(6 * b + 3);
   return out;
@@ -143,7 +157,7 @@ VecX SimulableAdjointModel::stateToIncrementTangent(const VecX& ds) const {
   checkSize(ds, numDofs(), "stateToIncrementTangent", "ds");
   const VecX s = state();
   VecX out = ds;
-  for (int b = 0; b < s.size() / 6; ++b)
+  for (int b = 0; b < simulable_->numBoneDofs() / 6; ++b)
     out.segment<3>(6 * b + 3) = leftJacobianSO3(s.segment<3>(6 * b + 3)) * ds.segment<3>(6 * b + 3);
   return out;
 }
@@ -152,7 +166,7 @@ VecX SimulableAdjointModel::stateToIncrementCotangent(const VecX& a) const {
   checkSize(a, numDofs(), "stateToIncrementCotangent", "a");
   const VecX s = state();
   VecX out = a;
-  for (int b = 0; b < s.size() / 6; ++b)
+  for (int b = 0; b < simulable_->numBoneDofs() / 6; ++b)
     out.segment<3>(6 * b + 3) =
         leftJacobianInverseSO3(s.segment<3>(6 * b + 3)).transpose() * a.segment<3>(6 * b + 3);
   return out;
@@ -162,7 +176,7 @@ VecX SimulableAdjointModel::incrementToStateCotangent(const VecX& a) const {
   checkSize(a, numDofs(), "incrementToStateCotangent", "a");
   const VecX s = state();
   VecX out = a;
-  for (int b = 0; b < s.size() / 6; ++b)
+  for (int b = 0; b < simulable_->numBoneDofs() / 6; ++b)
     out.segment<3>(6 * b + 3) =
         leftJacobianSO3(s.segment<3>(6 * b + 3)).transpose() * a.segment<3>(6 * b + 3);
   return out;
@@ -178,6 +192,9 @@ VecX SimulableAdjointModel::initialPreviousStateTangent(const VecX& dq0, const V
   const double h = simulable_->options().time_step;
   const VecX v = simulable_->getVelocity();
   VecX out(dq0.size());
+  const int nb = simulable_->numBoneDofs(), nu = numDofs() - nb;
+  // Soft state: u_{−1} = u_0 − h v_u.
+  out.tail(nu) = dq0.tail(nu) - h * dv0.tail(nu);
   for (int b = 0; b < int(s.R_n.size()); ++b) {
     const Mat3 back = s.R_nm1[b] * s.R_n[b].transpose();  // exp(−h[v_ω]×)
     out.segment<3>(6 * b) = dq0.segment<3>(6 * b) - h * dv0.segment<3>(6 * b);
@@ -195,6 +212,9 @@ VecX SimulableAdjointModel::initialPreviousStateCotangent(const VecX& a_previous
   const double h = simulable_->options().time_step;
   const VecX v = simulable_->getVelocity();
   VecX dv(a0.size());
+  const int nb = simulable_->numBoneDofs(), nu = numDofs() - nb;
+  a0.tail(nu) += a_previous.tail(nu);
+  dv.tail(nu) = -h * a_previous.tail(nu);
   for (int b = 0; b < int(s.R_n.size()); ++b) {
     const Mat3 back = s.R_nm1[b] * s.R_n[b].transpose();
     a0.segment<3>(6 * b) += a_previous.segment<3>(6 * b);

@@ -169,25 +169,44 @@ class RolloutSimulator:
     SoftAvatar and Simulable.
 
     body: flsh.BodyModel. mocap: flsh.Motion to track, or None (no tracking: a passive body
-    starting in the rest pose). steps: T ≥ 1 (h = options.time_step, s). options:
+    starting in the rest pose). steps: T ≥ 1 (h = options.time_step, s). model: "skeleton"
+    (24 rigid bones, the default), "fem" (bones and nodal soft tissue on a tet mesh) or "rom"
+    (bones and the reduced soft tissue with its cubatures; its basis and cubature are part of
+    the avatar, fixed during a rollout: the gradients are those of the reduced model). The soft
+    models' states are the bones followed by their soft state (num_dofs), their vertices the
+    simulated surface; β is not differentiable through them yet (betas may be given, without
+    requires_grad). resolution: interior node density of the tet mesh (soft models);
+    cache_dir: where soft avatars are cached (None: $FLSH_CACHE_DIR or ~/.cache/flsh);
+    avatar_settings: further flsh.SoftAvatar keyword arguments (e.g. handles,
+    elastic_cubature_points, material_file). options:
     flsh.SimulableOptions or None. colliders: flsh.Collider list (e.g. a ground plane). newton:
-    flsh.NewtonOptions or None; the gradients are exact for the converged steps, so the default
-    here is a tight gradient_tolerance of 1e-11 (central differences of the joints then agree
-    with the gradients to ~5e-10 on a 600-vertex body). betas: (≤K,) numpy shape used when simulate() gets betas=None
+    flsh.NewtonOptions of the model's steps, or None; the gradients are exact for the converged
+    steps, so the default is tight: the skeleton's gradient_tolerance 1e-11 (central differences
+    of the joints then agree with the gradients to ~5e-10 on a 600-vertex body), the soft
+    models' 1e-10 on the scene's settings for them. betas: (≤K,) numpy shape used when simulate() gets betas=None
     (default zeros). density (kg/m³) and voxel_size (m): SoftAvatar settings.
 
     The default-shape avatar is built once and kept: it also keeps the voxelized template
     alive, which every new avatar of the same body and settings reuses.
     """
 
-    def __init__(self, body, mocap=None, *, steps: int, options=None, colliders=(), newton=None,
-                 betas=None, density: float = 1010.0, voxel_size: float = 0.01):
+    MODELS = ("skeleton", "fem", "rom")
+
+    def __init__(self, body, mocap=None, *, steps: int, model: str = "skeleton", options=None,
+                 colliders=(), newton=None, betas=None, density: float = 1010.0,
+                 voxel_size: float = 0.01, resolution: float = 1.0, cache_dir=None,
+                 avatar_settings: dict | None = None):
         if not isinstance(body, _flsh.BodyModel):
             raise TypeError(f"body: expected a flsh.BodyModel, got {type(body).__name__}")
         if mocap is not None and not isinstance(mocap, _flsh.Motion):
             raise TypeError(f"mocap: expected a flsh.Motion or None, got {type(mocap).__name__}")
         if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
             raise ValueError(f"steps: expected an integer ≥ 1, got {steps!r}")
+        if model not in self.MODELS:
+            raise ValueError(f"model: expected one of {', '.join(self.MODELS)}, got {model!r}")
+        if avatar_settings is not None and not isinstance(avatar_settings, dict):
+            raise TypeError(f"avatar_settings: expected a dict of SoftAvatar keyword arguments "
+                            f"or None, got {type(avatar_settings).__name__}")
         if options is not None and not isinstance(options, _flsh.SimulableOptions):
             raise TypeError(f"options: expected a flsh.SimulableOptions or None, got "
                             f"{type(options).__name__}")
@@ -195,9 +214,7 @@ class RolloutSimulator:
         for i, c in enumerate(colliders):
             if not isinstance(c, _flsh.Collider):
                 raise TypeError(f"colliders[{i}]: expected a flsh.Collider, got {type(c).__name__}")
-        if newton is None:
-            newton = _flsh.NewtonOptions(gradient_tolerance=1e-11, max_iterations=50)
-        elif not isinstance(newton, _flsh.NewtonOptions):
+        if newton is not None and not isinstance(newton, _flsh.NewtonOptions):
             raise TypeError(f"newton: expected a flsh.NewtonOptions or None, got "
                             f"{type(newton).__name__}")
         self.body = body
@@ -205,12 +222,30 @@ class RolloutSimulator:
         self.steps = int(steps)
         self.options = options if options is not None else _flsh.SimulableOptions()
         self.colliders = tuple(colliders)
-        self.rollout_options = _flsh.RolloutOptions(newton=newton)
+        # The model's Newton settings; by default tight (the gradients are exact for the
+        # converged steps): the skeleton's at 1e-11, the soft models' (the scene's lagged-factor
+        # Newton on CHOLMOD, or the ROM's) at 1e-10.
+        rollout_options = _flsh.RolloutOptions()
+        if model == "skeleton":
+            rollout_options.newton = newton or _flsh.NewtonOptions(gradient_tolerance=1e-11,
+                                                                   max_iterations=50)
+        else:
+            name = "soft_tissue_newton" if model == "fem" else "reduced_newton"
+            if newton is None:
+                newton = getattr(rollout_options, name)
+                newton.gradient_tolerance = 1e-10
+                newton.max_iterations = 100
+            setattr(rollout_options, name, newton)
+        self.rollout_options = rollout_options
+        self.model = model
         self.density = float(density)
         self.voxel_size = float(voxel_size)
+        self.resolution = float(resolution)
+        self.cache_dir = cache_dir
+        self.avatar_settings = dict(avatar_settings or {})
         default_betas = np.zeros(body.num_betas) if betas is None else np.asarray(betas, float)
         self._default_avatar = self._make_avatar(default_betas)
-        self.num_dofs = 6 * _flsh.NUM_JOINTS
+        self.num_dofs = _flsh.Simulable(self._default_avatar, self.mocap, self.options).num_dofs
 
     @property
     def num_betas(self) -> int:
@@ -225,9 +260,21 @@ class RolloutSimulator:
         """(K,) the shape simulate() uses when betas is None."""
         return self._default_avatar.betas
 
+    @property
+    def soft_tissue(self) -> bool:
+        """Whether the model has soft tissue ("fem" or "rom")."""
+        return self.model != "skeleton"
+
     def _make_avatar(self, betas: np.ndarray):
         avatar = _flsh.SoftAvatar(self.body, betas, density=self.density,
-                                  voxel_size=self.voxel_size)
+                                  voxel_size=self.voxel_size, resolution=self.resolution,
+                                  cache_dir=self.cache_dir, **self.avatar_settings)
+        if self.soft_tissue:
+            avatar.enable_soft_tissue()
+        if self.model == "rom":
+            avatar.enable_reduced_model()
+            avatar.enable_elastic_cubature()
+            avatar.enable_inertial_cubature()
         avatar.init_volumetric_data()
         return avatar
 
@@ -273,7 +320,8 @@ class RolloutSimulator:
         return values
 
     def __repr__(self):
-        return (f"RolloutSimulator(vertices={self.num_vertices}, steps={self.steps}, "
+        return (f"RolloutSimulator(model={self.model!r}, vertices={self.num_vertices}, "
+                f"steps={self.steps}, "
                 f"mocap={'yes' if self.mocap is not None else 'none'}, "
                 f"colliders={len(self.colliders)})")
 
@@ -350,8 +398,9 @@ def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
     Targets need a mocap (the simulable tracks only then).
 
     Returns joints (T, 24, 3), the bone positions t_b after steps 1..T (m); with vertices=True
-    (joints, vertices) with the SMPL vertices (T, V, 3) (m; costs a skinning per step forward
-    and an SMPL Jacobian per step backward). ValueError on a wrong dtype, device, shape or a
+    (joints, vertices) with the vertices (T, V, 3) (m): the SMPL vertices (skeleton; a skinning
+    per step forward and an SMPL Jacobian per step backward) or the simulated surface (soft
+    models). With model "fem" or "rom", betas may not require grad. ValueError on a wrong dtype, device, shape or a
     non-finite value; TypeError if simulator is not a RolloutSimulator.
     """
     if not isinstance(simulator, RolloutSimulator):
@@ -360,6 +409,11 @@ def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
     T, K, n = simulator.steps, simulator.num_betas, simulator.num_dofs
     if betas is not None:
         _check_fixed(betas, "betas", (-1,), f"(K',) with K' <= {K}")
+        if simulator.soft_tissue and betas.requires_grad:
+            raise ValueError(f"betas: gradients with respect to the shape through soft tissue "
+                             f"(model={simulator.model!r}: its rest nodes, masses and "
+                             f"materials) are not available yet; pass betas without "
+                             f"requires_grad, or use model='skeleton'")
         if betas.shape[0] > K:
             raise ValueError(f"betas: expected at most {K} values (the model's shape "
                              f"components), got shape {tuple(betas.shape)}")

@@ -92,16 +92,27 @@ py::array_t<double, py::array::c_style> trajectory_argument(const py::handle& ob
 void bind_diff(py::module_& m) {
   const RolloutOptions rollout_defaults;
   py::class_<RolloutOptions>(m, "RolloutOptions", "Options of a Rollout.")
-      .def(py::init([](const py::object& newton) {
+      .def(py::init([](const py::object& newton, const py::object& soft_tissue_newton,
+                       const py::object& reduced_newton) {
              RolloutOptions o;
              if (!newton.is_none()) o.newton = newton.cast<NewtonOptions>();
+             if (!soft_tissue_newton.is_none())
+               o.soft_tissue_newton = soft_tissue_newton.cast<NewtonOptions>();
+             if (!reduced_newton.is_none()) o.reduced_newton = reduced_newton.cast<NewtonOptions>();
              return o;
            }),
            py::kw_only(), py::arg("newton") = py::none(),
-           "newton: NewtonOptions of every step, or None (defaults). The gradients are as "
+           py::arg("soft_tissue_newton") = py::none(), py::arg("reduced_newton") = py::none(),
+           "NewtonOptions of every step, or None (defaults), per model as SceneOptions has them: "
+           "newton (the skeleton), soft_tissue_newton (FEM; default: the scene's with "
+           "gradient_tolerance 1e-8), reduced_newton (ROM; likewise). The gradients are as "
            "accurate as Newton's convergence: use gradient_tolerance ≈ 1e-10 or tighter when "
            "comparing with finite differences.")
       .def_readwrite("newton", &RolloutOptions::newton, "NewtonOptions (a copy on read)")
+      .def_readwrite("soft_tissue_newton", &RolloutOptions::soft_tissue_newton,
+                     "NewtonOptions of the FEM (a copy on read)")
+      .def_readwrite("reduced_newton", &RolloutOptions::reduced_newton,
+                     "NewtonOptions of the ROM (a copy on read)")
       .def("__repr__", [](const RolloutOptions& o) {
         return "RolloutOptions(newton=" + py::repr(py::cast(o.newton)).cast<std::string>() + ")";
       });
@@ -365,38 +376,37 @@ void bind_diff(py::module_& m) {
           py::gil_scoped_release release;
           c = r.verticesCotangent(t, g);
         }
-        return py::make_tuple(to_numpy(c.state), c.direct);
+        return py::make_tuple(to_numpy(c.state), c.direct,
+                              c.previous_state.size() ? py::object(to_numpy(c.previous_state))
+                                                      : py::object(py::none()));
       },
       py::arg("t"), py::arg("dL_dvertices"),
-      "dL/d(SMPL vertices at step t) (V, 3) pulled back through getVertices: returns (state "
+      "dL/d(vertices at step t) (V, 3) pulled back through getVertices: returns (state "
       "(numDofs,), direct RolloutVariables with the β and J_0 parts that do not go through "
-      "the state; sum them over steps and pass them to backward as `direct`).");
+      "the state, previous_state: soft tissue's (numDofs,) for the state of step t − 1, whose "
+      "held pose blend moves the surface, else None). trajectory_cotangent sums them for a "
+      "whole trajectory.");
   rollout.def(
       "trajectory_cotangent",
       [](const Rollout& r, const py::object& dL_djoints, const py::object& dL_dvertices) {
-        const long T = r.numSteps(), n = r.numDofs();
+        const long T = r.numSteps();
         if (T == 0) throw py::value_error("trajectory_cotangent: call run() first");
-        RowMatX states = RowMatX::Zero(T, n);
-        RolloutVariables direct;
+        RowMatX joints, vertices;
         if (!dL_djoints.is_none()) {
           auto a = trajectory_argument(dL_djoints, "dL_djoints", T, 24, "24");
-          for (long t = 0; t < T; ++t)
-            states.row(t) += r.jointsCotangent(Eigen::Map<const MatX3>(a.data() + t * 72, 24, 3))
-                                 .transpose();
+          joints = Eigen::Map<const RowMatX>(a.data(), T, 72);
         }
         if (!dL_dvertices.is_none()) {
           const long V = r.simulable().avatar().body().numVertices();
           auto a = trajectory_argument(dL_dvertices, "dL_dvertices", T, V, "V");
-          const double* data = a.data();
-          py::gil_scoped_release release;
-          for (long t = 0; t < T; ++t) {
-            const Rollout::VerticesCotangent c =
-                r.verticesCotangent(int(t + 1), Eigen::Map<const MatX3>(data + t * 3 * V, V, 3));
-            states.row(t) += c.state.transpose();
-            accumulate(direct, c.direct);
-          }
+          vertices = Eigen::Map<const RowMatX>(a.data(), T, 3 * V);
         }
-        return py::make_tuple(to_numpy(states), direct);
+        Rollout::TrajectoryCotangent c;
+        {
+          py::gil_scoped_release release;
+          c = r.trajectoryCotangent(joints, vertices);
+        }
+        return py::make_tuple(to_numpy(c.states), c.direct);
       },
       py::arg("dL_djoints") = py::none(), py::arg("dL_dvertices") = py::none(),
       "Cotangent of a loss on the whole trajectory: dL/d(joints) (T, 24, 3) and/or dL/d(SMPL "

@@ -18,6 +18,8 @@ struct BoneFrames {
   const MatX3& t;              ///< 24 × 3 joint positions, m
 };
 
+struct SkinnedPoint;
+
 class ModelKinematics {
  public:
   virtual ~ModelKinematics() = default;
@@ -38,6 +40,9 @@ class ModelKinematics {
   virtual void surface(MatX3* x, MatX3* Y) const = 0;
   /// d(surface nodes)/dq rows (3#V × numDofs) at the prepared state, as triplets.
   virtual void surfaceJacobian(std::vector<Triplet>& triplets) const = 0;
+  /// Surface node i at the prepared state as a SkinnedPoint (sim/terms/term_blocks.h: its
+  /// bones' weights and lever arms; id set by the caller). The ROM's after surface().
+  virtual void surfacePoint(int i, SkinnedPoint& p) const = 0;
 };
 
 }  // namespace flsh::detail

@@ -6,9 +6,10 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/sim/simulable.h"
 #include "flsh/energy/skeleton_energies.h"
+#include "flsh/sim/simulable.h"
 #include "sim/simulable_impl.h"
+#include "sim/terms/term_blocks.h"
 
 namespace flsh {
 
@@ -73,6 +74,49 @@ SpMat Simulable::getNodesStateJacobian() const {
   SpMat D(3 * m.kinematics->numSurface(), m.dofs());
   D.setFromTriplets(triplets.begin(), triplets.end());
   return D;
+}
+
+// Soft tissue: x_i moves with its held pose blend offset P_i(R_n) by M_i = Σ_b w_ib R_b, so the
+// cotangent of P_i is M_iᵀ ∂L/∂x_i, chained to q_n's rotations by the kinematics.
+// The rest joint J_b moves x_i by −w_ib R_b.
+void Simulable::getNodesCotangents(const MatX3& dL_dnodes, VecX* previous_state,
+                                   VecX* rest_joints) const {
+  const Impl& m = *impl_;
+  const int V = m.kinematics->numSurface();
+  if (dL_dnodes.rows() != V)
+    throw InputError("Simulable::getNodesCotangents: dL_dnodes has shape " +
+                     shapeString({long(dL_dnodes.rows()), 3}) + ", expected " +
+                     shapeString({long(V), 3}));
+  m.prepare();
+  m.kinematics->surface(nullptr, nullptr);  // the ROM skins its surface nodes here
+  if (rest_joints) {
+    *rest_joints = VecX::Zero(3 * m.num_bones);
+    detail::SkinnedPoint point;
+    for (int i = 0; i < V; ++i) {
+      if (dL_dnodes.row(i).isZero(0.0)) continue;
+      m.kinematics->surfacePoint(i, point);
+      for (int a = 0; a < point.count; ++a) {
+        const int b = point.bone[a];
+        rest_joints->segment<3>(3 * b) -=
+            point.weight[a] * (m.q.R[b].transpose() * dL_dnodes.row(i).transpose());
+      }
+    }
+  }
+  if (!previous_state) return;
+  VecX& a = *previous_state;
+  a = VecX::Zero(m.dofs());
+  if (!m.soft) return;
+  const detail::SoftKinematics& kin = m.soft->kinematics();
+  std::vector<int> nodes;
+  std::vector<Vec3> mu;
+  for (int i = 0; i < V; ++i)
+    if (!dL_dnodes.row(i).isZero(0.0)) {
+      nodes.push_back(i);
+      mu.push_back(kin.M(i).transpose() * dL_dnodes.row(i).transpose());
+    }
+  VecX rotations = VecX::Zero(3 * m.num_bones);
+  kin.poseBlendCotangent(m.q_n.R, nodes, mu, rotations);
+  for (int b = 0; b < m.num_bones; ++b) a.segment<3>(6 * b + 3) = rotations.segment<3>(3 * b);
 }
 
 // ---- soft tissue --------------------------------------------------------------------------

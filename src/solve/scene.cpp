@@ -125,7 +125,9 @@ void Scene::ensureSolver() {
   }
 }
 
-StepStats Scene::step() {
+StepStats Scene::step() { return step(StepHooks{}); }
+
+StepStats Scene::step(const StepHooks& hooks) {
   if (simulables_.empty())
     throw Error("Scene::step: the scene has no simulables (call addSimulable first)");
   const auto start = std::chrono::steady_clock::now();
@@ -134,6 +136,7 @@ StepStats Scene::step() {
   before.reserve(simulables_.size());
   for (auto& s : simulables_) before.push_back(s->saveStep());
   for (auto& s : simulables_) s->preUpdate();
+  if (hooks.after_pre_update) hooks.after_pre_update();
   ensureSolver();
   if (options_.lower_energy_start && hasSoftTissue()) {
     const double at_prediction = energy();
@@ -158,6 +161,7 @@ StepStats Scene::step() {
   // Newton's last evaluation is the gradient at the final state, so these counts belong to it.
   for (auto& s : simulables_) stats.active_contacts += s->stats().active_contacts;
   stats.active_contacts += avatar_contacts_;
+  if (hooks.before_post_update) hooks.before_post_update(stats.newton);
   for (auto& s : simulables_) s->postUpdate();
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return stats;

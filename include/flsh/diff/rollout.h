@@ -1,4 +1,5 @@
-// Rollout: a differentiable simulation of one Simulable (articulated skeleton) over T steps.
+// Rollout: a differentiable simulation of one Simulable over T steps: the articulated skeleton,
+// or the FEM or ROM soft skeleton (bones followed by the soft state in every state vector).
 //
 //   Rollout rollout(simulable, options);
 //   rollout.run(T, inputs);                        // forward: simulate and record the tape
@@ -28,6 +29,12 @@
 //  - rest_joints (72) and bone_inertia (240): as if overridden by Simulable::setParameter before
 //    the run (they are the pieces of the β chain; setParameter(RestJoints) moves the root target
 //    J_0 + trans and, through initialize(), the initial state).
+// Soft tissue (FEM, ROM): every group but shape (β moves the rest nodes, masses and materials,
+// whose derivatives are not written yet: its gradient comes back empty and a shape direction
+// is refused). The ROM's basis and cubature are part of the avatar's discretization, fixed
+// during a rollout: the gradient is exact for the reduced model that is simulated. The vertices
+// are the simulated surface (getVertices), which moves with the pose blend held from the
+// previous state (VerticesCotangent::previous_state).
 // Accuracy: the gradients are exact for the converged rollout; they are as accurate as Newton's
 // convergence (RolloutOptions::newton.gradient_tolerance; use ~1e-10 or tighter when comparing
 // with finite differences).
@@ -41,6 +48,7 @@
 #include "flsh/diff/tape.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/newton.h"
+#include "flsh/solve/scene.h"
 
 namespace flsh {
 
@@ -81,8 +89,18 @@ double dot(const RolloutVariables& a, const RolloutVariables& b);
 /// non-empty members differ in shape.
 void accumulate(RolloutVariables& into, const RolloutVariables& add);
 
+/// Newton's settings per model, as SceneOptions has them (a rollout's steps are its scene's).
+/// The gradients are exact for the converged steps, so they are as accurate as these
+/// tolerances: the soft models' defaults are the scene's with gradient_tolerance 1e-8.
 struct RolloutOptions {
-  NewtonOptions newton;  ///< per-step solver settings (Auto: sparse Cholesky)
+  NewtonOptions newton;  ///< the skeleton's (Auto: sparse Cholesky)
+  NewtonOptions soft_tissue_newton = rolloutNewtonDefaults(softTissueNewtonDefaults());  ///< FEM
+  NewtonOptions reduced_newton = rolloutNewtonDefaults(reducedNewtonDefaults());         ///< ROM
+  /// `scene_defaults` with gradient_tolerance 1e-8.
+  static NewtonOptions rolloutNewtonDefaults(NewtonOptions scene_defaults) {
+    scene_defaults.gradient_tolerance = 1e-8;
+    return scene_defaults;
+  }
 };
 
 class Rollout {
@@ -113,6 +131,10 @@ class Rollout {
   VecX jointsCotangent(const MatX3& dL_djoints) const;
   struct VerticesCotangent {
     VecX state;  ///< dL/d(state vector at step t), numDofs
+    /// Soft tissue: dL/d(state vector at step t − 1) (the pose blend held from it moves the
+    /// surface; numDofs): add it to row t − 2 of dL/d(states), or for t = 1 to
+    /// direct.initial_state (trajectoryCotangent does). Empty for the skeleton and for t = 0.
+    VecX previous_state;
     /// The parts that do not go through the state: `shape` (K: SMPL shape and pose blend
     /// shapes and J_0(β) in trans = t_0 − J_0) and `rest_joints` (72: J_0 in trans). Pass them
     /// (summed over steps, see accumulate()) to backward() as `direct`.
@@ -120,12 +142,21 @@ class Rollout {
   };
   /// dL/d(SMPL vertices at step t) (#V × 3) pulled back through getVertices (t = 1..T, or 0).
   VerticesCotangent verticesCotangent(int t, const MatX3& dL_dvertices) const;
+  /// The arguments of backward() for a loss on whole trajectories: dL/d(joint positions)
+  /// (T × 72, row t − 1: the 24 × 3 of step t, row-major) and dL/d(vertices) (T × 3#V, row
+  /// t − 1: step t's #V × 3, row-major); either may be empty (zero).
+  struct TrajectoryCotangent {
+    RowMatX states;           ///< T × numDofs
+    RolloutVariables direct;  ///< parts that do not go through the states
+  };
+  TrajectoryCotangent trajectoryCotangent(const RowMatX& dL_djoints,
+                                          const RowMatX& dL_dvertices) const;
 
   // ---- derivatives ---------------------------------------------------------------------
   /// Reverse pass: dL/d(every input) for dL/dq_t (T × numDofs, state-vector layout), plus the
   /// loss's direct dependence on inputs (`direct`, e.g. VerticesCotangent::direct), added to
   /// the result. The simulable is left bitwise as it was. Throws InputError on wrong shapes /
-  /// NaN, Error before run().
+  /// NaN, Error before run() or when a step did not converge (TapeStepInfo::converged).
   RolloutVariables backward(const RowMatX& dL_dstates, const RolloutVariables& direct = {});
   /// Forward sensitivities: for each direction v, the T × numDofs changes of the state vectors
   /// dq_t/dp · v (one back-substitution per direction per step).
@@ -133,6 +164,7 @@ class Rollout {
 
  private:
   void requireRun(const char* who) const;
+  void requireConverged(const char* who) const;
   void checkVariables(const RolloutVariables& v, const std::string& who) const;
 
   SimulableAdjointModel model_;
@@ -145,7 +177,6 @@ class Rollout {
   VecX initial_state_;
   bool state_from_initialize_ = true, velocity_from_initialize_ = true;
   MatX initial_state_joints_jacobian_, initial_velocity_joints_jacobian_;  // numDofs × 72
-  std::unique_ptr<LinearSolver> solver_;
 };
 
 }  // namespace flsh

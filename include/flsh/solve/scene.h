@@ -9,12 +9,13 @@
 // soft-tissue node). Avatar–avatar contact is in src/solve/avatar_contact.cpp.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <vector>
 
 #include "flsh/contact/collider.h"
-#include "flsh/solve/hessian_assembler.h"
 #include "flsh/sim/simulable.h"
+#include "flsh/solve/hessian_assembler.h"
 #include "flsh/solve/newton.h"
 
 namespace flsh {
@@ -103,6 +104,14 @@ class Scene : public Objective {
   /// postUpdate. A step that leaves some simulable with a non-finite state throws Error after
   /// restoring every simulable to its state before the step (saveStep / restoreStep).
   StepStats step();
+  /// What a caller runs inside a step (either may be empty): after every preUpdate (e.g. to
+  /// override the step's targets) and after Newton, before the postUpdates (e.g. to record the
+  /// solved step, as the adjoint's Rollout does).
+  struct StepHooks {
+    std::function<void()> after_pre_update;
+    std::function<void(const NewtonResult&)> before_post_update;
+  };
+  StepStats step(const StepHooks& hooks);
   /// True when some simulable has soft-tissue DoFs (numDofs() > numBoneDofs()).
   bool hasSoftTissue() const;
   /// True when some simulable has FEM soft tissue (soft-tissue DoFs, not the reduced model).

@@ -17,35 +17,10 @@
 #include "flsh/core/rotation.h"
 #include "flsh/sim/simulable.h"
 #include "sim/terms/term_checks.h"
+#include "support/small_soft_avatar.h"
 #include "support/test_support.h"
 
 namespace flsh::test {
-
-enum class SoftModel { Fem, Rom };
-
-inline std::string modelName(const ::testing::TestParamInfo<SoftModel>& info) {
-  return info.param == SoftModel::Fem ? "Fem" : "Rom";
-}
-
-/// Soft avatars of the 800-vertex synthetic body (coarse interior), built once per binary: the
-/// FEM soft skeleton, and the ROM with both cubatures (16 handles, 60 tets each).
-inline std::shared_ptr<const SoftAvatar> smallSoftAvatar(SoftModel model) {
-  static const std::string cache = freshTempDir("soft_term_cache");
-  auto make = [](bool reduced) {
-    auto a =
-        std::make_shared<SoftAvatar>(smallScene(800).body, VecX(), smallSoftAvatarSettings(cache));
-    a->enableSoftTissue();
-    a->enableReducedModel(reduced);
-    a->enableElasticCubature(reduced);
-    a->enableInertialCubature(reduced);
-    a->initVolumetricData();
-    return a;
-  };
-  static std::shared_ptr<const SoftAvatar> fem = make(false);
-  if (model == SoftModel::Fem) return fem;
-  static std::shared_ptr<const SoftAvatar> rom = make(true);
-  return rom;
-}
 
 /// A walking soft avatar one step in with a velocity history (bones and soft state), moved off
 /// its prediction, a ground plane 1.5 cm above its lowest node and a sphere pressing into its

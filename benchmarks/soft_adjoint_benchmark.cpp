@@ -1,0 +1,261 @@
+// The soft skeletons' adjoint (issue 25): the gradient of a whole-rollout loss with respect to
+// every per-step pose and root target, the stiffnesses, the ground's offset and the initial state
+// and velocity, by the reverse pass, against the forward pass it follows and the central
+// differences it replaces. The full-size synthetic body (6890 vertices) tracking the built-in walk
+// on a ground plane at h = 1/30 s: the FEM at the default resolution (30 steps by default) or the
+// ROM with the default basis and both cubatures (100 steps).
+//
+// Loss: L = Σ_t ½‖J_t − Ĵ_t‖² + Σ_t ½‖V_t − V̂_t‖² over the 24 joints and the simulated surface of
+// every step (targets: the base rollout's moved by a fixed random offset of up to 2 cm).
+//
+// Printed, each the median of `repeats` runs (wall clock; the machine is shared):
+//  - forward without a tape (Scene::step, the scene's own Newton settings for the model);
+//  - forward with the tape (Rollout::run at the same Newton settings: each step also factors its
+//    exact Hessian for the reverse pass);
+//  - backward: Rollout::trajectoryCotangent and Rollout::backward (one back-substitution and the
+//    parameter and previous-state products per step);
+//  - the process's peak resident memory after the runs, and the tape's share of it per step;
+//  - central differences over the same parameters: 2 · #parameters forward passes without tape,
+//    extrapolated from the timed one (not run).
+// One directional derivative is compared with a central difference of two re-run rollouts.
+//
+// Usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] [--tolerance T]
+//   --tolerance: Newton's relative gradient tolerance of the rollouts (default: the rollout's
+//                default, 1e-8).
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "flsh/body/motion.h"
+#include "flsh/body/synthetic_body.h"
+#include "flsh/diff/rollout.h"
+#include "flsh/solve/scene.h"
+
+namespace {
+
+using namespace flsh;
+using Clock = std::chrono::steady_clock;
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+double timeOf(const std::function<void()>& f) {
+  const auto t0 = Clock::now();
+  f();
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+double peakResidentMB() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return double(usage.ru_maxrss) / 1024.0;  // kB on Linux
+}
+
+struct Setup {
+  std::shared_ptr<SoftAvatar> avatar;
+  std::shared_ptr<const Motion> walk;
+  SimulableOptions options;
+  Collider ground = Collider::plane(Vec3::Zero(), Vec3::UnitY());
+};
+
+std::shared_ptr<Simulable> makeSimulable(const Setup& s) {
+  auto sim = std::make_shared<Simulable>(s.avatar, s.walk, s.options);
+  sim->setColliders({s.ground});
+  return sim;
+}
+
+struct Loss {
+  RowMatX joint_targets, vertex_targets;  // T × 72, T × 3V
+
+  double value(const Rollout& r) const {
+    const RowMatX joints = r.joints();
+    double L = 0.5 * (joints - joint_targets).squaredNorm();
+    for (int t = 1; t <= r.numSteps(); ++t) {
+      const MatX3 v = r.vertices(t);
+      L += 0.5 *
+           (Eigen::Map<const Eigen::RowVectorXd>(v.data(), v.size()) - vertex_targets.row(t - 1))
+               .squaredNorm();
+    }
+    return L;
+  }
+  Rollout::TrajectoryCotangent cotangent(const Rollout& r) const {
+    RowMatX dV(r.numSteps(), vertex_targets.cols());
+    for (int t = 1; t <= r.numSteps(); ++t) {
+      const MatX3 v = r.vertices(t);
+      dV.row(t - 1) =
+          Eigen::Map<const Eigen::RowVectorXd>(v.data(), v.size()) - vertex_targets.row(t - 1);
+    }
+    return r.trajectoryCotangent(r.joints() - joint_targets, dV);
+  }
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || (std::strcmp(argv[1], "fem") != 0 && std::strcmp(argv[1], "rom") != 0)) {
+    std::fprintf(stderr,
+                 "usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] "
+                 "[--tolerance T]\n");
+    return 2;
+  }
+  const bool rom = std::strcmp(argv[1], "rom") == 0;
+  int steps = rom ? 100 : 30, repeats = 3;
+  double tolerance = -1.0;
+  int positional = 0;
+  for (int i = 2; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--tolerance") == 0 && i + 1 < argc) {
+      tolerance = std::atof(argv[++i]);
+    } else if (positional == 0) {
+      steps = std::atoi(argv[i]);
+      ++positional;
+    } else {
+      repeats = std::atoi(argv[i]);
+    }
+  }
+  if (steps < 1 || repeats < 1 || (tolerance != -1.0 && !(tolerance > 0.0))) {
+    std::fprintf(stderr, "soft_adjoint_benchmark: STEPS and REPEATS ≥ 1, tolerance > 0\n");
+    return 2;
+  }
+  try {
+    Setup s;
+    auto body = std::make_shared<BodyModel>(makeSyntheticBody({}));
+    s.avatar = std::make_shared<SoftAvatar>(body, VecX(), SoftAvatarSettings{});
+    s.avatar->enableSoftTissue();
+    if (rom) {
+      s.avatar->enableReducedModel();
+      s.avatar->enableElasticCubature();
+      s.avatar->enableInertialCubature();
+    }
+    const double build = timeOf([&] { s.avatar->initVolumetricData(); });
+    s.walk = std::make_shared<Motion>(makeBuiltinMotion("walk", 20.0, 30.0));
+    s.options.time_step = 1.0 / 30.0;
+    {
+      Simulable probe(s.avatar, s.walk, s.options);
+      probe.initialize();
+      s.ground =
+          Collider::plane(Vec3(0, probe.getNodes().col(1).minCoeff() - 0.002, 0), Vec3::UnitY());
+    }
+    RolloutOptions rollout_options;
+    if (tolerance > 0)
+      for (NewtonOptions* n :
+           {&rollout_options.soft_tissue_newton, &rollout_options.reduced_newton})
+        n->gradient_tolerance = tolerance;
+    const NewtonOptions& newton =
+        rom ? rollout_options.reduced_newton : rollout_options.soft_tissue_newton;
+    const int n = makeSimulable(s)->numDofs();
+    std::printf(
+        "%s: %d DoFs, avatar built/loaded in %.2f s; %d steps at h = 1/30 s, walk, "
+        "ground; Newton tolerance %.1e (relative)\n",
+        rom ? "ROM" : "FEM", n, build, steps, newton.gradient_tolerance);
+
+    // Forward without a tape: the scene, at the rollout's Newton settings.
+    std::vector<double> plain;
+    for (int r = 0; r < repeats; ++r) {
+      auto sim = makeSimulable(s);
+      SceneOptions scene_options;
+      scene_options.soft_tissue_newton = rollout_options.soft_tissue_newton;
+      scene_options.reduced_newton = rollout_options.reduced_newton;
+      Scene scene(scene_options);
+      scene.addSimulable(sim);
+      scene.addCollider(s.ground);
+      scene.initialize();
+      plain.push_back(timeOf([&] {
+        for (int t = 0; t < steps; ++t) scene.step();
+      }));
+    }
+
+    // The loss's targets from a base rollout.
+    auto base_sim = makeSimulable(s);
+    Rollout base(base_sim, rollout_options);
+    base.run(steps);
+    Loss loss;
+    loss.joint_targets = base.joints() + 0.02 * RowMatX::Random(steps, 72);
+    const int V = body->numVertices();
+    loss.vertex_targets.resize(steps, 3 * V);
+    for (int t = 1; t <= steps; ++t) {
+      const MatX3 v = base.vertices(t);
+      loss.vertex_targets.row(t - 1) = Eigen::Map<const Eigen::RowVectorXd>(v.data(), 3 * V);
+    }
+    loss.vertex_targets += 0.02 * RowMatX::Random(steps, 3 * V);
+
+    std::vector<double> forward, backward;
+    RolloutVariables grad;
+    double L = 0.0;
+    int newton_iterations = 0;
+    for (int r = 0; r < repeats; ++r) {
+      auto sim = makeSimulable(s);
+      Rollout rollout(sim, rollout_options);
+      forward.push_back(timeOf([&] { rollout.run(steps); }));
+      backward.push_back(timeOf([&] {
+        const Rollout::TrajectoryCotangent c = loss.cotangent(rollout);
+        grad = rollout.backward(c.states, c.direct);
+      }));
+      L = loss.value(rollout);
+      newton_iterations = 0;
+      for (int t = 1; t <= steps; ++t)
+        newton_iterations += rollout.tape().stepInfo(t).newton_iterations;
+    }
+    const long parameters = long(steps) * 75 + 4 + 3 + 2L * n;
+    const double f_plain = median(plain), f_tape = median(forward), b = median(backward);
+    std::printf("loss %.6g; Newton iterations per step %.2f\n", L,
+                double(newton_iterations) / steps);
+    std::printf("forward without tape  %8.3f s (%.2f steps/s)\n", f_plain, steps / f_plain);
+    std::printf("forward with tape     %8.3f s (%.2fx the plain forward)\n", f_tape,
+                f_tape / f_plain);
+    std::printf("backward              %8.3f s (%.2fx the plain forward, %.2fx with the tape)\n", b,
+                b / f_plain, b / f_tape);
+    std::printf("peak resident memory  %8.0f MB\n", peakResidentMB());
+    std::printf(
+        "central differences   %8.3g s (2 x %ld parameters x %.3f s, extrapolated): "
+        "%.3gx the forward + backward\n",
+        2.0 * double(parameters) * f_plain, parameters, f_plain,
+        2.0 * double(parameters) * f_plain / (f_tape + b));
+
+    // One direction against a central difference of re-run rollouts.
+    RolloutVariables d;
+    d.pose_targets = 0.05 * RowMatX::Random(steps, 72);
+    d.stiffnesses = VecX::Zero(4);
+    d.stiffnesses[1] = 0.05 * makeSimulable(s)->getParameter(SimParameter::Stiffnesses)[1];
+    const double analytic = dot(grad, d);
+    const double eps = 1e-4;
+    auto along = [&](double e) {
+      auto sim = makeSimulable(s);
+      Rollout r(sim, rollout_options);
+      RolloutInputs in;
+      RowMatX pose(steps, 72);
+      {
+        Simulable targets(s.avatar, s.walk, s.options);
+        targets.initialize();
+        for (int t = 0; t < steps; ++t) {
+          targets.preUpdate();
+          pose.row(t) = targets.getParameter(SimParameter::PoseTargets).transpose();
+          targets.postUpdate();
+        }
+      }
+      in.pose_targets = pose + e * d.pose_targets;
+      in.stiffnesses = sim->getParameter(SimParameter::Stiffnesses) + e * d.stiffnesses;
+      r.run(steps, in);
+      return loss.value(r);
+    };
+    const double fd = (along(eps) - along(-eps)) / (2 * eps);
+    std::printf(
+        "check: directional derivative %.10g, central difference %.10g (relative "
+        "difference %.2g)\n",
+        analytic, fd, std::abs(analytic - fd) / std::abs(fd));
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "soft_adjoint_benchmark: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,341 @@
+// Rollout through the soft skeletons (FEM and ROM): for every input group but β, the directional
+// derivative of a whole-rollout loss (joint positions, the state vectors with their soft part,
+// and the simulated surface at every step, which moves with the pose blend held from the
+// previous state) against a central difference of re-run rollouts, with and without contact (a
+// ground plane the walk touches and a sphere); forward sensitivities against the reverse pass;
+// backward leaves the simulable bitwise unchanged; a β direction is refused clearly.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <tuple>
+
+#include "flsh/core/error.h"
+#include "flsh/diff/rollout.h"
+#include "support/small_soft_avatar.h"
+#include "support/test_support.h"
+
+namespace flsh {
+namespace {
+
+using test::randomVector;
+using test::SoftModel;
+
+constexpr int kSteps = 6;
+
+const test::SmallScene& scene() { return test::smallScene(800); }
+
+// The soft models' Newton (the scene's: exact Hessian with a PSD fallback, the lagged factor),
+// converged tightly: the gradients are exact for the converged rollout.
+RolloutOptions tightOptions() {
+  RolloutOptions o;
+  for (NewtonOptions* newton : {&o.soft_tissue_newton, &o.reduced_newton}) {
+    newton->gradient_tolerance = 1e-11;
+    newton->max_iterations = 100;
+  }
+  return o;
+}
+
+// A ground plane 1 cm above the lowest surface node of the initial state and a sphere pressing
+// 1 cm into the frontmost one (placed once per model).
+std::vector<Collider> sceneColliders(SoftModel model) {
+  Simulable sim(test::smallSoftAvatar(model), scene().walk);
+  sim.initialize();
+  const MatX3 nodes = sim.getNodes();
+  Eigen::Index lowest, front;
+  nodes.col(1).minCoeff(&lowest);
+  nodes.col(2).maxCoeff(&front);
+  const Vec3 tip = nodes.row(front).transpose();
+  return {Collider::plane(Vec3(0, nodes(lowest, 1) + 0.01, 0), Vec3::UnitY()),
+          Collider::sphere(tip + Vec3(0, 0, 0.04), 0.05)};
+}
+
+// Bitwise equal step data (states, soft states, pose blend, time, targets).
+bool sameStep(const SimulableStep& a, const SimulableStep& b) {
+  bool same = a.t == b.t && a.t_n == b.t_n && a.t_nm1 == b.t_nm1 && a.time == b.time &&
+              a.target_t0 == b.target_t0 && a.u == b.u && a.u_n == b.u_n && a.u_nm1 == b.u_nm1 &&
+              a.pose_blend == b.pose_blend;
+  for (size_t k = 0; k < a.R.size(); ++k)
+    same = same && a.R[k] == b.R[k] && a.R_n[k] == b.R_n[k] && a.R_nm1[k] == b.R_nm1[k] &&
+           a.target_R[k] == b.target_R[k];
+  return same;
+}
+
+struct Case {
+  SoftModel model;
+  bool contact;
+  bool explicit_initial = false;  // the initial state and velocity as inputs
+};
+
+std::shared_ptr<Simulable> makeSimulable(const Case& c) {
+  auto sim = std::make_shared<Simulable>(test::smallSoftAvatar(c.model), scene().walk);
+  if (c.contact) sim->setColliders(sceneColliders(c.model));
+  return sim;
+}
+
+RolloutInputs baseInputs(const Case& c) {
+  RolloutInputs in;
+  Simulable sim(test::smallSoftAvatar(c.model), scene().walk);
+  sim.initialize();
+  const Vec3 J0 = sim.getParameter(SimParameter::RestJoints).head<3>();
+  if (c.explicit_initial) {
+    // Soft tissue already moving: the state and velocity three steps into the walk.
+    static const auto walked = [](SoftModel model) {
+      auto moving = std::make_shared<Simulable>(test::smallSoftAvatar(model), scene().walk);
+      Rollout warm_up(moving, tightOptions());
+      warm_up.run(3);
+      return std::pair{moving->getState(), moving->getVelocity()};
+    };
+    static const auto fem = walked(SoftModel::Fem), rom = walked(SoftModel::Rom);
+    const auto& start = c.model == SoftModel::Fem ? fem : rom;
+    in.initial_state = start.first;
+    in.initial_velocity = start.second;
+  }
+  in.pose_targets.resize(kSteps, 72);
+  in.root_targets.resize(kSteps, 3);
+  for (int t = 0; t < kSteps; ++t) {
+    sim.preUpdate();
+    in.pose_targets.row(t) = sim.getParameter(SimParameter::PoseTargets).transpose();
+    in.root_targets.row(t) =
+        (sim.getParameter(SimParameter::RootTranslationTarget) - J0).transpose();
+    sim.postUpdate();
+  }
+  return in;
+}
+
+// L = Σ_t w_t ‖joints_t − target_t‖² + Σ_t a_t · q_t (rotations and the soft state) +
+//     Σ_t c_t · vertices_t (the simulated surface).
+struct Loss {
+  RowMatX joint_targets, state_weights, vertex_weights;  // T × 72, T × n, T × 3V
+  VecX weights;
+
+  Loss(int n, int nb, int nv) {
+    joint_targets.resize(kSteps, 72);
+    state_weights = RowMatX::Zero(kSteps, n);
+    vertex_weights.resize(kSteps, 3 * nv);
+    weights.resize(kSteps);
+    for (int t = 0; t < kSteps; ++t) {
+      joint_targets.row(t) = (randomVector(72, 0.5, 100 + t) + VecX::Constant(72, 0.4)).transpose();
+      weights[t] = 1.0 + 0.1 * t;
+      const VecX a = randomVector(n, 1.0, 200 + t);
+      for (int b = 0; b < nb / 6; ++b)
+        state_weights.row(t).segment<3>(6 * b + 3) = a.segment<3>(6 * b + 3).transpose();
+      state_weights.row(t).tail(n - nb) = 30.0 * a.tail(n - nb).transpose();
+      vertex_weights.row(t) = randomVector(3 * nv, 1.0, 300 + t).transpose();
+    }
+  }
+
+  double value(const Rollout& r) const {
+    const RowMatX joints = r.joints();
+    double L = 0.0;
+    for (int t = 0; t < kSteps; ++t) {
+      L += weights[t] * (joints.row(t) - joint_targets.row(t)).squaredNorm();
+      L += state_weights.row(t).dot(r.states().row(t));
+      const MatX3 v = r.vertices(t + 1);
+      L += vertex_weights.row(t).dot(Eigen::Map<const Eigen::RowVectorXd>(v.data(), v.size()));
+    }
+    return L;
+  }
+
+  RolloutVariables gradient(Rollout& r) const {
+    const RowMatX joints = r.joints();
+    RowMatX dL_djoints(kSteps, 72);
+    for (int t = 0; t < kSteps; ++t)
+      dL_djoints.row(t) = 2.0 * weights[t] * (joints.row(t) - joint_targets.row(t));
+    Rollout::TrajectoryCotangent c = r.trajectoryCotangent(dL_djoints, vertex_weights);
+    return r.backward(c.states + state_weights, c.direct);
+  }
+};
+
+const Loss& lossFor(SoftModel model) {
+  static const auto make = [](SoftModel m) {
+    Simulable sim(test::smallSoftAvatar(m));
+    return Loss(sim.numDofs(), sim.numBoneDofs(), scene().body->numVertices());
+  };
+  static const Loss fem = make(SoftModel::Fem), rom = make(SoftModel::Rom);
+  return model == SoftModel::Fem ? fem : rom;
+}
+
+double lossAlong(const Case& c, const RolloutVariables& d, double eps) {
+  auto sim = makeSimulable(c);
+  if (d.rest_joints.size())
+    sim->setParameter(SimParameter::RestJoints,
+                      sim->getParameter(SimParameter::RestJoints) + eps * d.rest_joints);
+  if (d.bone_inertia.size())
+    sim->setParameter(SimParameter::BoneInertia,
+                      sim->getParameter(SimParameter::BoneInertia) + eps * d.bone_inertia);
+  RolloutInputs in = baseInputs(c);
+  if (d.pose_targets.size()) in.pose_targets += eps * d.pose_targets;
+  if (d.root_targets.size()) in.root_targets += eps * d.root_targets;
+  if (d.stiffnesses.size())
+    in.stiffnesses = sim->getParameter(SimParameter::Stiffnesses) + eps * d.stiffnesses;
+  if (d.collider_offsets.size()) in.collider_offsets = eps * d.collider_offsets;
+  if (d.initial_state.size()) in.initial_state += eps * d.initial_state;
+  if (d.initial_velocity.size()) in.initial_velocity += eps * d.initial_velocity;
+  Rollout rollout(sim, tightOptions());
+  rollout.run(kSteps, in);
+  for (int t = 1; t <= kSteps; ++t)
+    EXPECT_TRUE(rollout.tape().stepInfo(t).converged) << "eps " << eps << ", step " << t;
+  return lossFor(c.model).value(rollout);
+}
+
+// dot(∇L, d) against (L(+ε) − L(−ε)) / 2ε: relative error ≤ 1e-6 (ROM), 1e-5 (FEM).
+void expectDirectionalDerivative(const Case& c, const RolloutVariables& d, double eps) {
+  auto sim = makeSimulable(c);
+  Rollout rollout(sim, tightOptions());
+  rollout.run(kSteps, baseInputs(c));
+  int contacts = 0;
+  for (int t = 1; t <= kSteps; ++t) {
+    ASSERT_TRUE(rollout.tape().stepInfo(t).converged) << t;
+    if (c.contact) {
+      SimulableAdjointModel model(sim);
+      const auto saved = model.saveStep();
+      model.restoreStep(rollout.tape().stepSnapshot(t));
+      contacts += sim->stats().active_contacts;
+      model.restoreStep(*saved);
+    }
+  }
+  if (c.contact) {
+    ASSERT_GT(contacts, kSteps) << "contact is active along the rollout";
+  }
+  const SimulableStep before = sim->saveStep();
+  const RolloutVariables grad = lossFor(c.model).gradient(rollout);
+  const SimulableStep after = sim->saveStep();
+  EXPECT_TRUE(sameStep(before, after)) << "backward() changed the simulable";
+  EXPECT_EQ(grad.shape.size(), 0) << "β is not differentiated through soft tissue yet";
+  const double analytic = dot(grad, d);
+  ASSERT_GT(std::abs(analytic), 1e-8) << "the directional derivative is zero: vacuous check";
+  const double fd = (lossAlong(c, d, eps) - lossAlong(c, d, -eps)) / (2.0 * eps);
+  const double error = std::abs(analytic - fd) / std::abs(fd);
+  const double tol = c.model == SoftModel::Rom ? 1e-6 : 1e-5;
+  EXPECT_LE(error, tol) << "analytic " << analytic << ", central difference " << fd;
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.3g", error);
+  ::testing::Test::RecordProperty("relative_error", text);
+}
+
+class SoftRolloutGradient : public ::testing::TestWithParam<std::tuple<SoftModel, bool>> {
+ protected:
+  Case scenario(bool explicit_initial = false) const {
+    return {std::get<0>(GetParam()), std::get<1>(GetParam()), explicit_initial};
+  }
+};
+
+TEST_P(SoftRolloutGradient, RestJoints) {
+  RolloutVariables d;
+  d.rest_joints = randomVector(72, 0.01, 2);
+  expectDirectionalDerivative(scenario(), d, 1e-4);
+}
+
+TEST_P(SoftRolloutGradient, BoneInertia) {
+  RolloutVariables d;
+  const Case c = scenario();
+  const VecX p0 =
+      Simulable(test::smallSoftAvatar(c.model)).getParameter(SimParameter::BoneInertia).cwiseAbs();
+  d.bone_inertia = randomVector(240, 0.1, 3).cwiseProduct(p0);
+  // The inertias reach the loss only through the tracking stiffnesses: a small derivative, so
+  // a longer step (1e-4 of each inertia) keeps the difference above the solves' rounding.
+  expectDirectionalDerivative(c, d, 1e-3);
+}
+
+TEST_P(SoftRolloutGradient, PoseTargets) {
+  RolloutVariables d;
+  const VecX v = randomVector(kSteps * 72, 0.1, 4);
+  d.pose_targets = Eigen::Map<const RowMatX>(v.data(), kSteps, 72);
+  expectDirectionalDerivative(scenario(), d, 1e-5);
+}
+
+TEST_P(SoftRolloutGradient, RootTargets) {
+  RolloutVariables d;
+  const VecX v = randomVector(kSteps * 3, 0.01, 5);
+  d.root_targets = Eigen::Map<const RowMatX>(v.data(), kSteps, 3);
+  expectDirectionalDerivative(scenario(), d, 1e-4);
+}
+
+TEST_P(SoftRolloutGradient, Stiffnesses) {
+  RolloutVariables d;
+  const Case c = scenario();
+  const VecX k = makeSimulable(c)->getParameter(SimParameter::Stiffnesses);
+  d.stiffnesses = randomVector(4, 0.1, 6).cwiseProduct(k);
+  expectDirectionalDerivative(c, d, 1e-4);
+}
+
+TEST_P(SoftRolloutGradient, InitialState) {
+  const Case c = scenario(true);
+  const int n = makeSimulable(c)->numDofs();
+  RolloutVariables d;
+  d.initial_state = randomVector(n, 0.01, 8);
+  d.initial_state.tail(n - 144) *= 0.1;  // soft state: mm
+  expectDirectionalDerivative(c, d, 1e-4);
+}
+
+TEST_P(SoftRolloutGradient, InitialVelocity) {
+  const Case c = scenario(true);
+  RolloutVariables d;
+  d.initial_velocity = randomVector(makeSimulable(c)->numDofs(), 0.1, 9);
+  expectDirectionalDerivative(c, d, 1e-4);
+}
+
+INSTANTIATE_TEST_SUITE_P(Models, SoftRolloutGradient,
+                         ::testing::Combine(::testing::Values(SoftModel::Fem, SoftModel::Rom),
+                                            ::testing::Values(true, false)),
+                         [](const auto& info) {
+                           return std::string(std::get<0>(info.param) == SoftModel::Fem ? "Fem"
+                                                                                        : "Rom") +
+                                  (std::get<1>(info.param) ? "WithContact" : "WithoutContact");
+                         });
+
+class SoftRollout : public ::testing::TestWithParam<SoftModel> {};
+
+// Collider offsets exist only with colliders, so not in the contact-or-free grid.
+TEST_P(SoftRollout, ColliderOffsetsGradient) {
+  RolloutVariables d;
+  d.collider_offsets = randomVector(6, 0.01, 7);
+  expectDirectionalDerivative({GetParam(), true}, d, 1e-4);
+}
+
+// vᵀ(dL/dp) by the reverse pass equals Σ_t a_t · (dq_t/dp v) by forward sensitivities (the
+// loss linear in the states: a_t = its state weights), for a direction in several groups.
+TEST_P(SoftRollout, ForwardSensitivitiesAgreeWithTheReversePass) {
+  const Case c{GetParam(), true, true};
+  auto sim = makeSimulable(c);
+  const int n = sim->numDofs();
+  Rollout rollout(sim, tightOptions());
+  rollout.run(kSteps, baseInputs(c));
+  const RowMatX& a = lossFor(c.model).state_weights;
+  const RolloutVariables grad = rollout.backward(a);
+  RolloutVariables d;
+  d.rest_joints = randomVector(72, 0.01, 11);
+  const VecX v = randomVector(kSteps * 72, 0.1, 12);
+  d.pose_targets = Eigen::Map<const RowMatX>(v.data(), kSteps, 72);
+  d.stiffnesses =
+      randomVector(4, 0.1, 13).cwiseProduct(sim->getParameter(SimParameter::Stiffnesses));
+  d.collider_offsets = randomVector(6, 0.01, 14);
+  d.initial_state = randomVector(n, 0.001, 15);
+  d.initial_velocity = randomVector(n, 0.01, 16);
+  const std::vector<RowMatX> dq = rollout.forwardSensitivities({d});
+  ASSERT_EQ(dq.size(), 1u);
+  const double forward = (a.array() * dq[0].array()).sum();
+  const double reverse = dot(grad, d);
+  ASSERT_GT(std::abs(reverse), 1e-8);
+  EXPECT_NEAR(forward, reverse, 1e-9 * std::abs(reverse));
+}
+
+TEST_P(SoftRollout, ShapeIsRefusedWithAClearMessage) {
+  auto sim = makeSimulable({GetParam(), false});
+  Rollout rollout(sim, tightOptions());
+  rollout.run(2);
+  RolloutVariables d;
+  d.shape = VecX::Ones(sim->parameterSize(SimParameter::Shape));
+  const std::string message = test::messageOf<Error>([&] { rollout.forwardSensitivities({d}); });
+  EXPECT_NE(message.find("shape"), std::string::npos) << message;
+  EXPECT_NE(message.find("soft-tissue"), std::string::npos) << message;
+}
+
+INSTANTIATE_TEST_SUITE_P(Models, SoftRollout, ::testing::Values(SoftModel::Fem, SoftModel::Rom),
+                         test::modelName);
+
+}  // namespace
+}  // namespace flsh

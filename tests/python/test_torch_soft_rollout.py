@@ -1,0 +1,125 @@
+"""flsh.torch.simulate through the soft skeletons (model="fem" and "rom"): torch.autograd.gradcheck
+on the input groups (pose and root targets, stiffnesses, initial state and velocity, the soft
+state included), on joints and on the simulated surface, with ground contact; β refused with a
+clear message. A 800-vertex synthetic body with a coarse interior walking for T = 4 steps; the
+FEM's large groups are checked by random projections (fast_mode), its small ones column by
+column."""
+import numpy as np
+import pytest
+import torch
+
+import flsh
+import flsh.torch
+
+STEPS = 4
+
+
+@pytest.fixture(scope="module")
+def body():
+    return flsh.make_synthetic_body(vertices=800)
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return flsh.make_builtin_motion("walk", seconds=1.0, fps=30.0)
+
+
+@pytest.fixture(scope="module")
+def simulators(body, walk, tmp_path_factory):
+    """FEM and ROM simulators of the small soft avatar, with a ground plane 1 cm above the
+    lowest surface node of the walk's initial state."""
+    cache = tmp_path_factory.mktemp("soft_cache")
+    settings = dict(handles=16, elastic_cubature_points=60, inertial_cubature_points=60,
+                    cubature_training_samples=80)
+    out = {}
+    for model in ("fem", "rom"):
+        free = flsh.torch.RolloutSimulator(body, walk, steps=STEPS, model=model, voxel_size=0.02,
+                                           resolution=0.5, cache_dir=cache,
+                                           avatar_settings=settings)
+        sim = free.make_simulable()
+        sim.initialize()
+        lowest = sim.get_nodes()[:, 1].min()
+        ground = flsh.Collider.plane(point=[0.0, lowest + 0.01, 0.0], normal=[0.0, 1.0, 0.0])
+        out[model] = flsh.torch.RolloutSimulator(
+            body, walk, steps=STEPS, model=model, voxel_size=0.02, resolution=0.5,
+            cache_dir=cache, avatar_settings=settings, colliders=[ground])
+    return out
+
+
+def base_inputs(simulator, rng):
+    """Every input group near the simulable's own values, the soft state moving a little."""
+    own = simulator.own_inputs()
+    n = simulator.num_dofs
+    state = own["initial_state"] + np.concatenate(
+        [rng.uniform(-0.005, 0.005, 144), rng.uniform(-2e-4, 2e-4, n - 144)])
+    velocity = own["initial_velocity"] + np.concatenate(
+        [rng.uniform(-0.1, 0.1, 144), rng.uniform(-0.005, 0.005, n - 144)])
+    values = {
+        "pose_targets": own["pose_targets"] + rng.uniform(-0.05, 0.05, (STEPS, 72)),
+        "root_targets": own["root_targets"] + rng.uniform(-0.01, 0.01, (STEPS, 3)),
+        "stiffnesses": own["stiffnesses"] * rng.uniform(0.8, 1.2, 4),
+        "initial_state": state,
+        "initial_velocity": velocity,
+    }
+    return {k: torch.tensor(v, dtype=torch.float64) for k, v in values.items()}
+
+
+def simulate_with(simulator, inputs, name, vertices=False):
+    def f(x):
+        return flsh.torch.simulate(simulator, **{**inputs, name: x}, vertices=vertices)
+    return f
+
+
+@pytest.mark.parametrize("model", ["fem", "rom"])
+@pytest.mark.parametrize("name", ["pose_targets", "root_targets", "stiffnesses", "initial_state",
+                                  "initial_velocity"])
+def test_gradcheck_joints(simulators, model, name, rng):
+    simulator = simulators[model]
+    assert simulator.num_dofs > 144  # the soft state follows the bones
+    inputs = base_inputs(simulator, rng)
+    x = inputs[name].clone().requires_grad_(True)
+    f = simulate_with(simulator, inputs, name)
+    weights = torch.tensor(rng.normal(size=(STEPS, 24, 3)))
+    (grad,) = torch.autograd.grad((weights * f(x)).sum(), x)
+    assert grad.abs().max() > 1e-6, name
+    if name in ("initial_state", "initial_velocity"):
+        assert grad[144:].abs().max() > 0, "the soft state reaches the joints"
+    # Column by column where that is cheap (the ROM; the FEM's stiffnesses and root targets),
+    # else random projections. The soft models' Newton (relative tolerance 1e-10, lagged
+    # factor) leaves up to ~2e-12 m in a joint between two nearby rollouts, which a central
+    # difference over 2e-4 turns into ~1e-8 (the same offset in every column of that joint;
+    # over 2e-6 it would be ~1e-6): steps of 1e-4 and atol 5e-8.
+    fast = model == "fem" and x.numel() > 12
+    assert torch.autograd.gradcheck(f, (x,), eps=1e-4, atol=5e-8, rtol=1e-5, fast_mode=fast)
+
+
+@pytest.mark.parametrize("model", ["fem", "rom"])
+def test_gradcheck_surface(simulators, model, rng):
+    """The simulated surface: it moves with the soft state and with the pose blend held from
+    the previous step."""
+    simulator = simulators[model]
+    inputs = base_inputs(simulator, rng)
+    x = inputs["pose_targets"].clone().requires_grad_(True)
+    f = simulate_with(simulator, inputs, "pose_targets", vertices=True)
+    joints, vertices = f(x)
+    assert vertices.shape == (STEPS, 800, 3)
+    weights = torch.tensor(rng.normal(size=vertices.shape))
+    (grad,) = torch.autograd.grad((weights * vertices).sum(), x)
+    assert grad.abs().max() > 1e-6
+    assert torch.autograd.gradcheck(lambda x: (weights * f(x)[1]).sum(dim=(1, 2)), (x,),
+                                    eps=1e-4, atol=5e-8, rtol=1e-5, fast_mode=True)
+
+
+def test_betas_gradient_is_refused_clearly(simulators):
+    simulator = simulators["rom"]
+    betas = torch.zeros(simulator.num_betas, dtype=torch.float64, requires_grad=True)
+    with pytest.raises(ValueError, match="soft tissue"):
+        flsh.torch.simulate(simulator, betas=betas)
+    # Without requires_grad β just builds the avatar.
+    joints = flsh.torch.simulate(simulator, betas=betas.detach())
+    assert joints.shape == (STEPS, 24, 3)
+
+
+def test_unknown_model_is_refused(body):
+    with pytest.raises(ValueError, match="model"):
+        flsh.torch.RolloutSimulator(body, steps=2, model="spring")

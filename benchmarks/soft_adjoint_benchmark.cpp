@@ -12,8 +12,9 @@
 //  - forward without a tape (Scene::step, the scene's own Newton settings for the model);
 //  - forward with the tape (Rollout::run at the same Newton settings: each step also factors its
 //    exact Hessian for the reverse pass);
-//  - backward: Rollout::trajectoryCotangent and Rollout::backward (one back-substitution and the
-//    parameter and previous-state products per step);
+//  - the loss's cotangent (Rollout::trajectoryCotangent: the surface's Jacobians per step);
+//  - backward: Rollout::backward (one back-substitution and the parameter and previous-state
+//    products per step);
 //  - the process's peak resident memory after the runs, and the tape's share of it per step;
 //  - central differences over the same parameters: 2 · #parameters forward passes without tape,
 //    extrapolated from the timed one (not run).
@@ -189,7 +190,7 @@ int main(int argc, char** argv) {
     }
     loss.vertex_targets += 0.02 * RowMatX::Random(steps, 3 * V);
 
-    std::vector<double> forward, backward;
+    std::vector<double> forward, backward, cotangents;
     RolloutVariables grad;
     double L = 0.0;
     int newton_iterations = 0;
@@ -197,10 +198,9 @@ int main(int argc, char** argv) {
       auto sim = makeSimulable(s);
       Rollout rollout(sim, rollout_options);
       forward.push_back(timeOf([&] { rollout.run(steps); }));
-      backward.push_back(timeOf([&] {
-        const Rollout::TrajectoryCotangent c = loss.cotangent(rollout);
-        grad = rollout.backward(c.states, c.direct);
-      }));
+      Rollout::TrajectoryCotangent c;
+      cotangents.push_back(timeOf([&] { c = loss.cotangent(rollout); }));
+      backward.push_back(timeOf([&] { grad = rollout.backward(c.states, c.direct); }));
       L = loss.value(rollout);
       newton_iterations = 0;
       for (int t = 1; t <= steps; ++t)
@@ -213,6 +213,10 @@ int main(int argc, char** argv) {
     std::printf("forward without tape  %8.3f s (%.2f steps/s)\n", f_plain, steps / f_plain);
     std::printf("forward with tape     %8.3f s (%.2fx the plain forward)\n", f_tape,
                 f_tape / f_plain);
+    std::printf(
+        "loss's cotangent      %8.3f s (joints and surface of every step: "
+        "Rollout::trajectoryCotangent)\n",
+        median(cotangents));
     std::printf("backward              %8.3f s (%.2fx the plain forward, %.2fx with the tape)\n", b,
                 b / f_plain, b / f_tape);
     std::printf("peak resident memory  %8.0f MB\n", peakResidentMB());

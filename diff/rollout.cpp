@@ -312,14 +312,13 @@ Rollout::VerticesCotangent Rollout::verticesCotangent(int t, const MatX3& dL_dve
   if (simulable_->hasSoftTissue()) {
     // The simulated surface x(q_t), skinned with the pose blend held from q_{t−1} (at t = 0:
     // from q_0 itself).
-    VecX increments = simulable_->getNodesStateJacobian().transpose() * g, previous;
-    simulable_->getNodesCotangents(dL_dvertices, &previous, &out.direct.rest_joints);
+    VecX increments, previous;
+    simulable_->getNodesCotangents(dL_dvertices, &increments, &previous, &out.direct.rest_joints);
     if (t == 0) increments += previous;
     out.state = model.incrementToStateCotangent(increments);
-    if (t > 0) {
-      model.restoreStep(snapshot(t - 1));
-      out.previous_state = model.incrementToStateCotangent(previous);
-    }
+    if (t > 0)  // at q_{t−1}, the state recorded before step t
+      out.previous_state = model.incrementToStateCotangentAt(
+          t == 1 ? initial_state_ : VecX(states_.row(t - 2).transpose()), previous);
     return out;
   }
   PosedBodyJacobians jac;

@@ -173,8 +173,12 @@ VecX SimulableAdjointModel::stateToIncrementCotangent(const VecX& a) const {
 }
 
 VecX SimulableAdjointModel::incrementToStateCotangent(const VecX& a) const {
+  return incrementToStateCotangentAt(state(), a);
+}
+
+VecX SimulableAdjointModel::incrementToStateCotangentAt(const VecX& s, const VecX& a) const {
   checkSize(a, numDofs(), "incrementToStateCotangent", "a");
-  const VecX s = state();
+  checkSize(s, numDofs(), "incrementToStateCotangentAt", "state");
   VecX out = a;
   for (int b = 0; b < simulable_->numBoneDofs() / 6; ++b)
     out.segment<3>(6 * b + 3) =

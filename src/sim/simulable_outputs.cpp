@@ -79,7 +79,7 @@ SpMat Simulable::getNodesStateJacobian() const {
 // Soft tissue: x_i moves with its held pose blend offset P_i(R_n) by M_i = Σ_b w_ib R_b, so the
 // cotangent of P_i is M_iᵀ ∂L/∂x_i, chained to q_n's rotations by the kinematics.
 // The rest joint J_b moves x_i by −w_ib R_b.
-void Simulable::getNodesCotangents(const MatX3& dL_dnodes, VecX* previous_state,
+void Simulable::getNodesCotangents(const MatX3& dL_dnodes, VecX* state, VecX* previous_state,
                                    VecX* rest_joints) const {
   const Impl& m = *impl_;
   const int V = m.kinematics->numSurface();
@@ -89,6 +89,10 @@ void Simulable::getNodesCotangents(const MatX3& dL_dnodes, VecX* previous_state,
                      shapeString({long(V), 3}));
   m.prepare();
   m.kinematics->surface(nullptr, nullptr);  // the ROM skins its surface nodes here
+  if (state) {
+    *state = VecX::Zero(m.dofs());
+    m.kinematics->surfaceForces(dL_dnodes, *state);
+  }
   if (rest_joints) {
     *rest_joints = VecX::Zero(3 * m.num_bones);
     detail::SkinnedPoint point;

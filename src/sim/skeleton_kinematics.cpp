@@ -94,6 +94,12 @@ void SkeletonKinematics::mapForces(const std::vector<int>& vertices, const VecX&
                          });
 }
 
+void SkeletonKinematics::surfaceForces(const MatX3& forces, VecX& g) const {
+  std::vector<int> vertices(static_cast<size_t>(numSurface()));
+  for (int i = 0; i < numSurface(); ++i) vertices[size_t(i)] = i;
+  mapForces(vertices, Eigen::Map<const VecX>(forces.data(), forces.size()), *R_, g, 0);
+}
+
 void SkeletonKinematics::mapHessian(const std::vector<int>& vertices,
                                     const std::vector<std::pair<int, Mat3>>& node_blocks,
                                     const VecX& forces, const std::vector<Mat3>& R, bool psd,

@@ -60,6 +60,7 @@ class SkeletonKinematics final : public ModelKinematics {
   /// the caller).
   void point(int i, const std::vector<Mat3>& R, SkinnedPoint& p) const;
   void surfacePoint(int i, SkinnedPoint& p) const override { point(i, *R_, p); }
+  void surfaceForces(const MatX3& forces, VecX& g) const override;
 
  private:
   const SkinnedSurface& surface_;

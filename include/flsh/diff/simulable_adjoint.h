@@ -49,6 +49,9 @@ class SimulableAdjointModel final : public AdjointModel {
   VecX stateToIncrementTangent(const VecX& ds) const override;
   VecX stateToIncrementCotangent(const VecX& a) const override;
   VecX incrementToStateCotangent(const VecX& a) const override;
+  /// The same map at another state vector `state` (e.g. a recorded step's, without restoring
+  /// it).
+  VecX incrementToStateCotangentAt(const VecX& state, const VecX& a) const;
   VecX initialPreviousStateTangent(const VecX& dq0, const VecX& dv0) const override;
   VecX initialPreviousStateCotangent(const VecX& a_previous, VecX& a0) const override;
 

@@ -147,12 +147,14 @@ class Simulable {
   MatX3 getNodes() const;
   /// d(nodes)/dq: 3#V × numDofs, sparse.
   SpMat getNodesStateJacobian() const;
-  /// Cotangents of a loss on getNodes() (dL/dnodes, #V × 3) for what the nodes depend on besides
-  /// the state (getNodesStateJacobian): the previous state q_n (numDofs, its increments: with
-  /// soft tissue the nodes move with the pose blend held from q_n's rotations; zero for the
-  /// skeleton) and the rest joints (72: x_i = Σ_b w_ib (R_b (Y_i − J_b) + t_b)). Either pointer
-  /// may be null. Throws InputError on a wrong shape. Does not change the state.
-  void getNodesCotangents(const MatX3& dL_dnodes, VecX* previous_state, VecX* rest_joints) const;
+  /// Cotangents of a loss on getNodes() (dL/dnodes, #V × 3): the state's (getNodesStateJacobian
+  /// transposed times dL/dnodes, without forming the matrix; numDofs, increments), the previous
+  /// state q_n's (numDofs, its increments: with soft tissue the nodes move with the pose blend
+  /// held from q_n's rotations; zero for the skeleton) and the rest joints' (72:
+  /// x_i = Σ_b w_ib (R_b (Y_i − J_b) + t_b)). Any pointer may be null. Throws InputError on a
+  /// wrong shape. Does not change the state.
+  void getNodesCotangents(const MatX3& dL_dnodes, VecX* state, VecX* previous_state,
+                          VecX* rest_joints) const;
 
   /// Current bone transforms: rotations R_b (24) and joint positions t_b (24 × 3).
   const std::vector<Mat3>& boneRotations() const;

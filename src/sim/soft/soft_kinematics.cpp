@@ -534,6 +534,12 @@ void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<
   }
 }
 
+void SoftKinematics::surfaceForces(const MatX3& forces, VecX& g) const {
+  std::vector<Vec3> f(static_cast<size_t>(num_surface_));
+  for (int i = 0; i < num_surface_; ++i) f[size_t(i)] = forces.row(i).transpose();
+  mapForces(surface_nodes_, f, g, 0);
+}
+
 void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                                 const std::vector<Vec3>* forces, std::vector<Triplet>& H,
                                 int offset, bool psd, int list, std::vector<Mat3>* fixed,

@@ -157,6 +157,7 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// node terms' parameter blocks.
   void point(int j, SkinnedPoint& p) const;
   void surfacePoint(int i, SkinnedPoint& p) const override { point(i, p); }
+  void surfaceForces(const MatX3& forces, VecX& g) const override;
   /// Node j as a SkinnedPoint at other bones and soft state (e.g. q_n or q_{n−1}, for the
   /// inertia's prediction x̂), with the held pose blend: lever arms R_b (Y_j − J_b) with
   /// Y_j = X̄_j + P_j + u_j(state), soft blocks from Σ_b w_jb R_b of these bones.

@@ -2,7 +2,8 @@
 // ∂g/∂q_{n−1} (the nodal inertia's prediction x̂, and the pose blend held from q_n's rotations,
 // which moves the nodes of inertia, gravity and contact) against central differences of the
 // total gradient with the previous state moved in a snapshot (restoreStep with an empty pose
-// blend holds it from the moved R_n, as preUpdate does); the products against the Jacobians.
+// blend holds it from the moved R_n, as preUpdate does); the products against the Jacobians;
+// the surface's cotangents.
 #include <memory>
 
 #include "flsh/core/rotation.h"
@@ -102,6 +103,43 @@ TEST_P(SoftPreviousStateDerivatives, StaticKeepsThePoseBlendShare) {
   EXPECT_EQ(others, 0.0);
   EXPECT_TRUE(sim->getGradientPreviousStateJacobian(2).isZero(0.0));
   expectPreviousStateDerivatives(*sim, 1e-6, {1}, 1e-4);
+}
+
+// The surface's cotangents (getNodesCotangents) against differences of μ · getNodes(): in the
+// state (against getNodesStateJacobian), in q_n (its rotations hold the pose blend) and in the
+// rest joints.
+TEST_P(SoftPreviousStateDerivatives, SurfaceCotangentsMatchDifferences) {
+  auto sim = test::softTermScenario(GetParam());
+  const int n = sim->numDofs();
+  const SimulableStep base = sim->saveStep();
+  const MatX3 nodes = sim->getNodes();
+  const VecX m = test::randomVector(int(nodes.size()), 1.0, 51);
+  const MatX3 mu = Eigen::Map<const MatX3>(m.data(), nodes.rows(), 3);
+  VecX state, previous, joints;
+  sim->getNodesCotangents(mu, &state, &previous, &joints);
+  const Eigen::Map<const VecX> flat(mu.data(), mu.size());
+  const VecX expected_state = sim->getNodesStateJacobian().transpose() * flat;
+  ASSERT_GT(state.norm(), 0.0);
+  EXPECT_LT((state - expected_state).norm(), 1e-10 * state.norm());
+  const auto pairing = [&] { return (sim->getNodes().array() * mu.array()).sum(); };
+  const VecX d = test::randomVector(n, 1.0, 52);
+  const double eps = 1e-6;
+  sim->restoreStep(movedHistory(base, 1, eps * d));
+  const double plus = pairing();
+  sim->restoreStep(movedHistory(base, 1, -eps * d));
+  const double minus = pairing();
+  sim->restoreStep(base);
+  ASSERT_GT(std::abs(previous.dot(d)), 0.0);
+  EXPECT_NEAR(previous.dot(d), (plus - minus) / (2 * eps), 1e-6 * std::abs(previous.dot(d)));
+  const VecX J0 = sim->getParameter(SimParameter::RestJoints), dJ = test::randomVector(72, 1.0, 53);
+  sim->setParameter(SimParameter::RestJoints, J0 + eps * dJ);
+  const double joints_plus = pairing();
+  sim->setParameter(SimParameter::RestJoints, J0 - eps * dJ);
+  const double joints_minus = pairing();
+  sim->setParameter(SimParameter::RestJoints, J0);
+  ASSERT_GT(std::abs(joints.dot(dJ)), 0.0);
+  EXPECT_NEAR(joints.dot(dJ), (joints_plus - joints_minus) / (2 * eps),
+              1e-6 * std::abs(joints.dot(dJ)));
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, SoftPreviousStateDerivatives,

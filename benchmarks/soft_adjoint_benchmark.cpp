@@ -21,8 +21,11 @@
 // One directional derivative is compared with a central difference of two re-run rollouts.
 //
 // Usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] [--tolerance T]
+//                               [--storage factors|snapshots]
 //   --tolerance: Newton's relative gradient tolerance of the rollouts (default: the rollout's
-//                default, 1e-8).
+//                default, 1e-8);
+//   --storage:   what the tape keeps (RolloutOptions::tape_storage; default Auto: snapshots for
+//                the FEM, factors for the ROM).
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -113,10 +116,19 @@ int main(int argc, char** argv) {
   const bool rom = std::strcmp(argv[1], "rom") == 0;
   int steps = rom ? 100 : 30, repeats = 3;
   double tolerance = -1.0;
+  RolloutOptions rollout_options;
   int positional = 0;
   for (int i = 2; i < argc; ++i) {
     if (std::strcmp(argv[i], "--tolerance") == 0 && i + 1 < argc) {
       tolerance = std::atof(argv[++i]);
+    } else if (std::strcmp(argv[i], "--storage") == 0 && i + 1 < argc) {
+      const std::string storage = argv[++i];
+      if (storage != "factors" && storage != "snapshots") {
+        std::fprintf(stderr, "soft_adjoint_benchmark: --storage factors|snapshots\n");
+        return 2;
+      }
+      rollout_options.tape_storage = storage == "factors" ? RolloutOptions::TapeStorage::Factors
+                                                          : RolloutOptions::TapeStorage::Snapshots;
     } else if (positional == 0) {
       steps = std::atoi(argv[i]);
       ++positional;
@@ -147,7 +159,6 @@ int main(int argc, char** argv) {
       s.ground =
           Collider::plane(Vec3(0, probe.getNodes().col(1).minCoeff() - 0.002, 0), Vec3::UnitY());
     }
-    RolloutOptions rollout_options;
     if (tolerance > 0)
       for (NewtonOptions* n :
            {&rollout_options.soft_tissue_newton, &rollout_options.reduced_newton})

@@ -228,6 +228,10 @@ void Rollout::run(int steps, const RolloutInputs& in) {
   } else if (!velocity_from_initialize_) {
     sim.setVelocity(in.initial_velocity);
   }
+  const bool fem = sim.hasSoftTissue() && !sim.hasReducedModel();
+  const bool snapshots = options_.tape_storage == RolloutOptions::TapeStorage::Snapshots ||
+                         (options_.tape_storage == RolloutOptions::TapeStorage::Auto && fem);
+  tape_.setStorage(snapshots ? Tape::Storage::Snapshots : Tape::Storage::Factors);
   tape_.recordInitial(model_);
   initial_state_ = sim.getState();
   states_.resize(steps, n);

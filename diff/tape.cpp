@@ -9,6 +9,7 @@
 #include <string>
 
 #include "flsh/core/error.h"
+#include "flsh/solve/linear_solver.h"
 
 namespace flsh {
 
@@ -20,20 +21,34 @@ using NaturalLDLT = Eigen::SimplicialLDLT<SpMat, Eigen::Lower, Eigen::NaturalOrd
 
 // Pivots below this fraction of the largest count as zero (the solver's floor as well).
 constexpr double kRelativePivotFloor = 1e-14;
+// From this many unknowns a positive definite H is factored by CHOLMOD's supernodal Cholesky
+// (the FEM soft skeleton's: about 1.3 s per step for Eigen's simplicial factor of the 26 k-DoF
+// walking body, docs/benchmarks.md); below (the skeleton, the ROM's few hundred DoFs) the
+// simplicial factor. The small FEM bodies of the tests (~2 600 DoFs) take the supernodal path.
+constexpr int kSupernodalFrom = 2000;
 
 // The exact Hessian of one step, factored. P is the shared fill-reducing permutation: the
 // factors are of P H Pᵀ (lower triangle), so the symbolic work per step is only the elimination
 // tree of a fixed ordering.
 struct StepFactor {
+  std::unique_ptr<LinearSolver> supernodal;  // CHOLMOD, positive definite H of kSupernodalFrom+
   std::unique_ptr<NaturalLLT> llt;
   std::unique_ptr<NaturalLDLT> ldlt;
   std::unique_ptr<Eigen::SparseLU<SpMat, Eigen::COLAMDOrdering<int>>> lu;
   const Permutation* P = nullptr;
   const Permutation* P_inverse = nullptr;
 
-  std::string factorize(const SpMat& H, const Permutation& perm, const Permutation& perm_inv) {
+  /// `reuse`: a CHOLMOD solver whose symbolic analysis may serve (the previous step's), or null.
+  std::string factorize(const SpMat& H, const Permutation& perm, const Permutation& perm_inv,
+                        std::unique_ptr<LinearSolver> reuse = nullptr) {
     P = &perm;
     P_inverse = &perm_inv;
+    if (H.rows() >= kSupernodalFrom) {
+      supernodal =
+          reuse ? std::move(reuse) : makeLinearSolver(LinearSolverType::Cholmod, int(H.rows()));
+      if (supernodal->factorize(H)) return "llt";
+      supernodal.reset();
+    }
     SpMat permuted(H.rows(), H.cols());
     permuted.selfadjointView<Eigen::Lower>() = H.selfadjointView<Eigen::Lower>().twistedBy(perm);
     llt = std::make_unique<NaturalLLT>(permuted);
@@ -63,6 +78,7 @@ struct StepFactor {
   }
 
   VecX solve(const VecX& b) const {
+    if (supernodal) return supernodal->solve(b);
     if (llt) return *P_inverse * llt->solve(*P * b);
     if (ldlt) return *P_inverse * ldlt->solve(*P * b);
     return lu->solve(b);
@@ -79,7 +95,34 @@ void checkGroups(const std::vector<ParameterGroupInfo>& groups, const char* who)
 
 struct Tape::Impl {
   int n = -1;
+  Storage storage = Storage::Factors, recording = Storage::Factors;
   Permutation P, P_inverse;
+  // Storage::Snapshots: the factor of step `current_step` (0: none).
+  mutable std::unique_ptr<StepFactor> current;
+  mutable int current_step = 0;
+
+  // The step's exact Hessian factored (the ordering from the first one); `reuse`: a factor whose
+  // CHOLMOD analysis may serve.
+  std::unique_ptr<StepFactor> factor(const AdjointModel& model, std::string& how,
+                                     std::unique_ptr<StepFactor> reuse = nullptr) {
+    SpMat H;
+    model.exactHessian(H);
+    if (H.rows() != n || H.cols() != n)
+      throw Error("Tape: the model's exact Hessian is " +
+                  shapeString({long(H.rows()), long(H.cols())}) + ", expected " +
+                  shapeString({long(n), long(n)}));
+    if (P.size() != n) {
+      // One fill-reducing ordering for every step (any ordering is valid for any pattern; the
+      // skeleton's pattern barely changes between steps).
+      const SpMat full = H.selfadjointView<Eigen::Lower>();
+      Eigen::AMDOrdering<int> amd;
+      amd(full, P_inverse);
+      P = P_inverse.inverse();
+    }
+    auto f = std::make_unique<StepFactor>();
+    how = f->factorize(H, P, P_inverse, reuse ? std::move(reuse->supernodal) : nullptr);
+    return f;
+  }
   std::unique_ptr<StepSnapshot> initial;
   std::vector<std::unique_ptr<StepSnapshot>> snapshots;
   std::vector<std::unique_ptr<StepFactor>> factors;
@@ -96,10 +139,13 @@ void Tape::clear() {
   impl_->snapshots.clear();
   impl_->factors.clear();
   impl_->infos.clear();
+  impl_->current.reset();
+  impl_->current_step = 0;
 }
 
 void Tape::recordInitial(const AdjointModel& model) {
   clear();
+  impl_->recording = impl_->storage;
   impl_->n = model.numDofs();
   impl_->initial = model.saveStep();
 }
@@ -111,25 +157,28 @@ void Tape::recordStep(const AdjointModel& model, TapeStepInfo info) {
   if (model.numDofs() != m.n)
     throw InputError("Tape::recordStep: the model has " + std::to_string(model.numDofs()) +
                      " DoFs, expected the " + std::to_string(m.n) + " of the recorded steps");
-  SpMat H;
-  model.exactHessian(H);
-  if (H.rows() != m.n || H.cols() != m.n)
-    throw Error("Tape::recordStep: the model's exact Hessian is " +
-                shapeString({long(H.rows()), long(H.cols())}) + ", expected " +
-                shapeString({long(m.n), long(m.n)}));
-  if (m.P.size() != m.n) {
-    // One fill-reducing ordering for every step (any ordering is valid for any pattern; the
-    // skeleton's pattern barely changes between steps).
-    const SpMat full = H.selfadjointView<Eigen::Lower>();
-    Eigen::AMDOrdering<int> amd;
-    amd(full, m.P_inverse);
-    m.P = m.P_inverse.inverse();
+  if (m.recording == Storage::Factors) {
+    m.factors.push_back(m.factor(model, info.factorization));
+  } else {
+    info.factorization = "deferred";
+    m.factors.push_back(nullptr);
   }
-  auto factor = std::make_unique<StepFactor>();
-  info.factorization = factor->factorize(H, m.P, m.P_inverse);
   m.snapshots.push_back(model.saveStep());
-  m.factors.push_back(std::move(factor));
   m.infos.push_back(std::move(info));
+}
+
+void Tape::setStorage(Storage storage) { impl_->storage = storage; }
+Tape::Storage Tape::storage() const { return impl_->storage; }
+
+void Tape::prepareStep(int t, const AdjointModel& model) const {
+  stepInfo(t);  // range check
+  Impl& m = *impl_;
+  if (m.factors[size_t(t - 1)] || m.current_step == t) return;
+  m.current_step = 0;
+  std::string how;
+  m.current = m.factor(model, how, std::move(m.current));
+  m.current_step = t;
+  m.infos[size_t(t - 1)].factorization = how;
 }
 
 int Tape::numSteps() const { return int(impl_->snapshots.size()); }
@@ -157,6 +206,14 @@ const StepSnapshot& Tape::stepSnapshot(int t) const {
 
 VecX Tape::solve(int t, const VecX& b) const {
   const TapeStepInfo& info = stepInfo(t);
+  const Impl& m = *impl_;
+  const StepFactor* factor = m.factors[size_t(t - 1)]
+                                 ? m.factors[size_t(t - 1)].get()
+                                 : (m.current_step == t ? m.current.get() : nullptr);
+  if (!factor)
+    throw Error("Tape::solve: step " + std::to_string(t) +
+                "'s factor is not kept (Storage::Snapshots): call prepareStep(t, model) with the "
+                "model restored to the step first");
   if (info.factorization == "singular")
     throw Error("Tape: the exact Hessian of step " + std::to_string(t) +
                 " is singular (the converged state is not a strict local minimum), so the "
@@ -164,7 +221,7 @@ VecX Tape::solve(int t, const VecX& b) const {
   if (b.size() != impl_->n)
     throw InputError("Tape::solve: b has " + std::to_string(b.size()) + " entries, expected " +
                      std::to_string(impl_->n));
-  return impl_->factors[t - 1]->solve(b);
+  return factor->solve(b);
 }
 
 // ---- sweeps --------------------------------------------------------------------------------
@@ -221,6 +278,7 @@ AdjointResult adjointSweep(AdjointModel& model, const Tape& tape,
   std::vector<VecX> products;
   for (int t = T; t >= 1; --t) {
     model.restoreStep(tape.stepSnapshot(t));
+    tape.prepareStep(t, model);
     a_t += model.stateToIncrementCotangent(state_cotangents.row(t - 1).transpose());
     const VecX lambda = tape.solve(t, a_t);
     // Products with λ only: no ∂g/∂p or ∂g/∂q_{n−k} matrices are formed.
@@ -321,6 +379,7 @@ std::vector<RowMatX> tangentSweep(AdjointModel& model, const Tape& tape,
   std::vector<VecX> products;
   for (int t = 1; t <= T; ++t) {
     model.restoreStep(tape.stepSnapshot(t));
+    tape.prepareStep(t, model);
     for (size_t d = 0; d < D; ++d) {
       const TangentDirection& dir = directions[d];
       for (size_t g = 0; g < groups.size(); ++g) {

@@ -323,6 +323,36 @@ TEST_P(SoftRollout, ForwardSensitivitiesAgreeWithTheReversePass) {
   EXPECT_NEAR(forward, reverse, 1e-9 * std::abs(reverse));
 }
 
+// A tape that keeps only the snapshots (each sweep factors every step again) gives the gradients
+// and sensitivities of one that keeps the factors, and says how each step was factored.
+TEST_P(SoftRollout, SnapshotTapeMatchesTheFactorTape) {
+  const Case c{GetParam(), true, true};
+  RolloutVariables results[2];
+  RowMatX sensitivities[2];
+  RolloutVariables d;
+  d.initial_velocity = randomVector(makeSimulable(c)->numDofs(), 0.1, 61);
+  int k = 0;
+  for (auto storage :
+       {RolloutOptions::TapeStorage::Factors, RolloutOptions::TapeStorage::Snapshots}) {
+    RolloutOptions options = tightOptions();
+    options.tape_storage = storage;
+    Rollout rollout(makeSimulable(c), options);
+    rollout.run(kSteps, baseInputs(c));
+    const bool kept = storage == RolloutOptions::TapeStorage::Factors;
+    EXPECT_EQ(rollout.tape().stepInfo(1).factorization == "deferred", !kept);
+    results[k] = lossFor(c.model).gradient(rollout);
+    sensitivities[k] = rollout.forwardSensitivities({d}).front();
+    EXPECT_NE(rollout.tape().stepInfo(1).factorization, "deferred");
+    ++k;
+  }
+  ASSERT_GT(results[0].initial_velocity.norm(), 0.0);
+  EXPECT_LT((results[0].initial_velocity - results[1].initial_velocity).norm(),
+            1e-9 * results[0].initial_velocity.norm());
+  EXPECT_LT((results[0].pose_targets - results[1].pose_targets).norm(),
+            1e-9 * results[0].pose_targets.norm());
+  EXPECT_LT((sensitivities[0] - sensitivities[1]).norm(), 1e-9 * sensitivities[0].norm());
+}
+
 TEST_P(SoftRollout, ShapeIsRefusedWithAClearMessage) {
   auto sim = makeSimulable({GetParam(), false});
   Rollout rollout(sim, tightOptions());

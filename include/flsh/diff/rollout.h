@@ -96,6 +96,12 @@ struct RolloutOptions {
   NewtonOptions newton;  ///< the skeleton's (Auto: sparse Cholesky)
   NewtonOptions soft_tissue_newton = rolloutNewtonDefaults(softTissueNewtonDefaults());  ///< FEM
   NewtonOptions reduced_newton = rolloutNewtonDefaults(reducedNewtonDefaults());         ///< ROM
+  /// What the tape keeps (tape.h, "Memory"): each step's factor, or only its snapshot (every
+  /// sweep then factors each step again: memory grows with the state). Auto: the factors for
+  /// the skeleton and the ROM (small), the snapshots for the FEM (a factor of the default
+  /// resolution's exact Hessian is tens of MB: docs/benchmarks.md).
+  enum class TapeStorage { Auto, Factors, Snapshots };
+  TapeStorage tape_storage = TapeStorage::Auto;
   /// `scene_defaults` with gradient_tolerance 1e-8.
   static NewtonOptions rolloutNewtonDefaults(NewtonOptions scene_defaults) {
     scene_defaults.gradient_tolerance = 1e-8;

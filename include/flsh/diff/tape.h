@@ -17,6 +17,13 @@
 // (one back-substitution per direction per step, with the same factors).
 // Both sweeps restore the model to each recorded step to evaluate the Jacobians there, and leave
 // it exactly (bitwise) as they found it.
+//
+// Memory. The snapshots hold every step's converged state, so the factors need not be kept: with
+// Tape::Storage::Snapshots each sweep factors step t's exact Hessian when it reaches it (the
+// model restored there: the same matrix, the same factor) and keeps one factor at a time. Memory
+// then grows with the state (a snapshot per step), not with the factors, at the price of one
+// factorization per step and sweep instead of one per step. Storage::Factors keeps them (the
+// skeleton's are small).
 #pragma once
 
 #include <memory>
@@ -35,7 +42,8 @@ struct TapeStepInfo {
   int newton_iterations = 0;
   double gradient_norm = 0.0;  ///< ‖g‖∞ at the recorded state
   /// How the exact Hessian was factored: "llt" (positive definite), "ldlt" (indefinite),
-  /// "lu" (indefinite, LDLᵀ met a zero pivot) or "singular" (the sweeps refuse this step).
+  /// "lu" (indefinite, LDLᵀ met a zero pivot) or "singular" (the sweeps refuse this step);
+  /// "deferred" until a sweep has factored it (Storage::Snapshots).
   std::string factorization;
 };
 
@@ -45,6 +53,13 @@ class Tape {
   ~Tape();
   Tape(Tape&&) noexcept;
   Tape& operator=(Tape&&) noexcept;
+
+  /// What recordStep keeps: each step's factor (Factors, the default) or only its snapshot,
+  /// the sweeps factoring each step as they reach it (Snapshots; see "Memory" above). Takes
+  /// effect from the next recordInitial.
+  enum class Storage { Factors, Snapshots };
+  void setStorage(Storage storage);
+  Storage storage() const;
 
   void clear();
   /// Records the initial conditions: the model with q_n = q_0, q_{n−1} = q_{−1} (before the
@@ -60,7 +75,11 @@ class Tape {
   const TapeStepInfo& stepInfo(int t) const;  ///< t = 1..T
   const StepSnapshot& initialSnapshot() const;
   const StepSnapshot& stepSnapshot(int t) const;  ///< t = 1..T
-  /// Solves H_t x = b with step t's factor (t = 1..T).
+  /// Makes step t's factor available to solve(): a no-op when it is kept (Storage::Factors),
+  /// else factors the model's exact Hessian, the model restored to step t's snapshot (the sweeps
+  /// call it there), replacing the previous one.
+  void prepareStep(int t, const AdjointModel& model) const;
+  /// Solves H_t x = b with step t's factor (t = 1..T; Storage::Snapshots: after prepareStep(t)).
   VecX solve(int t, const VecX& b) const;
 
  private:

@@ -76,9 +76,8 @@ void NodalInertiaTerm::hessianPart(int part, std::vector<Triplet>& H, int offset
 // −w_jb R_b, the prediction x̂_j = 2 x_j(q_n) − x_j(q_{n−1}) by −w_jb (2 R_b,n − R_b,n−1), and
 // turns the lever arm of J_jᵀ's rotation rows (∂(r × f)/∂J_b = w [f]× R_b): per node and bone,
 // a rotation-row block w [f]× R_b and a node block κ · (−w (R_b − 2 R_b,n + R_b,n−1)).
-template <class Sink>
-void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
-  if (c.is_static || !sink.wants(SimParameter::RestJoints)) return;
+template <class Visit>
+void NodalInertiaTerm::forEachMassNode(Visit&& visit) const {
   const double k = 1.0 / (h_ * h_);
   const std::vector<int>& nodes = masses_.nodes;
   const MatX3& x = kin_.x();
@@ -86,9 +85,16 @@ void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   for (size_t idx = 0; idx < nodes.size(); ++idx) {
     const int j = nodes[idx];
     const double kappa = k * masses_.mass[j];
-    const Vec3 f = kappa * (x.row(j) - x_hat_.row(j)).transpose();
     kin_.point(j, point);
     point.id = int(idx);
+    visit(j, kappa, Vec3(kappa * (x.row(j) - x_hat_.row(j)).transpose()), point);
+  }
+}
+
+template <class Sink>
+void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
+  if (c.is_static || !sink.wants(SimParameter::RestJoints)) return;
+  forEachMassNode([&](int, double kappa, const Vec3& f, const SkinnedPoint& point) {
     const Mat3 turn = skew(f);
     for (int a = 0; a < point.count; ++a) {
       const int b = point.bone[a];
@@ -97,7 +103,7 @@ void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
       sink.add(SimParameter::RestJoints, point, 3 * b, kappa * Mat3::Identity(),
                -w * (c.R[b] - 2.0 * c.R_n[b] + c.R_nm1[b]));
     }
-  }
+  });
 }
 
 // An offset d_j of Y_j (in q, q_n and q_{n−1} alike) moves x_j by M_j d_j and x̂_j by
@@ -106,22 +112,13 @@ void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
 template <class Sink>
 void NodalInertiaTerm::nodeOffsetBlocks(const TermContext& c, Sink& sink) const {
   if (c.is_static) return;
-  const double k = 1.0 / (h_ * h_);
-  const std::vector<int>& nodes = masses_.nodes;
-  const MatX3& x = kin_.x();
-  SkinnedPoint point;
-  for (size_t idx = 0; idx < nodes.size(); ++idx) {
-    const int j = nodes[idx];
-    const double kappa = k * masses_.mass[j];
-    const Vec3 f = kappa * (x.row(j) - x_hat_.row(j)).transpose();
-    kin_.point(j, point);
-    point.id = int(idx);
+  forEachMassNode([&](int j, double kappa, const Vec3& f, const SkinnedPoint& point) {
     sink.add(point, j,
              kappa * (kin_.M(j) - 2.0 * kin_.blendMatrix(j, c.R_n) + kin_.blendMatrix(j, c.R_nm1)));
     const Mat3 turn = skew(f);
     for (int a = 0; a < point.count; ++a)
       sink.addRotation(point.bone[a], j, -point.weight[a] * turn * c.R[point.bone[a]]);
-  }
+  });
 }
 
 // g = Σ_j J_jᵀ κ_j (x_j − x̂_j) with x̂_j = 2 x_j(q_n) − x_j(q_{n−1}): (∂g/∂q_n)ᵀ λ =

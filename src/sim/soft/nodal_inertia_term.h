@@ -67,6 +67,11 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   void hessianPart(int part, std::vector<Triplet>& H, int offset, bool psd) const;
 
  private:
+  /// visit(j, κ_j, f_j, point) for every mass node j: κ_j = m_j / h², its force
+  /// f_j = κ_j (x_j − x̂_j) and its skinned point (id: its index among the mass nodes).
+  template <class Visit>
+  void forEachMassNode(Visit&& visit) const;
+
   const NodeMasses& masses_;
   double h_;
   MatX3 x_hat_;

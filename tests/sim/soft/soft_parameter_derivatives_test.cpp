@@ -10,13 +10,7 @@ namespace flsh {
 namespace {
 
 using test::SoftModel;
-
-VecX totalGradient(const Simulable& sim) {
-  VecX g = VecX::Zero(sim.numDofs());
-  sim.getDynamicGradientVector(g);
-  sim.getPotentialGradientVector(g);
-  return g;
-}
+using test::totalGradient;
 
 class SoftParameterDerivatives : public ::testing::TestWithParam<SoftModel> {};
 

@@ -13,13 +13,7 @@ namespace flsh {
 namespace {
 
 using test::SoftModel;
-
-VecX totalGradient(const Simulable& sim) {
-  VecX g = VecX::Zero(sim.numDofs());
-  sim.getDynamicGradientVector(g);
-  sim.getPotentialGradientVector(g);
-  return g;
-}
+using test::totalGradient;
 
 // The snapshot with q_n (which = 1) or q_{n−1} (which = 2) moved by increments d (bones:
 // t += δt, R ← exp([δω]×) R; soft state: u += δu), its pose blend to be held again.

@@ -44,6 +44,14 @@ inline std::unique_ptr<Simulable> softTermScenario(SoftModel model) {
   return sim;
 }
 
+/// The simulable's whole gradient (dynamic and potential parts).
+inline VecX totalGradient(const Simulable& sim) {
+  VecX g = VecX::Zero(sim.numDofs());
+  sim.getDynamicGradientVector(g);
+  sim.getPotentialGradientVector(g);
+  return g;
+}
+
 inline MatX softTermHessian(const Simulable& sim, const EnergyTerm& term, bool psd) {
   std::vector<Triplet> triplets;
   term.addHessian(sim.termContext(), triplets, 0, psd);

@@ -113,6 +113,32 @@ void bind_diff(py::module_& m) {
                      "NewtonOptions of the FEM (a copy on read)")
       .def_readwrite("reduced_newton", &RolloutOptions::reduced_newton,
                      "NewtonOptions of the ROM (a copy on read)")
+      .def_property(
+          "tape_storage",
+          [](const RolloutOptions& o) {
+            switch (o.tape_storage) {
+              case RolloutOptions::TapeStorage::Factors:
+                return std::string("factors");
+              case RolloutOptions::TapeStorage::Snapshots:
+                return std::string("snapshots");
+              default:
+                return std::string("auto");
+            }
+          },
+          [](RolloutOptions& o, const std::string& value) {
+            if (value == "auto")
+              o.tape_storage = RolloutOptions::TapeStorage::Auto;
+            else if (value == "factors")
+              o.tape_storage = RolloutOptions::TapeStorage::Factors;
+            else if (value == "snapshots")
+              o.tape_storage = RolloutOptions::TapeStorage::Snapshots;
+            else
+              throw py::value_error(
+                  "tape_storage: expected 'auto', 'factors' or 'snapshots', got '" + value + "'");
+          },
+          "What the tape keeps: 'factors' (each step's factor), 'snapshots' (only each step's "
+          "converged state; every sweep factors the steps again: memory grows with the state) or "
+          "'auto' (snapshots for the FEM, factors otherwise; the default).")
       .def("__repr__", [](const RolloutOptions& o) {
         return "RolloutOptions(newton=" + py::repr(py::cast(o.newton)).cast<std::string>() + ")";
       });

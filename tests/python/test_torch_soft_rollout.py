@@ -123,3 +123,12 @@ def test_betas_gradient_is_refused_clearly(simulators):
 def test_unknown_model_is_refused(body):
     with pytest.raises(ValueError, match="model"):
         flsh.torch.RolloutSimulator(body, steps=2, model="spring")
+
+
+def test_rollout_options_tape_storage():
+    options = flsh.RolloutOptions()
+    assert options.tape_storage == "auto"
+    options.tape_storage = "snapshots"
+    assert options.tape_storage == "snapshots"
+    with pytest.raises(ValueError, match="tape_storage"):
+        options.tape_storage = "disk"

@@ -80,7 +80,9 @@ struct SimulationCostOptions {
   /// Size of the Shape block: the first num_betas of β (−1: all K). 1..K.
   int num_betas = -1;
   /// Evaluate fails when Newton did not converge at some step (its Jacobians would not be
-  /// those of the residuals).
+  /// those of the residuals). With false, the residuals of such a rollout are still returned,
+  /// but never its Jacobians: Rollout refuses to differentiate an unconverged step, so an
+  /// evaluation that asks for them fails.
   bool require_convergence = true;
 };
 

@@ -111,16 +111,9 @@ void Simulable::getNodesCotangents(const MatX3& dL_dnodes, VecX* state, VecX* pr
   a = VecX::Zero(m.dofs());
   if (!m.soft) return;
   const detail::SoftKinematics& kin = m.soft->kinematics();
-  std::vector<int> nodes;
-  std::vector<Vec3> mu;
-  for (int i = 0; i < V; ++i)
-    if (!dL_dnodes.row(i).isZero(0.0)) {
-      nodes.push_back(i);
-      mu.push_back(kin.M(i).transpose() * dL_dnodes.row(i).transpose());
-    }
-  VecX rotations = VecX::Zero(3 * m.num_bones);
-  kin.poseBlendCotangent(m.q_n.R, nodes, mu, rotations);
-  for (int b = 0; b < m.num_bones; ++b) a.segment<3>(6 * b + 3) = rotations.segment<3>(3 * b);
+  MatX3 offsets(V, 3);  // cotangent of the surface nodes' held offsets P_i
+  for (int i = 0; i < V; ++i) offsets.row(i) = dL_dnodes.row(i) * kin.M(i);
+  m.soft->addPoseBlendCotangent(m.q_n.R, offsets, a);
 }
 
 // ---- soft tissue --------------------------------------------------------------------------

@@ -5,9 +5,10 @@
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/sim/simulable.h"
 #include "flsh/energy/skeleton_energies.h"
+#include "flsh/sim/simulable.h"
 #include "sim/simulable_impl.h"
+#include "sim/tangent_columns.h"
 
 namespace flsh {
 
@@ -200,12 +201,9 @@ MatX Simulable::getGradientPreviousStateJacobian(int which) const {
   MatX D = MatX::Zero(n, n);
   if (m.soft) {  // columns of the tangent: n products (small models, tests)
     const VecX zero = VecX::Zero(n);
-    VecX unit = zero;
-    for (int col = 0; col < n; ++col) {
-      unit[col] = 1.0;
-      D.col(col) = getGradientPreviousStatesJVP(which == 1 ? unit : zero, which == 2 ? unit : zero);
-      unit[col] = 0.0;
-    }
+    detail::addTangentColumns(D, [&](const VecX& unit, VecX& column) {
+      column += getGradientPreviousStatesJVP(which == 1 ? unit : zero, which == 2 ? unit : zero);
+    });
     return D;
   }
   const TermContext c = m.context();

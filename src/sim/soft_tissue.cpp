@@ -48,15 +48,20 @@ void SoftTissue::addPoseBlendProducts(const TermContext& c, const VecX& lambda, 
   MatX3 node_cotangent = MatX3::Zero(numNodes(), 3);
   for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
     term->addNodeOffsetProducts(c, lambda, node_cotangent);
+  addPoseBlendCotangent(c.R_n, node_cotangent, a_n);
+}
+
+void SoftTissue::addPoseBlendCotangent(const std::vector<Mat3>& R_n, const MatX3& offsets,
+                                       VecX& a_n) const {
   std::vector<int> nodes;
   std::vector<Vec3> mu;
-  for (int j = 0; j < numNodes(); ++j)
-    if (!node_cotangent.row(j).isZero(0.0)) {
+  for (int j = 0; j < int(offsets.rows()); ++j)
+    if (!offsets.row(j).isZero(0.0)) {
       nodes.push_back(j);
-      mu.push_back(node_cotangent.row(j).transpose());
+      mu.push_back(offsets.row(j).transpose());
     }
   VecX rotations = VecX::Zero(3 * kin_.numBones());
-  kin_.poseBlendCotangent(c.R_n, nodes, mu, rotations);
+  kin_.poseBlendCotangent(R_n, nodes, mu, rotations);
   for (int b = 0; b < kin_.numBones(); ++b)
     a_n.segment<3>(rotationRow(b)) += rotations.segment<3>(3 * b);
 }

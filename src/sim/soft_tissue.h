@@ -122,6 +122,10 @@ class SoftTissue final : public TwoThreadSchedule {
   void addPoseBlendProducts(const TermContext& c, const VecX& lambda, VecX& a_n) const;
   /// ADDS ∂g/∂ω_n δω_n (δω_n: dq_n's rotation entries) into out.
   void addPoseBlendTangent(const TermContext& c, const VecX& dq_n, VecX& out) const;
+  /// The chain itself: ADDS into a_n's rotation rows the cotangent of q_n's rotation increments
+  /// for a cotangent of the held offsets P (`offsets`: rows for nodes 0..rows − 1, zero rows
+  /// skipped), the pose blend held from the rotations R_n.
+  void addPoseBlendCotangent(const std::vector<Mat3>& R_n, const MatX3& offsets, VecX& a_n) const;
 
   /// The contact broad phase's margins (SoftKinematics::contactMargins) from the surface nodes
   /// each bone dominates.

@@ -22,6 +22,12 @@ def reference(body):
     return smpl_torch.SmplTorch.from_flsh(body)
 
 
+@pytest.fixture(scope="session")
+def walk():
+    """The built-in walk, 1 s at 30 fps (read only)."""
+    return flsh.make_builtin_motion("walk", seconds=1.0, fps=30.0)
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(20240611)

@@ -28,11 +28,6 @@ def avatar():
     return a
 
 
-@pytest.fixture(scope="module")
-def walk():
-    return flsh.make_builtin_motion("walk", seconds=1.0, fps=30.0)
-
-
 def ground(avatar):
     return flsh.Collider.plane(point=[0.0, avatar.rest_vertices[:, 1].min(), 0.0],
                                normal=[0.0, 1.0, 0.0])

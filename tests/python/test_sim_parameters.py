@@ -20,11 +20,6 @@ def avatar():
     return a
 
 
-@pytest.fixture(scope="module")
-def walk():
-    return flsh.make_builtin_motion("walk", seconds=1.0, fps=30.0)
-
-
 def total_gradient(sim):
     return sim.get_dynamic_gradient_vector() + sim.get_potential_gradient_vector()
 

@@ -21,11 +21,6 @@ def body():
     return flsh.make_synthetic_body(vertices=600)
 
 
-@pytest.fixture(scope="module")
-def walk():
-    return flsh.make_builtin_motion("walk", seconds=1.0, fps=30.0)
-
-
 def ground_under(body, walk):
     """A ground plane 1 cm above the lowest vertex of the walk's initial state: the foot is
     in contact from the first step."""

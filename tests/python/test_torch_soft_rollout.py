@@ -15,19 +15,9 @@ STEPS = 4
 
 
 @pytest.fixture(scope="module")
-def body():
-    return flsh.make_synthetic_body(vertices=800)
-
-
-@pytest.fixture(scope="module")
-def walk():
-    return flsh.make_builtin_motion("walk", seconds=1.0, fps=30.0)
-
-
-@pytest.fixture(scope="module")
 def simulators(body, walk, tmp_path_factory):
-    """FEM and ROM simulators of the small soft avatar, with a ground plane 1 cm above the
-    lowest surface node of the walk's initial state."""
+    """FEM and ROM simulators of the small soft avatar (conftest's 800-vertex body), with a
+    ground plane 1 cm above the lowest surface node of the walk's initial state."""
     cache = tmp_path_factory.mktemp("soft_cache")
     settings = dict(handles=16, elastic_cubature_points=60, inertial_cubature_points=60,
                     cubature_training_samples=80)

@@ -2,6 +2,7 @@
 
 #include "flsh/core/rotation.h"
 #include "sim/soft/node_offset_blocks.h"
+#include "sim/tangent_columns.h"
 #include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
@@ -160,16 +161,10 @@ void NodalInertiaTerm::addPreviousStatesTangent(const TermContext& c, const VecX
 }
 
 void NodalInertiaTerm::addPreviousStateJacobian(const TermContext& c, int which, MatX& D) const {
-  const Eigen::Index n = D.cols();
-  const VecX zero = VecX::Zero(n);
-  VecX unit = zero, column(n);
-  for (Eigen::Index col = 0; col < n; ++col) {
-    unit[col] = 1.0;
-    column.setZero();
+  const VecX zero = VecX::Zero(D.cols());
+  addTangentColumns(D, [&](const VecX& unit, VecX& column) {
     addPreviousStatesTangent(c, which == 1 ? unit : zero, which == 2 ? unit : zero, column);
-    D.col(col) += column;
-    unit[col] = 0.0;
-  }
+  });
 }
 
 }  // namespace flsh::detail

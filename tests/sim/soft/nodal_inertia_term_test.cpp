@@ -47,6 +47,25 @@ TEST_P(NodalInertiaTerm, RestJointProductsMatchFiniteDifferences) {
     test::expectNoParameterProducts(*sim, term, p);
 }
 
+// The term's dense previous-state blocks (EnergyTerm::addPreviousStateJacobian): for q_{n−1},
+// which only the prediction x̂ reads, the whole simulable's (tested against differences in
+// soft_previous_state_derivatives_test.cpp); for q_n, its products.
+TEST_P(NodalInertiaTerm, PreviousStateBlocksMatchTheSimulablesAndTheProducts) {
+  auto sim = test::softTermScenario(GetParam());
+  const EnergyTerm& term = test::termNamed(*sim, "nodal inertia");
+  const int n = sim->numDofs();
+  MatX D[2] = {MatX::Zero(n, n), MatX::Zero(n, n)};
+  for (int which : {1, 2}) term.addPreviousStateJacobian(sim->termContext(), which, D[which - 1]);
+  ASSERT_GT(D[1].norm(), 0.0);
+  const MatX whole = sim->getGradientPreviousStateJacobian(2);
+  EXPECT_LT((D[1] - whole).norm(), 1e-12 * whole.norm());
+  const VecX lambda = test::randomVector(n, 1.0, 71);
+  VecX a_n = VecX::Zero(n);
+  term.addPreviousStatesProducts(sim->termContext(), lambda, &a_n, nullptr);
+  ASSERT_GT(D[0].norm(), 0.0);
+  EXPECT_LT((a_n - D[0].transpose() * lambda).norm(), 1e-10 * a_n.norm());
+}
+
 INSTANTIATE_TEST_SUITE_P(Models, NodalInertiaTerm,
                          ::testing::Values(SoftModel::Fem, SoftModel::Rom), test::modelName);
 

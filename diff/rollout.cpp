@@ -61,6 +61,8 @@ VecX* RolloutVariables::global(SimParameter p) {
       return &stiffnesses;
     case SimParameter::ColliderOffsets:
       return &collider_offsets;
+    case SimParameter::Material:
+      return &material;
     case SimParameter::PoseTargets:
     case SimParameter::RootTranslationTarget:
       return nullptr;
@@ -147,6 +149,11 @@ void Rollout::checkVariables(const RolloutVariables& v, const std::string& who) 
   checkMatrix(v.root_targets, T, 3, who, "root_targets");
   checkVector(v.stiffnesses, 4, who, "stiffnesses");
   checkVector(v.collider_offsets, 3 * long(base_colliders_.size()), who, "collider_offsets");
+  if (!sim.hasSoftTissue() && v.material.size())
+    throw InputError(who +
+                     ": material: the articulated skeleton has no soft-tissue material; "
+                     "leave material empty");
+  checkVector(v.material, sim.parameterSize(SimParameter::Material), who, "material");
   checkVector(v.initial_state, n, who, "initial_state");
   checkVector(v.initial_velocity, n, who, "initial_velocity");
 }

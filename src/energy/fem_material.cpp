@@ -60,6 +60,9 @@ struct FungMap {
   double psi;  ///< Ψ (Pa)
   double d1;   ///< dΨ/dΨ_S (dimensionless, ≥ 1)
   double d2;   ///< d²Ψ/dΨ_S² (1/Pa, ≥ 0)
+  double x;    ///< the exponent γΨ_S/μ
+  double e1;   ///< ∂d1/∂x (d2 = (γ/μ) e1)
+  double ratio;  ///< Ψ/Ψ_S = φ(x)/x (1 at x = 0)
 };
 
 FungMap fungMap(double psi_s, double gamma, double modulus) {
@@ -69,12 +72,12 @@ FungMap fungMap(double psi_s, double gamma, double modulus) {
     const double ex = std::exp(x);
     // expm1(x)/x → 1 as x → 0; the series keeps γ = 0 (x = 0) exact and avoids 0/0.
     const double ratio = std::abs(x) < 1e-5 ? 1.0 + x * (0.5 + x / 6.0) : std::expm1(x) / x;
-    return {psi_s * ratio, ex, k * ex};
+    return {psi_s * ratio, ex, k * ex, x, ex, ratio};
   }
   // Beyond the cap: the second-order Taylor continuation of expm1 at the cap (x > 50, so x ≠ 0).
   const double ec = std::exp(kFungExponentCap), d = x - kFungExponentCap;
   const double g = std::expm1(kFungExponentCap) + ec * (d + 0.5 * d * d);
-  return {psi_s * (g / x), ec * (1.0 + d), k * ec};
+  return {psi_s * (g / x), ec * (1.0 + d), k * ec, x, ec, g / x};
 }
 
 /// The stress-dependent state shared by the density and the element kernels.
@@ -255,6 +258,59 @@ double fungEnergyDensity(const Mat3& F, const FemMaterialPoint& material, Mat3* 
     }
   }
   return state.map.psi + guard.energy();
+}
+
+Vec6 voigtLinearStrain(const Mat3& H) {
+  Vec6 e;
+  e << H(0, 0), H(1, 1), H(2, 2), H(1, 2) + H(2, 1), H(0, 2) + H(2, 0), H(0, 1) + H(1, 0);
+  return e;
+}
+
+namespace {
+
+/// (d1 − ratio) / x = h′(x) for h(x) = φ(x)/x, by its series near 0 (γ = 0 included).
+double fungRatioSlope(const FungMap& map) {
+  const double x = map.x;
+  return std::abs(x) < 1e-5 ? 0.5 + x * (1.0 / 3.0 + x / 8.0) : (map.d1 - map.ratio) / x;
+}
+
+}  // namespace
+
+// Ψ = Ψ_S h(x) + Ψ_J with x = (γ/μ) Ψ_S, h = φ(x)/x: ∂Ψ/∂C_world = d1 ½ ε εᵀ, ∂Ψ/∂μ =
+// −Ψ_S h′ x/μ + Ψ_J/μ (κ = kInversionStiffness μ), ∂Ψ/∂γ = Ψ_S h′ Ψ_S/μ.
+void addEnergyDensityMaterialGradient(const Mat3& F, const FemMaterialPoint& material, double scale,
+                                      FemMaterialDerivative& out) {
+  requireFinite(F, "addEnergyDensityMaterialGradient");
+  const Vec6 eps = voigtGreenStrain(F);
+  const double psi_s = 0.5 * eps.dot(material.C_world * eps);
+  const FungMap map = fungMap(psi_s, material.gamma, material.modulus);
+  const double slope = fungRatioSlope(map);
+  out.C_world.noalias() += (0.5 * scale * map.d1) * eps * eps.transpose();
+  out.modulus -= scale * psi_s * slope * map.x / material.modulus;
+  out.gamma += scale * psi_s * slope * psi_s / material.modulus;
+  const InversionGuard guard = inversionGuard(F, material);
+  if (guard.active()) out.modulus += scale * guard.energy() / material.modulus;
+}
+
+// D = ⟨P, dF⟩ = d1 σ·δε − κ (J₀ − J) ⟨cof F, dF⟩ with δε the strain of sym(Fᵀ dF):
+// ∂D/∂C_world = d1 δε εᵀ + d2 (σ·δε) ½ ε εᵀ, ∂D/∂μ = −e1 (σ·δε) x/μ − kInversionStiffness (J₀ −
+// J) ⟨cof F, dF⟩, ∂D/∂γ = e1 (σ·δε) Ψ_S/μ.
+void addStressMaterialGradient(const Mat3& F, const FemMaterialPoint& material, const Mat3& dF,
+                               double scale, FemMaterialDerivative& out) {
+  requireFinite(F, "addStressMaterialGradient");
+  const Vec6 eps = voigtGreenStrain(F);
+  const Vec6 sigma = material.C_world * eps;
+  const double psi_s = 0.5 * eps.dot(sigma);
+  const FungMap map = fungMap(psi_s, material.gamma, material.modulus);
+  const Vec6 deps = voigtLinearStrain(F.transpose() * dF);
+  const double work = sigma.dot(deps);
+  out.C_world.noalias() += (scale * map.d1) * deps * eps.transpose();
+  out.C_world.noalias() += (0.5 * scale * map.d2 * work) * eps * eps.transpose();
+  out.modulus -= scale * map.e1 * work * map.x / material.modulus;
+  out.gamma += scale * map.e1 * work * psi_s / material.modulus;
+  const InversionGuard guard = inversionGuard(F, material);
+  if (guard.active())
+    out.modulus -= scale * kInversionStiffness * guard.depth * cofactor(F).cwiseProduct(dF).sum();
 }
 
 TetElementRest tetElementRest(const Mat34& X, int tet_index) {

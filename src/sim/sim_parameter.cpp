@@ -5,6 +5,7 @@
 
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
+#include "flsh/volume/materials.h"
 #include "flsh/volume/soft_avatar.h"
 
 namespace flsh {
@@ -36,6 +37,12 @@ const std::array<SimParameterInfo, kNumSimParameters>& simParameters() {
        "stiffness (N/m³)"},
       {SimParameter::ColliderOffsets, "collider_offsets", "ColliderOffsets", "m", false, -1,
        "collider contact", "(3·#colliders,) translation offset of each collider's path, m"},
+      {SimParameter::Material, "material", "Material",
+       "1 (log of each coefficient's value; log-slopes per unit β)", false, -1,
+       "soft skeletons: elasticity, nodal inertia and gravity (node masses)",
+       "(40·(1+K),) the material file's coefficients as MaterialModel::parameters(): per "
+       "coefficient a = log c₀, then its K log-slopes (read only on a simulable: build the "
+       "avatar with SoftAvatar::withMaterial instead); empty for the articulated skeleton"},
   }};
   return table;
 }
@@ -47,10 +54,17 @@ const SimParameterInfo& simParameterInfo(SimParameter p) {
   return simParameters()[size_t(k)];
 }
 
-int simParameterSize(SimParameter p, int num_colliders, int num_betas) {
+int simParameterSize(SimParameter p, int num_colliders, int num_betas, bool soft_tissue) {
   const SimParameterInfo& info = simParameterInfo(p);
   if (info.fixed_size >= 0) return info.fixed_size;
-  return p == SimParameter::Shape ? num_betas : 3 * num_colliders;
+  switch (p) {
+    case SimParameter::Shape:
+      return num_betas;
+    case SimParameter::Material:
+      return soft_tissue ? MaterialModel::numCoefficients() * (1 + num_betas) : 0;
+    default:
+      return 3 * num_colliders;
+  }
 }
 
 namespace {

@@ -33,11 +33,13 @@ namespace {
 
 // The groups every term of a soft skeleton differentiates so far: those the node terms do not
 // depend on (pose and root targets, bone inertias: the bones' springs alone), the contact
-// stiffness and collider offsets (the node contact term) and the rest joints (the tet nodes'
-// skinning in inertia, its prediction, gravity and contact). β also moves the rest nodes X̄(β),
-// the masses and the materials: not written yet (issue 25).
+// stiffness and collider offsets (the node contact term), the rest joints (the tet nodes'
+// skinning in inertia, its prediction, gravity and contact) and the material (elasticity and
+// the node masses). β also moves the rest nodes X̄(β), the masses and the materials: not
+// written yet (issue 25).
 bool softDifferentiable(SimParameter p) {
   switch (p) {
+    case SimParameter::Material:
     case SimParameter::RestJoints:
     case SimParameter::PoseTargets:
     case SimParameter::RootTranslationTarget:
@@ -59,15 +61,16 @@ void requireDifferentiable(const Simulable::Impl& m, const std::vector<SimParame
       throw Error(std::string("Simulable::") + who + ": " + simParameterInfo(p).enum_name +
                   ": parameter derivatives of a soft-tissue avatar (the FEM or ROM soft "
                   "skeleton) cover RestJoints, PoseTargets, RootTranslationTarget, BoneInertia, "
-                  "Stiffnesses and ColliderOffsets so far; the articulated skeleton has every "
-                  "group");
+                  "Stiffnesses, ColliderOffsets and Material so far; the articulated skeleton "
+                  "has every group but Material");
   }
 }
 
 }  // namespace
 
 int Simulable::parameterSize(SimParameter p) const {
-  return simParameterSize(p, int(impl_->colliders.size()), int(impl_->avatar->betas().size()));
+  return simParameterSize(p, int(impl_->colliders.size()), int(impl_->avatar->betas().size()),
+                          impl_->soft != nullptr);
 }
 
 MatX Simulable::getGradientParameterJacobian(SimParameter p) const {
@@ -94,6 +97,30 @@ bool askFor(const Simulable& s, const std::vector<SimParameter>& groups, int col
   return shape;
 }
 
+// The Material group: the terms write it in the coefficient values at β (MaterialChain); the
+// file's parameters (a, b) follow by ∂c_i/∂a_i = c_i, ∂c_i/∂b_i = c_i β, once per call.
+template <class Block>
+void askForMaterialValues(const Simulable::Impl& m, ParameterProducts<Block>& out) {
+  if (!m.soft || !out.wants(SimParameter::Material)) return;
+  const int n = m.soft->materialChain().numValues();
+  Block& block = out[SimParameter::Material];
+  if constexpr (Block::ColsAtCompileTime == 1)
+    block = Block::Zero(n);
+  else
+    block = Block::Zero(block.rows(), n);
+}
+
+VecX materialParametersCotangent(const Simulable::Impl& m, const VecX& values_bar) {
+  return m.soft->materialChain().parametersCotangent(values_bar);
+}
+
+MatX materialParametersJacobian(const Simulable::Impl& m, const MatX& values_jacobian) {
+  MatX out(values_jacobian.rows(), m.avatar->volumetricData().material_model.numParameters());
+  for (Eigen::Index r = 0; r < values_jacobian.rows(); ++r)
+    out.row(r) = materialParametersCotangent(m, values_jacobian.row(r).transpose()).transpose();
+  return out;
+}
+
 }  // namespace
 
 // The terms' Jacobians (numDofs × size); Shape's chain through the rest joints and bone
@@ -106,9 +133,13 @@ std::vector<MatX> Simulable::getGradientParameterJacobians(const std::vector<Sim
   const bool chain = askFor(*this, groups, numDofs(), jacobians) && !shape_surface_only;
   if (chain)
     askFor(*this, {SimParameter::RestJoints, SimParameter::BoneInertia}, numDofs(), jacobians);
+  askForMaterialValues(m, jacobians);
   m.ensureContact();
   const TermContext c = m.context();
   for (const EnergyTerm* term : m.terms) term->addParameterJacobians(c, jacobians);
+  if (m.soft && jacobians.wants(SimParameter::Material))
+    jacobians[SimParameter::Material] =
+        materialParametersJacobian(m, jacobians[SimParameter::Material]);
   std::vector<MatX> out;
   out.reserve(groups.size());
   for (SimParameter p : groups) {
@@ -133,9 +164,13 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
   ParameterProducts<VecX> products;
   const bool chain = askFor(*this, groups, 1, products) && !shape_surface_only;
   if (chain) askFor(*this, {SimParameter::RestJoints, SimParameter::BoneInertia}, 1, products);
+  askForMaterialValues(m, products);
   m.ensureContact();
   const TermContext c = m.context();
   for (const EnergyTerm* term : m.terms) term->addParameterProducts(c, lambda, products);
+  if (m.soft && products.wants(SimParameter::Material))
+    products[SimParameter::Material] =
+        materialParametersCotangent(m, products[SimParameter::Material]);
   std::vector<VecX> out;
   out.reserve(groups.size());
   for (SimParameter p : groups) {
@@ -182,6 +217,14 @@ std::vector<VecX> Simulable::getGradientParameterJVPs(
         given[d][size_t(group)] = change;
       }
     }
+  // Material directions in the coefficient values the terms read.
+  std::vector<VecX> material_values(directions.size());
+  for (size_t d = 0; d < directions.size(); ++d) {
+    const VecX* dp = directions[d][size_t(SimParameter::Material)];
+    if (!m.soft || !dp || dp->size() == 0) continue;
+    material_values[d] = m.soft->materialChain().valuesTangent(*dp);
+    given[d][size_t(SimParameter::Material)] = &material_values[d];
+  }
   std::vector<VecX> out(directions.size(), VecX::Zero(numDofs()));
   m.ensureContact();
   const TermContext c = m.context();
@@ -269,6 +312,9 @@ VecX Simulable::getParameter(SimParameter p) const {
     case SimParameter::Shape:
       value = m.avatar->betas();
       break;
+    case SimParameter::Material:
+      if (m.soft) value = m.avatar->volumetricData().material_model.parameters();
+      break;
   }
   return value;
 }
@@ -279,6 +325,11 @@ void Simulable::setParameter(SimParameter p, const VecX& value) {
     throw InputError(
         "Simulable::setParameter: Shape (β) is fixed by the SoftAvatar the simulable was built "
         "with; build a new SoftAvatar with the new β and a new Simulable on it");
+  if (p == SimParameter::Material)
+    throw InputError(
+        "Simulable::setParameter: Material is fixed by the SoftAvatar the simulable was built "
+        "with; build one with SoftAvatar::withMaterial (same discretization, other materials) "
+        "and a new Simulable on it");
   if (value.size() != parameterSize(p))
     throw InputError("Simulable::setParameter: value has " + std::to_string(value.size()) +
                      " entries, expected parameterSize() = " + std::to_string(parameterSize(p)));
@@ -344,6 +395,7 @@ void Simulable::setParameter(SimParameter p, const VecX& value) {
       }
       break;
     case SimParameter::Shape:
+    case SimParameter::Material:
       break;  // rejected above
   }
   m.touch();

@@ -28,19 +28,21 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
       u(kin_.u),
       u_n(kin_.u_n),
       u_nm1(kin_.u_nm1),
-      masses_(nodeMasses(avatar)) {
+      masses_(nodeMasses(avatar)),
+      material_chain_(avatar) {
   kin_.setMassNodes(masses_.nodes);
   ElasticElements elements = elasticElements(avatar);
   if (kin_.reduced()) {
-    auto reduced = std::make_unique<ReducedElasticityTerm>(avatar, kin_, std::move(elements));
+    auto reduced =
+        std::make_unique<ReducedElasticityTerm>(avatar, kin_, material_chain_, std::move(elements));
     kin_.buildReducedPattern(reduced->handlePairs());
     reduced_elastic_ = reduced.get();
     elastic_ = std::move(reduced);
   } else {
-    elastic_ = std::make_unique<FemElasticityTerm>(kin_, std::move(elements));
+    elastic_ = std::make_unique<FemElasticityTerm>(kin_, material_chain_, std::move(elements));
   }
-  inertia_ = std::make_unique<NodalInertiaTerm>(kin_, masses_, time_step);
-  gravity_ = std::make_unique<NodalGravityTerm>(kin_, masses_);
+  inertia_ = std::make_unique<NodalInertiaTerm>(kin_, masses_, material_chain_, time_step);
+  gravity_ = std::make_unique<NodalGravityTerm>(kin_, masses_, material_chain_);
   contact_ = std::make_unique<NodeContactTerm>(kin_, avatar.vertexAreas());
 }
 

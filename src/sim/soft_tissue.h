@@ -16,6 +16,7 @@
 #include "flsh/core/types.h"
 #include "flsh/volume/soft_avatar.h"
 #include "sim/soft/elastic_elements.h"
+#include "sim/soft/material_chain.h"
 #include "sim/soft/nodal_gravity_term.h"
 #include "sim/soft/nodal_inertia_term.h"
 #include "sim/soft/node_contact_term.h"
@@ -134,6 +135,8 @@ class SoftTissue final : public TwoThreadSchedule {
   }
   /// New rest joints (Simulable::setParameter(RestJoints)); call setPrediction after.
   void setJoints(const MatX3& joints) { kin_.setJoints(joints); }
+  /// The Material group's chain (coefficient values ↔ the material file's parameters).
+  const MaterialChain& materialChain() const { return material_chain_; }
   /// The node contact term, as the broad phase asks it (refresh).
   const ContactTerm& contactTerm() const { return *contact_; }
   /// World positions and unposed nodes of every surface node (#V × 3) at the prepared state.
@@ -146,6 +149,7 @@ class SoftTissue final : public TwoThreadSchedule {
     return {inertia_.get(), gravity_.get(), contact_.get()};
   }
   NodeMasses masses_;
+  MaterialChain material_chain_;
   std::unique_ptr<NodalInertiaTerm> inertia_;
   std::unique_ptr<NodalGravityTerm> gravity_;
   std::unique_ptr<ElasticityTerm> elastic_;

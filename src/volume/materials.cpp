@@ -14,6 +14,7 @@
 #include "flsh/format/atomic_file.h"
 #include "flsh/format/input_file.h"
 #include "flsh/volume/soft_avatar.h"
+#include "flsh/volume/tet_material_map.h"
 #include "volume/kinematic_tree.h"
 #include "volume/surface_query.h"
 
@@ -309,6 +310,62 @@ void MaterialModel::setParameters(const VecX& parameters) {
   *this = std::move(candidate);
 }
 
+int MaterialModel::numCoefficients() { return int(flsh::numCoefficients()); }
+
+std::vector<std::string> MaterialModel::parameterNames() const {
+  std::vector<std::string> keys;
+  for (const auto& layer : kLayerNames)
+    for (const auto& q : kLayerQuantities) keys.push_back("layers." + layer + "." + q);
+  for (const auto& q : kBodyQuantities) keys.push_back("body." + q);
+  for (const auto& r : kRegionNames)
+    for (const auto& q : kRegionQuantities) keys.push_back("regions." + r + "." + q);
+  std::vector<std::string> names;
+  for (const auto& key : keys) {
+    names.push_back(key + ".log_value");
+    for (int k = 0; k < num_betas_; ++k)
+      names.push_back(key + ".log_slopes[" + std::to_string(k) + "]");
+  }
+  return names;
+}
+
+VecX MaterialModel::coefficientValues(const VecX& betas) const {
+  const VecX b = padded(betas, num_betas_, "MaterialModel::coefficientValues");
+  VecX values(coefficients_.size());
+  for (size_t i = 0; i < coefficients_.size(); ++i)
+    values[Eigen::Index(i)] = coefficients_[i].base * std::exp(coefficients_[i].slopes.dot(b));
+  return values;
+}
+
+VecX MaterialModel::parametersCotangent(const VecX& values_bar, const VecX& betas) const {
+  if (values_bar.size() != numCoefficients())
+    throw InputError("MaterialModel::parametersCotangent: values_bar has " +
+                     std::to_string(values_bar.size()) + " values, expected " +
+                     std::to_string(numCoefficients()));
+  const VecX b = padded(betas, num_betas_, "MaterialModel::parametersCotangent");
+  const VecX c = coefficientValues(b);
+  VecX out(numParameters());
+  for (Eigen::Index i = 0; i < c.size(); ++i) {
+    const double scaled = c[i] * values_bar[i];
+    out[i * (1 + num_betas_)] = scaled;
+    out.segment(i * (1 + num_betas_) + 1, num_betas_) = scaled * b;
+  }
+  return out;
+}
+
+VecX MaterialModel::coefficientValuesTangent(const VecX& parameters_direction,
+                                             const VecX& betas) const {
+  if (parameters_direction.size() != numParameters())
+    throw InputError("MaterialModel::coefficientValuesTangent: direction has " +
+                     std::to_string(parameters_direction.size()) + " values, expected " +
+                     std::to_string(numParameters()));
+  const VecX b = padded(betas, num_betas_, "MaterialModel::coefficientValuesTangent");
+  VecX out = coefficientValues(b);
+  for (Eigen::Index i = 0; i < out.size(); ++i)
+    out[i] *= parameters_direction[i * (1 + num_betas_)] +
+              parameters_direction.segment(i * (1 + num_betas_) + 1, num_betas_).dot(b);
+  return out;
+}
+
 void MaterialModel::validate(const std::string& origin, const VecX& betas) const {
   const VecX b = padded(betas, num_betas_, "MaterialModel::validate");
   for (int layer = 0; layer < kNumLayers; ++layer) {
@@ -569,16 +626,6 @@ Mat3 tissueFrame(const Vec3& inward, const Vec3& axis) {
   return frame;
 }
 
-/// Fraction of a tet's volume that is skin: the skin under a boundary face (area × thickness, to
-/// first order in thickness) is given to the tet owning the face, so the skin volume summed over
-/// the tets is the surface area times the thickness; capped at 1 (tets thinner than ~3 t).
-/// |volume|: a shape may invert a sliver (reported by the simulation, not here).
-double skinFraction(double boundary_area, double volume, double thickness) {
-  if (boundary_area == 0) return 0;
-  const double skin = boundary_area * thickness;
-  return skin >= std::abs(volume) ? 1.0 : skin / std::abs(volume);
-}
-
 }  // namespace
 
 VecX surfaceTissueThickness(const MatX3& surface_vertices, const MatX& surface_weights,
@@ -626,29 +673,9 @@ TetMaterials computeTetMaterials(const TetMesh& mesh, const MatX3& shaped_nodes,
   detail::checkTetMesh(mesh, shaped_nodes, "computeTetMaterials", false);
   checkSkeleton(fn, node_weights, mesh.numNodes(), joints, parents);
   model.validate("computeTetMaterials: material model", betas);
-  std::vector<int> owners;
-  const MatX3i F = detail::outwardBoundaryFaces(mesh, "computeTetMaterials", &owners);
+  const MatX3i F = detail::outwardBoundaryFaces(mesh, "computeTetMaterials");
   if (F.rows() == 0) throw InputError(fn + "the tet mesh has no boundary faces");
   const int nv = mesh.num_surface_nodes, nt = mesh.numTets();
-
-  // Layer coefficients at β and the layers' stiffness (normal block, 3 × 3) in the local frame.
-  struct Layer {
-    double density, fung;
-    Vec3 young, poisson, shear;
-    Mat3 normal_stiffness;
-  };
-  Layer layers[MaterialModel::kNumLayers];
-  for (int l = 0; l < MaterialModel::kNumLayers; ++l) {
-    auto v = [&](const char* q) { return model.value(q, l, betas); };
-    layers[l] = Layer{v("density"),
-                      v("fung_gamma"),
-                      Vec3(v("E1"), v("E2"), v("E3")),
-                      Vec3(v("nu12"), v("nu13"), v("nu23")),
-                      Vec3(v("G12"), v("G13"), v("G23")),
-                      Mat3::Zero()};
-    layers[l].normal_stiffness = normalCompliance(layers[l].young, layers[l].poisson).inverse();
-  }
-  const double skin_thickness = model.value("skin_thickness", MaterialModel::kBodyLevel, betas);
 
   const MatX3 surface = shaped_nodes.topRows(nv);
   const std::vector<Vec3> axes = boneAxes(
@@ -656,33 +683,8 @@ TetMaterials computeTetMaterials(const TetMesh& mesh, const MatX3& shaped_nodes,
   const MatX3 normals = detail::vertexNormals(shaped_nodes, F);
   const detail::SurfaceDistance distance(shaped_nodes, F);
 
-  // Boundary area and volume of each tet.
-  VecX boundary_area = VecX::Zero(nt), volume(nt);
-  for (int t = 0; t < nt; ++t) {
-    const Vec3 x0 = shaped_nodes.row(mesh.tets(t, 0));
-    volume[t] = (shaped_nodes.row(mesh.tets(t, 1)).transpose() - x0)
-                    .cross(shaped_nodes.row(mesh.tets(t, 2)).transpose() - x0)
-                    .dot(shaped_nodes.row(mesh.tets(t, 3)).transpose() - x0) /
-                6;
-  }
-  for (int f = 0; f < F.rows(); ++f) {
-    const Vec3 a = shaped_nodes.row(F(f, 0)), b = shaped_nodes.row(F(f, 1)),
-               c = shaped_nodes.row(F(f, 2));
-    boundary_area[owners[f]] += 0.5 * (b - a).cross(c - a).norm();
-  }
-
-  TetMaterials out;
-  out.tissue_stiffness_scale = tetTissueStiffnessScale(mesh, node_weights, model, betas);
-  out.density.resize(nt);
-  out.young.resize(nt, 3);
-  out.poisson.resize(nt, 3);
-  out.shear.resize(nt, 3);
-  out.fung.resize(nt);
-  out.frame.resize(nt);
-  out.layer.resize(nt);
-  out.skin_fraction.resize(nt);
-  const Layer& skin = layers[MaterialModel::kSkin];
-  const Layer& reference_tissue = layers[MaterialModel::kSoftTissue];
+  // The orthotropy frame of each tet; the coefficients follow from the material map.
+  std::vector<Mat3> frames(static_cast<size_t>(nt));
 #pragma omp parallel for schedule(static)
   for (int t = 0; t < nt; ++t) {
     Vec3 centroid = Vec3::Zero();
@@ -702,41 +704,11 @@ TetMaterials computeTetMaterials(const TetMesh& mesh, const MatX3& shaped_nodes,
                  c = shaped_nodes.row(F(hit.face, 2));
       outward = (b - a).cross(c - a);
     }
-    out.frame[t] = tissueFrame(-outward, axes[dominant]);
-
-    // The soft-tissue layer of this tet's body region: moduli scaled, ν unchanged (a positive
-    // multiple of a positive-definite stiffness).
-    Layer tissue = reference_tissue;
-    const double k = out.tissue_stiffness_scale[t];
-    tissue.young *= k;
-    tissue.shear *= k;
-    tissue.normal_stiffness *= k;
-
-    const double f = skinFraction(boundary_area[t], volume[t], skin_thickness);
-    out.skin_fraction[t] = f;
-    out.layer[t] = f >= 0.5 ? MaterialModel::kSkin : MaterialModel::kSoftTissue;
-    if (f == 0 || f == 1) {
-      const Layer& l = f == 1 ? skin : tissue;
-      out.density[t] = l.density;
-      out.fung[t] = l.fung;
-      out.young.row(t) = l.young.transpose();
-      out.poisson.row(t) = l.poisson.transpose();
-      out.shear.row(t) = l.shear.transpose();
-      continue;
-    }
-    // Voigt mixture: volume average of the stiffness tensors (same frame, so still orthotropic
-    // and positive definite), converted back to engineering constants.
-    out.density[t] = f * skin.density + (1 - f) * tissue.density;
-    out.fung[t] = f * skin.fung + (1 - f) * tissue.fung;
-    out.shear.row(t) = (f * skin.shear + (1 - f) * tissue.shear).transpose();
-    const Mat3 compliance =
-        (f * skin.normal_stiffness + (1 - f) * tissue.normal_stiffness).inverse();
-    const Vec3 young(1 / compliance(0, 0), 1 / compliance(1, 1), 1 / compliance(2, 2));
-    out.young.row(t) = young.transpose();
-    out.poisson.row(t) << -compliance(0, 1) * young[0], -compliance(0, 2) * young[0],
-        -compliance(1, 2) * young[1];
+    frames[size_t(t)] = tissueFrame(-outward, axes[dominant]);
   }
-  return out;
+  const TetMaterialMap map(tetMaterialGeometry(mesh, shaped_nodes, node_weights, std::move(frames)),
+                           model.coefficientValues(betas));
+  return map.materials();
 }
 
 }  // namespace flsh

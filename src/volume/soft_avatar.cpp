@@ -19,6 +19,8 @@
 #include "flsh/body/body_forward.h"
 #include "flsh/body/model_finalized.h"
 #include "flsh/core/error.h"
+#include "flsh/core/sha256.h"
+#include "flsh/volume/tet_material_map.h"
 
 namespace flsh {
 
@@ -143,9 +145,10 @@ void SoftAvatar::initVolumetricData() {
     std::unique_ptr<AvatarCache> cache;
     if (settings_.volumetric.use_cache)
       cache = std::make_unique<AvatarCache>(settings_.volumetric.cache_dir);
-    reduced_data = std::make_shared<const ReducedData>(
-        buildReducedData(*volumetric, body, settings_.reduced, elastic_cubature_,
-                         inertial_cubature_, cache.get(), &reduced_report));
+    ReducedData rom = buildReducedData(*volumetric, body, settings_.reduced, elastic_cubature_,
+                                       inertial_cubature_, cache.get(), &reduced_report);
+    rom.elastic_floors = elasticCubatureFloors(*volumetric, rom);
+    reduced_data = std::make_shared<const ReducedData>(std::move(rom));
   }
   volumetric_ = std::move(volumetric);
   build_report_ = std::move(volumetric_report);
@@ -202,7 +205,55 @@ void SoftAvatar::setReducedData(std::shared_ptr<const ReducedData> data) {
                      std::to_string(C.cols()) + (C.allFinite() ? "" : " with NaN or Inf") +
                      ", expected empty or 3·#handles × 3·#handles = " + std::to_string(3 * H) +
                      " × " + std::to_string(3 * H) + " finite");
+  if (data->elastic_floors.size() > 0 &&
+      data->elastic_floors.size() != data->elastic.elements.size())
+    throw InputError(fn + "elastic_floors has " + std::to_string(data->elastic_floors.size()) +
+                     " entries, expected empty or one per elastic cubature sample (" +
+                     std::to_string(data->elastic.elements.size()) + ")");
+  if (data->elastic_floors.size() == 0 && data->elastic.elements.size() > 0 && C.size() > 0) {
+    auto filled = std::make_shared<ReducedData>(*data);
+    filled->elastic_floors = elasticCubatureFloors(vol, *filled);
+    data = std::move(filled);
+  }
   reduced_data_ = std::move(data);
+}
+
+// The same discretization (tet mesh, rest nodes, bone nodes, frames, reduced basis, cubature
+// samples, weights and floors) with the materials of `model` at this β: the per-tet map
+// (tet_material_map.h) re-evaluated and, for the ROM, the subspace's exact rest stiffness K.
+std::shared_ptr<SoftAvatar> SoftAvatar::withMaterial(const MaterialModel& model) const {
+  const std::string fn = "SoftAvatar::withMaterial: ";
+  if (!initialized_ || !volumetric_)
+    throw Error(fn +
+                "the avatar has no volumetric body (enableSoftTissue() and "
+                "initVolumetricData() first)");
+  if (model.numBetas() != betas_.size())
+    throw InputError(fn + "the material model is for " + std::to_string(model.numBetas()) +
+                     " shape components, expected " + std::to_string(betas_.size()) +
+                     " (the body's)");
+  model.validate("SoftAvatar::withMaterial: material", betas_);
+  auto out = std::make_shared<SoftAvatar>(*this);
+  auto data = std::make_shared<VolumetricData>(*volumetric_);
+  const TetMaterialMap map(tetMaterialGeometry(*volumetric_), model.coefficientValues(betas_));
+  data->materials = map.materials();
+  data->material_model = model;
+  const std::string text = model.canonicalText();
+  Sha256 h;
+  h.update(volumetric_->key);
+  h.updateField("materials", text.data(), text.size());
+  data->key = h.hexDigest();
+  if (reduced_data_) {
+    auto rom = std::make_shared<ReducedData>(*reduced_data_);
+    if (rom->elastic_rest_stiffness.size() > 0)
+      rom->elastic_rest_stiffness = elasticRestStiffness(*data, rom->basis);
+    Sha256 k;
+    k.update(reduced_data_->key);
+    k.update(data->key);
+    rom->key = k.hexDigest();
+    out->reduced_data_ = std::move(rom);
+  }
+  out->volumetric_ = std::move(data);
+  return out;
 }
 
 const ReducedData& SoftAvatar::reducedData() const {

@@ -1,4 +1,5 @@
-// Rollout through the soft skeletons (FEM and ROM): for every input group but β, the directional
+// Rollout through the soft skeletons (FEM and ROM): for every input group but β (the material
+// included, through SoftAvatar::withMaterial avatars), the directional
 // derivative of a whole-rollout loss (joint positions, the state vectors with their soft part,
 // and the simulated surface at every step, which moves with the pose blend held from the
 // previous state) against a central difference of re-run rollouts, with and without contact (a
@@ -69,8 +70,10 @@ struct Case {
   bool explicit_initial = false;  // the initial state and velocity as inputs
 };
 
-std::shared_ptr<Simulable> makeSimulable(const Case& c) {
-  auto sim = std::make_shared<Simulable>(test::smallSoftAvatar(c.model), scene().walk);
+std::shared_ptr<Simulable> makeSimulable(const Case& c,
+                                         std::shared_ptr<const SoftAvatar> avatar = nullptr) {
+  if (!avatar) avatar = test::smallSoftAvatar(c.model);
+  auto sim = std::make_shared<Simulable>(avatar, scene().walk);
   if (c.contact) sim->setColliders(sceneColliders(c.model));
   return sim;
 }
@@ -158,8 +161,17 @@ const Loss& lossFor(SoftModel model) {
   return model == SoftModel::Fem ? fem : rom;
 }
 
+// The avatar with the material parameters moved by `step` (the same discretization).
+std::shared_ptr<const SoftAvatar> avatarWithMaterial(SoftModel model, const VecX& step) {
+  const auto avatar = test::smallSoftAvatar(model);
+  MaterialModel m = avatar->volumetricData().material_model;
+  m.setParameters(m.parameters() + step);
+  return avatar->withMaterial(m);
+}
+
 double lossAlong(const Case& c, const RolloutVariables& d, double eps) {
-  auto sim = makeSimulable(c);
+  auto sim =
+      makeSimulable(c, d.material.size() ? avatarWithMaterial(c.model, eps * d.material) : nullptr);
   if (d.rest_joints.size())
     sim->setParameter(SimParameter::RestJoints,
                       sim->getParameter(SimParameter::RestJoints) + eps * d.rest_joints);
@@ -262,6 +274,15 @@ TEST_P(SoftRolloutGradient, Stiffnesses) {
   expectDirectionalDerivative(c, d, 1e-4);
 }
 
+// The material file's coefficients (log-values and log-slopes; at β = 0 the slopes do not act):
+// a rollout of SoftAvatar::withMaterial avatars.
+TEST_P(SoftRolloutGradient, Material) {
+  const Case c = scenario();
+  RolloutVariables d;
+  d.material = randomVector(makeSimulable(c)->parameterSize(SimParameter::Material), 0.1, 10);
+  expectDirectionalDerivative(c, d, 1e-4);
+}
+
 TEST_P(SoftRolloutGradient, InitialState) {
   const Case c = scenario(true);
   const int n = makeSimulable(c)->numDofs();
@@ -315,6 +336,7 @@ TEST_P(SoftRollout, ForwardSensitivitiesAgreeWithTheReversePass) {
   d.collider_offsets = randomVector(6, 0.01, 14);
   d.initial_state = randomVector(n, 0.001, 15);
   d.initial_velocity = randomVector(n, 0.01, 16);
+  d.material = randomVector(sim->parameterSize(SimParameter::Material), 0.1, 17);
   const std::vector<RowMatX> dq = rollout.forwardSensitivities({d});
   ASSERT_EQ(dq.size(), 1u);
   const double forward = (a.array() * dq[0].array()).sum();

@@ -29,10 +29,15 @@
 //  - rest_joints (72) and bone_inertia (240): as if overridden by Simulable::setParameter before
 //    the run (they are the pieces of the β chain; setParameter(RestJoints) moves the root target
 //    J_0 + trans and, through initialize(), the initial state).
+//  - material (soft tissue): MaterialModel::parameters() of the avatar's material file, a =
+//    log c₀ and the log-slopes b of every coefficient (docs/materials.md): the gradient of a
+//    rollout of SoftAvatar::withMaterial(model with these parameters). tissue_fraction and the
+//    regions' tissue_scale select the bone nodes (kept by withMaterial): their gradient is 0.
 // Soft tissue (FEM, ROM): every group but shape (β moves the rest nodes, masses and materials,
 // whose derivatives are not written yet: its gradient comes back empty and a shape direction
-// is refused). The ROM's basis and cubature are part of the avatar's discretization, fixed
-// during a rollout: the gradient is exact for the reduced model that is simulated. The vertices
+// is refused). The ROM's basis, cubature and rest-split floors are part of the avatar's
+// discretization, fixed during a rollout and by withMaterial: the gradient is exact for the
+// reduced model that is simulated. The vertices
 // are the simulated surface (getVertices), which moves with the pose blend held from the
 // previous state (VerticesCotangent::previous_state).
 // Accuracy: the gradients are exact for the converged rollout; they are as accurate as Newton's
@@ -72,6 +77,9 @@ struct RolloutVariables {
   RowMatX root_targets;   ///< T × 3
   VecX stiffnesses;       ///< 4
   VecX collider_offsets;  ///< 3 per collider
+  /// Soft tissue: the material file's coefficients (MaterialModel::parameters(), 40 (1 + K)):
+  /// as if the avatar were built with SoftAvatar::withMaterial. Empty for the skeleton.
+  VecX material;
   VecX initial_state;     ///< numDofs
   VecX initial_velocity;  ///< numDofs
 

@@ -92,6 +92,27 @@ FemMaterialPoint makeFemMaterialPoint(const Vec3& young, const Vec3& poisson, co
 double fungEnergyDensity(const Mat3& F, const FemMaterialPoint& material, Mat3* P = nullptr,
                          Mat9* dPdF = nullptr, bool psd = false);
 
+/// Derivatives with respect to a material point's parameters (the adjoint's Material group,
+/// chained to the material file's coefficients by the per-tet material map,
+/// flsh/volume/tet_material_map.h): its C_world (the 36 entries taken as independent), modulus
+/// μ and Fung exponent γ. The frame enters through C_world only.
+struct FemMaterialDerivative {
+  Mat6 C_world = Mat6::Zero();
+  double modulus = 0.0, gamma = 0.0;
+};
+
+/// ADDS scale · ∂Ψ(F)/∂(C_world, μ, γ) into out (Ψ of fungEnergyDensity, guard included).
+/// InputError on a non-finite F.
+void addEnergyDensityMaterialGradient(const Mat3& F, const FemMaterialPoint& material, double scale,
+                                      FemMaterialDerivative& out);
+/// ADDS scale · ∂⟨P(F), dF⟩/∂(C_world, μ, γ) into out, P = ∂Ψ/∂F: an element's λᵀ g is
+/// volume · ⟨P, δF⟩ with δF the deformation gradient of the nodal direction λ, so this is
+/// the material cotangent of λᵀ g. InputError on a non-finite F.
+void addStressMaterialGradient(const Mat3& F, const FemMaterialPoint& material, const Mat3& dF,
+                               double scale, FemMaterialDerivative& out);
+/// Voigt strain (engineering shear) of sym(H): the linear strain of a displacement gradient H.
+Vec6 voigtLinearStrain(const Mat3& H);
+
 /// Rest geometry of a linear tet.
 struct TetElementRest {
   Mat3 Dm_inv;          ///< inverse of Dm = [X1 − X0, X2 − X0, X3 − X0] (1/m)

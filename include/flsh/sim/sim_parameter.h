@@ -33,8 +33,13 @@ enum class SimParameter {
   Stiffnesses,            ///< 4: joint_stiffness (N/m), tracking_stiffness (1/s²),
                           ///< root_stiffness (1/s²), contact stiffness (N/m³)
   ColliderOffsets,        ///< 3 per collider: current translation offset of its path (m)
+  /// The soft skeletons' material file as MaterialModel::parameters() (per coefficient
+  /// a = log c₀ and its K log-slopes b; flsh/volume/materials.h): fixed by the SoftAvatar like
+  /// Shape (setParameter throws, build one with SoftAvatar::withMaterial instead). Empty (size
+  /// 0) for the articulated skeleton, which has no material.
+  Material,
 };
-constexpr int kNumSimParameters = 7;
+constexpr int kNumSimParameters = 8;
 
 /// Values per bone of SimParameter::BoneInertia: mass, first moment (3), second moment (6).
 constexpr int kBoneInertiaValues = 10;
@@ -55,8 +60,10 @@ struct SimParameterInfo {
 const std::array<SimParameterInfo, kNumSimParameters>& simParameters();
 const SimParameterInfo& simParameterInfo(SimParameter p);
 /// Number of values of group p for a simulable with `num_colliders` colliders and `num_betas`
-/// shape coefficients. Throws InputError for a value outside the enum.
-int simParameterSize(SimParameter p, int num_colliders, int num_betas);
+/// shape coefficients, with soft tissue or not (Material: MaterialModel::numParameters() =
+/// numCoefficients() · (1 + K) with it, 0 without). Throws InputError for a value outside the
+/// enum.
+int simParameterSize(SimParameter p, int num_colliders, int num_betas, bool soft_tissue = false);
 
 /// The β chain, in one place: ADDS (dJ/dβ)ᵀ joints + (dI/dβ)ᵀ inertia into shape, for
 /// cotangents of the rest joints (72 × m) and bone inertias (240 × m) of `avatar` (either may be

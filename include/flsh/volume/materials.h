@@ -101,6 +101,25 @@ class MaterialModel {
   int numParameters() const;
   /// Offset of (quantity, layer)'s a in parameters(); its b follows.
   int parameterOffset(const std::string& quantity, int layer) const;
+  /// Names of parameters()' entries: "<key>.log_value" for a = log c₀ and "<key>.log_slopes[k]"
+  /// for b_k, with <key> the file's key path ("layers.skin.E1", "body.skin_thickness",
+  /// "regions.thighs.stiffness_scale").
+  std::vector<std::string> parameterNames() const;
+
+  /// The coefficients' values at β in parameters()' coefficient order (numCoefficients()
+  /// values c_i(β) = c₀ exp(bᵀβ); β zero padded): what the per-tet material map reads
+  /// (tet_material_map.h). InputError on a bad β.
+  VecX coefficientValues(const VecX& betas) const;
+  static int numCoefficients();
+  /// Index of (quantity, layer) in coefficientValues(); InputError as value().
+  int coefficientIndex(const std::string& quantity, int layer) const {
+    return index(quantity, layer);
+  }
+  /// The chain between the two: a cotangent of the values (numCoefficients()) to one of
+  /// parameters() (∂c_i/∂a_i = c_i, ∂c_i/∂b_i = c_i β), and a direction of parameters() to one
+  /// of the values. InputError on sizes that do not match.
+  VecX parametersCotangent(const VecX& values_bar, const VecX& betas) const;
+  VecX coefficientValuesTangent(const VecX& parameters_direction, const VecX& betas) const;
 
   /// Value at β = 0 (c₀) and log-slopes (K) of one coefficient.
   double baseValue(const std::string& quantity, int layer) const;

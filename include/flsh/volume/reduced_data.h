@@ -86,6 +86,13 @@ struct ReducedData {
   /// floors c_e = 1 + s w_e once (restSplitFloors in flsh/energy/fem_material.h) so that
   /// Σ_S c_e K̃_e ≼ ½ K: E ≥ ½ · ½ zᵀ K z in every state. Empty without the elastic cubature.
   MatX elastic_rest_stiffness;
+  /// With the rest-stiffness split, the floors c_e of each elastic cubature sample (same order
+  /// as elastic.elements; kUnusedRestSplitFloor for a sample without a soft node, which has no
+  /// energy): elasticCubatureFloors at the avatar's materials when it was built. Part of the
+  /// discretization like the samples and weights: an avatar with other materials
+  /// (SoftAvatar::withMaterial) keeps them, so that the Material group's gradient is exact for
+  /// the model simulated. SoftAvatar fills them (not cached on disk); empty otherwise.
+  VecX elastic_floors;
   /// Inertial cubature, same conventions (kinetic energy).
   Cubature inertial;
   double inertial_test_error = 0;
@@ -119,6 +126,17 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
 /// elastic stiffness of the subspace spanned by `basis` (#N × H) at z = 0, 3H × 3H, N/m, exactly
 /// symmetric (ReducedData::elastic_rest_stiffness).
 MatX elasticRestStiffness(const VolumetricData& data, const SpMat& basis);
+
+/// Floor of a cubature sample that has no soft node (never read).
+constexpr double kUnusedRestSplitFloor = 2.0;
+
+/// The floors c_e of the rest-stiffness split (ReducedData::elastic_floors) of `rom`'s elastic
+/// cubature at `data`'s materials: restSplitFloors (fem_material.h) of K =
+/// rom.elastic_rest_stiffness and the samples' own rest Hessians in the subspace, without and
+/// with their weights, so that the split energy keeps at least half of K in every direction.
+/// Empty cubature or K: every entry kUnusedRestSplitFloor. InputError (naming the cubature) when
+/// the samples cannot be bounded that way or the sizes do not match.
+VecX elasticCubatureFloors(const VolumetricData& data, const ReducedData& rom);
 
 /// The inertial cubature as node masses (#N, kg): m̃_j = Σ_{e∈S, j∈e} w_e ρ_e vol_e / 4 at X̄(β).
 /// Zero outside the sample tets' nodes.

@@ -107,6 +107,15 @@ class SoftAvatar {
   /// or on bone nodes, handles out of range, repeated, or on bone nodes, or cubature tets out of
   /// range / weights not finite and > 0 / lengths that differ.
   void setReducedData(std::shared_ptr<const ReducedData> data);
+  /// This avatar with other soft-tissue materials, for fitting them (the adjoint's Material
+  /// group): the same β and discretization — tet mesh, rest nodes, bone nodes (their selection
+  /// by tissue_fraction and the regions' tissue_scale is kept), orthotropy frames, and for the
+  /// ROM the basis, cubature samples, weights and rest-split floors — with every tet's
+  /// materials re-evaluated from `model` (tet_material_map.h) and, for the ROM, the subspace's
+  /// rest stiffness K recomputed. Cheap next to a build (no meshing, basis or cubature
+  /// training; nothing is cached). Error on an avatar without an initialized volumetric body;
+  /// InputError on a model for another number of shape components or not physical at β.
+  std::shared_ptr<SoftAvatar> withMaterial(const MaterialModel& model) const;
   /// Cache hit, warnings and seconds per stage of the reduced build (all zero without it).
   const ReducedBuildReport& reducedBuildReport() const { return reduced_report_; }
   /// Cache hits, warnings and seconds per stage of the volumetric build (all zero without it);

@@ -1,7 +1,11 @@
 #include "sim/soft/elastic_elements.h"
 
+#include <omp.h>
+
+#include <algorithm>
 #include <string>
 
+#include "core/first_failure.h"
 #include "flsh/core/error.h"
 #include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/reduced_data.h"
@@ -36,6 +40,7 @@ ElasticElements elasticElements(const SoftAvatar& avatar) {
   ElasticTets tets = elasticTets(data, std::move(kept), "Simulable");
   const MatX4i& all_tets = data.templ->mesh.tets;
   ElasticElements out;
+  out.tet = tets.tets;
   out.tets.resize(Eigen::Index(tets.size()), 4);
   for (int k = 0; k < tets.size(); ++k) out.tets.row(k) = all_tets.row(tets.tets[size_t(k)]);
   out.weights = Eigen::Map<const VecX>(kept_weight.data(), Eigen::Index(kept_weight.size()));
@@ -49,6 +54,95 @@ void ElasticityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>
                                       bool psd) const {
   collectFixedBlocks(blocks,
                      [&](FixedHessianBlocks* fixed) { evaluate(nullptr, &H, offset, psd, fixed); });
+}
+
+namespace {
+
+TetMaterialCotangent materialCotangent(const FemMaterialDerivative& d) {
+  TetMaterialCotangent bar;
+  bar.C_world = d.C_world;
+  bar.modulus = d.modulus;
+  bar.gamma = d.gamma;
+  return bar;
+}
+
+Mat3X gatherDirections(const std::vector<int>& dofs, const VecX& lambda, int offset) {
+  Mat3X Lambda = Mat3X::Zero(3, Eigen::Index(dofs.size() / 3));
+  for (size_t i = 0; i < dofs.size(); ++i)
+    if (dofs[i] >= 0) Lambda(Eigen::Index(i % 3), Eigen::Index(i / 3)) = lambda[offset + dofs[i]];
+  return Lambda;
+}
+
+}  // namespace
+
+// λᵀ ∂g/∂c = Σ_e (chain of element e)ᵀ ∂(Λ_eᵀ g_e)/∂(material point): one pass, on the
+// available threads (per-thread sums added in thread order: deterministic for a fixed count).
+void ElasticityTerm::addParameterProducts(const TermContext&, const VecX& lambda,
+                                          ParameterProducts<VecX>& out) const {
+  if (!out.wants(SimParameter::Material)) return;
+  const TetMaterialMap& map = chain_.map();
+  const int E = numMaterialElements();
+  const int threads = E > 1000 ? std::max(1, omp_get_max_threads()) : 1;
+  std::vector<VecX> partial(size_t(threads), VecX::Zero(chain_.numValues()));
+  FirstFailure failure;
+#pragma omp parallel num_threads(threads)
+  {
+    const int k = omp_get_thread_num();
+    std::vector<int> dofs;
+#pragma omp for schedule(static)
+    for (int e = 0; e < E; ++e)
+      failure.run([&] {
+        materialElementDofs(e, dofs);
+        const FemMaterialDerivative d =
+            materialElementGradient(e, gatherDirections(dofs, lambda, 0));
+        map.addCotangent(materialElementTet(e), materialCotangent(d), partial[size_t(k)]);
+      });
+  }
+  failure.rethrow();
+  for (const VecX& p : partial) out[SimParameter::Material] += p;
+}
+
+template <class Row>
+void ElasticityTerm::materialElementRows(int e, std::vector<int>& dofs, VecX& values,
+                                         Row&& row) const {
+  materialElementDofs(e, dofs);
+  const Eigen::Index columns = Eigen::Index(dofs.size() / 3);
+  for (size_t i = 0; i < dofs.size(); ++i) {
+    if (dofs[i] < 0) continue;
+    Mat3X unit = Mat3X::Zero(3, columns);
+    unit(Eigen::Index(i % 3), Eigen::Index(i / 3)) = 1.0;
+    values.setZero(chain_.numValues());
+    chain_.map().addCotangent(materialElementTet(e),
+                              materialCotangent(materialElementGradient(e, unit)), values);
+    row(dofs[i], values);
+  }
+}
+
+void ElasticityTerm::addParameterTangents(const TermContext&,
+                                          const std::vector<ParameterDirection>& directions,
+                                          std::vector<VecX>& out) const {
+  const size_t m = size_t(SimParameter::Material);
+  bool any = false;
+  for (const ParameterDirection& d : directions) any = any || (d[m] && d[m]->size() > 0);
+  if (!any) return;
+  std::vector<int> dofs;
+  VecX values;
+  for (int e = 0; e < numMaterialElements(); ++e)
+    materialElementRows(e, dofs, values, [&](int dof, const VecX& row) {
+      for (size_t k = 0; k < directions.size(); ++k)
+        if (directions[k][m] && directions[k][m]->size() > 0)
+          out[k][dof] += row.dot(*directions[k][m]);
+    });
+}
+
+void ElasticityTerm::addParameterJacobians(const TermContext&, ParameterProducts<MatX>& out) const {
+  if (!out.wants(SimParameter::Material)) return;
+  MatX& J = out[SimParameter::Material];
+  std::vector<int> dofs;
+  VecX values;
+  for (int e = 0; e < numMaterialElements(); ++e)
+    materialElementRows(e, dofs, values,
+                        [&](int dof, const VecX& row) { J.row(dof) += row.transpose(); });
 }
 
 }  // namespace flsh::detail

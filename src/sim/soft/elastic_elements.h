@@ -9,12 +9,14 @@
 #include "flsh/core/hessian_blocks.h"
 #include "flsh/energy/fem_material.h"
 #include "flsh/sim/energy_term.h"
+#include "sim/soft/material_chain.h"
 #include "sim/soft/node_term.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
 
 struct ElasticElements {
+  std::vector<int> tet;  ///< each element's tet in the avatar's tet mesh
   MatX4i tets;   ///< nodes of each element
   VecX weights;  ///< 1, or the elastic cubature's weights
   std::vector<TetElementRest> rest;
@@ -28,6 +30,15 @@ ElasticElements elasticElements(const SoftAvatar& avatar);
 
 /// The elastic energy of a soft skeleton (FEM: fem_elasticity_term.h; ROM:
 /// reduced_elasticity_term.h).
+///
+/// Material derivatives (SimParameter::Material, in the coefficient values of MaterialChain):
+/// the gradient's product with a direction Λ is, element by element, a function of the
+/// element's material point (C_world, μ, γ) whose derivative the elastic law gives
+/// (fem_material.h addStressMaterialGradient); the per-tet material map chains it to the
+/// coefficients. Each model lists its "material elements" (the FEM's tets; the ROM's sample tets
+/// and, with the rest-stiffness split, every elastic tet of ½ zᵀ K z) with their local
+/// directions; the vector–Jacobian product is one pass with Λ = λ, the tangents and Jacobians
+/// take the element's rows (Λ a unit direction each) from the same function.
 class ElasticityTerm : public NodeTerm<1> {
  public:
   const char* name() const override { return "elasticity"; }
@@ -43,8 +54,29 @@ class ElasticityTerm : public NodeTerm<1> {
   virtual double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                           FixedHessianBlocks* blocks = nullptr) const = 0;
 
+  /// The Material group only, in coefficient values (numCoefficients() entries or columns).
+  void addParameterProducts(const TermContext& c, const VecX& lambda,
+                            ParameterProducts<VecX>& out) const override;
+  void addParameterTangents(const TermContext& c, const std::vector<ParameterDirection>& directions,
+                            std::vector<VecX>& out) const override;
+  void addParameterJacobians(const TermContext& c, ParameterProducts<MatX>& out) const override;
+
  protected:
-  explicit ElasticityTerm(const SoftKinematics& kinematics) : NodeTerm(kinematics) {}
+  ElasticityTerm(const SoftKinematics& kinematics, const MaterialChain& chain)
+      : NodeTerm(kinematics), chain_(chain) {}
+  /// The material elements (see above), their tets, their local directions' DoFs (entry 3s + k
+  /// for direction k of local column s; relative to the simulable's first DoF; −1: none) and the
+  /// material cotangent of the gradient's product with local directions Λ (3 × #columns).
+  virtual int numMaterialElements() const = 0;
+  virtual int materialElementTet(int e) const = 0;
+  virtual void materialElementDofs(int e, std::vector<int>& dofs) const = 0;
+  virtual FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const = 0;
+
+ private:
+  /// Element e's rows ∂g/∂c at its DoFs: row(dof, values) for every local direction with a DoF.
+  template <class Row>
+  void materialElementRows(int e, std::vector<int>& dofs, VecX& values, Row&& row) const;
+  const MaterialChain& chain_;
 };
 
 }  // namespace flsh::detail

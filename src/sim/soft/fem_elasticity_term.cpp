@@ -6,8 +6,9 @@
 
 namespace flsh::detail {
 
-FemElasticityTerm::FemElasticityTerm(const SoftKinematics& kinematics, ElasticElements elements)
-    : ElasticityTerm(kinematics), elements_(std::move(elements)) {
+FemElasticityTerm::FemElasticityTerm(const SoftKinematics& kinematics, const MaterialChain& chain,
+                                     ElasticElements elements)
+    : ElasticityTerm(kinematics, chain), elements_(std::move(elements)) {
   // The blocks: soft-node pairs sharing a tet as (column node, row node), sorted, so that the
   // blocks are column-major.
   const MatX4i& tets = elements_.tets;
@@ -83,6 +84,27 @@ double FemElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset,
     }
   }
   return E;
+}
+
+void FemElasticityTerm::materialElementDofs(int e, std::vector<int>& dofs) const {
+  dofs.assign(12, -1);
+  for (int a = 0; a < 4; ++a) {
+    const int j = elements_.tets(e, a);
+    if (!kin_.isSoftNode(j)) continue;
+    for (int k = 0; k < 3; ++k) dofs[size_t(3 * a + k)] = kin_.boneDofs() + kin_.nodeDof(j) + k;
+  }
+}
+
+// Λᵀ g_e = w V ⟨P(F), Λ Gᵀ⟩ with G the tet's shape-function gradients.
+FemMaterialDerivative FemElasticityTerm::materialElementGradient(int e, const Mat3X& Lambda) const {
+  const TetElementRest& rest = elements_.rest[size_t(e)];
+  const Mat3X G = reducedShapeGradients(rest, Mat4X::Identity(4, 4));
+  Mat3X U(3, 4);
+  for (int a = 0; a < 4; ++a) U.col(a) = kin_.nodeDisplacement(kin_.u, elements_.tets(e, a));
+  FemMaterialDerivative d;
+  addStressMaterialGradient(Mat3::Identity() + U * G.transpose(), elements_.materials[size_t(e)],
+                            Lambda * G.transpose(), elements_.weights[e] * rest.volume, d);
+  return d;
 }
 
 }  // namespace flsh::detail

@@ -14,12 +14,21 @@ namespace flsh::detail {
 
 class FemElasticityTerm final : public ElasticityTerm {
  public:
-  FemElasticityTerm(const SoftKinematics& kinematics, ElasticElements elements);
+  FemElasticityTerm(const SoftKinematics& kinematics, const MaterialChain& chain,
+                    ElasticElements elements);
   using ElasticityTerm::evaluate;
   /// `blocks` (may be null): the node-pair blocks are returned through it (positions fixed,
   /// column-major) instead of appended to H.
   double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                   FixedHessianBlocks* blocks = nullptr) const override;
+
+ protected:
+  // Material elements: the elastic tets; local columns: the tet's four nodes (a bone node has
+  // no DoF).
+  int numMaterialElements() const override { return elements_.size(); }
+  int materialElementTet(int e) const override { return elements_.tet[size_t(e)]; }
+  void materialElementDofs(int e, std::vector<int>& dofs) const override;
+  FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const override;
 
  private:
   ElasticElements elements_;

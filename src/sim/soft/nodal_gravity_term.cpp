@@ -7,8 +7,9 @@
 
 namespace flsh::detail {
 
-NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses)
-    : NodeTerm(kinematics), masses_(masses) {
+NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
+                                   const MaterialChain& chain)
+    : NodeTerm(kinematics), masses_(masses), chain_(chain) {
   bone_mass_.assign(size_t(kin_.numBones()), 0.0);
   for (int j : masses_.nodes)
     for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf)
@@ -94,8 +95,24 @@ void NodalGravityTerm::reducedHessian(const Vec3& gravity, std::vector<Triplet>&
 
 // g = Σ_j J_jᵀ f_j with the constant f_j = −m_j g: the rest joint J_b turns only the lever
 // arms of bone b's rotation rows, Σ_j w_jb [f_j]× R_b = [−g]× R_b Σ_j m_j w_jb.
+// The masses (Material, in coefficient values): ∂g/∂m_j = J_jᵀ (−g), through each mass
+// coefficient k as ∂m_j/∂c_k.
 template <class Sink>
 void NodalGravityTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
+  if (sink.wants(SimParameter::Material)) {
+    const MatX3& dm = chain_.massDerivatives();
+    SkinnedPoint point;
+    const Vec3 force = -c.options.gravity;
+    for (size_t idx = 0; idx < masses_.nodes.size(); ++idx) {
+      const int j = masses_.nodes[idx];
+      kin_.point(j, point);
+      point.id = int(idx);
+      for (int k = 0; k < 3; ++k)
+        if (dm(j, k) != 0.0)
+          sink.add(SimParameter::Material, point, chain_.massCoefficients()[size_t(k)], force,
+                   Eigen::Matrix<double, 1, 1>(dm(j, k)));
+    }
+  }
   if (!sink.wants(SimParameter::RestJoints)) return;
   const Mat3 turn = skew(Vec3(-c.options.gravity));
   for (int b = 0; b < kin_.numBones(); ++b)

@@ -1,14 +1,16 @@
 // Gravity on the soft skeletons' mass nodes (ARCHITECTURE.md §4): −Σ_j m_j g · x_j(q). The
 // constant node forces −m_j g go to the state through the kinematics; their Hessian is the
 // curvature of the rotating nodes alone (no node–node blocks). Parameter derivatives: the rest
-// joints and the nodes' unposed positions (node_offset_derivatives.h), both through the lever
-// arms of the rotation rows. Private to Simulable.
+// joints, the material (the masses m_j) and the nodes' unposed positions
+// (node_offset_derivatives.h), both through the lever arms of the rotation rows. Private to
+// Simulable.
 #pragma once
 
 #include <vector>
 
 #include "flsh/sim/energy_term.h"
 #include "sim/block_hessian_term.h"
+#include "sim/soft/material_chain.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/node_offset_derivatives.h"
 #include "sim/soft/node_term.h"
@@ -20,7 +22,8 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
                                public WithNodeOffsetBlocks<NodalGravityTerm> {
  public:
   /// Call after the kinematics' buildReducedPattern (the ROM's rotation–handle slots).
-  NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses);
+  NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
+                   const MaterialChain& chain);
 
   const char* name() const override { return "nodal gravity"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override {
@@ -48,6 +51,7 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
 
  private:
   const NodeMasses& masses_;
+  const MaterialChain& chain_;
   // ROM: the rotation–handle blocks D_bh [g]× R_b into value list 1 at `slot`, D_bh = Σ_j m_j
   // w_jb φ_jh over the mass nodes (constant).
   struct HandleBlock {

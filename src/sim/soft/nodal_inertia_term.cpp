@@ -8,8 +8,12 @@
 namespace flsh::detail {
 
 NodalInertiaTerm::NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
-                                   double time_step)
-    : NodeTerm(kinematics), masses_(masses), h_(time_step), x_hat_(kinematics.restNodes()) {
+                                   const MaterialChain& chain, double time_step)
+    : NodeTerm(kinematics),
+      masses_(masses),
+      chain_(chain),
+      h_(time_step),
+      x_hat_(kinematics.restNodes()) {
   const std::vector<int>& nodes = masses_.nodes;
   const size_t first = size_t((1.0 - kShareBesidePotential) * double(nodes.size()));
   parts_[0].assign(nodes.begin(), nodes.begin() + long(first));
@@ -92,10 +96,21 @@ void NodalInertiaTerm::forEachMassNode(Visit&& visit) const {
   }
 }
 
+// The masses (Material, in coefficient values): ∂g/∂m_j = J_jᵀ f_j / m_j, through each mass
+// coefficient k as ∂m_j/∂c_k.
 template <class Sink>
 void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
-  if (c.is_static || !sink.wants(SimParameter::RestJoints)) return;
-  forEachMassNode([&](int, double kappa, const Vec3& f, const SkinnedPoint& point) {
+  const bool joints = sink.wants(SimParameter::RestJoints);
+  const bool material = sink.wants(SimParameter::Material);
+  if (c.is_static || (!joints && !material)) return;
+  const MatX3* dm = material ? &chain_.massDerivatives() : nullptr;
+  forEachMassNode([&](int j, double kappa, const Vec3& f, const SkinnedPoint& point) {
+    if (material)
+      for (int k = 0; k < 3; ++k)
+        if ((*dm)(j, k) != 0.0)
+          sink.add(SimParameter::Material, point, chain_.massCoefficients()[size_t(k)],
+                   Vec3(f / masses_.mass[j]), Eigen::Matrix<double, 1, 1>((*dm)(j, k)));
+    if (!joints) return;
     const Mat3 turn = skew(f);
     for (int a = 0; a < point.count; ++a) {
       const int b = point.bone[a];

@@ -3,6 +3,7 @@
 // x̂ = 2 x(q_n) − x(q_{n−1}) with the held pose blend. The node forces and the node Hessians
 // m_j / h² I go to the state through the kinematics (its curvature of the rotating nodes in the
 // exact form). Parameter derivatives: the rest joints (the nodes' skinning, in x and in x̂);
+// the material (the masses m_j, MaterialChain::massDerivatives);
 // the nodes' unposed positions (node_offset_derivatives.h); the previous states q_n, q_{n−1}
 // through x̂ (the held pose blend's share is SoftTissue's). Private to Simulable.
 #pragma once
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "flsh/sim/energy_term.h"
+#include "sim/soft/material_chain.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/node_offset_derivatives.h"
 #include "sim/soft/node_term.h"
@@ -24,7 +26,8 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   /// terms (soft_tissue.cpp): hessianPart(1) maps it, hessianPart(0) the rest.
   static constexpr double kShareBesidePotential = 0.1;
 
-  NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses, double time_step);
+  NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
+                   const MaterialChain& chain, double time_step);
 
   const char* name() const override { return "nodal inertia"; }
   double evaluate(const TermContext&, VecX* g, int offset) const override {
@@ -73,6 +76,7 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   void forEachMassNode(Visit&& visit) const;
 
   const NodeMasses& masses_;
+  const MaterialChain& chain_;
   double h_;
   MatX3 x_hat_;
   std::vector<int> parts_[2];

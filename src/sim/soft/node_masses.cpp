@@ -5,19 +5,19 @@
 
 namespace flsh::detail {
 
-NodeMasses nodeMasses(const SoftAvatar& avatar) {
-  const VolumetricData& data = avatar.volumetricData();
+Cubature massCubature(const SoftAvatar& avatar) {
   const ReducedData* rom = avatar.reducedModelEnabled() ? &avatar.reducedData() : nullptr;
+  if (rom && rom->inertial.elements.size() > 0) return rom->inertial;
+  const int T = avatar.volumetricData().numTets();  // lumped masses: every tet, weight 1
+  Cubature every;
+  every.elements = VecXi::LinSpaced(T, 0, T - 1);
+  every.weights = VecX::Ones(T);
+  return every;
+}
+
+NodeMasses nodeMasses(const SoftAvatar& avatar) {
   NodeMasses out;
-  if (rom && rom->inertial.elements.size() > 0) {
-    out.mass = inertialNodeMasses(data, rom->inertial);
-  } else {  // lumped masses: every tet, weight 1
-    const int T = data.numTets();
-    Cubature every;
-    every.elements = VecXi::LinSpaced(T, 0, T - 1);
-    every.weights = VecX::Ones(T);
-    out.mass = inertialNodeMasses(data, every);
-  }
+  out.mass = inertialNodeMasses(avatar.volumetricData(), massCubature(avatar));
   for (Eigen::Index j = 0; j < out.mass.size(); ++j)
     if (out.mass[j] > 0.0) out.nodes.push_back(int(j));
   return out;

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "flsh/core/types.h"
+#include "flsh/volume/cubature.h"
 #include "flsh/volume/soft_avatar.h"
 
 namespace flsh::detail {
@@ -14,6 +15,10 @@ struct NodeMasses {
   std::vector<int> nodes;  ///< the nodes with mass > 0, ascending
   VecX mass;               ///< #N, kg (0 off `nodes`)
 };
+
+/// The tets and weights the node masses sum: the ROM's inertial cubature when its avatar has
+/// one, else every tet with weight 1.
+Cubature massCubature(const SoftAvatar& avatar);
 
 /// Lumped masses m_j = Σ_{e ∋ j} ρ_e vol_e / 4 at the rest nodes X̄(β), or the inertial
 /// cubature's when the avatar's ROM has one.

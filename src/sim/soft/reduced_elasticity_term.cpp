@@ -3,18 +3,21 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cmath>
 #include <string>
 
 #include "flsh/core/error.h"
+#include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/reduced_data.h"
+#include "flsh/volume/volumetric_data.h"
 #include "sim/soft/on_two_threads.h"
 
 namespace flsh::detail {
 
 ReducedElasticityTerm::ReducedElasticityTerm(const SoftAvatar& avatar,
                                              const SoftKinematics& kinematics,
-                                             ElasticElements elements)
-    : ElasticityTerm(kinematics), elements_(std::move(elements)) {
+                                             const MaterialChain& chain, ElasticElements elements)
+    : ElasticityTerm(kinematics, chain), avatar_(avatar), elements_(std::move(elements)) {
   const ReducedData& rom = avatar.reducedData();
   const int H = kin_.numHandles();
   if (rom.elastic_rest_stiffness.size() > 0) {
@@ -30,8 +33,54 @@ ReducedElasticityTerm::ReducedElasticityTerm(const SoftAvatar& avatar,
           rest_stiffness_blocks_.emplace_back(a, b);
   }
   // Each element's handles and its shape gradients through the basis.
-  const MatX4i& tets = elements_.tets;
-  handle_start_.assign(1, 0);
+  ReducedTets samples = reducedTets(elements_.tet, elements_.tets, elements_.rest);
+  handle_start_ = std::move(samples.handle_start);
+  handles_ = std::move(samples.handles);
+  gradients_ = std::move(samples.gradients);
+  max_handles_ = samples.max_handles;
+  const int T = elements_.size();
+  if (rest_stiffness_.size() > 0) {  // each sample tet's own rest quadratic K̃_e
+    rest_hessian_start_.assign(1, 0);
+    for (int e = 0; e < T; ++e) {
+      const int m = 3 * (handle_start_[size_t(e) + 1] - handle_start_[size_t(e)]);
+      rest_hessian_start_.push_back(rest_hessian_start_.back() + m * m);
+    }
+    rest_hessians_.resize(rest_hessian_start_.back());
+    for (int e = 0; e < T; ++e) {
+      const int begin = handle_start_[size_t(e)], count = handle_start_[size_t(e) + 1] - begin;
+      const int m = 3 * count;
+      if (count == 0) continue;
+      Eigen::Map<MatX> K(rest_hessians_.data() + rest_hessian_start_[size_t(e)], m, m);
+      Eigen::Ref<MatX> view = K;
+      reducedTetElasticEnergy(elements_.rest[size_t(e)].volume, elements_.materials[size_t(e)],
+                              gradients_.middleCols(begin, count), Mat3X::Zero(3, count), nullptr,
+                              &view, false);
+    }
+    // The floors of the discretization (ReducedData::elastic_floors), per kept sample.
+    if (rom.elastic_floors.size() != rom.elastic.elements.size())
+      throw InputError("Simulable: the avatar's reduced data has " +
+                       std::to_string(rom.elastic_floors.size()) +
+                       " rest-split floors, expected one per elastic cubature sample (" +
+                       std::to_string(rom.elastic.elements.size()) + "; SoftAvatar fills them)");
+    rest_floors_.resize(T);
+    Eigen::Index k = 0;
+    for (int e = 0; e < T; ++e) {
+      while (k < rom.elastic.elements.size() && rom.elastic.elements[k] != elements_.tet[size_t(e)])
+        ++k;
+      if (k == rom.elastic.elements.size())
+        throw InputError("Simulable: elastic element " + std::to_string(e) +
+                         " is not a sample of the avatar's elastic cubature");
+      rest_floors_[e] = rom.elastic_floors[k++];
+    }
+  }
+}
+
+ReducedElasticityTerm::ReducedTets ReducedElasticityTerm::reducedTets(
+    const std::vector<int>& tet, const MatX4i& tets,
+    const std::vector<TetElementRest>& rest) const {
+  ReducedTets out;
+  out.tet = tet;
+  out.handle_start.assign(1, 0);
   std::vector<Mat3X> gradients;
   int columns = 0;
   for (Eigen::Index e = 0; e < tets.rows(); ++e) {
@@ -43,36 +92,33 @@ ReducedElasticityTerm::ReducedElasticityTerm(const SoftAvatar& avatar,
     handles.erase(std::unique(handles.begin(), handles.end()), handles.end());
     Mat4X Phi = Mat4X::Zero(4, Eigen::Index(handles.size()));
     for (size_t s = 0; s < handles.size(); ++s) {
-      handles_.push_back(handles[s]);
+      out.handles.push_back(handles[s]);
       for (int a = 0; a < 4; ++a)
         for (auto* phi = kin_.basisBegin(tets(e, a)); phi != kin_.basisEnd(tets(e, a)); ++phi)
           if (phi->first == handles[s]) Phi(a, Eigen::Index(s)) = phi->second;
     }
-    gradients.push_back(reducedShapeGradients(elements_.rest[size_t(e)], Phi));
+    gradients.push_back(reducedShapeGradients(rest[size_t(e)], Phi));
+    out.volume.push_back(rest[size_t(e)].volume);
     columns += int(handles.size());
-    handle_start_.push_back(int(handles_.size()));
-    max_handles_ = std::max(max_handles_, int(handles.size()));
+    out.handle_start.push_back(int(out.handles.size()));
+    out.max_handles = std::max(out.max_handles, int(handles.size()));
   }
-  gradients_.resize(3, columns);
+  out.gradients.resize(3, columns);
   for (size_t e = 0; e < gradients.size(); ++e)
-    gradients_.middleCols(handle_start_[e], gradients[e].cols()) = gradients[e];
-  if (rest_stiffness_.size() > 0) {  // each sample tet's own rest quadratic K̃_e
-    rest_hessian_start_.assign(1, 0);
-    for (size_t e = 0; e < gradients.size(); ++e) {
-      const int m = 3 * int(gradients[e].cols());
-      rest_hessian_start_.push_back(rest_hessian_start_.back() + m * m);
-    }
-    rest_hessians_.resize(rest_hessian_start_.back());
-    for (size_t e = 0; e < gradients.size(); ++e) {
-      const int count = int(gradients[e].cols()), m = 3 * count;
-      if (count == 0) continue;
-      Eigen::Map<MatX> K(rest_hessians_.data() + rest_hessian_start_[e], m, m);
-      Eigen::Ref<MatX> view = K;
-      reducedTetElasticEnergy(elements_.rest[e].volume, elements_.materials[e], gradients[e],
-                              Mat3X::Zero(3, count), nullptr, &view, false);
-    }
-    rest_floors_ = restSplitFloors();
+    out.gradients.middleCols(out.handle_start[e], gradients[e].cols()) = gradients[e];
+  return out;
+}
+
+const ReducedElasticityTerm::ReducedTets& ReducedElasticityTerm::everyTet() const {
+  if (!every_tet_) {
+    const VolumetricData& data = avatar_.volumetricData();
+    const ElasticTets all = deformableTets(data);
+    MatX4i tets(all.size(), 4);
+    for (int k = 0; k < all.size(); ++k)
+      tets.row(k) = data.templ->mesh.tets.row(all.tets[size_t(k)]);
+    every_tet_ = std::make_unique<ReducedTets>(reducedTets(all.tets, tets, all.rest));
   }
+  return *every_tet_;
 }
 
 std::vector<std::pair<int, int>> ReducedElasticityTerm::handlePairs() const {
@@ -142,31 +188,6 @@ double ReducedElasticityTerm::sampleExcess(int e, int count, double w,
                          nullptr, rest_floors_[e]);
 }
 
-VecX ReducedElasticityTerm::restSplitFloors() const {
-  // The sample tets' rest Hessians assembled in the subspace, without and with their weights.
-  const int H = kin_.numHandles(), T = int(elements_.tets.rows());
-  MatX unit = MatX::Zero(3 * H, 3 * H), weighted = MatX::Zero(3 * H, 3 * H);
-  VecX weights(T);
-  for (int e = 0; e < T; ++e) {
-    weights[e] = elements_.weights[e];
-    const int begin = handle_start_[e], count = handle_start_[e + 1] - begin;
-    const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[e], 3 * count,
-                                   3 * count);
-    for (int s = 0; s < count; ++s)
-      for (int r = 0; r < count; ++r) {
-        const int a = handles_[size_t(begin + s)], b = handles_[size_t(begin + r)];
-        unit.block<3, 3>(3 * a, 3 * b) += K.block<3, 3>(3 * s, 3 * r);
-        weighted.block<3, 3>(3 * a, 3 * b) += weights[e] * K.block<3, 3>(3 * s, 3 * r);
-      }
-  }
-  try {
-    return flsh::restSplitFloors(rest_stiffness_, unit, weighted, weights);
-  } catch (const InputError& error) {
-    throw InputError(std::string("Simulable: the avatar's elastic cubature (ReducedData): ") +
-                     error.what());
-  }
-}
-
 double ReducedElasticityTerm::restStiffness(VecX* g, Mat3* values, int offset) const {
   if (rest_stiffness_.size() == 0) return 0.0;
   // ½ zᵀ K z, K the exact rest stiffness of the subspace (positive definite).
@@ -201,6 +222,98 @@ double ReducedElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int off
     if (g) g->segment(base, second.size()) += second;
   }
   return E + restStiffness(g, values, offset);
+}
+
+// ---- the Material group -------------------------------------------------------------------
+
+int ReducedElasticityTerm::numMaterialElements() const {
+  return elements_.size() + (rest_stiffness_.size() > 0 ? int(everyTet().tet.size()) : 0);
+}
+
+int ReducedElasticityTerm::materialElementTet(int e) const {
+  return e < elements_.size() ? elements_.tet[size_t(e)]
+                              : everyTet().tet[size_t(e - elements_.size())];
+}
+
+void ReducedElasticityTerm::materialElementDofs(int e, std::vector<int>& dofs) const {
+  const bool sample = e < elements_.size();
+  const int k = sample ? e : e - elements_.size();
+  const std::vector<int>& start = sample ? handle_start_ : everyTet().handle_start;
+  const std::vector<int>& handles = sample ? handles_ : everyTet().handles;
+  dofs.clear();
+  for (int s = start[size_t(k)]; s < start[size_t(k) + 1]; ++s)
+    for (int c = 0; c < 3; ++c) dofs.push_back(kin_.boneDofs() + 3 * handles[size_t(s)] + c);
+}
+
+namespace {
+
+void addScaled(double a, const FemMaterialDerivative& x, FemMaterialDerivative& y) {
+  y.C_world += a * x.C_world;
+  y.modulus += a * x.modulus;
+  y.gamma += a * x.gamma;
+}
+
+}  // namespace
+
+// Samples under the split: λᵀ∇f_e = f_r (λᵀ∇ψ − λᵀb) + f_q λᵀb (b = K̃ z, q = ½ zᵀ b, r = ψ − q;
+// restSplitExcess), whose material derivative adds to f_r, f_q's own terms the second-order
+// part of f in (r, q): in the bounded branch (h′ / ((c − 1) q)) (w λᵀ∇r + x λᵀb) (w dr + x dq).
+// The floors c_e are the discretization's (held). Every tet of K: V ε(Λ) ε(Z)ᵀ on C_world.
+FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
+                                                                     const Mat3X& Lambda) const {
+  FemMaterialDerivative d;
+  const bool sample = e < elements_.size();
+  if (!sample) {
+    const ReducedTets& all = everyTet();
+    const int k = e - elements_.size(), begin = all.handle_start[size_t(k)], n = all.count(k);
+    Mat3X Z(3, n);
+    for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * all.handles[size_t(begin + s)]);
+    const auto G = all.gradients.middleCols(begin, n);
+    d.C_world = all.volume[size_t(k)] * voigtLinearStrain(Lambda * G.transpose()) *
+                voigtLinearStrain(Z * G.transpose()).transpose();
+    return d;
+  }
+  const int begin = handle_start_[size_t(e)], n = handle_start_[size_t(e) + 1] - begin;
+  if (n == 0) return d;
+  Mat3X Z(3, n);
+  for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * handles_[size_t(begin + s)]);
+  const Mat3X G = gradients_.middleCols(begin, n);
+  const FemMaterialPoint& material = elements_.materials[size_t(e)];
+  const double V = elements_.rest[size_t(e)].volume, w = elements_.weights[e];
+  const Mat3 F = Mat3::Identity() + Z * G.transpose(), dF = Lambda * G.transpose();
+  if (rest_stiffness_.size() == 0) {
+    addStressMaterialGradient(F, material, dF, w * V, d);
+    return d;
+  }
+  const int m = 3 * n;
+  const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[size_t(e)], m, m);
+  const Eigen::Map<const VecX> z(Z.data(), m), l(Lambda.data(), m);
+  const VecX b = K * z;
+  const double q = 0.5 * z.dot(b), gq = l.dot(b);
+  Mat3 P;
+  const double psi = V * fungEnergyDensity(F, material, &P);
+  const double gpsi = V * P.cwiseProduct(dF).sum();
+  FemMaterialDerivative Dgpsi, Dq, Dgq;
+  addStressMaterialGradient(F, material, dF, V, Dgpsi);
+  const Vec6 ez = voigtLinearStrain(Z * G.transpose()), el = voigtLinearStrain(dF);
+  Dq.C_world = 0.5 * V * ez * ez.transpose();
+  Dgq.C_world = V * el * ez.transpose();
+  const double r = psi - q, x = q > 0.0 ? -w * r / q : -1.0;
+  if (x <= 1.0) {
+    addScaled(w, Dgpsi, d);
+    addScaled(-w, Dgq, d);
+    return d;
+  }
+  const double c = rest_floors_[e], decay = std::exp(-(x - 1.0) / (c - 1.0));
+  const double h = c - (c - 1.0) * decay, f_r = w * decay, f_q = x * decay - h;
+  FemMaterialDerivative Dpsi;
+  addEnergyDensityMaterialGradient(F, material, V, Dpsi);
+  const double coef = decay / ((c - 1.0) * q) * (w * (gpsi - gq) + x * gq);
+  addScaled(f_r, Dgpsi, d);
+  addScaled(f_q - f_r, Dgq, d);
+  addScaled(coef * w, Dpsi, d);
+  addScaled(coef * (x - w), Dq, d);
+  return d;
 }
 
 }  // namespace flsh::detail

@@ -8,6 +8,7 @@
 // quadratic, bounded below. Private to Simulable.
 #pragma once
 
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -18,7 +19,7 @@ namespace flsh::detail {
 class ReducedElasticityTerm final : public ElasticityTerm {
  public:
   ReducedElasticityTerm(const SoftAvatar& avatar, const SoftKinematics& kinematics,
-                        ElasticElements elements);
+                        const MaterialChain& chain, ElasticElements elements);
   using ElasticityTerm::evaluate;
   /// The Hessian goes into the kinematics' value list 1 (H and blocks are not used). Energy or
   /// gradient alone run on two threads (the tets in halves) from 256 tets.
@@ -35,18 +36,38 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   /// ½ zᵀ K z (0 without the elastic cubature), its gradient and Hessian blocks.
   double restStiffness(VecX* g, Mat3* values, int offset) const;
 
+ protected:
+  // Material elements: the sample tets (their excess under the split, or their weighted energy
+  // without it), then, with the split, every elastic tet for ½ zᵀ K z (K = Σ_t K_t, K_t =
+  // V_t B_tᵀ C_world B_t on the tet's linear strains: λᵀ K_t z is V_t ε(λ)ᵀ C_world ε(z)). Local
+  // columns: the tet's handles.
+  int numMaterialElements() const override;
+  int materialElementTet(int e) const override;
+  void materialElementDofs(int e, std::vector<int>& dofs) const override;
+  FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const override;
+
  private:
+  /// Tets in the subspace: each one's handles (ascending) and its shape gradients through the
+  /// basis, G̃_e = G_e Φ_e (columns at the same offsets).
+  struct ReducedTets {
+    std::vector<int> tet;
+    std::vector<double> volume;
+    std::vector<int> handle_start, handles;
+    Mat3X gradients;
+    int max_handles = 0;
+    int count(int e) const { return handle_start[size_t(e) + 1] - handle_start[size_t(e)]; }
+  };
+  ReducedTets reducedTets(const std::vector<int>& tet, const MatX4i& tets,
+                          const std::vector<TetElementRest>& rest) const;
+  /// Every elastic tet in the subspace (built on first use, for the Material group).
+  const ReducedTets& everyTet() const;
   /// Element e (count handles, cubature weight w, their displacements Z) under the
   /// rest-stiffness split: its weighted excess over its rest quadratic, bounded below;
   /// gradient and Hessian (in the handles' coordinates, weighted) written into the views.
   double sampleExcess(int e, int count, double w, const Eigen::Ref<const Mat3X>& Z,
                       bool want_gradient, bool want_hessian, bool psd, Eigen::Ref<VecX> gradient,
                       Eigen::Ref<MatX> hessian) const;
-  /// The floors c_e of the split's excess (f_e ≥ −c_e q_e) per element: restSplitFloors
-  /// (fem_material.h) of K and the sample tets' rest Hessians, so that the energy keeps at
-  /// least half of K in every direction.
-  VecX restSplitFloors() const;
-
+  const SoftAvatar& avatar_;
   ElasticElements elements_;
   // Element e's handles handles_[handle_start_[e] ..) and its shape gradients through the basis
   // (columns of gradients_ at the same offsets).
@@ -60,7 +81,8 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   std::vector<std::pair<int, int>> rest_stiffness_blocks_;
   std::vector<int> rest_hessian_start_;
   VecX rest_hessians_;
-  VecX rest_floors_;
+  VecX rest_floors_;  // per element: ReducedData::elastic_floors of its sample
+  mutable std::unique_ptr<ReducedTets> every_tet_;
 };
 
 }  // namespace flsh::detail

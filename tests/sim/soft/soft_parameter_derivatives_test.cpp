@@ -1,7 +1,7 @@
 // A soft skeleton's (FEM and ROM) parameter derivatives, the whole simulable: ∂g/∂p for the
 // groups its terms differentiate so far (rest joints, pose and root targets, bone inertias,
-// stiffnesses, collider offsets) against central differences of the total gradient under
-// setParameter, the products against the Jacobians, and a clear error for what is not written
+// stiffnesses, collider offsets, the material) against central differences of the total gradient
+// under setParameter, the products against the Jacobians, and a clear error for what is not written
 // yet (issue 25: β).
 #include "flsh/core/error.h"
 #include "sim/soft/soft_term_checks.h"
@@ -53,6 +53,55 @@ TEST_P(SoftParameterDerivatives, SupportedGroupsMatchFiniteDifferences) {
     EXPECT_LT((jvp - J * direction).norm(), 1e-10 * (1.0 + jvp.norm()));
   }
   EXPECT_EQ((sim->getState() - q0).norm(), 0.0) << "derivative calls changed the state";
+}
+
+// The material (the file's coefficients): ∂g/∂p against central differences of the total
+// gradient of simulables on SoftAvatar::withMaterial avatars at the same step (restoreStep), in
+// the log-values a (at β = 0 the log-slopes do not act); the products against the Jacobian in
+// every entry.
+TEST_P(SoftParameterDerivatives, MaterialMatchesFiniteDifferences) {
+  auto sim = test::softTermScenario(GetParam());
+  const int n = sim->numDofs();
+  const VecX q0 = sim->getState();
+  const SimulableStep step = sim->saveStep();
+  const std::shared_ptr<const SoftAvatar> avatar = test::smallSoftAvatar(GetParam());
+  const MaterialModel model = avatar->volumetricData().material_model;
+  const VecX p0 = sim->getParameter(SimParameter::Material);
+  ASSERT_EQ(p0.size(), sim->parameterSize(SimParameter::Material));
+  ASSERT_EQ(p0.size(), model.numParameters());
+  const MatX J = sim->getGradientParameterJacobian(SimParameter::Material);
+  ASSERT_EQ(J.rows(), n);
+  ASSERT_EQ(J.cols(), p0.size());
+  const int K = int(avatar->betas().size()), C = MaterialModel::numCoefficients();
+  std::vector<int> log_values;
+  for (int i = 0; i < C; ++i) log_values.push_back(i * (1 + K));
+  const auto gradient = [&](const VecX& d) {
+    VecX p = p0;
+    for (int i = 0; i < C; ++i) p[log_values[size_t(i)]] += d[i];
+    MaterialModel m = model;
+    m.setParameters(p);
+    Simulable other(avatar->withMaterial(m), test::smallScene(800).walk);
+    other.setColliders(sim->colliders());
+    other.restoreStep(step);
+    return totalGradient(other);
+  };
+  // Every layer's moduli and densities act (the soft tissue's most).
+  for (const char* q : {"density", "E1", "G23", "fung_gamma"})
+    EXPECT_GT(J.col(model.parameterOffset(q, MaterialModel::kSoftTissue)).norm(), 0.0) << q;
+  EXPECT_TRUE(test::jacobianMatchesFiniteDifferences(gradient, VecX::Zero(C),
+                                                     J(Eigen::all, log_values), 1e-5));
+  const VecX lambda = test::randomVector(n, 1.0, 41);
+  const VecX vjp = sim->getGradientParameterVJPs(lambda, {SimParameter::Material}).front();
+  EXPECT_LT((vjp - J.transpose() * lambda).norm(), 1e-10 * (1.0 + vjp.norm()));
+  const VecX direction = test::randomVector(int(p0.size()), 1.0, 42);
+  ParameterDirection along{};
+  along[size_t(SimParameter::Material)] = &direction;
+  const VecX jvp = sim->getGradientParameterJVPs({along}).front();
+  EXPECT_LT((jvp - J * direction).norm(), 1e-10 * (1.0 + jvp.norm()));
+  EXPECT_EQ((sim->getState() - q0).norm(), 0.0) << "derivative calls changed the state";
+  const std::string message =
+      test::messageOf<InputError>([&] { sim->setParameter(SimParameter::Material, p0); });
+  EXPECT_NE(message.find("withMaterial"), std::string::npos) << message;
 }
 
 TEST_P(SoftParameterDerivatives, GroupsNotWrittenYetThrowNamingThem) {

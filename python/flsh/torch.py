@@ -10,9 +10,10 @@
     joints[7].sum().backward()  # pose.grad: (72,)
 
 ``simulate(simulator, betas=…, pose_targets=…, …)`` is a whole simulated rollout (flsh.Rollout,
-docs/adjoint.md) as an autograd Function: joint (and optionally SMPL vertex) trajectories as
-functions of β, per-step pose and root targets, the 4 stiffnesses and the initial state and
-velocity, with a backward pass by the adjoint method:
+docs/adjoint.md) as an autograd Function: joint (and optionally vertex) trajectories as
+functions of β, per-step pose and root targets, the 4 stiffnesses, the initial state and
+velocity and, for the soft models (model="fem" or "rom"), the material file's coefficients
+(material=), with a backward pass by the adjoint method:
 
     sim = flsh.torch.RolloutSimulator(model, flsh.make_builtin_motion("walk"), steps=8,
                                       colliders=[flsh.Collider.plane()])
@@ -174,8 +175,9 @@ class RolloutSimulator:
     (bones and the reduced soft tissue with its cubatures; its basis and cubature are part of
     the avatar, fixed during a rollout: the gradients are those of the reduced model). The soft
     models' states are the bones followed by their soft state (num_dofs), their vertices the
-    simulated surface; β is not differentiable through them yet (betas may be given, without
-    requires_grad). resolution: interior node density of the tet mesh (soft models);
+    simulated surface; their material coefficients are an input of simulate() (material=, see
+    own_material and material_names); β is not differentiable through them yet (betas may be
+    given, without requires_grad). resolution: interior node density of the tet mesh (soft models);
     cache_dir: where soft avatars are cached (None: $FLSH_CACHE_DIR or ~/.cache/flsh);
     avatar_settings: further flsh.SoftAvatar keyword arguments (e.g. handles,
     elastic_cubature_points, material_file). options:
@@ -278,19 +280,46 @@ class RolloutSimulator:
         avatar.init_volumetric_data()
         return avatar
 
-    def make_simulable(self, betas: np.ndarray | None = None):
+    def material_names(self) -> list:
+        """Names of the material vector's entries (soft models): '<key>.log_value' and
+        '<key>.log_slopes[k]' per coefficient of the material file, <key> its key path (e.g.
+        'layers.soft_tissue.E1'; docs/materials.md)."""
+        self._require_soft("material_names")
+        return list(self._default_avatar.material_parameter_names)
+
+    def own_material(self) -> np.ndarray:
+        """(P,) the avatar's material coefficients (soft models), P = 40·(1 + K): per
+        coefficient a = log c₀ then its K log-slopes b (c(β) = exp(a + bᵀβ)); what simulate()
+        uses for material=None."""
+        self._require_soft("own_material")
+        return self._default_avatar.material_parameters
+
+    def _require_soft(self, who: str) -> None:
+        if not self.soft_tissue:
+            raise ValueError(f"{who}: the {self.model!r} model has no soft-tissue material; use "
+                             f"model='fem' or 'rom'")
+
+    def make_simulable(self, betas: np.ndarray | None = None,
+                       material: np.ndarray | None = None):
         """A new flsh.Simulable with these settings and colliders, of shape `betas` (≤K,) or the
-        default shape (None; then the avatar is the shared, immutable default one)."""
+        default shape (None; then the avatar is the shared, immutable default one), with the
+        material coefficients `material` ((P,) as own_material(); None = the avatar's own: soft
+        models only, SoftAvatar.with_material)."""
         avatar = self._default_avatar if betas is None else self._make_avatar(betas)
+        if material is not None:
+            self._require_soft("material")
+            avatar = avatar.with_material(material)
         simulable = _flsh.Simulable(avatar, self.mocap, self.options)
         if self.colliders:
             simulable.set_colliders(list(self.colliders))
         return simulable
 
-    def rollout(self, betas: np.ndarray | None = None, **inputs):
-        """A new flsh.Rollout of T steps, already run: shape `betas` (numpy (≤K,) or None) and
-        numpy inputs by the names of flsh.RolloutInputs (None = the simulable's own)."""
-        rollout = _flsh.Rollout(self.make_simulable(betas), self.rollout_options)
+    def rollout(self, betas: np.ndarray | None = None, material: np.ndarray | None = None,
+                **inputs):
+        """A new flsh.Rollout of T steps, already run: shape `betas` (numpy (≤K,) or None),
+        material (numpy (P,) or None, soft models) and numpy inputs by the names of
+        flsh.RolloutInputs (None = the simulable's own)."""
+        rollout = _flsh.Rollout(self.make_simulable(betas, material), self.rollout_options)
         rollout.run(self.steps, _flsh.RolloutInputs(**inputs))
         return rollout
 
@@ -333,19 +362,20 @@ _ROLLOUT_INPUTS = ("pose_targets", "root_targets", "stiffnesses", "initial_state
 
 
 class RolloutFunction(torch.autograd.Function):
-    """One simulated rollout: (betas, pose_targets, root_targets, stiffnesses, initial_state,
-    initial_velocity), each a float64 tensor or None (= the simulable's own) -> joints (T, 24, 3)
-    and vertices (T, V, 3) (empty (T, 0, 3) unless requested). Use :func:`simulate`, which
-    checks the inputs."""
+    """One simulated rollout: (betas, material, pose_targets, root_targets, stiffnesses,
+    initial_state, initial_velocity), each a float64 tensor or None (= the simulable's own) ->
+    joints (T, 24, 3) and vertices (T, V, 3) (empty (T, 0, 3) unless requested). Use
+    :func:`simulate`, which checks the inputs."""
 
     @staticmethod
-    def forward(ctx, simulator, want_vertices, betas, pose_targets, root_targets, stiffnesses,
-                initial_state, initial_velocity):
+    def forward(ctx, simulator, want_vertices, betas, material, pose_targets, root_targets,
+                stiffnesses, initial_state, initial_velocity):
         tensors = (pose_targets, root_targets, stiffnesses, initial_state, initial_velocity)
         inputs = {name: t.detach().numpy() for name, t in zip(_ROLLOUT_INPUTS, tensors)
                   if t is not None}
         betas_np = None if betas is None else betas.detach().numpy()
-        rollout = simulator.rollout(betas_np, **inputs)
+        material_np = None if material is None else material.detach().numpy()
+        rollout = simulator.rollout(betas_np, material_np, **inputs)
         joints = torch.from_numpy(rollout.joints())
         if want_vertices:
             vertices = torch.from_numpy(rollout.vertex_trajectory())
@@ -373,22 +403,26 @@ class RolloutFunction(torch.autograd.Function):
         grad_betas = None
         if needs[2] and grad.shape is not None:  # (K,): the padded components are dropped
             grad_betas = torch.from_numpy(grad.shape[:ctx.num_betas].copy())
-        return (None, None, grad_betas,
-                as_tensor(needs[3], grad.pose_targets), as_tensor(needs[4], grad.root_targets),
-                as_tensor(needs[5], grad.stiffnesses), as_tensor(needs[6], grad.initial_state),
-                as_tensor(needs[7], grad.initial_velocity))
+        return (None, None, grad_betas, as_tensor(needs[3], grad.material),
+                as_tensor(needs[4], grad.pose_targets), as_tensor(needs[5], grad.root_targets),
+                as_tensor(needs[6], grad.stiffnesses), as_tensor(needs[7], grad.initial_state),
+                as_tensor(needs[8], grad.initial_velocity))
 
 
 def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
              pose_targets: torch.Tensor | None = None, root_targets: torch.Tensor | None = None,
              stiffnesses: torch.Tensor | None = None, initial_state: torch.Tensor | None = None,
-             initial_velocity: torch.Tensor | None = None, *, vertices: bool = False):
+             initial_velocity: torch.Tensor | None = None, *, material: torch.Tensor | None = None,
+             vertices: bool = False):
     """Simulates simulator.steps steps and returns the joint trajectory, differentiable in every
     tensor input (adjoint method, flsh.Rollout).
 
     simulator: RolloutSimulator (body, mocap, options, colliders, T). Inputs, float64 CPU
     tensors or None (= the simulable's own):
       betas (K',) body shape, K' ≤ K (zero padded; a new avatar is built);
+      material (P,) the soft models' material coefficients (RolloutSimulator.own_material,
+        material_names: log-values and log-slopes of the material file), P = 40·(1 + K); the
+        avatar's discretization is kept (SoftAvatar.with_material);
       pose_targets (T, 72) tracking target rotation vectors per step, rad (SMPL layout: bone
         b ≥ 1 relative to its parent, the root global); None = the mocap's;
       root_targets (T, 3) SMPL trans per step, m (root joint target J_0(β) + trans);
@@ -428,10 +462,14 @@ def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
     for name, value in given.items():
         if value is not None:
             _check_fixed(value, name, *expected[name])
+    if material is not None:
+        simulator._require_soft("material")
+        P = len(simulator.own_material())
+        _check_fixed(material, "material", (P,), f"(P,) = ({P},)")
     if simulator.mocap is None and (pose_targets is not None or root_targets is not None):
         raise ValueError("pose_targets, root_targets: the simulator has no mocap, so its "
                          "simulable does not track targets")
     joints, vertex_trajectory = RolloutFunction.apply(
-        simulator, bool(vertices), betas, pose_targets, root_targets, stiffnesses,
+        simulator, bool(vertices), betas, material, pose_targets, root_targets, stiffnesses,
         initial_state, initial_velocity)
     return (joints, vertex_trajectory) if vertices else joints

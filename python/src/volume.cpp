@@ -325,6 +325,33 @@ void bind_volume(py::module_& m) {
                              py::return_value_policy::reference_internal,
                              "VolumetricData of a soft avatar (RuntimeError for the skeleton model).")
       .def_property_readonly("has_volumetric_data", &SoftAvatar::hasVolumetricData)
+      .def_property_readonly(
+          "material_parameters",
+          [](const SoftAvatar& a) {
+            return to_numpy(a.volumetricData().material_model.parameters());
+          },
+          "(P,) the material file's coefficients of a soft avatar (MaterialModel.parameters: per "
+          "coefficient a = log c₀ then its K log-slopes; P = 40·(1 + K)); what the adjoint's "
+          "'material' group differentiates. RuntimeError for the skeleton model.")
+      .def_property_readonly(
+          "material_parameter_names",
+          [](const SoftAvatar& a) { return a.volumetricData().material_model.parameterNames(); },
+          "Names of material_parameters' entries: '<key>.log_value' and '<key>.log_slopes[k]' "
+          "with <key> the material file's key path (e.g. 'layers.soft_tissue.E1').")
+      .def(
+          "with_material",
+          [](const SoftAvatar& a, const py::object& parameters) {
+            MaterialModel model = a.volumetricData().material_model;
+            model.setParameters(to_vector(parameters, "parameters", model.numParameters()));
+            py::gil_scoped_release release;
+            return a.withMaterial(model);
+          },
+          py::arg("parameters"),
+          "This soft avatar with other material coefficients (parameters: (P,) as "
+          "material_parameters): the same β and discretization (tet mesh, bone nodes, frames; "
+          "the ROM's basis, cubatures and rest-split floors), every tet's materials "
+          "re-evaluated. Cheap next to a build. ValueError on a wrong size or a material that "
+          "is not physical.")
       .def_property_readonly("reduced_data",
                              [](const SoftAvatar& a) -> const ReducedData& {
                                return a.reducedData();

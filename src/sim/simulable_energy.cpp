@@ -207,6 +207,13 @@ const SoftAvatar& Simulable::avatar() const { return *impl_->avatar; }
 std::shared_ptr<const Motion> Simulable::mocap() const { return impl_->mocap; }
 const SimulableOptions& Simulable::options() const { return impl_->options; }
 
+int Simulable::restSplitBoundedSamples() const {
+  const Impl& m = *impl_;
+  if (!m.soft) return 0;
+  m.prepare();
+  return m.soft->restSplitBoundedSamples();
+}
+
 SimulableStats Simulable::stats() const {
   SimulableStats s;
   s.active_contacts = impl_->contact.active;

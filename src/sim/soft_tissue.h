@@ -135,6 +135,10 @@ class SoftTissue final : public TwoThreadSchedule {
   }
   /// New rest joints (Simulable::setParameter(RestJoints)); call setPrediction after.
   void setJoints(const MatX3& joints) { kin_.setJoints(joints); }
+  /// ROM: elastic samples in the bounded branch of the rest split at the current state.
+  int restSplitBoundedSamples() const {
+    return reduced_elastic_ ? reduced_elastic_->boundedSamples() : 0;
+  }
   /// The Material group's chain (coefficient values ↔ the material file's parameters).
   const MaterialChain& materialChain() const { return material_chain_; }
   /// The node contact term, as the broad phase asks it (refresh).

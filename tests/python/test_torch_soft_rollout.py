@@ -1,6 +1,6 @@
 """flsh.torch.simulate through the soft skeletons (model="fem" and "rom"): torch.autograd.gradcheck
 on the input groups (pose and root targets, stiffnesses, initial state and velocity, the soft
-state included), on joints and on the simulated surface, with ground contact; β refused with a
+state included, the material coefficients), on joints and on the simulated surface, with ground contact; β refused with a
 clear message. A 800-vertex synthetic body with a coarse interior walking for T = 4 steps; the
 FEM's large groups are checked by random projections (fast_mode), its small ones column by
 column."""
@@ -98,6 +98,43 @@ def test_gradcheck_surface(simulators, model, rng):
     assert grad.abs().max() > 1e-6
     assert torch.autograd.gradcheck(lambda x: (weights * f(x)[1]).sum(dim=(1, 2)), (x,),
                                     eps=1e-4, atol=5e-8, rtol=1e-5, fast_mode=True)
+
+
+@pytest.mark.parametrize("model", ["fem", "rom"])
+def test_gradcheck_material(simulators, model, rng):
+    """The material coefficients, on the surface and the joints: gradcheck on a few log-values
+    (soft-tissue and skin moduli, densities, the Fung exponent; the vector's other entries
+    fixed at the avatar's own)."""
+    simulator = simulators[model]
+    own = simulator.own_material()
+    names = simulator.material_names()
+    assert len(names) == len(own) == 40 * (1 + simulator.num_betas)
+    picked = [names.index(f"layers.{layer}.{q}.log_value")
+              for layer, q in (("soft_tissue", "E1"), ("soft_tissue", "density"),
+                               ("soft_tissue", "fung_gamma"), ("skin", "G12"))]
+    base = torch.tensor(own, dtype=torch.float64)
+    inputs = base_inputs(simulator, rng)
+    weights = torch.tensor(rng.normal(size=(STEPS, 800, 3)))
+
+    def f(x):
+        material = base.index_put((torch.tensor(picked),), base[picked] + x)
+        joints, vertices = flsh.torch.simulate(simulator, **inputs, material=material,
+                                               vertices=True)
+        return torch.cat([(weights * vertices).sum(dim=(1, 2)), joints.reshape(-1)[:12]])
+
+    x = torch.zeros(len(picked), dtype=torch.float64, requires_grad=True)
+    (grad,) = torch.autograd.grad(f(x).sum(), x)
+    assert grad.abs().max() > 1e-6
+    assert torch.autograd.gradcheck(f, (x,), eps=1e-4, atol=5e-8, rtol=1e-5)
+
+
+def test_material_is_for_soft_models_only(body, walk, simulators):
+    skeleton = flsh.torch.RolloutSimulator(body, walk, steps=2)
+    with pytest.raises(ValueError, match="material"):
+        skeleton.own_material()
+    simulator = simulators["fem"]
+    with pytest.raises(ValueError, match="material"):
+        flsh.torch.simulate(simulator, material=torch.zeros(3, dtype=torch.float64))
 
 
 def test_betas_gradient_is_refused_clearly(simulators):

@@ -257,6 +257,10 @@ class Simulable {
   /// The mocap the simulable tracks (null without one).
   std::shared_ptr<const Motion> mocap() const;
   const SimulableOptions& options() const;
+  /// ROM with the elastic cubature's rest-stiffness split: how many sample tets' excess is in
+  /// its bounded branch (f_e = −q h(x), the floor acting) at the current state; 0 for other
+  /// models. A diagnostic of the cubature (one energy pass over its samples).
+  int restSplitBoundedSamples() const;
   SimulableStats stats() const;
 
   // ---- parameter derivatives (for the adjoint) ---------------------------------------------

@@ -224,6 +224,27 @@ double ReducedElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int off
   return E + restStiffness(g, values, offset);
 }
 
+int ReducedElasticityTerm::boundedSamples() const {
+  if (rest_stiffness_.size() == 0) return 0;
+  int count = 0;
+  for (int e = 0; e < elements_.size(); ++e) {
+    const int begin = handle_start_[size_t(e)], n = handle_start_[size_t(e) + 1] - begin;
+    if (n == 0) continue;
+    Mat3X Z(3, n);
+    for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * handles_[size_t(begin + s)]);
+    const double psi =
+        reducedTetElasticEnergy(elements_.rest[size_t(e)].volume, elements_.materials[size_t(e)],
+                                gradients_.middleCols(begin, n), Z);
+    const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[size_t(e)], 3 * n,
+                                   3 * n);
+    bool bounded = false;
+    restSplitExcess(psi, Eigen::Map<const VecX>(Z.data(), 3 * n), K, elements_.weights[e],
+                    nullptr, nullptr, false, &bounded, rest_floors_[e]);
+    count += bounded ? 1 : 0;
+  }
+  return count;
+}
+
 // ---- the Material group -------------------------------------------------------------------
 
 int ReducedElasticityTerm::numMaterialElements() const {

@@ -33,6 +33,9 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   /// Elements [first, last): energy returned, gradient added into gz (the handles' 3H entries;
   /// may be null), Hessian blocks summed into `values` (a value list; may be null).
   double elements(int first, int last, double* gz, Mat3* values, bool psd) const;
+  /// Sample tets whose rest-split excess is in its bounded branch at the current state (0
+  /// without the split): a diagnostic of the floors (one energy pass over the samples).
+  int boundedSamples() const;
   /// ½ zᵀ K z (0 without the elastic cubature), its gradient and Hessian blocks.
   double restStiffness(VecX* g, Mat3* values, int offset) const;
 

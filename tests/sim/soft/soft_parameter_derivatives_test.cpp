@@ -59,17 +59,16 @@ TEST_P(SoftParameterDerivatives, SupportedGroupsMatchFiniteDifferences) {
 // gradient of simulables on SoftAvatar::withMaterial avatars at the same step (restoreStep), in
 // the log-values a (at β = 0 the log-slopes do not act); the products against the Jacobian in
 // every entry.
-TEST_P(SoftParameterDerivatives, MaterialMatchesFiniteDifferences) {
-  auto sim = test::softTermScenario(GetParam());
-  const int n = sim->numDofs();
-  const VecX q0 = sim->getState();
-  const SimulableStep step = sim->saveStep();
-  const std::shared_ptr<const SoftAvatar> avatar = test::smallSoftAvatar(GetParam());
-  const MaterialModel model = avatar->volumetricData().material_model;
-  const VecX p0 = sim->getParameter(SimParameter::Material);
-  ASSERT_EQ(p0.size(), sim->parameterSize(SimParameter::Material));
-  ASSERT_EQ(p0.size(), model.numParameters());
-  const MatX J = sim->getGradientParameterJacobian(SimParameter::Material);
+void expectMaterialDerivatives(Simulable& sim, SoftModel model) {
+  const int n = sim.numDofs();
+  const VecX q0 = sim.getState();
+  const SimulableStep step = sim.saveStep();
+  const std::shared_ptr<const SoftAvatar> avatar = test::smallSoftAvatar(model);
+  const MaterialModel material = avatar->volumetricData().material_model;
+  const VecX p0 = sim.getParameter(SimParameter::Material);
+  ASSERT_EQ(p0.size(), sim.parameterSize(SimParameter::Material));
+  ASSERT_EQ(p0.size(), material.numParameters());
+  const MatX J = sim.getGradientParameterJacobian(SimParameter::Material);
   ASSERT_EQ(J.rows(), n);
   ASSERT_EQ(J.cols(), p0.size());
   const int K = int(avatar->betas().size()), C = MaterialModel::numCoefficients();
@@ -78,30 +77,54 @@ TEST_P(SoftParameterDerivatives, MaterialMatchesFiniteDifferences) {
   const auto gradient = [&](const VecX& d) {
     VecX p = p0;
     for (int i = 0; i < C; ++i) p[log_values[size_t(i)]] += d[i];
-    MaterialModel m = model;
+    MaterialModel m = material;
     m.setParameters(p);
     Simulable other(avatar->withMaterial(m), test::smallScene(800).walk);
-    other.setColliders(sim->colliders());
+    other.setColliders(sim.colliders());
     other.restoreStep(step);
     return totalGradient(other);
   };
   // Every layer's moduli and densities act (the soft tissue's most).
   for (const char* q : {"density", "E1", "G23", "fung_gamma"})
-    EXPECT_GT(J.col(model.parameterOffset(q, MaterialModel::kSoftTissue)).norm(), 0.0) << q;
+    EXPECT_GT(J.col(material.parameterOffset(q, MaterialModel::kSoftTissue)).norm(), 0.0) << q;
   EXPECT_TRUE(test::jacobianMatchesFiniteDifferences(gradient, VecX::Zero(C),
                                                      J(Eigen::all, log_values), 1e-5));
   const VecX lambda = test::randomVector(n, 1.0, 41);
-  const VecX vjp = sim->getGradientParameterVJPs(lambda, {SimParameter::Material}).front();
+  const VecX vjp = sim.getGradientParameterVJPs(lambda, {SimParameter::Material}).front();
   EXPECT_LT((vjp - J.transpose() * lambda).norm(), 1e-10 * (1.0 + vjp.norm()));
   const VecX direction = test::randomVector(int(p0.size()), 1.0, 42);
   ParameterDirection along{};
   along[size_t(SimParameter::Material)] = &direction;
-  const VecX jvp = sim->getGradientParameterJVPs({along}).front();
+  const VecX jvp = sim.getGradientParameterJVPs({along}).front();
   EXPECT_LT((jvp - J * direction).norm(), 1e-10 * (1.0 + jvp.norm()));
-  EXPECT_EQ((sim->getState() - q0).norm(), 0.0) << "derivative calls changed the state";
-  const std::string message =
-      test::messageOf<InputError>([&] { sim->setParameter(SimParameter::Material, p0); });
+  EXPECT_EQ((sim.getState() - q0).norm(), 0.0) << "derivative calls changed the state";
+}
+
+TEST_P(SoftParameterDerivatives, MaterialMatchesFiniteDifferences) {
+  auto sim = test::softTermScenario(GetParam());
+  expectMaterialDerivatives(*sim, GetParam());
+  const std::string message = test::messageOf<InputError>([&] {
+    sim->setParameter(SimParameter::Material, sim->getParameter(SimParameter::Material));
+  });
   EXPECT_NE(message.find("withMaterial"), std::string::npos) << message;
+}
+
+// The ROM's rest split in its bounded branch (a sample's energy far below its rest quadratic,
+// the floor acting): the soft state pushed until some samples get there.
+TEST(SoftMaterialDerivatives, RomRestSplitBoundedBranch) {
+  auto sim = test::softTermScenario(SoftModel::Rom);
+  const int n = sim->numDofs(), nb = sim->numBoneDofs();
+  VecX q = sim->getState();
+  const VecX push = test::randomVector(n - nb, 1.0, 51);
+  int bounded = 0;
+  for (double amplitude = 0.01; amplitude <= 0.16 && bounded == 0; amplitude *= 2) {
+    q.tail(n - nb) = amplitude * push;
+    sim->setState(q);
+    bounded = sim->restSplitBoundedSamples();
+  }
+  ASSERT_GT(bounded, 0) << "no sample reached the bounded branch";
+  RecordProperty("bounded_samples", bounded);
+  expectMaterialDerivatives(*sim, SoftModel::Rom);
 }
 
 TEST_P(SoftParameterDerivatives, GroupsNotWrittenYetThrowNamingThem) {

@@ -2,6 +2,7 @@
 // gradient and the chart maps of its [t, rotation vector] state.
 #include "flsh/diff/simulable_adjoint.h"
 
+#include <algorithm>
 #include <string>
 
 #include "flsh/core/error.h"
@@ -112,10 +113,17 @@ VecX SimulableAdjointModel::previousStatesJVP(const VecX& dq_n, const VecX& dq_n
 }
 
 void SimulableAdjointModel::parameterVJPs(const VecX& lambda, std::vector<VecX>& out) const {
-  const std::vector<SimParameter> groups = differentiatedGroups(*simulable_);
+  std::vector<SimParameter> groups = differentiatedGroups(*simulable_);
+  const bool material = simulable_->hasSoftTissue();
+  if (material) groups.erase(std::find(groups.begin(), groups.end(), SimParameter::Material));
   out = inRegistryOrder(
       groups, simulable_->getGradientParameterVJPs(lambda, groups, /*shape_surface_only=*/true),
       VecX());
+  if (!material) return;
+  out[size_t(SimParameter::Material)] =
+      VecX::Zero(simulable_->parameterSize(SimParameter::Material));
+  simulable_->accumulateMaterialProducts(lambda, material_sum_);
+  material_pending_ = true;
 }
 
 // p̄_β = Σ_t (dJ/dβ)ᵀ (∂g_t/∂J)ᵀ λ_t + (dI/dβ)ᵀ (∂g_t/∂I)ᵀ λ_t + surface: the first two sums are
@@ -123,6 +131,12 @@ void SimulableAdjointModel::parameterVJPs(const VecX& lambda, std::vector<VecX>&
 void SimulableAdjointModel::finishParameterVJPs(std::vector<VecX>& global) const {
   const size_t shape = size_t(SimParameter::Shape), joints = size_t(SimParameter::RestJoints),
                inertia = size_t(SimParameter::BoneInertia);
+  if (material_pending_) {  // global holds −Σ_t products (the sweep's sign)
+    if (global.size() == size_t(kNumSimParameters))
+      global[size_t(SimParameter::Material)] -= simulable_->finishMaterialProducts(material_sum_);
+    material_sum_ = Simulable::MaterialProducts();
+    material_pending_ = false;
+  }
   if (global.size() != size_t(kNumSimParameters) || global[shape].size() == 0) return;
   chainShapeCotangent(simulable_->avatar(), global[joints], global[inertia], global[shape]);
 }

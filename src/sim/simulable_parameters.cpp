@@ -182,6 +182,38 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
   return out;
 }
 
+void Simulable::accumulateMaterialProducts(const VecX& lambda, MaterialProducts& sum) const {
+  const Impl& m = *impl_;
+  if (!m.soft)
+    throw Error("Simulable::accumulateMaterialProducts: the articulated skeleton has no material");
+  checkStateSized(lambda, numDofs(), "accumulateMaterialProducts", "lambda");
+  ParameterProducts<VecX> products;
+  products[SimParameter::Material] = VecX::Zero(m.soft->materialChain().numValues());
+  m.ensureContact();
+  const TermContext c = m.context();
+  const detail::ElasticityTerm& elastic = m.soft->elasticTerm();
+  for (const EnergyTerm* term : m.terms) {
+    if (term == &elastic)
+      elastic.accumulateMaterialProducts(lambda, sum.elements, sum.rest_outer);
+    else
+      term->addParameterProducts(c, lambda, products);
+  }
+  if (sum.values.size() == 0)
+    sum.values = products[SimParameter::Material];
+  else
+    sum.values += products[SimParameter::Material];
+}
+
+VecX Simulable::finishMaterialProducts(const MaterialProducts& sum) const {
+  const Impl& m = *impl_;
+  if (!m.soft)
+    throw Error("Simulable::finishMaterialProducts: the articulated skeleton has no material");
+  VecX values = VecX::Zero(m.soft->materialChain().numValues());
+  if (sum.values.size() > 0) values += sum.values;
+  m.soft->elasticTerm().addAccumulatedMaterialProducts(sum.elements, sum.rest_outer, values);
+  return materialParametersCotangent(m, values);
+}
+
 // A Shape direction moves the rest joints and bone inertias too (shapeTangent): those changes
 // join the RestJoints and BoneInertia directions, unless shape_surface_only.
 std::vector<VecX> Simulable::getGradientParameterJVPs(

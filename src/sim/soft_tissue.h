@@ -139,6 +139,8 @@ class SoftTissue final : public TwoThreadSchedule {
   int restSplitBoundedSamples() const {
     return reduced_elastic_ ? reduced_elastic_->boundedSamples() : 0;
   }
+  /// The elastic term (its Material products split for the reverse sweep).
+  const ElasticityTerm& elasticTerm() const { return *elastic_; }
   /// The Material group's chain (coefficient values ↔ the material file's parameters).
   const MaterialChain& materialChain() const { return material_chain_; }
   /// The node contact term, as the broad phase asks it (refresh).

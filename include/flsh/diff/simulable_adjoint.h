@@ -35,7 +35,9 @@ class SimulableAdjointModel final : public AdjointModel {
   void parameterJacobians(std::vector<MatX>& out) const override;
   /// Products without matrices (Simulable::getGradientParameterVJPs); the Shape entry holds
   /// only the contact-surface part per step, finishParameterVJPs adds (dJ/dβ)ᵀ p̄_J +
-  /// (dI/dβ)ᵀ p̄_I once.
+  /// (dI/dβ)ᵀ p̄_I once; the Material entry is zero per step: its products are summed
+  /// over the steps and chained once by finishParameterVJPs (Simulable::
+  /// accumulateMaterialProducts).
   void previousStatesVJP(const VecX& lambda, VecX& a_n, VecX& a_nm1) const override;
   VecX previousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const override;
   void parameterVJPs(const VecX& lambda, std::vector<VecX>& out) const override;
@@ -57,6 +59,10 @@ class SimulableAdjointModel final : public AdjointModel {
 
  private:
   std::shared_ptr<Simulable> simulable_;
+  // The Material products of a sweep's steps (Simulable::accumulateMaterialProducts), chained
+  // by finishParameterVJPs.
+  mutable Simulable::MaterialProducts material_sum_;
+  mutable bool material_pending_ = false;
 };
 
 }  // namespace flsh

@@ -257,6 +257,19 @@ class Simulable {
   /// The mocap the simulable tracks (null without one).
   std::shared_ptr<const Motion> mocap() const;
   const SimulableOptions& options() const;
+  /// The Material group's products over many steps (a reverse sweep, SimulableAdjointModel):
+  /// accumulateMaterialProducts ADDS step by step what Σ_t (∂g_t/∂p_material)ᵀ λ_t needs —
+  /// each elastic element's material-point cotangent, the ROM's Σ λ zᵀ of its exact rest
+  /// stiffness, the node masses' share — and finishMaterialProducts chains the sum once
+  /// (parameterSize(Material) values): one pass over the tets and their material map per sweep
+  /// instead of one per step. Error without soft tissue.
+  struct MaterialProducts {
+    MatX elements;    ///< per elastic element: C_world (36, column-major), μ, γ cotangents
+    MatX rest_outer;  ///< ROM with the rest-stiffness split: Σ λ zᵀ (3H × 3H)
+    VecX values;      ///< the node masses' share, in coefficient values
+  };
+  void accumulateMaterialProducts(const VecX& lambda, MaterialProducts& sum) const;
+  VecX finishMaterialProducts(const MaterialProducts& sum) const;
   /// ROM with the elastic cubature's rest-stiffness split: how many sample tets' excess is in
   /// its bounded branch (f_e = −q h(x), the floor acting) at the current state; 0 for other
   /// models. A diagnostic of the cubature (one energy pass over its samples).

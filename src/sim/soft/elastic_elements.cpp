@@ -75,19 +75,23 @@ Mat3X gatherDirections(const std::vector<int>& dofs, const VecX& lambda, int off
 
 }  // namespace
 
-// λᵀ ∂g/∂c = Σ_e (chain of element e)ᵀ ∂(Λ_eᵀ g_e)/∂(material point): one pass, on the
-// available threads (per-thread sums added in thread order: deterministic for a fixed count).
+// λᵀ ∂g/∂c = Σ_e (chain of element e)ᵀ ∂(Λ_eᵀ g_e)/∂(material point): the element cotangents
+// first (summed over a sweep's steps when accumulated), then one pass through the material map.
 void ElasticityTerm::addParameterProducts(const TermContext&, const VecX& lambda,
                                           ParameterProducts<VecX>& out) const {
   if (!out.wants(SimParameter::Material)) return;
-  const TetMaterialMap& map = chain_.map();
-  const int E = numMaterialElements();
-  const int threads = E > 1000 ? std::max(1, omp_get_max_threads()) : 1;
-  std::vector<VecX> partial(size_t(threads), VecX::Zero(chain_.numValues()));
+  MatX elements, rest_outer;
+  accumulateMaterialProducts(lambda, elements, rest_outer);
+  addAccumulatedMaterialProducts(elements, rest_outer, out[SimParameter::Material]);
+}
+
+void ElasticityTerm::accumulateMaterialProducts(const VecX& lambda, MatX& elements,
+                                                MatX& rest_outer) const {
+  const int E = numProductElements();
+  if (elements.size() == 0) elements = MatX::Zero(E, kMaterialPointValues);
   FirstFailure failure;
-#pragma omp parallel num_threads(threads)
+#pragma omp parallel if (E > 1000)
   {
-    const int k = omp_get_thread_num();
     std::vector<int> dofs;
 #pragma omp for schedule(static)
     for (int e = 0; e < E; ++e)
@@ -95,11 +99,37 @@ void ElasticityTerm::addParameterProducts(const TermContext&, const VecX& lambda
         materialElementDofs(e, dofs);
         const FemMaterialDerivative d =
             materialElementGradient(e, gatherDirections(dofs, lambda, 0));
-        map.addCotangent(materialElementTet(e), materialCotangent(d), partial[size_t(k)]);
+        elements.row(e).head<36>() += Eigen::Map<const Eigen::RowVectorXd>(d.C_world.data(), 36);
+        elements(e, 36) += d.modulus;
+        elements(e, 37) += d.gamma;
       });
   }
   failure.rethrow();
-  for (const VecX& p : partial) out[SimParameter::Material] += p;
+  addRestOuter(lambda, rest_outer);
+}
+
+// On the available threads, per-thread sums added in thread order (deterministic for a fixed
+// thread count).
+void ElasticityTerm::addAccumulatedMaterialProducts(const MatX& elements, const MatX& rest_outer,
+                                                    VecX& values_bar) const {
+  const TetMaterialMap& map = chain_.map();
+  const int E = int(elements.rows());
+  const int threads = E > 1000 ? std::max(1, omp_get_max_threads()) : 1;
+  std::vector<VecX> partial(size_t(threads), VecX::Zero(values_bar.size()));
+#pragma omp parallel num_threads(threads)
+  {
+    const int k = omp_get_thread_num();
+#pragma omp for schedule(static)
+    for (int e = 0; e < E; ++e) {
+      TetMaterialCotangent bar;
+      bar.C_world = Eigen::Map<const Mat6>(elements.row(e).head<36>().eval().data());
+      bar.modulus = elements(e, 36);
+      bar.gamma = elements(e, 37);
+      map.addCotangent(materialElementTet(e), bar, partial[size_t(k)]);
+    }
+  }
+  for (const VecX& p : partial) values_bar += p;
+  if (rest_outer.size() > 0) addRestStiffnessProducts(rest_outer, values_bar);
 }
 
 template <class Row>

@@ -60,10 +60,21 @@ class ElasticityTerm : public NodeTerm<1> {
   void addParameterTangents(const TermContext& c, const std::vector<ParameterDirection>& directions,
                             std::vector<VecX>& out) const override;
   void addParameterJacobians(const TermContext& c, ParameterProducts<MatX>& out) const override;
+  /// The products of many steps, chained once (a reverse sweep): per step ADDS into row e of
+  /// `elements` (numProductElements() × kMaterialPointValues, resized from empty) element e's
+  /// material-point cotangent of λᵀ g (C_world's 36 entries column-major, μ, γ) and, for the
+  /// ROM with the rest-stiffness split, λ zᵀ into `rest_outer` (3H × 3H, resized from empty).
+  void accumulateMaterialProducts(const VecX& lambda, MatX& elements, MatX& rest_outer) const;
+  /// ADDS into values_bar (coefficient values) the cotangent of such sums: each element's
+  /// through the material map, the rest stiffness's with one pass over every elastic tet.
+  void addAccumulatedMaterialProducts(const MatX& elements, const MatX& rest_outer,
+                                      VecX& values_bar) const;
+  static constexpr int kMaterialPointValues = 38;
 
  protected:
   ElasticityTerm(const SoftKinematics& kinematics, const MaterialChain& chain)
       : NodeTerm(kinematics), chain_(chain) {}
+  const MaterialChain& materialChain() const { return chain_; }
   /// The material elements (see above), their tets, their local directions' DoFs (entry 3s + k
   /// for direction k of local column s; relative to the simulable's first DoF; −1: none) and the
   /// material cotangent of the gradient's product with local directions Λ (3 × #columns).
@@ -71,6 +82,14 @@ class ElasticityTerm : public NodeTerm<1> {
   virtual int materialElementTet(int e) const = 0;
   virtual void materialElementDofs(int e, std::vector<int>& dofs) const = 0;
   virtual FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const = 0;
+  /// The leading material elements whose products take λ element by element (the rest: the
+  /// ROM's rest stiffness, through addRestOuter and addRestStiffnessProducts).
+  virtual int numProductElements() const { return numMaterialElements(); }
+  /// ROM with the split: ADDS λ zᵀ over the handles' coordinates into W (resized from empty).
+  virtual void addRestOuter(const VecX& lambda, MatX& W) const {}
+  /// ROM with the split: ADDS into values_bar the rest stiffness's share for Σ λ zᵀ = W (one
+  /// pass over every elastic tet). Nothing otherwise.
+  virtual void addRestStiffnessProducts(const MatX& W, VecX& values_bar) const {}
 
  private:
   /// Element e's rows ∂g/∂c at its DoFs: row(dof, values) for every local direction with a DoF.

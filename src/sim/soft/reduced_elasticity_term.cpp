@@ -266,6 +266,53 @@ void ReducedElasticityTerm::materialElementDofs(int e, std::vector<int>& dofs) c
     for (int c = 0; c < 3; ++c) dofs.push_back(kin_.boneDofs() + 3 * handles[size_t(s)] + c);
 }
 
+// λᵀ K z = Σ_t V_t ε_t(λ)ᵀ C_world ε_t(z), ε_t = B_t (the tet's linear strain of its handles'
+// coordinates): the cotangent of C_world is V_t B_t W_t B_tᵀ for W = Σ λ zᵀ (bilinear), so the
+// reverse sweep sums W over steps and passes over the tets once.
+void ReducedElasticityTerm::addRestOuter(const VecX& lambda, MatX& W) const {
+  if (rest_stiffness_.size() == 0) return;
+  const int m = 3 * kin_.numHandles();
+  if (W.size() == 0) W = MatX::Zero(m, m);
+  W.noalias() += lambda.segment(kin_.boneDofs(), m) * kin_.u.transpose();
+}
+
+void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values_bar) const {
+  if (rest_stiffness_.size() == 0 || W.size() == 0) return;
+  const ReducedTets& all = everyTet();
+  const TetMaterialMap& map = materialChain().map();
+  const int T = int(all.tet.size());
+  const int threads = T > 1000 ? std::max(1, omp_get_max_threads()) : 1;
+  std::vector<VecX> partial(size_t(threads), VecX::Zero(values_bar.size()));
+#pragma omp parallel num_threads(threads)
+  {
+    const int k = omp_get_thread_num();
+    Eigen::Matrix<double, 6, Eigen::Dynamic> B;
+    MatX We;
+#pragma omp for schedule(static)
+    for (int t = 0; t < T; ++t) {
+      const int begin = all.handle_start[size_t(t)], n = all.count(t);
+      if (n == 0) continue;
+      B.resize(6, 3 * n);
+      We.resize(3 * n, 3 * n);
+      for (int s = 0; s < n; ++s) {
+        const Vec3 g = all.gradients.col(begin + s);
+        for (int c = 0; c < 3; ++c) {
+          Mat3 unit = Mat3::Zero();
+          unit.row(c) = g.transpose();  // e_c g_sᵀ
+          B.col(3 * s + c) = voigtLinearStrain(unit);
+        }
+        for (int r = 0; r < n; ++r)
+          We.block<3, 3>(3 * s, 3 * r) = W.block<3, 3>(3 * all.handles[size_t(begin + s)],
+                                                       3 * all.handles[size_t(begin + r)]);
+      }
+      TetMaterialCotangent bar;
+      bar.C_world = all.volume[size_t(t)] * B * We * B.transpose();
+      map.addCotangent(all.tet[size_t(t)], bar, partial[size_t(k)]);
+    }
+  }
+  for (const VecX& p : partial) values_bar += p;
+}
+
 namespace {
 
 void addScaled(double a, const FemMaterialDerivative& x, FemMaterialDerivative& y) {

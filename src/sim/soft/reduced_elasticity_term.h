@@ -48,6 +48,11 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   int materialElementTet(int e) const override;
   void materialElementDofs(int e, std::vector<int>& dofs) const override;
   FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const override;
+  int numProductElements() const override { return elements_.size(); }
+  void addRestOuter(const VecX& lambda, MatX& W) const override;
+
+ public:
+  void addRestStiffnessProducts(const MatX& rest_outer, VecX& values_bar) const override;
 
  private:
   /// Tets in the subspace: each one's handles (ascending) and its shape gradients through the

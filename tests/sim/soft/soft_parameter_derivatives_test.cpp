@@ -92,6 +92,15 @@ void expectMaterialDerivatives(Simulable& sim, SoftModel model) {
   const VecX lambda = test::randomVector(n, 1.0, 41);
   const VecX vjp = sim.getGradientParameterVJPs(lambda, {SimParameter::Material}).front();
   EXPECT_LT((vjp - J.transpose() * lambda).norm(), 1e-10 * (1.0 + vjp.norm()));
+  // The reverse sweep's form (summed over steps, chained once) gives the same, and is linear.
+  Simulable::MaterialProducts sum;
+  sim.accumulateMaterialProducts(lambda, sum);
+  EXPECT_EQ(sum.rest_outer.size() > 0, model == SoftModel::Rom);
+  EXPECT_LT((sim.finishMaterialProducts(sum) - vjp).norm(), 1e-10 * (1.0 + vjp.norm()));
+  const VecX lambda2 = test::randomVector(n, 1.0, 43);
+  sim.accumulateMaterialProducts(lambda2, sum);
+  const VecX both = sim.getGradientParameterVJPs(lambda + lambda2, {SimParameter::Material}).front();
+  EXPECT_LT((sim.finishMaterialProducts(sum) - both).norm(), 1e-10 * (1.0 + both.norm()));
   const VecX direction = test::randomVector(int(p0.size()), 1.0, 42);
   ParameterDirection along{};
   along[size_t(SimParameter::Material)] = &direction;

@@ -113,17 +113,14 @@ VecX SimulableAdjointModel::previousStatesJVP(const VecX& dq_n, const VecX& dq_n
 }
 
 void SimulableAdjointModel::parameterVJPs(const VecX& lambda, std::vector<VecX>& out) const {
-  std::vector<SimParameter> groups = differentiatedGroups(*simulable_);
+  const std::vector<SimParameter> groups = differentiatedGroups(*simulable_);
   const bool material = simulable_->hasSoftTissue();
-  if (material) groups.erase(std::find(groups.begin(), groups.end(), SimParameter::Material));
-  out = inRegistryOrder(
-      groups, simulable_->getGradientParameterVJPs(lambda, groups, /*shape_surface_only=*/true),
-      VecX());
-  if (!material) return;
-  out[size_t(SimParameter::Material)] =
-      VecX::Zero(simulable_->parameterSize(SimParameter::Material));
-  simulable_->accumulateMaterialProducts(lambda, material_sum_);
-  material_pending_ = true;
+  out = inRegistryOrder(groups,
+                        simulable_->getGradientParameterVJPs(lambda, groups,
+                                                             /*shape_surface_only=*/true,
+                                                             material ? &material_sum_ : nullptr),
+                        VecX());
+  material_pending_ = material_pending_ || material;
 }
 
 // p̄_β = Σ_t (dJ/dβ)ᵀ (∂g_t/∂J)ᵀ λ_t + (dI/dβ)ᵀ (∂g_t/∂I)ᵀ λ_t + surface: the first two sums are

@@ -157,7 +157,8 @@ std::vector<MatX> Simulable::getGradientParameterJacobians(const std::vector<Sim
 
 std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
                                                       const std::vector<SimParameter>& groups,
-                                                      bool shape_surface_only) const {
+                                                      bool shape_surface_only,
+                                                      MaterialProducts* material_sum) const {
   const Impl& m = *impl_;
   requireDifferentiable(m, groups, "getGradientParameterVJPs");
   checkStateSized(lambda, numDofs(), "getGradientParameterVJPs", "lambda");
@@ -165,12 +166,29 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
   const bool chain = askFor(*this, groups, 1, products) && !shape_surface_only;
   if (chain) askFor(*this, {SimParameter::RestJoints, SimParameter::BoneInertia}, 1, products);
   askForMaterialValues(m, products);
+  const bool material = m.soft && products.wants(SimParameter::Material);
   m.ensureContact();
   const TermContext c = m.context();
-  for (const EnergyTerm* term : m.terms) term->addParameterProducts(c, lambda, products);
-  if (m.soft && products.wants(SimParameter::Material))
-    products[SimParameter::Material] =
-        materialParametersCotangent(m, products[SimParameter::Material]);
+  const EnergyTerm* elastic = m.soft ? &m.soft->elasticTerm() : nullptr;
+  for (const EnergyTerm* term : m.terms) {
+    if (material && material_sum && term == elastic)
+      m.soft->elasticTerm().accumulateMaterialProducts(lambda, material_sum->elements,
+                                                       material_sum->rest_outer);
+    else
+      term->addParameterProducts(c, lambda, products);
+  }
+  if (material) {
+    VecX& values = products[SimParameter::Material];
+    if (material_sum) {  // summed in coefficient values, chained by finishMaterialProducts
+      if (material_sum->values.size() == 0)
+        material_sum->values = values;
+      else
+        material_sum->values += values;
+      values = VecX::Zero(parameterSize(SimParameter::Material));
+    } else {
+      values = materialParametersCotangent(m, values);
+    }
+  }
   std::vector<VecX> out;
   out.reserve(groups.size());
   for (SimParameter p : groups) {
@@ -183,25 +201,9 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
 }
 
 void Simulable::accumulateMaterialProducts(const VecX& lambda, MaterialProducts& sum) const {
-  const Impl& m = *impl_;
-  if (!m.soft)
+  if (!impl_->soft)
     throw Error("Simulable::accumulateMaterialProducts: the articulated skeleton has no material");
-  checkStateSized(lambda, numDofs(), "accumulateMaterialProducts", "lambda");
-  ParameterProducts<VecX> products;
-  products[SimParameter::Material] = VecX::Zero(m.soft->materialChain().numValues());
-  m.ensureContact();
-  const TermContext c = m.context();
-  const detail::ElasticityTerm& elastic = m.soft->elasticTerm();
-  for (const EnergyTerm* term : m.terms) {
-    if (term == &elastic)
-      elastic.accumulateMaterialProducts(lambda, sum.elements, sum.rest_outer);
-    else
-      term->addParameterProducts(c, lambda, products);
-  }
-  if (sum.values.size() == 0)
-    sum.values = products[SimParameter::Material];
-  else
-    sum.values += products[SimParameter::Material];
+  getGradientParameterVJPs(lambda, {SimParameter::Material}, false, &sum);
 }
 
 VecX Simulable::finishMaterialProducts(const MaterialProducts& sum) const {

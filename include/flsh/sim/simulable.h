@@ -71,6 +71,13 @@ struct SimulableStats {
 
 // FixedHessianBlocks, appendBlockTriplets: flsh/core/hessian_blocks.h.
 
+/// Simulable::accumulateMaterialProducts' sums over steps.
+struct SimulableMaterialProducts {
+  MatX elements;    ///< per elastic element: C_world (36, column-major), μ, γ cotangents
+  MatX rest_outer;  ///< ROM with the rest-stiffness split: Σ λ zᵀ (3H × 3H)
+  VecX values;      ///< the node masses' share, in coefficient values
+};
+
 class Simulable {
  public:
   /// `avatar` must be initialized (initVolumetricData()); `mocap` may be null (no tracking,
@@ -263,11 +270,7 @@ class Simulable {
   /// stiffness, the node masses' share — and finishMaterialProducts chains the sum once
   /// (parameterSize(Material) values): one pass over the tets and their material map per sweep
   /// instead of one per step. Error without soft tissue.
-  struct MaterialProducts {
-    MatX elements;    ///< per elastic element: C_world (36, column-major), μ, γ cotangents
-    MatX rest_outer;  ///< ROM with the rest-stiffness split: Σ λ zᵀ (3H × 3H)
-    VecX values;      ///< the node masses' share, in coefficient values
-  };
+  using MaterialProducts = SimulableMaterialProducts;
   void accumulateMaterialProducts(const VecX& lambda, MaterialProducts& sum) const;
   VecX finishMaterialProducts(const MaterialProducts& sum) const;
   /// ROM with the elastic cubature's rest-stiffness split: how many sample tets' excess is in
@@ -307,9 +310,12 @@ class Simulable {
   /// a(β)); the caller chains the RestJoints and BoneInertia products with
   /// SoftAvatar::restJointsShapeJacobian / boneInertiaShapeJacobian itself (e.g. once per
   /// rollout). Throws InputError on a wrong size of λ. Does not change the state.
+  /// `material_sum` (soft tissue, may be null): the Material products are accumulated into it
+  /// (accumulateMaterialProducts) and the Material entry comes back zero.
   std::vector<VecX> getGradientParameterVJPs(const VecX& lambda,
                                              const std::vector<SimParameter>& groups,
-                                             bool shape_surface_only = false) const;
+                                             bool shape_surface_only = false,
+                                             MaterialProducts* material_sum = nullptr) const;
   /// Jacobian–vector products Σ_p ∂g/∂p ṗ_p for several directions at once (each: one pointer
   /// per group, indexed by SimParameter; null or empty = no change), one numDofs vector per
   /// direction, without forming the matrices (the forward sensitivities' tangent sweep). A Shape

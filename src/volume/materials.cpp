@@ -74,13 +74,6 @@ std::string numberText(double x) {
 }
 
 /// Orthotropic compliance of the normal block (3 × 3, 1/Pa) from E (3) and ν12, ν13, ν23.
-Mat3 normalCompliance(const Vec3& E, const Vec3& nu) {
-  Mat3 S;
-  S << 1 / E[0], -nu[0] / E[0], -nu[1] / E[0],  //
-      -nu[0] / E[0], 1 / E[1], -nu[2] / E[1],   //
-      -nu[1] / E[0], -nu[2] / E[1], 1 / E[2];
-  return S;
-}
 
 VecX padded(const VecX& betas, int K, const char* who) {
   if (betas.size() > K)
@@ -135,6 +128,14 @@ int MaterialModel::regionOfBone(int bone) {
     throw InputError("MaterialModel::regionOfBone: bone " + std::to_string(bone) +
                      ", expected ≥ 0");
   return bone < 24 ? kSmplRegion[bone] : kTorso;
+}
+
+Mat3 normalCompliance(const Vec3& E, const Vec3& nu) {
+  Mat3 S;
+  S << 1 / E[0], -nu[0] / E[0], -nu[1] / E[0],  //
+      -nu[0] / E[0], 1 / E[1], -nu[2] / E[1],   //
+      -nu[1] / E[0], -nu[2] / E[1], 1 / E[2];
+  return S;
 }
 
 MatX MaterialModel::regionWeights(const MatX& bone_weights) {

@@ -13,14 +13,6 @@ namespace flsh {
 
 namespace {
 
-Mat3 normalCompliance(const Vec3& E, const Vec3& nu) {
-  Mat3 S;
-  S << 1 / E[0], -nu[0] / E[0], -nu[1] / E[0],  //
-      -nu[0] / E[0], 1 / E[1], -nu[2] / E[1],   //
-      -nu[1] / E[0], -nu[2] / E[1], 1 / E[2];
-  return S;
-}
-
 /// T (6 × 6) with ε̂ = T ε: the Voigt strain in the frame of a world Voigt strain (engineering
 /// shear), so that C_world = Tᵀ C T (stiffnessInWorldAxes).
 Mat6 frameStrainMap(const Mat3& frame) {

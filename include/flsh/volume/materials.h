@@ -146,6 +146,11 @@ class MaterialModel {
   std::vector<Coefficient> coefficients_;
 };
 
+/// The normal block of an orthotropic compliance (docs/materials.md): [[1/E1, −ν12/E1, −ν13/E1],
+/// [−ν12/E1, 1/E2, −ν23/E2], [−ν13/E1, −ν23/E2, 1/E3]] for young = (E1, E2, E3), poisson =
+/// (ν12, ν13, ν23). No checks.
+Mat3 normalCompliance(const Vec3& young, const Vec3& poisson);
+
 /// Materials of every tet of the body at one β.
 struct TetMaterials {
   VecX density;   ///< #T, kg/m³

@@ -1,9 +1,10 @@
 // The soft skeletons' adjoint (issue 25): the gradient of a whole-rollout loss with respect to
-// every per-step pose and root target, the stiffnesses, the ground's offset and the initial state
-// and velocity, by the reverse pass, against the forward pass it follows and the central
-// differences it replaces. The full-size synthetic body (6890 vertices) tracking the built-in walk
-// on a ground plane at h = 1/30 s: the FEM at the default resolution (30 steps by default) or the
-// ROM with the default basis and both cubatures (100 steps).
+// every per-step pose and root target, the stiffnesses, the ground's offset, the initial state
+// and velocity and the material vector (40 (1 + K) coefficients), by the reverse pass, against the
+// forward pass it follows and the central differences it replaces. The full-size synthetic body
+// (6890 vertices) tracking the built-in walk on a ground plane at h = 1/30 s: the FEM at the
+// default resolution (30 steps by default) or the ROM with the default basis and both cubatures
+// (100 steps).
 //
 // Loss: L = Σ_t ½‖J_t − Ĵ_t‖² + Σ_t ½‖V_t − V̂_t‖² over the 24 joints and the simulated surface of
 // every step (targets: the base rollout's moved by a fixed random offset of up to 2 cm).
@@ -18,7 +19,9 @@
 //  - the process's peak resident memory after the runs, and the tape's share of it per step;
 //  - central differences over the same parameters: 2 · #parameters forward passes without tape,
 //    extrapolated from the timed one (not run).
-// One directional derivative is compared with a central difference of two re-run rollouts.
+// One directional derivative is compared with a central difference of two re-run rollouts, and
+// one along the material vector (every coefficient of the material file) with rollouts of
+// SoftAvatar::withMaterial avatars.
 //
 // Usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] [--tolerance T]
 //                               [--storage factors|snapshots]
@@ -217,7 +220,8 @@ int main(int argc, char** argv) {
       for (int t = 1; t <= steps; ++t)
         newton_iterations += rollout.tape().stepInfo(t).newton_iterations;
     }
-    const long parameters = long(steps) * 75 + 4 + 3 + 2L * n;
+    const long material_size = makeSimulable(s)->parameterSize(SimParameter::Material);
+    const long parameters = long(steps) * 75 + 4 + 3 + 2L * n + material_size;
     const double f_plain = median(plain), f_tape = median(forward), b = median(backward);
     std::printf("loss %.6g; Newton iterations per step %.2f\n", L,
                 double(newton_iterations) / steps);
@@ -268,6 +272,28 @@ int main(int argc, char** argv) {
         "check: directional derivative %.10g, central difference %.10g (relative "
         "difference %.2g)\n",
         analytic, fd, std::abs(analytic - fd) / std::abs(fd));
+
+    // The material vector along a random direction (every coefficient's log-value and
+    // log-slopes): rollouts of SoftAvatar::withMaterial avatars.
+    RolloutVariables dm;
+    dm.material = 0.05 * VecX::Random(material_size);
+    const double material_analytic = dot(grad, dm);
+    const MaterialModel base_model = s.avatar->volumetricData().material_model;
+    auto along_material = [&](double e) {
+      MaterialModel m = base_model;
+      m.setParameters(base_model.parameters() + e * dm.material);
+      auto sim = std::make_shared<Simulable>(s.avatar->withMaterial(m), s.walk, s.options);
+      sim->setColliders({s.ground});
+      Rollout r(sim, rollout_options);
+      r.run(steps);
+      return loss.value(r);
+    };
+    const double material_fd = (along_material(eps) - along_material(-eps)) / (2 * eps);
+    std::printf(
+        "check (material, %ld coefficients): directional derivative %.10g, central difference "
+        "%.10g (relative difference %.2g)\n",
+        material_size, material_analytic, material_fd,
+        std::abs(material_analytic - material_fd) / std::abs(material_fd));
   } catch (const std::exception& e) {
     std::fprintf(stderr, "soft_adjoint_benchmark: %s\n", e.what());
     return 1;

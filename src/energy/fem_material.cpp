@@ -153,7 +153,7 @@ Mat6 orthotropicStiffness(const Vec3& young, const Vec3& poisson, const Vec3& sh
   return C;
 }
 
-Mat6 stiffnessInWorldAxes(const Mat6& C, const Mat3& frame) {
+Mat6 frameStrainMap(const Mat3& frame) {
   // T (6 × 6): column k is the frame strain ε̂ of the unit world strain e_k.
   Mat6 T;
   for (int k = 0; k < 6; ++k) {
@@ -168,6 +168,11 @@ Mat6 stiffnessInWorldAxes(const Mat6& C, const Mat3& frame) {
     T.col(k) << E_frame(0, 0), E_frame(1, 1), E_frame(2, 2), 2 * E_frame(1, 2), 2 * E_frame(0, 2),
         2 * E_frame(0, 1);
   }
+  return T;
+}
+
+Mat6 stiffnessInWorldAxes(const Mat6& C, const Mat3& frame) {
+  const Mat6 T = frameStrainMap(frame);
   const Mat6 C_world = T.transpose() * C * T;
   return 0.5 * (C_world + C_world.transpose());
 }

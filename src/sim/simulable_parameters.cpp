@@ -114,11 +114,13 @@ VecX materialParametersCotangent(const Simulable::Impl& m, const VecX& values_ba
   return m.soft->materialChain().parametersCotangent(values_bar);
 }
 
+// The chain's matrix (values × parameters) once, then one product.
 MatX materialParametersJacobian(const Simulable::Impl& m, const MatX& values_jacobian) {
-  MatX out(values_jacobian.rows(), m.avatar->volumetricData().material_model.numParameters());
-  for (Eigen::Index r = 0; r < values_jacobian.rows(); ++r)
-    out.row(r) = materialParametersCotangent(m, values_jacobian.row(r).transpose()).transpose();
-  return out;
+  const Eigen::Index n = values_jacobian.cols();
+  MatX chain(n, m.avatar->volumetricData().material_model.numParameters());
+  for (Eigen::Index i = 0; i < n; ++i)
+    chain.row(i) = materialParametersCotangent(m, VecX::Unit(n, i)).transpose();
+  return values_jacobian * chain;
 }
 
 }  // namespace

@@ -6,27 +6,13 @@
 #include <string>
 
 #include "flsh/core/error.h"
+#include "flsh/energy/fem_material.h"
 #include "flsh/volume/volumetric_data.h"
 #include "volume/surface_query.h"
 
 namespace flsh {
 
 namespace {
-
-/// T (6 × 6) with ε̂ = T ε: the Voigt strain in the frame of a world Voigt strain (engineering
-/// shear), so that C_world = Tᵀ C T (stiffnessInWorldAxes).
-Mat6 frameStrainMap(const Mat3& frame) {
-  Mat6 T;
-  for (int k = 0; k < 6; ++k) {
-    Vec6 e = Vec6::Zero();
-    e[k] = k < 3 ? 1.0 : 0.5;
-    Mat3 E;
-    E << e[0], e[5], e[4], e[5], e[1], e[3], e[4], e[3], e[2];
-    const Mat3 F = frame.transpose() * E * frame;
-    T.col(k) << F(0, 0), F(1, 1), F(2, 2), 2 * F(1, 2), 2 * F(0, 2), 2 * F(0, 1);
-  }
-  return T;
-}
 
 /// Indices into MaterialModel::coefficientValues, looked up once.
 struct CoefficientIndices {

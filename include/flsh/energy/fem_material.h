@@ -60,9 +60,12 @@ constexpr double kInversionStiffness = 100.0;
 /// definite (message names the arguments and their values).
 Mat6 orthotropicStiffness(const Vec3& young, const Vec3& poisson, const Vec3& shear);
 
-/// The same elastic law expressed on world-axis strains: T(A)ᵀ C T(A), where T(A) (6 × 6) maps
-/// the Voigt strain ε of E to the Voigt strain ε̂ of Aᵀ E A. Symmetric positive definite when C
-/// is.
+/// T(A) (6 × 6): maps the Voigt strain ε of E (world axes) to the Voigt strain ε̂ of Aᵀ E A
+/// (the frame's axes), both with engineering shear.
+Mat6 frameStrainMap(const Mat3& frame);
+
+/// The same elastic law expressed on world-axis strains: T(A)ᵀ C T(A) (frameStrainMap).
+/// Symmetric positive definite when C is.
 Mat6 stiffnessInWorldAxes(const Mat6& C, const Mat3& frame);
 
 /// Material of one element (model data, immutable during a simulation).

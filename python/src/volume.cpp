@@ -245,85 +245,88 @@ void bind_volume(py::module_& m) {
       "The immutable data of one body shape for simulation. Configure, then call "
       "init_volumetric_data(); the skeleton model (soft tissue off) is the default.");
   avatar
-      .def(py::init([](std::shared_ptr<BodyModel> body, const py::object& betas, double density,
-                       double voxel_size, double resolution, const std::string& material_file,
-                       const py::object& cache_dir, bool use_cache, int handles,
-                       int elastic_cubature_points, int inertial_cubature_points,
-                       int cubature_training_samples, double cubature_training_amplitude,
-                       std::uint64_t cubature_seed, double basis_drop_below,
-                       bool surface_partition_of_unity) {
-             if (!body) throw py::value_error("body: expected a BodyModel, got None");
-             const VecX b = betas.is_none() ? VecX(VecX::Zero(body->numBetas()))
-                                            : to_vector(betas, "betas", -1, "(K,)");
-             SoftAvatarSettings settings;
-             settings.density = density;
-             settings.voxel_size = voxel_size;
-             settings.volumetric.tet_mesh.resolution = resolution;
-             settings.volumetric.material_file = material_file;
-             if (!cache_dir.is_none())
-               settings.volumetric.cache_dir =
-                   py::module_::import("os").attr("fspath")(cache_dir).cast<std::string>();
-             settings.volumetric.use_cache = use_cache;
-             ReducedSettings& r = settings.reduced;
-             r.num_handles = checked_count(handles, "handles", 1, "point handles of the ROM");
-             r.elastic_cubature_points =
-                 checked_count(elastic_cubature_points, "elastic_cubature_points", 1,
-                               "sample tets; enable_elastic_cubature(False) switches it off");
-             r.inertial_cubature_points =
-                 checked_count(inertial_cubature_points, "inertial_cubature_points", 1,
-                               "sample tets; enable_inertial_cubature(False) switches it off");
-             r.training_samples = checked_count(cubature_training_samples,
-                                                "cubature_training_samples", 1,
-                                                "random training samples per cubature");
-             if (!(cubature_training_amplitude > 0) || !std::isfinite(cubature_training_amplitude))
-               throw py::value_error(
-                   "cubature_training_amplitude: expected a finite value > 0 (m), got " +
-                   std::to_string(cubature_training_amplitude));
-             r.training_amplitude = cubature_training_amplitude;
-             r.seed = cubature_seed;
-             if (!(basis_drop_below >= 0.0 && basis_drop_below <= 0.01))
-               throw py::value_error("basis_drop_below: expected a value in [0, 0.01], got " +
-                                     std::to_string(basis_drop_below));
-             r.basis_drop_below = basis_drop_below;
-             r.surface_partition_of_unity = surface_partition_of_unity;
-             return std::make_shared<SoftAvatar>(std::move(body), b, settings);
-           }),
-           py::arg("body"), py::arg("betas") = py::none(), py::kw_only(),
-           py::arg("density") = defaults.density, py::arg("voxel_size") = defaults.voxel_size,
-           py::arg("resolution") = 1.0, py::arg("material_file") = std::string(),
-           py::arg("cache_dir") = py::none(), py::arg("use_cache") = true,
-           py::arg("handles") = rd.num_handles,
-           py::arg("elastic_cubature_points") = rd.elastic_cubature_points,
-           py::arg("inertial_cubature_points") = rd.inertial_cubature_points,
-           py::arg("cubature_training_samples") = rd.training_samples,
-           py::arg("cubature_training_amplitude") = rd.training_amplitude,
-           py::arg("cubature_seed") = rd.seed, py::arg("basis_drop_below") = rd.basis_drop_below,
-           py::arg("surface_partition_of_unity") = rd.surface_partition_of_unity,
-           "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³ and voxel_size "
-           "m (the skeleton's bone inertias). Soft tissue: resolution (interior node density of the "
-           "tet mesh, 1 ≈ 10 000 nodes for SMPL), material_file (JSON, '' = built-in defaults), "
-           "cache_dir (None = $FLSH_CACHE_DIR or ~/.cache/flsh), use_cache. Reduced model (ROM, "
-           "enable_reduced_model(); docs/rom.md): handles (point handles on the surface, ≥ 1), "
-           "elastic_cubature_points / inertial_cubature_points (sample tets of each cubature when "
-           "enabled, ≥ 1), cubature_training_samples (random training samples per cubature), "
-           "cubature_training_amplitude (largest handle displacement of a training sample, m), "
-           "cubature_seed, basis_drop_below (basis weights below it are dropped, in [0, 0.01]), "
-           "surface_partition_of_unity (the basis rescaled to sum to 1 on the soft surface: about "
-           "half the error against the FEM, slower; docs/rom.md).")
-      .def("init_volumetric_data",
-           [](SoftAvatar& a) {
-             py::gil_scoped_release release;
-             a.initVolumetricData();
-           },
-           "Builds what the configured model needs (every model: rest shape, joints, bone "
-           "inertias, capsules; soft tissue: the volumetric body; the reduced model also its "
-           "handles, basis and the enabled cubatures; each level from the cache when there). "
-           "Idempotent; ValueError for the reduced model without soft tissue or for more handles "
-           "than soft-tissue surface nodes.")
-      .def_property_readonly("volumetric_data",
-                             [](const SoftAvatar& a) -> const VolumetricData& { return a.volumetricData(); },
-                             py::return_value_policy::reference_internal,
-                             "VolumetricData of a soft avatar (RuntimeError for the skeleton model).")
+      .def(
+          py::init([](std::shared_ptr<BodyModel> body, const py::object& betas, double density,
+                      double voxel_size, double resolution, const std::string& material_file,
+                      const py::object& cache_dir, bool use_cache, int handles,
+                      int elastic_cubature_points, int inertial_cubature_points,
+                      int cubature_training_samples, double cubature_training_amplitude,
+                      std::uint64_t cubature_seed, double basis_drop_below,
+                      bool surface_partition_of_unity) {
+            if (!body) throw py::value_error("body: expected a BodyModel, got None");
+            const VecX b = betas.is_none() ? VecX(VecX::Zero(body->numBetas()))
+                                           : to_vector(betas, "betas", -1, "(K,)");
+            SoftAvatarSettings settings;
+            settings.density = density;
+            settings.voxel_size = voxel_size;
+            settings.volumetric.tet_mesh.resolution = resolution;
+            settings.volumetric.material_file = material_file;
+            if (!cache_dir.is_none())
+              settings.volumetric.cache_dir =
+                  py::module_::import("os").attr("fspath")(cache_dir).cast<std::string>();
+            settings.volumetric.use_cache = use_cache;
+            ReducedSettings& r = settings.reduced;
+            r.num_handles = checked_count(handles, "handles", 1, "point handles of the ROM");
+            r.elastic_cubature_points =
+                checked_count(elastic_cubature_points, "elastic_cubature_points", 1,
+                              "sample tets; enable_elastic_cubature(False) switches it off");
+            r.inertial_cubature_points =
+                checked_count(inertial_cubature_points, "inertial_cubature_points", 1,
+                              "sample tets; enable_inertial_cubature(False) switches it off");
+            r.training_samples =
+                checked_count(cubature_training_samples, "cubature_training_samples", 1,
+                              "random training samples per cubature");
+            if (!(cubature_training_amplitude > 0) || !std::isfinite(cubature_training_amplitude))
+              throw py::value_error(
+                  "cubature_training_amplitude: expected a finite value > 0 (m), got " +
+                  std::to_string(cubature_training_amplitude));
+            r.training_amplitude = cubature_training_amplitude;
+            r.seed = cubature_seed;
+            if (!(basis_drop_below >= 0.0 && basis_drop_below <= 0.01))
+              throw py::value_error("basis_drop_below: expected a value in [0, 0.01], got " +
+                                    std::to_string(basis_drop_below));
+            r.basis_drop_below = basis_drop_below;
+            r.surface_partition_of_unity = surface_partition_of_unity;
+            return std::make_shared<SoftAvatar>(std::move(body), b, settings);
+          }),
+          py::arg("body"), py::arg("betas") = py::none(), py::kw_only(),
+          py::arg("density") = defaults.density, py::arg("voxel_size") = defaults.voxel_size,
+          py::arg("resolution") = 1.0, py::arg("material_file") = std::string(),
+          py::arg("cache_dir") = py::none(), py::arg("use_cache") = true,
+          py::arg("handles") = rd.num_handles,
+          py::arg("elastic_cubature_points") = rd.elastic_cubature_points,
+          py::arg("inertial_cubature_points") = rd.inertial_cubature_points,
+          py::arg("cubature_training_samples") = rd.training_samples,
+          py::arg("cubature_training_amplitude") = rd.training_amplitude,
+          py::arg("cubature_seed") = rd.seed, py::arg("basis_drop_below") = rd.basis_drop_below,
+          py::arg("surface_partition_of_unity") = rd.surface_partition_of_unity,
+          "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³ and voxel_size "
+          "m (the skeleton's bone inertias). Soft tissue: resolution (interior node density of the "
+          "tet mesh, 1 ≈ 10 000 nodes for SMPL), material_file (JSON, '' = built-in defaults), "
+          "cache_dir (None = $FLSH_CACHE_DIR or ~/.cache/flsh), use_cache. Reduced model (ROM, "
+          "enable_reduced_model(); docs/rom.md): handles (point handles on the surface, ≥ 1), "
+          "elastic_cubature_points / inertial_cubature_points (sample tets of each cubature when "
+          "enabled, ≥ 1), cubature_training_samples (random training samples per cubature), "
+          "cubature_training_amplitude (largest handle displacement of a training sample, m), "
+          "cubature_seed, basis_drop_below (basis weights below it are dropped, in [0, 0.01]), "
+          "surface_partition_of_unity (the basis rescaled to sum to 1 on the soft surface: about "
+          "half the error against the FEM, slower; docs/rom.md).")
+      .def(
+          "init_volumetric_data",
+          [](SoftAvatar& a) {
+            py::gil_scoped_release release;
+            a.initVolumetricData();
+          },
+          "Builds what the configured model needs (every model: rest shape, joints, bone "
+          "inertias, capsules; soft tissue: the volumetric body; the reduced model also its "
+          "handles, basis and the enabled cubatures; each level from the cache when there). "
+          "Idempotent; ValueError for the reduced model without soft tissue or for more handles "
+          "than soft-tissue surface nodes.")
+      .def_property_readonly(
+          "volumetric_data",
+          [](const SoftAvatar& a) -> const VolumetricData& { return a.volumetricData(); },
+          py::return_value_policy::reference_internal,
+          "VolumetricData of a soft avatar (RuntimeError for the skeleton model).")
       .def_property_readonly("has_volumetric_data", &SoftAvatar::hasVolumetricData)
       .def_property_readonly(
           "material_parameters",
@@ -352,56 +355,56 @@ void bind_volume(py::module_& m) {
           "the ROM's basis, cubatures and rest-split floors), every tet's materials "
           "re-evaluated. Cheap next to a build. ValueError on a wrong size or a material that "
           "is not physical.")
-      .def_property_readonly("reduced_data",
-                             [](const SoftAvatar& a) -> const ReducedData& {
-                               return a.reducedData();
-                             },
-                             py::return_value_policy::reference_internal,
-                             "ReducedData of a ROM avatar (RuntimeError for the other models).")
+      .def_property_readonly(
+          "reduced_data", [](const SoftAvatar& a) -> const ReducedData& { return a.reducedData(); },
+          py::return_value_policy::reference_internal,
+          "ReducedData of a ROM avatar (RuntimeError for the other models).")
       .def_property_readonly("has_reduced_data", &SoftAvatar::hasReducedData)
-      .def_property_readonly("reduced_build_report",
-                             [](const SoftAvatar& a) {
-                               const ReducedBuildReport& r = a.reducedBuildReport();
-                               py::dict d;
-                               d["from_cache"] = r.from_cache;
-                               d["warnings"] = r.warnings;
-                               d["seconds_handles"] = r.seconds_handles;
-                               d["seconds_basis"] = r.seconds_basis;
-                               d["seconds_training"] = r.seconds_training;
-                               d["seconds_cubature"] = r.seconds_cubature;
-                               d["seconds_cache_load"] = r.seconds_cache_load;
-                               d["seconds_cache_store"] = r.seconds_cache_store;
-                               d["seconds_total"] = r.seconds_total;
-                               return d;
-                             },
-                             "dict: cache hit, warnings and seconds per stage of the reduced "
-                             "build (all zero without the reduced model).")
-      .def_property_readonly("build_report",
-                             [](const SoftAvatar& a) {
-                               const VolumetricBuildReport& r = a.volumetricBuildReport();
-                               py::dict d;
-                               d["template_from_cache"] = r.template_from_cache;
-                               d["data_from_cache"] = r.data_from_cache;
-                               d["warnings"] = r.warnings;
-                               d["seconds_skeleton"] = a.skeletonSeconds();
-                               d["seconds_meshing"] = r.seconds_meshing;
-                               d["seconds_harmonic"] = r.seconds_harmonic;
-                               d["seconds_bone_nodes"] = r.seconds_bone_nodes;
-                               d["seconds_materials"] = r.seconds_materials;
-                               d["seconds_cache_load"] = r.seconds_cache_load;
-                               d["seconds_cache_store"] = r.seconds_cache_store;
-                               d["seconds_volumetric_total"] = r.seconds_total;
-                               return d;
-                             },
-                             "dict: cache hits, warnings and seconds per stage of the build.")
+      .def_property_readonly(
+          "reduced_build_report",
+          [](const SoftAvatar& a) {
+            const ReducedBuildReport& r = a.reducedBuildReport();
+            py::dict d;
+            d["from_cache"] = r.from_cache;
+            d["warnings"] = r.warnings;
+            d["seconds_handles"] = r.seconds_handles;
+            d["seconds_basis"] = r.seconds_basis;
+            d["seconds_training"] = r.seconds_training;
+            d["seconds_cubature"] = r.seconds_cubature;
+            d["seconds_cache_load"] = r.seconds_cache_load;
+            d["seconds_cache_store"] = r.seconds_cache_store;
+            d["seconds_total"] = r.seconds_total;
+            return d;
+          },
+          "dict: cache hit, warnings and seconds per stage of the reduced "
+          "build (all zero without the reduced model).")
+      .def_property_readonly(
+          "build_report",
+          [](const SoftAvatar& a) {
+            const VolumetricBuildReport& r = a.volumetricBuildReport();
+            py::dict d;
+            d["template_from_cache"] = r.template_from_cache;
+            d["data_from_cache"] = r.data_from_cache;
+            d["warnings"] = r.warnings;
+            d["seconds_skeleton"] = a.skeletonSeconds();
+            d["seconds_meshing"] = r.seconds_meshing;
+            d["seconds_harmonic"] = r.seconds_harmonic;
+            d["seconds_bone_nodes"] = r.seconds_bone_nodes;
+            d["seconds_materials"] = r.seconds_materials;
+            d["seconds_cache_load"] = r.seconds_cache_load;
+            d["seconds_cache_store"] = r.seconds_cache_store;
+            d["seconds_volumetric_total"] = r.seconds_total;
+            return d;
+          },
+          "dict: cache hits, warnings and seconds per stage of the build.")
       .def_property_readonly("initialized", &SoftAvatar::initialized)
       .def_property_readonly("soft_tissue_enabled", &SoftAvatar::softTissueEnabled)
       .def_property_readonly("reduced_model_enabled", &SoftAvatar::reducedModelEnabled)
       .def_property_readonly("elastic_cubature_enabled", &SoftAvatar::elasticCubatureEnabled)
       .def_property_readonly("inertial_cubature_enabled", &SoftAvatar::inertialCubatureEnabled)
-      .def_property_readonly("handles",
-                             [](const SoftAvatar& a) { return a.settings().reduced.num_handles; },
-                             "point handles the reduced model asks for (setting)")
+      .def_property_readonly(
+          "handles", [](const SoftAvatar& a) { return a.settings().reduced.num_handles; },
+          "point handles the reduced model asks for (setting)")
       .def_property_readonly(
           "elastic_cubature_points",
           [](const SoftAvatar& a) { return a.settings().reduced.elastic_cubature_points; },
@@ -410,51 +413,49 @@ void bind_volume(py::module_& m) {
           "inertial_cubature_points",
           [](const SoftAvatar& a) { return a.settings().reduced.inertial_cubature_points; },
           "sample tets of the inertial cubature when enabled (setting)")
-      .def_property_readonly("body",
-                             [](const SoftAvatar& a) {
-                               return std::const_pointer_cast<BodyModel>(a.bodyPtr());
-                             },
-                             "The BodyModel the avatar was built for.")
-      .def_property_readonly("betas", [](const SoftAvatar& a) { return to_numpy(a.betas()); },
-                             "(K,) shape coefficients (zero padded).")
-      .def_property_readonly("density", [](const SoftAvatar& a) { return a.settings().density; },
-                             "kg/m³")
-      .def_property_readonly("voxel_size",
-                             [](const SoftAvatar& a) { return a.settings().voxel_size; }, "m")
-      .def_property_readonly("rest_vertices",
-                             [](const SoftAvatar& a) {
-                               return to_numpy(initialized(a, "rest_vertices").restVertices());
-                             },
-                             "(V, 3) shaped T-pose vertices, m.")
-      .def_property_readonly("rest_joints",
-                             [](const SoftAvatar& a) {
-                               return to_numpy(initialized(a, "rest_joints").restJoints());
-                             },
-                             "(24, 3) joint centres J(β) of the shaped T-pose, m.")
-      .def_property_readonly("bone_inertia",
-                             [](const SoftAvatar& a) {
-                               return initialized(a, "bone_inertia").boneInertia();
-                             },
-                             "list of 24 BoneInertia (mass kg, first_moment kg·m, "
-                             "second_moment kg·m²).")
-      .def_property_readonly("bone_capsules",
-                             [](const SoftAvatar& a) {
-                               return initialized(a, "bone_capsules").boneCapsules();
-                             },
-                             "list of 24 BoneCapsule, one per bone (rest pose).")
-      .def_property_readonly("vertex_areas",
-                             [](const SoftAvatar& a) {
-                               return to_numpy(initialized(a, "vertex_areas").vertexAreas());
-                             },
-                             "(V,) a third of the incident faces' areas, m².")
-      .def_property_readonly("total_mass",
-                             [](const SoftAvatar& a) {
-                               return initialized(a, "total_mass").totalMass();
-                             },
-                             "Σ bone masses, kg.")
-      .def_property_readonly("volume",
-                             [](const SoftAvatar& a) { return initialized(a, "volume").volume(); },
-                             "Enclosed volume of the rest surface, m³.")
+      .def_property_readonly(
+          "body",
+          [](const SoftAvatar& a) { return std::const_pointer_cast<BodyModel>(a.bodyPtr()); },
+          "The BodyModel the avatar was built for.")
+      .def_property_readonly(
+          "betas", [](const SoftAvatar& a) { return to_numpy(a.betas()); },
+          "(K,) shape coefficients (zero padded).")
+      .def_property_readonly(
+          "density", [](const SoftAvatar& a) { return a.settings().density; }, "kg/m³")
+      .def_property_readonly(
+          "voxel_size", [](const SoftAvatar& a) { return a.settings().voxel_size; }, "m")
+      .def_property_readonly(
+          "rest_vertices",
+          [](const SoftAvatar& a) {
+            return to_numpy(initialized(a, "rest_vertices").restVertices());
+          },
+          "(V, 3) shaped T-pose vertices, m.")
+      .def_property_readonly(
+          "rest_joints",
+          [](const SoftAvatar& a) { return to_numpy(initialized(a, "rest_joints").restJoints()); },
+          "(24, 3) joint centres J(β) of the shaped T-pose, m.")
+      .def_property_readonly(
+          "bone_inertia",
+          [](const SoftAvatar& a) { return initialized(a, "bone_inertia").boneInertia(); },
+          "list of 24 BoneInertia (mass kg, first_moment kg·m, "
+          "second_moment kg·m²).")
+      .def_property_readonly(
+          "bone_capsules",
+          [](const SoftAvatar& a) { return initialized(a, "bone_capsules").boneCapsules(); },
+          "list of 24 BoneCapsule, one per bone (rest pose).")
+      .def_property_readonly(
+          "vertex_areas",
+          [](const SoftAvatar& a) {
+            return to_numpy(initialized(a, "vertex_areas").vertexAreas());
+          },
+          "(V,) a third of the incident faces' areas, m².")
+      .def_property_readonly(
+          "total_mass",
+          [](const SoftAvatar& a) { return initialized(a, "total_mass").totalMass(); },
+          "Σ bone masses, kg.")
+      .def_property_readonly(
+          "volume", [](const SoftAvatar& a) { return initialized(a, "volume").volume(); },
+          "Enclosed volume of the rest surface, m³.")
       .def("__repr__", [](const SoftAvatar& a) {
         return "SoftAvatar(vertices=" + std::to_string(a.body().numVertices()) +
                ", initialized=" + (a.initialized() ? "True" : "False") +

@@ -238,8 +238,8 @@ int ReducedElasticityTerm::boundedSamples() const {
     const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[size_t(e)], 3 * n,
                                    3 * n);
     bool bounded = false;
-    restSplitExcess(psi, Eigen::Map<const VecX>(Z.data(), 3 * n), K, elements_.weights[e],
-                    nullptr, nullptr, false, &bounded, rest_floors_[e]);
+    restSplitExcess(psi, Eigen::Map<const VecX>(Z.data(), 3 * n), K, elements_.weights[e], nullptr,
+                    nullptr, false, &bounded, rest_floors_[e]);
     count += bounded ? 1 : 0;
   }
   return count;
@@ -302,8 +302,8 @@ void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values
           B.col(3 * s + c) = voigtLinearStrain(unit);
         }
         for (int r = 0; r < n; ++r)
-          We.block<3, 3>(3 * s, 3 * r) = W.block<3, 3>(3 * all.handles[size_t(begin + s)],
-                                                       3 * all.handles[size_t(begin + r)]);
+          We.block<3, 3>(3 * s, 3 * r) =
+              W.block<3, 3>(3 * all.handles[size_t(begin + s)], 3 * all.handles[size_t(begin + r)]);
       }
       TetMaterialCotangent bar;
       bar.C_world = all.volume[size_t(t)] * B * We * B.transpose();

@@ -99,7 +99,8 @@ void expectMaterialDerivatives(Simulable& sim, SoftModel model) {
   EXPECT_LT((sim.finishMaterialProducts(sum) - vjp).norm(), 1e-10 * (1.0 + vjp.norm()));
   const VecX lambda2 = test::randomVector(n, 1.0, 43);
   sim.accumulateMaterialProducts(lambda2, sum);
-  const VecX both = sim.getGradientParameterVJPs(lambda + lambda2, {SimParameter::Material}).front();
+  const VecX both =
+      sim.getGradientParameterVJPs(lambda + lambda2, {SimParameter::Material}).front();
   EXPECT_LT((sim.finishMaterialProducts(sum) - both).norm(), 1e-10 * (1.0 + both.norm()));
   const VecX direction = test::randomVector(int(p0.size()), 1.0, 42);
   ParameterDirection along{};

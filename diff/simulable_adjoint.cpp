@@ -17,12 +17,12 @@ struct SimulableSnapshot final : StepSnapshot {
   SimulableStep step;
 };
 
-// The adjoint's groups are the registry's, in SimParameter order; a soft skeleton's Shape group
-// is empty (β's soft-tissue derivatives — rest nodes, masses, materials — are not written yet).
+// The adjoint's groups are the registry's, in SimParameter order; the ROM's Shape group is
+// empty (β through its reduced elastic term is not written yet).
 std::vector<SimParameter> differentiatedGroups(const Simulable& s) {
   std::vector<SimParameter> groups;
   for (const SimParameterInfo& info : simParameters())
-    if (!(s.hasSoftTissue() && info.id == SimParameter::Shape)) groups.push_back(info.id);
+    if (!(s.hasReducedModel() && info.id == SimParameter::Shape)) groups.push_back(info.id);
   return groups;
 }
 
@@ -61,7 +61,7 @@ std::vector<ParameterGroupInfo> SimulableAdjointModel::parameterGroups() const {
   std::vector<ParameterGroupInfo> groups;
   for (const SimParameterInfo& info : simParameters())
     groups.push_back({info.name,
-                      info.id == SimParameter::Shape && simulable_->hasSoftTissue()
+                      info.id == SimParameter::Shape && simulable_->hasReducedModel()
                           ? 0
                           : simulable_->parameterSize(info.id),
                       info.per_step});

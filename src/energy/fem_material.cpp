@@ -344,6 +344,29 @@ Mat3 tetDeformationGradient(const TetElementRest& rest, const Mat34& u) {
   return Mat3::Identity() + Du * rest.Dm_inv;
 }
 
+void addTetGradientRestCotangent(const TetElementRest& rest, const FemMaterialPoint& material,
+                                 const Mat34& u, const Mat34& lambda, double scale,
+                                 Mat34& X_bar) {
+  if (!u.allFinite())
+    throw InputError("addTetGradientRestCotangent: nodal displacements u have a non-finite entry");
+  const Mat3& W = rest.Dm_inv;
+  const Mat3 F = tetDeformationGradient(rest, u);
+  Mat3 Dl;
+  Dl << lambda.col(1) - lambda.col(0), lambda.col(2) - lambda.col(0),
+      lambda.col(3) - lambda.col(0);
+  const Mat3 G = Dl * W;
+  Mat3 P;
+  Mat9 dPdF;
+  fungEnergyDensity(F, material, &P, &dPdF, false);
+  const Mat3 AG = Eigen::Map<const Mat3>(Vec9(dPdF * Eigen::Map<const Vec9>(G.data())).data());
+  const Mat3 dDm = (scale * rest.volume) *
+                   (P.cwiseProduct(G).sum() * Mat3::Identity() -
+                    (F - Mat3::Identity()).transpose() * AG - G.transpose() * P) *
+                   W.transpose();
+  X_bar.rightCols<3>() += dDm;
+  X_bar.col(0) -= dDm.rowwise().sum();
+}
+
 namespace {
 
 /// volume · Ψ(F) and its derivatives with respect to n "nodes" whose values enter F linearly,

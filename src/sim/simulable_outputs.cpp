@@ -80,7 +80,7 @@ SpMat Simulable::getNodesStateJacobian() const {
 // cotangent of P_i is M_iᵀ ∂L/∂x_i, chained to q_n's rotations by the kinematics.
 // The rest joint J_b moves x_i by −w_ib R_b.
 void Simulable::getNodesCotangents(const MatX3& dL_dnodes, VecX* state, VecX* previous_state,
-                                   VecX* rest_joints) const {
+                                   VecX* rest_joints, VecX* rest_nodes_shape) const {
   const Impl& m = *impl_;
   const int V = m.kinematics->numSurface();
   if (dL_dnodes.rows() != V)
@@ -106,14 +106,14 @@ void Simulable::getNodesCotangents(const MatX3& dL_dnodes, VecX* state, VecX* pr
       }
     }
   }
-  if (!previous_state) return;
-  VecX& a = *previous_state;
-  a = VecX::Zero(m.dofs());
-  if (!m.soft) return;
+  if (rest_nodes_shape) *rest_nodes_shape = VecX::Zero(parameterSize(SimParameter::Shape));
+  if (previous_state) *previous_state = VecX::Zero(m.dofs());
+  if (!m.soft || !(previous_state || rest_nodes_shape)) return;
   const detail::SoftKinematics& kin = m.soft->kinematics();
-  MatX3 offsets(V, 3);  // cotangent of the surface nodes' held offsets P_i
+  MatX3 offsets(V, 3);  // cotangent of the surface nodes' Y_i (the held offsets P_i, X̄_i)
   for (int i = 0; i < V; ++i) offsets.row(i) = dL_dnodes.row(i) * kin.M(i);
-  m.soft->addPoseBlendCotangent(m.q_n.R, offsets, a);
+  if (previous_state) m.soft->addPoseBlendCotangent(m.q_n.R, offsets, *previous_state);
+  if (rest_nodes_shape) m.soft->addRestNodesCotangent(offsets, *rest_nodes_shape);
 }
 
 // ---- soft tissue --------------------------------------------------------------------------

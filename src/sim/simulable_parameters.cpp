@@ -31,14 +31,16 @@ void checkStateSized(const VecX& x, int n, const char* who, const char* name) {
 
 namespace {
 
-// The groups every term of a soft skeleton differentiates so far: those the node terms do not
-// depend on (pose and root targets, bone inertias: the bones' springs alone), the contact
-// stiffness and collider offsets (the node contact term), the rest joints (the tet nodes'
-// skinning in inertia, its prediction, gravity and contact) and the material (elasticity and
-// the node masses). β also moves the rest nodes X̄(β), the masses and the materials: not
-// written yet (issue 25).
-bool softDifferentiable(SimParameter p) {
+// The groups every term of a soft skeleton differentiates: those the node terms do not depend
+// on (pose and root targets, bone inertias: the bones' springs alone), the contact stiffness and
+// collider offsets (the node contact term), the rest joints (the tet nodes' skinning in inertia,
+// its prediction, gravity and contact), the material (elasticity and the node masses) and, for
+// the FEM, β (the rest nodes X̄(β), masses, materials and contact areas; SoftTissue::
+// addShapeProducts). The ROM's elastic term has no β derivatives yet.
+bool softDifferentiable(const Simulable::Impl& m, SimParameter p) {
   switch (p) {
+    case SimParameter::Shape:
+      return m.soft->shapeDifferentiable();
     case SimParameter::Material:
     case SimParameter::RestJoints:
     case SimParameter::PoseTargets:
@@ -57,12 +59,11 @@ void requireDifferentiable(const Simulable::Impl& m, const std::vector<SimParame
   if (!m.soft) return;
   for (SimParameter p : groups) {
     simParameterInfo(p);  // throws for a value outside the enum
-    if (!softDifferentiable(p))
+    if (!softDifferentiable(m, p))
       throw Error(std::string("Simulable::") + who + ": " + simParameterInfo(p).enum_name +
-                  ": parameter derivatives of a soft-tissue avatar (the FEM or ROM soft "
-                  "skeleton) cover RestJoints, PoseTargets, RootTranslationTarget, BoneInertia, "
-                  "Stiffnesses, ColliderOffsets and Material so far; the articulated skeleton "
-                  "has every group but Material");
+                  ": parameter derivatives of the ROM soft skeleton cover every group but Shape "
+                  "(β through the reduced elastic term is not written yet); the FEM soft "
+                  "skeleton has every group, the articulated skeleton every group but Material");
   }
 }
 
@@ -139,6 +140,8 @@ std::vector<MatX> Simulable::getGradientParameterJacobians(const std::vector<Sim
   m.ensureContact();
   const TermContext c = m.context();
   for (const EnergyTerm* term : m.terms) term->addParameterJacobians(c, jacobians);
+  if (m.soft && jacobians.wants(SimParameter::Shape))
+    m.soft->addShapeJacobian(c, jacobians[SimParameter::Shape]);
   if (m.soft && jacobians.wants(SimParameter::Material))
     jacobians[SimParameter::Material] =
         materialParametersJacobian(m, jacobians[SimParameter::Material]);
@@ -179,6 +182,8 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
     else
       term->addParameterProducts(c, lambda, products);
   }
+  if (m.soft && products.wants(SimParameter::Shape))
+    m.soft->addShapeProducts(c, lambda, products[SimParameter::Shape]);
   if (material) {
     VecX& values = products[SimParameter::Material];
     if (material_sum) {  // summed in coefficient values, chained by finishMaterialProducts
@@ -265,6 +270,11 @@ std::vector<VecX> Simulable::getGradientParameterJVPs(
   m.ensureContact();
   const TermContext c = m.context();
   for (const EnergyTerm* term : m.terms) term->addParameterTangents(c, given, out);
+  if (m.soft)
+    for (size_t d = 0; d < directions.size(); ++d) {
+      const VecX* dbeta = directions[d][size_t(SimParameter::Shape)];
+      if (dbeta && dbeta->size()) m.soft->addShapeTangent(c, *dbeta, out[d]);
+    }
   return out;
 }
 

@@ -29,7 +29,8 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
       u_n(kin_.u_n),
       u_nm1(kin_.u_nm1),
       masses_(nodeMasses(avatar)),
-      material_chain_(avatar) {
+      material_chain_(avatar),
+      shape_chain_(avatar, material_chain_) {
   kin_.setMassNodes(masses_.nodes);
   ElasticElements elements = elasticElements(avatar);
   if (kin_.reduced()) {
@@ -41,8 +42,9 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
   } else {
     elastic_ = std::make_unique<FemElasticityTerm>(kin_, material_chain_, std::move(elements));
   }
-  inertia_ = std::make_unique<NodalInertiaTerm>(kin_, masses_, material_chain_, time_step);
-  gravity_ = std::make_unique<NodalGravityTerm>(kin_, masses_, material_chain_);
+  inertia_ =
+      std::make_unique<NodalInertiaTerm>(kin_, masses_, material_chain_, shape_chain_, time_step);
+  gravity_ = std::make_unique<NodalGravityTerm>(kin_, masses_, material_chain_, shape_chain_);
   contact_ = std::make_unique<NodeContactTerm>(kin_, avatar.vertexAreas());
 }
 
@@ -86,6 +88,37 @@ void SoftTissue::addPoseBlendTangent(const TermContext& c, const VecX& dq_n, Vec
   for (size_t k = 0; k < nodes.size(); ++k) dY.row(nodes[k]) = dP.row(Eigen::Index(k));
   for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
     term->addNodeOffsetTangent(c, dY, out);
+}
+
+void SoftTissue::addShapeProducts(const TermContext& c, const VecX& lambda,
+                                  VecX& beta_bar) const {
+  if (!shapeDifferentiable()) throw Error("SoftTissue: the ROM's Shape derivatives are not written");
+  MatX3 node_cotangent = MatX3::Zero(numNodes(), 3);
+  for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
+    term->addNodeOffsetProducts(c, lambda, node_cotangent);
+  shape_chain_.addNodeCotangent(node_cotangent, beta_bar);
+  static_cast<const FemElasticityTerm&>(*elastic_).addShapeProducts(lambda, shape_chain_,
+                                                                    beta_bar);
+}
+
+void SoftTissue::addShapeTangent(const TermContext& c, const VecX& dbeta, VecX& out) const {
+  if (!shapeDifferentiable()) throw Error("SoftTissue: the ROM's Shape derivatives are not written");
+  const MatX3 dY = shape_chain_.nodeTangent(dbeta);
+  for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
+    term->addNodeOffsetTangent(c, dY, out);
+  static_cast<const FemElasticityTerm&>(*elastic_).addShapeTangent(dbeta, shape_chain_, out);
+}
+
+void SoftTissue::addShapeJacobian(const TermContext& c, MatX& J) const {
+  if (!shapeDifferentiable()) throw Error("SoftTissue: the ROM's Shape derivatives are not written");
+  for (int k = 0; k < shape_chain_.numBetas(); ++k) {
+    const MatX3 dY = shape_chain_.nodeTangent(VecX::Unit(shape_chain_.numBetas(), k));
+    VecX column = VecX::Zero(J.rows());
+    for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
+      term->addNodeOffsetTangent(c, dY, column);
+    J.col(k) += column;
+  }
+  static_cast<const FemElasticityTerm&>(*elastic_).addShapeJacobian(shape_chain_, J);
 }
 
 std::vector<const EnergyTerm*> SoftTissue::terms() const {

@@ -22,6 +22,7 @@
 #include "sim/soft/node_contact_term.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/reduced_elasticity_term.h"
+#include "sim/soft/shape_chain.h"
 #include "sim/soft/soft_kinematics.h"
 #include "sim/two_thread_schedule.h"
 
@@ -128,6 +129,21 @@ class SoftTissue final : public TwoThreadSchedule {
   /// skipped), the pose blend held from the rotations R_n.
   void addPoseBlendCotangent(const std::vector<Mat3>& R_n, const MatX3& offsets, VecX& a_n) const;
 
+  // ---- Shape (β) beyond the node terms' own blocks (the masses' and the contact areas'
+  // ∂/∂β: inertia, gravity, contact) — the rest nodes through every node term's Y
+  // (node_offset_derivatives.h) and the FEM's elastic rest shape and materials
+  // (FemElasticityTerm); the ROM's elastic term has none yet ----
+  bool shapeDifferentiable() const { return !reduced(); }
+  /// ADDS λᵀ ∂g/∂β into beta_bar (K).
+  void addShapeProducts(const TermContext& c, const VecX& lambda, VecX& beta_bar) const;
+  /// ADDS ∂g/∂β dβ into out / ∂g/∂β into J (numDofs × K).
+  void addShapeTangent(const TermContext& c, const VecX& dbeta, VecX& out) const;
+  void addShapeJacobian(const TermContext& c, MatX& J) const;
+  /// ADDS Σ_i (∂X̄_i/∂β)ᵀ Y_bar_i into beta_bar for a cotangent of the first nodes' Y (rows).
+  void addRestNodesCotangent(const MatX3& Y_bar, VecX& beta_bar) const {
+    shape_chain_.addNodeCotangent(Y_bar, beta_bar);
+  }
+
   /// The contact broad phase's margins (SoftKinematics::contactMargins) from the surface nodes
   /// each bone dominates.
   void setContactBones(const std::vector<std::vector<int>>& dominated) {
@@ -156,6 +172,7 @@ class SoftTissue final : public TwoThreadSchedule {
   }
   NodeMasses masses_;
   MaterialChain material_chain_;
+  ShapeChain shape_chain_;
   std::unique_ptr<NodalInertiaTerm> inertia_;
   std::unique_ptr<NodalGravityTerm> gravity_;
   std::unique_ptr<ElasticityTerm> elastic_;

@@ -337,6 +337,14 @@ VecX MaterialModel::coefficientValues(const VecX& betas) const {
   return values;
 }
 
+MatX MaterialModel::coefficientValuesShapeJacobian(const VecX& betas) const {
+  const VecX c = coefficientValues(betas);
+  MatX out(c.size(), num_betas_);
+  for (size_t i = 0; i < coefficients_.size(); ++i)
+    out.row(Eigen::Index(i)) = c[Eigen::Index(i)] * coefficients_[i].slopes.transpose();
+  return out;
+}
+
 VecX MaterialModel::parametersCotangent(const VecX& values_bar, const VecX& betas) const {
   if (values_bar.size() != numCoefficients())
     throw InputError("MaterialModel::parametersCotangent: values_bar has " +

@@ -94,6 +94,38 @@ void SoftAvatar::initVolumetricData() {
         "the reduced model (ROM soft skeleton) is a soft-tissue model: call enableSoftTissue() "
         "too, or enableReducedModel(false) for the skeleton");
   const auto start = std::chrono::steady_clock::now();
+  buildRestShape();
+  skeleton_seconds_ =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const BodyModel& body = *body_;
+  // Built into locals first: a failing reduced build leaves no half-built avatar behind.
+  std::shared_ptr<const VolumetricData> volumetric;
+  VolumetricBuildReport volumetric_report;
+  std::shared_ptr<const ReducedData> reduced_data;
+  ReducedBuildReport reduced_report;
+  if (soft_tissue_)
+    volumetric = std::make_shared<const VolumetricData>(
+        buildVolumetricData(body, betas_, settings_.volumetric, &volumetric_report));
+  if (soft_tissue_ && reduced_) {
+    std::unique_ptr<AvatarCache> cache;
+    if (settings_.volumetric.use_cache)
+      cache = std::make_unique<AvatarCache>(settings_.volumetric.cache_dir);
+    ReducedData rom = buildReducedData(*volumetric, body, settings_.reduced, elastic_cubature_,
+                                       inertial_cubature_, cache.get(), &reduced_report);
+    rom.elastic_floors = elasticCubatureFloors(*volumetric, rom);
+    reduced_data = std::make_shared<const ReducedData>(std::move(rom));
+  }
+  volumetric_ = std::move(volumetric);
+  build_report_ = std::move(volumetric_report);
+  reduced_data_ = std::move(reduced_data);
+  reduced_report_ = std::move(reduced_report);
+  initialized_ = true;
+}
+
+// The rest data of betas_ that every model needs: shaped surface, joints, areas, volume, bone
+// inertias (the template's moments carried by the shaped vertices), capsules and their
+// β-derivatives.
+void SoftAvatar::buildRestShape() {
   const BodyModel& body = *body_;
   MatX3 vertices = shapedVertices(body, betas_);
   MatX3 joints = MatX3(body.J_regressor * vertices);
@@ -131,30 +163,6 @@ void SoftAvatar::initVolumetricData() {
   rest_joints_ = std::move(joints);
   vertex_areas_ = std::move(areas);
   volume_ = volume;
-  skeleton_seconds_ =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  // Built into locals first: a failing reduced build leaves no half-built avatar behind.
-  std::shared_ptr<const VolumetricData> volumetric;
-  VolumetricBuildReport volumetric_report;
-  std::shared_ptr<const ReducedData> reduced_data;
-  ReducedBuildReport reduced_report;
-  if (soft_tissue_)
-    volumetric = std::make_shared<const VolumetricData>(
-        buildVolumetricData(body, betas_, settings_.volumetric, &volumetric_report));
-  if (soft_tissue_ && reduced_) {
-    std::unique_ptr<AvatarCache> cache;
-    if (settings_.volumetric.use_cache)
-      cache = std::make_unique<AvatarCache>(settings_.volumetric.cache_dir);
-    ReducedData rom = buildReducedData(*volumetric, body, settings_.reduced, elastic_cubature_,
-                                       inertial_cubature_, cache.get(), &reduced_report);
-    rom.elastic_floors = elasticCubatureFloors(*volumetric, rom);
-    reduced_data = std::make_shared<const ReducedData>(std::move(rom));
-  }
-  volumetric_ = std::move(volumetric);
-  build_report_ = std::move(volumetric_report);
-  reduced_data_ = std::move(reduced_data);
-  reduced_report_ = std::move(reduced_report);
-  initialized_ = true;
 }
 
 void SoftAvatar::setReducedData(std::shared_ptr<const ReducedData> data) {
@@ -242,16 +250,51 @@ std::shared_ptr<SoftAvatar> SoftAvatar::withMaterial(const MaterialModel& model)
   h.update(volumetric_->key);
   h.updateField("materials", text.data(), text.size());
   data->key = h.hexDigest();
-  if (reduced_data_) {
-    auto rom = std::make_shared<ReducedData>(*reduced_data_);
-    if (rom->elastic_rest_stiffness.size() > 0)
-      rom->elastic_rest_stiffness = elasticRestStiffness(*data, rom->basis);
-    Sha256 k;
-    k.update(reduced_data_->key);
-    k.update(data->key);
-    rom->key = k.hexDigest();
-    out->reduced_data_ = std::move(rom);
-  }
+  if (reduced_data_) out->reduced_data_ = reducedDataFor(*data);
+  out->volumetric_ = std::move(data);
+  return out;
+}
+
+std::shared_ptr<const ReducedData> SoftAvatar::reducedDataFor(const VolumetricData& data) const {
+  auto rom = std::make_shared<ReducedData>(*reduced_data_);
+  if (rom->elastic_rest_stiffness.size() > 0)
+    rom->elastic_rest_stiffness = elasticRestStiffness(data, rom->basis);
+  Sha256 k;
+  k.update(reduced_data_->key);
+  k.update(data.key);
+  rom->key = k.hexDigest();
+  return rom;
+}
+
+// The same discretization at β′ (see the header): the skeleton's rest data rebuilt, the
+// volumetric body's rest nodes and materials re-evaluated on the kept tet mesh, bone nodes and
+// frames.
+std::shared_ptr<SoftAvatar> SoftAvatar::withShape(const VecX& betas) const {
+  const std::string fn = "SoftAvatar::withShape: ";
+  if (!initialized_) throw Error(fn + "call initVolumetricData() first");
+  auto out = std::make_shared<SoftAvatar>(body_, betas, settings_);
+  out->soft_tissue_ = soft_tissue_;
+  out->reduced_ = reduced_;
+  out->inertial_cubature_ = inertial_cubature_;
+  out->elastic_cubature_ = elastic_cubature_;
+  out->buildRestShape();
+  out->initialized_ = true;
+  if (!volumetric_) return out;
+  const VolumetricTemplate& templ = *volumetric_->templ;
+  const MaterialModel& model = volumetric_->material_model;
+  model.validate("SoftAvatar::withShape: material", out->betas_);
+  auto data = std::make_shared<VolumetricData>(*volumetric_);
+  data->rest_nodes = shapedNodes(templ.mesh, templ.fields, out->betas_);
+  data->rest_joints = out->rest_joints_;
+  const TetMaterialMap map(tetMaterialGeometry(templ.mesh, data->rest_nodes, templ.fields.weights,
+                                               volumetric_->materials.frame),
+                           model.coefficientValues(out->betas_));
+  data->materials = map.materials();
+  Sha256 h;
+  h.update(volumetric_->key);
+  h.updateField("betas", out->betas_.data(), size_t(out->betas_.size()) * sizeof(double));
+  data->key = h.hexDigest();
+  if (reduced_data_) out->reduced_data_ = reducedDataFor(*data);
   out->volumetric_ = std::move(data);
   return out;
 }

@@ -1,6 +1,7 @@
 // The per-tet material map and its reverse-mode derivative (tet_material_map.h).
 #include "flsh/volume/tet_material_map.h"
 
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <cmath>
 #include <string>
@@ -174,7 +175,62 @@ TetMaterials TetMaterialMap::materials() const {
   return out;
 }
 
-void TetMaterialMap::addCotangent(int t, const TetMaterialCotangent& bar, VecX& values_bar) const {
+void tetMaterialGeometryTangent(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX3& dX,
+                                VecX& d_area, VecX& d_volume) {
+  detail::checkTetMesh(mesh, shaped_nodes, "tetMaterialGeometryTangent", false);
+  if (dX.rows() != shaped_nodes.rows())
+    throw InputError("tetMaterialGeometryTangent: dX has " + std::to_string(dX.rows()) +
+                     " rows, expected " + std::to_string(shaped_nodes.rows()) + " (one per node)");
+  const int nt = mesh.numTets();
+  d_area = VecX::Zero(nt);
+  d_volume.resize(nt);
+  auto node = [&](const MatX3& m, int t, int a) -> Vec3 { return m.row(mesh.tets(t, a)); };
+  for (int t = 0; t < nt; ++t) {
+    // vol = det[x1 − x0, x2 − x0, x3 − x0]/6; |vol|' = sign(vol) vol'.
+    Mat3 D, dD;
+    for (int k = 0; k < 3; ++k) {
+      D.col(k) = node(shaped_nodes, t, k + 1) - node(shaped_nodes, t, 0);
+      dD.col(k) = node(dX, t, k + 1) - node(dX, t, 0);
+    }
+    // d det D = Σ_k (cofactor column k) · dD column k.
+    const double d_det = D.col(1).cross(D.col(2)).dot(dD.col(0)) +
+                         D.col(2).cross(D.col(0)).dot(dD.col(1)) +
+                         D.col(0).cross(D.col(1)).dot(dD.col(2));
+    d_volume[t] = (D.determinant() < 0 ? -d_det : d_det) / 6;
+  }
+  std::vector<int> owners;
+  const MatX3i F = detail::outwardBoundaryFaces(mesh, "tetMaterialGeometryTangent", &owners);
+  for (int f = 0; f < F.rows(); ++f) {
+    // A = ½ |n|, n = (b − a) × (c − a): dA = ½ n̂ · dn.
+    const Vec3 a = shaped_nodes.row(F(f, 0)), b = shaped_nodes.row(F(f, 1)),
+               c = shaped_nodes.row(F(f, 2));
+    const Vec3 da = dX.row(F(f, 0)), db = dX.row(F(f, 1)), dc = dX.row(F(f, 2));
+    const Vec3 n = (b - a).cross(c - a);
+    const double length = n.norm();
+    if (length == 0) continue;
+    const Vec3 dn = (db - da).cross(c - a) + (b - a).cross(dc - da);
+    d_area[owners[size_t(f)]] += 0.5 * n.dot(dn) / length;
+  }
+}
+
+double TetMaterialMap::densityTangent(int t, const VecX& values_direction, double d_area,
+                                      double d_volume) const {
+  const CoefficientIndices& ix = indices();
+  const double f = skinFraction(t);
+  const double rho_skin = layers_[MaterialModel::kSkin].density;
+  const double rho_tissue = layers_[MaterialModel::kSoftTissue].density;
+  const double d_skin = values_direction[ix.layer[MaterialModel::kSkin][kDensity]];
+  const double d_tissue = values_direction[ix.layer[MaterialModel::kSoftTissue][kDensity]];
+  double df = 0.0;
+  if (f > 0 && f < 1)  // f = A t / |vol|
+    df = f * (d_area / geometry_.boundary_area[t] +
+              values_direction[ix.skin_thickness] / skin_thickness_ -
+              d_volume / geometry_.volume[t]);
+  return f * d_skin + (1 - f) * d_tissue + df * (rho_skin - rho_tissue);
+}
+
+void TetMaterialMap::addCotangent(int t, const TetMaterialCotangent& bar, VecX& values_bar,
+                                  TetGeometryCotangent* geometry_bar) const {
   if (t < 0 || t >= numTets())
     throw InputError("TetMaterialMap::addCotangent: tet " + std::to_string(t) + " of " +
                      std::to_string(numTets()));
@@ -240,8 +296,13 @@ void TetMaterialMap::addCotangent(int t, const TetMaterialCotangent& bar, VecX& 
     values_bar[i] += s_bar * s * w / values_[i];
   }
   // f = A t / |vol| below the cap, constant (0 or 1) elsewhere.
-  if (f > 0 && f < 1)
+  if (f > 0 && f < 1) {
     values_bar[ix.skin_thickness] += f_bar * geometry_.boundary_area[t] / geometry_.volume[t];
+    if (geometry_bar) {
+      geometry_bar->area += f_bar * f / geometry_.boundary_area[t];
+      geometry_bar->volume -= f_bar * f / geometry_.volume[t];
+    }
+  }
 }
 
 }  // namespace flsh

@@ -138,5 +138,36 @@ TEST(FemMaterialParameters, ScaleAddsAndLinearStrainIsTheSymmetricPart) {
   EXPECT_DOUBLE_EQ(e[5], H(0, 1) + H(1, 0));
 }
 
+// The rest shape's derivative of λᵀ g (addTetGradientRestCotangent) against central
+// differences of the element gradient's product with λ under moved rest nodes, in every regime
+// of the law (the displacements chosen so that F is the regime's).
+TEST(FemMaterialParameters, GradientRestCotangentMatchesFiniteDifferences) {
+  Mat34 X;
+  X << 0.0, 0.03, 0.004, 0.006, 0.0, 0.002, 0.025, 0.003, 0.0, 0.001, 0.004, 0.028;
+  const VecX lambda_values = randomVector(12, 1.0, 31);
+  const Mat34 lambda = Eigen::Map<const Mat34>(lambda_values.data());
+  for (const Regime& r : regimes()) {
+    SCOPED_TRACE(r.name);
+    const FemMaterialPoint m =
+        makeFemMaterialPoint(kYoung, kPoisson, kShear, rodrigues(Vec3(0.2, 0.9, -0.4)), r.gamma);
+    const TetElementRest rest = tetElementRest(X, 0);
+    // u with F(u) = r.F at the rest X: u_a = (F − I)(X_a − X_0).
+    Mat34 u;
+    for (int a = 0; a < 4; ++a) u.col(a) = (r.F - Mat3::Identity()) * (X.col(a) - X.col(0));
+    Mat34 X_bar = Mat34::Zero();
+    addTetGradientRestCotangent(rest, m, u, lambda, 2.0, X_bar);
+    ASSERT_GT(X_bar.norm(), 0.0);
+    const double scale = 0.01;  // steps in units of 1 cm
+    const auto product = [&](const VecX& d) {
+      Vec12 g;
+      tetElasticEnergy(tetElementRest(X + scale * Eigen::Map<const Mat34>(d.data()), 0), m, u, &g);
+      return VecX::Constant(1, 2.0 * Eigen::Map<const Vec12>(lambda.data()).dot(g));
+    };
+    const MatX analytic = scale * Eigen::Map<const MatX>(X_bar.data(), 1, 12);
+    EXPECT_TRUE(
+        jacobianMatchesFiniteDifferences(product, VecX::Zero(12), analytic, 1e-6, 1e-6));
+  }
+}
+
 }  // namespace
 }  // namespace flsh

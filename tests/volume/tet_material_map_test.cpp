@@ -89,6 +89,74 @@ TEST(TetMaterialMap, CotangentMatchesFiniteDifferences) {
   }
 }
 
+// The geometry's tangent in the rest nodes, and the map's cotangent of the tets' area and volume
+// (through the skin fraction) and its density tangent, against central differences.
+TEST(TetMaterialMap, GeometryDerivativesMatchFiniteDifferences) {
+  const VolumetricData& d = data();
+  const TetMesh& mesh = d.templ->mesh;
+  const MatX3 dX = Eigen::Map<const MatX3>(randomVector(3 * d.numNodes(), 1e-3, 5).data(),
+                                           d.numNodes(), 3);
+  VecX d_area, d_volume;
+  tetMaterialGeometryTangent(mesh, d.rest_nodes, dX, d_area, d_volume);
+  ASSERT_GT(d_area.norm(), 0.0);
+  ASSERT_GT(d_volume.norm(), 0.0);
+  const auto geometry_at = [&](double s) {
+    return tetMaterialGeometry(mesh, d.rest_nodes + s * dX, d.templ->fields.weights,
+                               d.materials.frame);
+  };
+  const double h = 1e-4;
+  const TetMaterialGeometry plus = geometry_at(h), minus = geometry_at(-h);
+  EXPECT_LT(relativeDifference((plus.boundary_area - minus.boundary_area) / (2 * h), d_area),
+            1e-6);
+  EXPECT_LT(relativeDifference((plus.volume - minus.volume) / (2 * h), d_volume), 1e-6);
+
+  // The material point and density of a skin-mixture tet as functions of (area, volume, c).
+  const VecX c0 = d.material_model.coefficientValues(VecX());
+  const TetMaterialGeometry g0 = tetMaterialGeometry(d);
+  const TetMaterialMap map(g0, c0);
+  const std::vector<int> tets = tetsOfEveryKind(map);
+  int mixed = -1;
+  for (int t : tets)
+    if (map.skinFraction(t) > 0 && map.skinFraction(t) < 1) mixed = t;
+  ASSERT_GE(mixed, 0);
+  TetMaterialCotangent bar;
+  bar.C_world = Eigen::Map<const Mat6>(randomVector(36, 1.0, 3).data());
+  bar.modulus = 0.7;
+  bar.gamma = -2e4;
+  bar.density = 30.0;
+  VecX values_bar = VecX::Zero(c0.size());
+  TetGeometryCotangent geometry_bar;
+  map.addCotangent(mixed, bar, values_bar, &geometry_bar);
+  ASSERT_NE(geometry_bar.area, 0.0);
+  ASSERT_NE(geometry_bar.volume, 0.0);
+  const double A = g0.boundary_area[mixed], V = g0.volume[mixed];
+  const auto s = [&](const VecX& x) {  // relative steps of the area and the volume
+    TetMaterialGeometry g = g0;
+    g.boundary_area[mixed] = A * (1 + x[0]);
+    g.volume[mixed] = V * (1 + x[1]);
+    const TetMaterials m = TetMaterialMap(g, c0).materials();
+    const FemMaterialPoint p = femMaterialPoint(m, mixed);
+    return VecX::Constant(1, bar.C_world.cwiseProduct(p.C_world).sum() + bar.modulus * p.modulus +
+                                 bar.gamma * p.gamma + bar.density * m.density[mixed]);
+  };
+  MatX analytic(1, 2);
+  analytic << geometry_bar.area * A, geometry_bar.volume * V;
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(s, VecX::Zero(2), analytic, 1e-7, 1e-6));
+  // The density's tangent in (c, area, volume) is the density part of the same derivative.
+  const VecX dc = c0.cwiseProduct(randomVector(c0.size(), 0.1, 8));
+  const double dA = 0.1 * A, dV = -0.05 * V;
+  const auto density = [&](double t) {
+    TetMaterialGeometry g = g0;
+    g.boundary_area[mixed] = A + t * dA;
+    g.volume[mixed] = V + t * dV;
+    return TetMaterialMap(g, c0 + t * dc).materials().density[mixed];
+  };
+  const double fd = (density(1e-5) - density(-1e-5)) / 2e-5;
+  const double analytic_density = map.densityTangent(mixed, dc, dA, dV);
+  ASSERT_NE(analytic_density, 0.0);
+  EXPECT_NEAR(analytic_density, fd, 1e-6 * std::abs(fd));
+}
+
 TEST(TetMaterialMap, RejectsValuesOfTheWrongSize) {
   const std::string message = test::messageOf<InputError>(
       [] { TetMaterialMap(tetMaterialGeometry(data()), VecX::Ones(3)); });
@@ -150,6 +218,57 @@ TEST(TetMaterialMap, WithMaterialRefusesAModelForAnotherBody) {
   EXPECT_NE(message.find("shape components"), std::string::npos) << message;
 }
 
+// withShape: the same tet mesh, bone nodes and frames; the rest data of a new avatar at β′; the
+// rest nodes X̄(β′) and the materials of the model at β′ on the geometry there; the ROM's data
+// kept but K.
+TEST(TetMaterialMap, WithShapeKeepsTheDiscretization) {
+  for (SoftModel model : {SoftModel::Fem, SoftModel::Rom}) {
+    const auto avatar = test::smallSoftAvatar(model);
+    const VolumetricData& d = avatar->volumetricData();
+    const int K = int(avatar->betas().size());
+    VecX beta = VecX::Zero(K);
+    beta.head(2) << 0.8, -0.5;
+    const auto other = avatar->withShape(beta);
+    const VolumetricData& o = other->volumetricData();
+    EXPECT_EQ(other->betas(), beta);
+    EXPECT_EQ(o.templ, d.templ);
+    EXPECT_EQ(o.bone_of_node, d.bone_of_node);
+    EXPECT_NE(o.key, d.key);
+    EXPECT_LT(relativeDifference(o.rest_nodes, shapedNodes(d.templ->mesh, d.templ->fields, beta)),
+              1e-14);
+    EXPECT_GT(relativeDifference(o.rest_nodes, d.rest_nodes), 1e-3);
+    for (size_t t = 0; t < d.materials.frame.size(); ++t)
+      ASSERT_EQ(o.materials.frame[t], d.materials.frame[t]);
+    const TetMaterials expected =
+        TetMaterialMap(tetMaterialGeometry(d.templ->mesh, o.rest_nodes, d.templ->fields.weights,
+                                           d.materials.frame),
+                       d.material_model.coefficientValues(beta))
+            .materials();
+    EXPECT_LT(relativeDifference(o.materials.young, expected.young), 1e-12);
+    EXPECT_LT(relativeDifference(o.materials.density, expected.density), 1e-12);
+    // The skeleton's rest data are a new avatar's.
+    SoftAvatar fresh(avatar->bodyPtr(), beta, avatar->settings());
+    fresh.initVolumetricData();
+    EXPECT_LT(relativeDifference(other->restVertices(), fresh.restVertices()), 1e-14);
+    EXPECT_LT(relativeDifference(other->restJoints(), fresh.restJoints()), 1e-14);
+    EXPECT_LT(relativeDifference(other->vertexAreas(), fresh.vertexAreas()), 1e-14);
+    EXPECT_EQ(o.rest_joints, other->restJoints());
+    if (model == SoftModel::Rom) {
+      const ReducedData& r = avatar->reducedData();
+      const ReducedData& ro = other->reducedData();
+      EXPECT_EQ(ro.handles, r.handles);
+      EXPECT_EQ(ro.elastic.elements, r.elastic.elements);
+      EXPECT_EQ(ro.elastic_floors, r.elastic_floors);
+      EXPECT_LT(relativeDifference(ro.elastic_rest_stiffness, elasticRestStiffness(o, r.basis)),
+                1e-12);
+    }
+    const auto same = avatar->withShape(avatar->betas());
+    EXPECT_LT(relativeDifference(same->volumetricData().materials.young, d.materials.young),
+              1e-12);
+    EXPECT_THROW(avatar->withShape(VecX::Ones(K + 1)), InputError);
+  }
+}
+
 // The coefficient values c_i(β) = exp(a_i + b_iᵀβ) and their chain to (a, b), at a non-zero β.
 TEST(MaterialModelChain, ValuesCotangentAndTangentMatchFiniteDifferences) {
   const int K = 4;
@@ -170,6 +289,12 @@ TEST(MaterialModelChain, ValuesCotangentAndTangentMatchFiniteDifferences) {
   const VecX dp = randomVector(model.numParameters(), 1.0, 23);
   const VecX dc = model.coefficientValuesTangent(dp, beta);
   EXPECT_NEAR(dc.cwiseQuotient(c).dot(values_bar), g.dot(dp), 1e-12 * std::abs(g.dot(dp)));
+  // ∂c/∂β, relative.
+  const MatX dc_dbeta = model.coefficientValuesShapeJacobian(beta);
+  ASSERT_GT(dc_dbeta.norm(), 0.0);
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+      [&](const VecX& b) { return VecX(model.coefficientValues(b).cwiseQuotient(c)); }, beta,
+      MatX(c.cwiseInverse().asDiagonal() * dc_dbeta), 1e-7, 1e-6));
   EXPECT_EQ(int(model.parameterNames().size()), model.numParameters());
   EXPECT_EQ(model.parameterNames()[size_t(model.parameterOffset("E1", MaterialModel::kSkin))],
             "layers.skin.E1.log_value");

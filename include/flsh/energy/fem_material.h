@@ -139,6 +139,16 @@ double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& mate
                         const Mat34& u, Vec12* gradient = nullptr, Mat12* hessian = nullptr,
                         bool psd = false);
 
+/// The rest shape's derivative of an element's gradient (the adjoint's Shape group, through the
+/// rest nodes X̄(β)): ADDS scale · ∂(λᵀ g)/∂X (3 × 4, column a: rest node a) into X_bar, where
+/// λᵀ g = volume · ⟨P(F), Dλ Dm⁻¹⟩ is the product of tetElasticEnergy's gradient with the nodal
+/// direction `lambda` (3 × 4) at the displacements u, the material point held. With W = Dm⁻¹,
+/// G = Dλ W and A the law's exact tangent dPdF:
+///   ∂(λᵀ g)/∂Dm = volume (⟨P, G⟩ Wᵀ − (F − I)ᵀ A[G] Wᵀ − Gᵀ P Wᵀ),
+/// column k to node k + 1 and minus their sum to node 0. InputError on non-finite u.
+void addTetGradientRestCotangent(const TetElementRest& rest, const FemMaterialPoint& material,
+                                 const Mat34& u, const Mat34& lambda, double scale, Mat34& X_bar);
+
 /// Reduced tets (the ROM's elastic term): the tet's nodal displacements are a linear map of n
 /// reduced 3-vectors z_s, u_a = Σ_s Φ(a, s) z_s (Φ: the 4 × n basis rows of the tet's nodes).
 /// Then F = I + Z G̃ᵀ with Z (3 × n, columns z_s) and G̃ = G Φ (3 × n), G the shape-function

@@ -158,10 +158,12 @@ class Simulable {
   /// transposed times dL/dnodes, without forming the matrix; numDofs, increments), the previous
   /// state q_n's (numDofs, its increments: with soft tissue the nodes move with the pose blend
   /// held from q_n's rotations; zero for the skeleton) and the rest joints' (72:
-  /// x_i = Σ_b w_ib (R_b (Y_i − J_b) + t_b)). Any pointer may be null. Throws InputError on a
+  /// x_i = Σ_b w_ib (R_b (Y_i − J_b) + t_b)). `rest_nodes_shape` (K, soft tissue only; zero for
+  /// the skeleton): β's share through the rest nodes Y_i ∋ X̄_i(β), without the rest joints'
+  /// (chain those with chainShapeCotangent). Any pointer may be null. Throws InputError on a
   /// wrong shape. Does not change the state.
   void getNodesCotangents(const MatX3& dL_dnodes, VecX* state, VecX* previous_state,
-                          VecX* rest_joints) const;
+                          VecX* rest_joints, VecX* rest_nodes_shape = nullptr) const;
 
   /// Current bone transforms: rotations R_b (24) and joint positions t_b (24 × 3).
   const std::vector<Mat3>& boneRotations() const;

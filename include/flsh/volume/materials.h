@@ -120,6 +120,9 @@ class MaterialModel {
   /// of the values. InputError on sizes that do not match.
   VecX parametersCotangent(const VecX& values_bar, const VecX& betas) const;
   VecX coefficientValuesTangent(const VecX& parameters_direction, const VecX& betas) const;
+  /// d coefficientValues / dβ (numCoefficients() × K): row i = c_i(β) b_iᵀ. InputError on a bad
+  /// β.
+  MatX coefficientValuesShapeJacobian(const VecX& betas) const;
 
   /// Value at β = 0 (c₀) and log-slopes (K) of one coefficient.
   double baseValue(const std::string& quantity, int layer) const;

@@ -116,6 +116,16 @@ class SoftAvatar {
   /// training; nothing is cached). Error on an avatar without an initialized volumetric body;
   /// InputError on a model for another number of shape components or not physical at β.
   std::shared_ptr<SoftAvatar> withMaterial(const MaterialModel& model) const;
+  /// This avatar at another shape β′, for fitting β (the adjoint's Shape group): the same
+  /// discretization — tet mesh, bone nodes (selected at this avatar's β), orthotropy frames, and
+  /// for the ROM the basis, cubature samples, weights and rest-split floors — with the rest data
+  /// of β′: surface, joints, areas, bone inertias and capsules as a new avatar would have them,
+  /// rest nodes X̄(β′) = X̄₀ + S β′, every tet's materials from the material model at β′ on the
+  /// tets' areas and volumes at X̄(β′) (tet_material_map.h) and, for the ROM, K recomputed. The
+  /// soft models' Shape gradient is exact for this model. Cheap next to a build (nothing is
+  /// meshed, trained or cached). β′ as the constructor's (zero padded; InputError on a bad size
+  /// or value, or a material model not physical at β′); Error on an uninitialized avatar.
+  std::shared_ptr<SoftAvatar> withShape(const VecX& betas) const;
   /// Cache hit, warnings and seconds per stage of the reduced build (all zero without it).
   const ReducedBuildReport& reducedBuildReport() const { return reduced_report_; }
   /// Cache hits, warnings and seconds per stage of the volumetric build (all zero without it);
@@ -139,7 +149,10 @@ class SoftAvatar {
   double templateVolume() const { return template_volume_; }  ///< vol(0), m³
 
  private:
+  void buildRestShape();
   void buildShapeJacobians(const MatX3& X, const MatX3& J, double mass_scale);
+  /// The ROM data for new volumetric data of the same discretization (K recomputed).
+  std::shared_ptr<const ReducedData> reducedDataFor(const VolumetricData& data) const;
 
   std::shared_ptr<const BodyModel> body_;
   VecX betas_;

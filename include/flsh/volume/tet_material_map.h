@@ -43,6 +43,17 @@ TetMaterialGeometry tetMaterialGeometry(const TetMesh& mesh, const MatX3& shaped
 /// materials).
 TetMaterialGeometry tetMaterialGeometry(const VolumetricData& data);
 
+/// Derivative of every tet's boundary area and volume (TetMaterialGeometry) in the rest nodes,
+/// for the adjoint's Shape group: d_area, d_volume (#T) for a direction dX (#N × 3) of the
+/// nodes `shaped_nodes` (#N × 3) of `mesh`. InputError on shapes that do not match.
+void tetMaterialGeometryTangent(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX3& dX,
+                                VecX& d_area, VecX& d_volume);
+
+/// Cotangent of one tet's boundary area and volume (the geometry the map reads).
+struct TetGeometryCotangent {
+  double area = 0.0, volume = 0.0;
+};
+
 /// Cotangent (or direction) of one tet's material: its material point's C_world (all 36 entries
 /// taken as independent), modulus μ and Fung exponent γ, and its density ρ.
 struct TetMaterialCotangent {
@@ -69,7 +80,14 @@ class TetMaterialMap {
 
   /// ADDS into values_bar (numCoefficients()) the cotangent of the coefficient values for a
   /// cotangent `bar` of tet t's material point and density.
-  void addCotangent(int t, const TetMaterialCotangent& bar, VecX& values_bar) const;
+  /// `geometry_bar` (may be null): ADDS the cotangent of the tet's boundary area and volume too
+  /// (through the skin fraction f = A · skin_thickness / |vol| below its cap).
+  void addCotangent(int t, const TetMaterialCotangent& bar, VecX& values_bar,
+                    TetGeometryCotangent* geometry_bar = nullptr) const;
+  /// Direction of tet t's density for directions of the coefficient values (numCoefficients())
+  /// and of its boundary area and volume.
+  double densityTangent(int t, const VecX& values_direction, double d_area,
+                        double d_volume) const;
 
  private:
   struct Layer {

@@ -58,14 +58,6 @@ void ElasticityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>
 
 namespace {
 
-TetMaterialCotangent materialCotangent(const FemMaterialDerivative& d) {
-  TetMaterialCotangent bar;
-  bar.C_world = d.C_world;
-  bar.modulus = d.modulus;
-  bar.gamma = d.gamma;
-  return bar;
-}
-
 Mat3X gatherDirections(const std::vector<int>& dofs, const VecX& lambda, int offset) {
   Mat3X Lambda = Mat3X::Zero(3, Eigen::Index(dofs.size() / 3));
   for (size_t i = 0; i < dofs.size(); ++i)

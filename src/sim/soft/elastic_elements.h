@@ -24,6 +24,16 @@ struct ElasticElements {
   int size() const { return int(tets.rows()); }
 };
 
+/// The material map's cotangent (tet_material_map.h) of an element's material-point cotangent
+/// (no density: the elastic energy does not read it).
+inline TetMaterialCotangent materialCotangent(const FemMaterialDerivative& d) {
+  TetMaterialCotangent bar;
+  bar.C_world = d.C_world;
+  bar.modulus = d.modulus;
+  bar.gamma = d.gamma;
+  return bar;
+}
+
 /// The avatar's elastic elements (volume/elastic_tets.h: the tets with a soft-tissue node, at
 /// the avatar's rest nodes X̄(β)), all of them or the ROM's elastic cubature's.
 ElasticElements elasticElements(const SoftAvatar& avatar);

@@ -8,8 +8,8 @@
 namespace flsh::detail {
 
 NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
-                                   const MaterialChain& chain)
-    : NodeTerm(kinematics), masses_(masses), chain_(chain) {
+                                   const MaterialChain& chain, const ShapeChain& shape)
+    : NodeTerm(kinematics), masses_(masses), chain_(chain), shape_(shape) {
   bone_mass_.assign(size_t(kin_.numBones()), 0.0);
   for (int j : masses_.nodes)
     for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf)
@@ -99,6 +99,17 @@ void NodalGravityTerm::reducedHessian(const Vec3& gravity, std::vector<Triplet>&
 // coefficient k as ∂m_j/∂c_k.
 template <class Sink>
 void NodalGravityTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
+  if (sink.wants(SimParameter::Shape)) {  // ∂g/∂β = J_jᵀ (−g) ∂m_j/∂β
+    const MatX& dm = shape_.massJacobian();
+    SkinnedPoint point;
+    const Vec3 force = -c.options.gravity;
+    for (size_t idx = 0; idx < masses_.nodes.size(); ++idx) {
+      const int j = masses_.nodes[idx];
+      kin_.point(j, point);
+      point.id = int(idx);
+      sink.add(SimParameter::Shape, point, 0, force, dm.row(j));
+    }
+  }
   if (sink.wants(SimParameter::Material)) {
     const MatX3& dm = chain_.massDerivatives();
     SkinnedPoint point;

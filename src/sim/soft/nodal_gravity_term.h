@@ -11,6 +11,7 @@
 #include "flsh/sim/energy_term.h"
 #include "sim/block_hessian_term.h"
 #include "sim/soft/material_chain.h"
+#include "sim/soft/shape_chain.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/node_offset_derivatives.h"
 #include "sim/soft/node_term.h"
@@ -23,7 +24,7 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
  public:
   /// Call after the kinematics' buildReducedPattern (the ROM's rotation–handle slots).
   NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
-                   const MaterialChain& chain);
+                   const MaterialChain& chain, const ShapeChain& shape);
 
   const char* name() const override { return "nodal gravity"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override {
@@ -52,6 +53,7 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
  private:
   const NodeMasses& masses_;
   const MaterialChain& chain_;
+  const ShapeChain& shape_;
   // ROM: the rotation–handle blocks D_bh [g]× R_b into value list 1 at `slot`, D_bh = Σ_j m_j
   // w_jb φ_jh over the mass nodes (constant).
   struct HandleBlock {

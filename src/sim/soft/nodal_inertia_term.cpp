@@ -8,10 +8,12 @@
 namespace flsh::detail {
 
 NodalInertiaTerm::NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
-                                   const MaterialChain& chain, double time_step)
+                                   const MaterialChain& chain, const ShapeChain& shape,
+                                   double time_step)
     : NodeTerm(kinematics),
       masses_(masses),
       chain_(chain),
+      shape_(shape),
       h_(time_step),
       x_hat_(kinematics.restNodes()) {
   const std::vector<int>& nodes = masses_.nodes;
@@ -96,15 +98,20 @@ void NodalInertiaTerm::forEachMassNode(Visit&& visit) const {
   }
 }
 
-// The masses (Material, in coefficient values): ∂g/∂m_j = J_jᵀ f_j / m_j, through each mass
-// coefficient k as ∂m_j/∂c_k.
+// The masses (Material, in coefficient values; Shape): ∂g/∂m_j = J_jᵀ f_j / m_j, through each
+// mass coefficient k as ∂m_j/∂c_k and through β as ∂m_j/∂β (the rest nodes' share of β goes
+// through Y, nodeOffsetBlocks).
 template <class Sink>
 void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   const bool joints = sink.wants(SimParameter::RestJoints);
   const bool material = sink.wants(SimParameter::Material);
-  if (c.is_static || (!joints && !material)) return;
+  const bool shape = sink.wants(SimParameter::Shape);
+  if (c.is_static || (!joints && !material && !shape)) return;
   const MatX3* dm = material ? &chain_.massDerivatives() : nullptr;
+  const MatX* dm_dbeta = shape ? &shape_.massJacobian() : nullptr;
   forEachMassNode([&](int j, double kappa, const Vec3& f, const SkinnedPoint& point) {
+    if (shape)
+      sink.add(SimParameter::Shape, point, 0, Vec3(f / masses_.mass[j]), dm_dbeta->row(j));
     if (material)
       for (int k = 0; k < 3; ++k)
         if ((*dm)(j, k) != 0.0)

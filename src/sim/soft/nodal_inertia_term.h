@@ -12,6 +12,7 @@
 
 #include "flsh/sim/energy_term.h"
 #include "sim/soft/material_chain.h"
+#include "sim/soft/shape_chain.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/node_offset_derivatives.h"
 #include "sim/soft/node_term.h"
@@ -27,7 +28,7 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   static constexpr double kShareBesidePotential = 0.1;
 
   NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
-                   const MaterialChain& chain, double time_step);
+                   const MaterialChain& chain, const ShapeChain& shape, double time_step);
 
   const char* name() const override { return "nodal inertia"; }
   double evaluate(const TermContext&, VecX* g, int offset) const override {
@@ -77,6 +78,7 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
 
   const NodeMasses& masses_;
   const MaterialChain& chain_;
+  const ShapeChain& shape_;
   double h_;
   MatX3 x_hat_;
   std::vector<int> parts_[2];

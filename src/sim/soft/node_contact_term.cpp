@@ -78,7 +78,8 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   const bool stiffness = sink.wants(SimParameter::Stiffnesses);
   const bool offsets = sink.wants(SimParameter::ColliderOffsets);
   const bool joints = sink.wants(SimParameter::RestJoints);
-  if (!(stiffness || offsets || joints) || c.colliders.empty()) return;
+  const bool shape = sink.wants(SimParameter::Shape);  // the areas' share (the rest nodes': Y)
+  if (!(stiffness || offsets || joints || shape) || c.colliders.empty()) return;
   const std::vector<int>& list = gather(&c.contact.candidates, true);
   const int V = int(list.size());
   if (V == 0) return;
@@ -91,9 +92,9 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   }
   ContactOptions exact = c.options.contact;
   exact.exact_hessian = true;
-  VecX gradient;              // g_x (joints)
-  std::vector<Mat3> H_total;  // the exact node Hessian against every collider (joints)
-  if (joints) {
+  VecX gradient;              // g_x (joints, shape)
+  std::vector<Mat3> H_total;  // the exact node Hessian against every collider (joints, shape)
+  if (joints || shape) {
     gradient = VecX::Zero(3 * V);
     colliderContactBlocks(x_, node_areas_, c.colliders, c.time, exact, &gradient, H_total);
   }
@@ -108,9 +109,11 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
     const bool unit_touching = stiffness && !unit_gradient.segment<3>(3 * idx).isZero(0.0);
     bool touching = false;
     for (const std::vector<Mat3>& Hk : H) touching = touching || !Hk[size_t(idx)].isZero(0.0);
-    const bool joint_touching =
-        joints && !(gradient.segment<3>(3 * idx).isZero(0.0) && H_total[size_t(idx)].isZero(0.0));
-    if (!unit_touching && !touching && !joint_touching) continue;
+    const bool gradient_touching =
+        (joints || shape) &&
+        !(gradient.segment<3>(3 * idx).isZero(0.0) && H_total[size_t(idx)].isZero(0.0));
+    const bool joint_touching = joints && gradient_touching;
+    if (!unit_touching && !touching && !gradient_touching) continue;
     kin_.point(list[size_t(idx)], point);
     point.id = idx;
     if (unit_touching)
@@ -120,6 +123,12 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
       if (!H[size_t(k)][size_t(idx)].isZero(0.0))
         sink.add(SimParameter::ColliderOffsets, point, 3 * k,
                  -H[size_t(k)][size_t(idx)].transpose(), I3);
+    // g_x is linear in the node's area a_j(β): ∂g_x/∂β = g_x / a_j ∂a_j/∂β.
+    const int node = list[size_t(idx)];
+    if (shape && gradient_touching && node_areas_[idx] > 0.0)
+      sink.add(SimParameter::Shape, point, 0,
+               Vec3(gradient.segment<3>(3 * idx) / node_areas_[idx]),
+               c.avatar.vertexAreasShapeJacobian().row(node));
     // J_b moves x_j by −w R_b and turns the lever arm of bone b's rotation rows.
     if (joint_touching) {
       const Mat3 turn = skew(Vec3(gradient.segment<3>(3 * idx)));

@@ -1,9 +1,9 @@
 // Collider contact of a soft skeleton's surface nodes (ARCHITECTURE.md §5): the penalty energy
 // of contact_energy.h on the skinned surface nodes (the broad phase's candidates), its node
 // forces and 3 × 3 node Hessians taken to the state by the kinematics. Private to Simulable.
-// Parameter derivatives: Stiffnesses[3] (the contact stiffness, linear), the collider offsets
-// and the rest joints, and the nodes' unposed positions; its dependence on β (the rest nodes,
-// areas) is not written yet (issue 25), so Simulable refuses Shape for soft avatars.
+// Parameter derivatives: Stiffnesses[3] (the contact stiffness, linear), the collider offsets,
+// the rest joints, Shape through the nodes' areas a_j(β) (the rest nodes' share of β goes
+// through the nodes' unposed positions, nodeOffsetBlocks).
 #pragma once
 
 #include <vector>

@@ -1,8 +1,9 @@
 // A soft skeleton's (FEM and ROM) parameter derivatives, the whole simulable: ∂g/∂p for the
-// groups its terms differentiate so far (rest joints, pose and root targets, bone inertias,
-// stiffnesses, collider offsets, the material) against central differences of the total gradient
-// under setParameter, the products against the Jacobians, and a clear error for what is not written
-// yet (issue 25: β).
+// groups its terms differentiate (rest joints, pose and root targets, bone inertias, stiffnesses,
+// collider offsets, the material, and β for the FEM) against central differences of the total
+// gradient under setParameter (or of simulables on SoftAvatar::withMaterial / withShape
+// avatars), the products against the Jacobians, and a clear error for what is not written yet
+// (the ROM's β).
 #include "flsh/core/error.h"
 #include "sim/soft/soft_term_checks.h"
 
@@ -137,13 +138,81 @@ TEST(SoftMaterialDerivatives, RomRestSplitBoundedBranch) {
   expectMaterialDerivatives(*sim, SoftModel::Rom);
 }
 
-TEST_P(SoftParameterDerivatives, GroupsNotWrittenYetThrowNamingThem) {
-  auto sim = test::softTermScenario(GetParam());
+// β (the FEM): ∂g/∂β against central differences of the total gradient of simulables on
+// SoftAvatar::withShape avatars at the same step, at a β away from the mean shape (so that the
+// materials' log-slopes act), with ground and sphere contact; the products against the Jacobian.
+TEST(SoftShapeDerivatives, FemMatchesFiniteDifferences) {
+  const std::shared_ptr<const SoftAvatar> base = test::smallSoftAvatar(SoftModel::Fem);
+  const int K = int(base->betas().size());
+  VecX beta = VecX::Zero(K);
+  beta.head(3) << 0.4, -0.3, 0.2;
+  auto sim = test::softTermScenario(base->withShape(beta));
+  const int n = sim->numDofs();
+  const VecX q0 = sim->getState();
+  const SimulableStep step = sim->saveStep();
+  const MatX J = sim->getGradientParameterJacobian(SimParameter::Shape);
+  ASSERT_EQ(J.rows(), n);
+  ASSERT_EQ(J.cols(), K);
+  ASSERT_GT(J.norm(), 0.0);
+  // The soft tissue's own rows (elasticity, masses, rest nodes) act, not only the bones'.
+  EXPECT_GT(J.bottomRows(n - sim->numBoneDofs()).norm(), 0.0);
+  // The bones' rows and the soft tissue's each on their own scale (the elastic rows, through the
+  // materials' log-slopes on β₀ and β₁, are 10³ times the bones').
+  const int nb = sim->numBoneDofs();
+  const double bone_scale = J.topRows(nb).norm(), soft_scale = J.bottomRows(n - nb).norm();
+  ASSERT_GT(bone_scale, 0.0);
+  const auto scaled = [&](const MatX& m) {
+    MatX out = m;
+    out.topRows(nb) /= bone_scale;
+    out.bottomRows(n - nb) /= soft_scale;
+    return out;
+  };
+  const auto gradient = [&](const VecX& d) {
+    Simulable other(base->withShape(beta + d), test::smallScene(800).walk);
+    other.setColliders(sim->colliders());
+    // The step's states and targets, the root target moved with J_0(β) as preUpdate moves it
+    // (target = J_0 + the motion's translation).
+    other.restoreStep(step);
+    other.setParameter(SimParameter::RootTranslationTarget,
+                       sim->getParameter(SimParameter::RootTranslationTarget) +
+                           (other.avatar().restJoints().row(0) - sim->avatar().restJoints().row(0))
+                               .transpose());
+    return VecX(scaled(totalGradient(other)));
+  };
+  EXPECT_TRUE(
+      test::jacobianMatchesFiniteDifferences(gradient, VecX::Zero(K), scaled(J), 1e-6, 1e-4));
+  // β₂ moves no material coefficient (the default log-slopes act on β₀ and β₁): its soft rows
+  // are the rest nodes' (elastic rest shape, inertia, gravity, contact) and the masses', checked
+  // on their own scale.
+  const double h = 1e-4;
+  const VecX step2 = h * VecX::Unit(K, 2);
+  const auto unscaled = [&](const VecX& g) {
+    MatX m = g;
+    m.topRows(nb) *= bone_scale;
+    m.bottomRows(n - nb) *= soft_scale;
+    return VecX(m);
+  };
+  const VecX fd2 = (unscaled(gradient(step2)) - unscaled(gradient(-step2))) / (2 * h);
+  ASSERT_GT(J.col(2).tail(n - nb).norm(), 0.0);
+  EXPECT_LT((fd2 - J.col(2)).tail(n - nb).norm(), 1e-6 * J.col(2).tail(n - nb).norm());
+  const VecX lambda = test::randomVector(n, 1.0, 61);
+  const VecX vjp = sim->getGradientParameterVJPs(lambda, {SimParameter::Shape}).front();
+  EXPECT_LT((vjp - J.transpose() * lambda).norm(), 1e-10 * (1.0 + vjp.norm()));
+  const VecX direction = test::randomVector(K, 1.0, 62);
+  ParameterDirection along{};
+  along[size_t(SimParameter::Shape)] = &direction;
+  const VecX jvp = sim->getGradientParameterJVPs({along}).front();
+  EXPECT_LT((jvp - J * direction).norm(), 1e-10 * (1.0 + jvp.norm()));
+  EXPECT_EQ((sim->getState() - q0).norm(), 0.0) << "derivative calls changed the state";
+}
+
+TEST(SoftShapeDerivatives, RomThrowsNamingIt) {
+  auto sim = test::softTermScenario(SoftModel::Rom);
   for (SimParameter p : {SimParameter::Shape}) {
     const std::string message =
         test::messageOf<Error>([&] { sim->getGradientParameterJacobian(p); });
     EXPECT_NE(message.find(simParameterInfo(p).enum_name), std::string::npos) << message;
-    EXPECT_NE(message.find("soft-tissue avatar"), std::string::npos) << message;
+    EXPECT_NE(message.find("ROM"), std::string::npos) << message;
     EXPECT_THROW(sim->getGradientParameterVJPs(VecX::Zero(sim->numDofs()), {p}), Error);
     const VecX d = VecX::Ones(sim->parameterSize(p));
     ParameterDirection along{};

@@ -25,8 +25,8 @@ namespace flsh::test {
 /// A walking soft avatar one step in with a velocity history (bones and soft state), moved off
 /// its prediction, a ground plane 1.5 cm above its lowest node and a sphere pressing into its
 /// frontmost node: every node term is active.
-inline std::unique_ptr<Simulable> softTermScenario(SoftModel model) {
-  auto sim = std::make_unique<Simulable>(smallSoftAvatar(model), smallScene(800).walk);
+inline std::unique_ptr<Simulable> softTermScenario(std::shared_ptr<const SoftAvatar> avatar) {
+  auto sim = std::make_unique<Simulable>(std::move(avatar), smallScene(800).walk);
   sim->initialize();
   sim->preUpdate();
   const int n = sim->numDofs(), nb = sim->numBoneDofs();
@@ -42,6 +42,10 @@ inline std::unique_ptr<Simulable> softTermScenario(SoftModel model) {
   sim->updateState(increment(0.03, 0.003, 5));
   placeGroundAndSphere(*sim);
   return sim;
+}
+
+inline std::unique_ptr<Simulable> softTermScenario(SoftModel model) {
+  return softTermScenario(smallSoftAvatar(model));
 }
 
 /// The simulable's whole gradient (dynamic and potential parts).

@@ -1,0 +1,85 @@
+#include "sim/soft/shape_chain.h"
+
+#include <Eigen/Geometry>
+
+#include "flsh/energy/fem_material.h"
+#include "flsh/volume/tet_material_map.h"
+#include "flsh/volume/volumetric_data.h"
+#include "sim/soft/node_masses.h"
+
+namespace flsh::detail {
+
+Eigen::Block<const MatX, 3, Eigen::Dynamic> ShapeChain::nodeDirections(int j) const {
+  return avatar_.volumetricData().templ->fields.shapedirs.middleRows<3>(3 * Eigen::Index(j));
+}
+
+void ShapeChain::addNodeCotangent(const MatX3& X_bar, VecX& beta_bar) const {
+  const MatX& S = avatar_.volumetricData().templ->fields.shapedirs;
+  // S is 3#N × K with row 3j + c: X_bar is row-major, so its storage matches S row for row.
+  beta_bar.noalias() += S.topRows(X_bar.size()).transpose() *
+                        Eigen::Map<const VecX>(X_bar.data(), X_bar.size());
+}
+
+MatX3 ShapeChain::nodeTangent(const VecX& dbeta) const {
+  const VecX d = avatar_.volumetricData().templ->fields.shapedirs * dbeta;
+  return Eigen::Map<const MatX3>(d.data(), d.size() / 3, 3);
+}
+
+const MatX& ShapeChain::valuesJacobian() const {
+  build();
+  return values_;
+}
+const MatX& ShapeChain::areaJacobian() const {
+  build();
+  return area_;
+}
+const MatX& ShapeChain::volumeJacobian() const {
+  build();
+  return volume_;
+}
+const MatX& ShapeChain::massJacobian() const {
+  build();
+  return mass_;
+}
+
+// Forward mode over the K columns: dX̄ = S e_k moves each tet's area and volume; with dc the
+// column of ∂c/∂β, m_j = Σ_k w_k ρ_t vol_t / 4 (signed volume, as node_masses) moves by
+// w_k (dρ_t vol_t + ρ_t dvol_t) / 4.
+void ShapeChain::build() const {
+  if (built_) return;
+  const VolumetricData& data = avatar_.volumetricData();
+  const TetMesh& mesh = data.templ->mesh;
+  const int K = numBetas(), T = data.numTets();
+  values_ = data.material_model.coefficientValuesShapeJacobian(avatar_.betas());
+  area_.resize(T, K);
+  volume_.resize(T, K);
+  VecX d_area, d_volume;
+  for (int k = 0; k < K; ++k) {
+    tetMaterialGeometryTangent(mesh, data.rest_nodes, nodeTangent(VecX::Unit(K, k)), d_area,
+                               d_volume);
+    area_.col(k) = d_area;
+    volume_.col(k) = d_volume;
+  }
+  const Cubature cubature = massCubature(avatar_);
+  const TetMaterialMap& map = materials_.map();
+  mass_ = MatX::Zero(data.numNodes(), K);
+  for (Eigen::Index i = 0; i < cubature.elements.size(); ++i) {
+    const int t = cubature.elements[i];
+    Mat34 X;
+    for (int a = 0; a < 4; ++a) X.col(a) = data.rest_nodes.row(mesh.tets(t, a)).transpose();
+    const double volume =
+        (X.col(1) - X.col(0)).cross(X.col(2) - X.col(0)).dot(X.col(3) - X.col(0)) / 6;
+    const double sign = volume < 0 ? -1.0 : 1.0;
+    Eigen::RowVectorXd dm(K);
+    for (int k = 0; k < K; ++k) {
+      const double d_rho =
+          map.densityTangent(t, values_.col(k), area_(t, k), volume_(t, k));
+      dm[k] = d_rho * volume + data.materials.density[t] * sign * volume_(t, k);
+    }
+    dm *= cubature.weights[i] / 4;
+    for (int a = 0; a < 4; ++a) mass_.row(mesh.tets(t, a)) += dm;
+  }
+  built_ = true;
+}
+
+}  // namespace flsh::detail

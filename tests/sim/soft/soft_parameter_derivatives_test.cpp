@@ -173,10 +173,10 @@ TEST(SoftShapeDerivatives, FemMatchesFiniteDifferences) {
     // The step's states and targets, the root target moved with J_0(β) as preUpdate moves it
     // (target = J_0 + the motion's translation).
     other.restoreStep(step);
-    other.setParameter(SimParameter::RootTranslationTarget,
-                       sim->getParameter(SimParameter::RootTranslationTarget) +
-                           (other.avatar().restJoints().row(0) - sim->avatar().restJoints().row(0))
-                               .transpose());
+    other.setParameter(
+        SimParameter::RootTranslationTarget,
+        sim->getParameter(SimParameter::RootTranslationTarget) +
+            (other.avatar().restJoints().row(0) - sim->avatar().restJoints().row(0)).transpose());
     return VecX(scaled(totalGradient(other)));
   };
   EXPECT_TRUE(

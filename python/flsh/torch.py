@@ -302,10 +302,14 @@ class RolloutSimulator:
     def make_simulable(self, betas: np.ndarray | None = None,
                        material: np.ndarray | None = None):
         """A new flsh.Simulable with these settings and colliders, of shape `betas` (≤K,) or the
-        default shape (None; then the avatar is the shared, immutable default one), with the
+        default shape (None; then the avatar is the shared, immutable default one; otherwise
+        the default avatar at `betas` with its discretization, SoftAvatar.with_shape), with the
         material coefficients `material` ((P,) as own_material(); None = the avatar's own: soft
         models only, SoftAvatar.with_material)."""
-        avatar = self._default_avatar if betas is None else self._make_avatar(betas)
+        # Another shape keeps the default avatar's discretization (SoftAvatar.with_shape: for
+        # the soft models the tet mesh, bone nodes, frames and the ROM's basis; for the
+        # skeleton the same as a new avatar), so that β's gradient is exact for what runs.
+        avatar = self._default_avatar if betas is None else self._default_avatar.with_shape(betas)
         if material is not None:
             self._require_soft("material")
             avatar = avatar.with_material(material)
@@ -419,7 +423,8 @@ def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
 
     simulator: RolloutSimulator (body, mocap, options, colliders, T). Inputs, float64 CPU
     tensors or None (= the simulable's own):
-      betas (K',) body shape, K' ≤ K (zero padded; a new avatar is built);
+      betas (K',) body shape, K' ≤ K (zero padded): the default avatar at β with its
+        discretization kept (SoftAvatar.with_shape; the ROM's β gradient is not available);
       material (P,) the soft models' material coefficients (RolloutSimulator.own_material,
         material_names: log-values and log-slopes of the material file), P = 40·(1 + K); the
         avatar's discretization is kept (SoftAvatar.with_material);
@@ -434,8 +439,8 @@ def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
     Returns joints (T, 24, 3), the bone positions t_b after steps 1..T (m); with vertices=True
     (joints, vertices) with the vertices (T, V, 3) (m): the SMPL vertices (skeleton; a skinning
     per step forward and an SMPL Jacobian per step backward) or the simulated surface (soft
-    models). With model "fem" or "rom", betas may not require grad. ValueError on a wrong dtype, device, shape or a
-    non-finite value; TypeError if simulator is not a RolloutSimulator.
+    models). With model "rom", betas may not require grad. ValueError on a wrong dtype, device,
+    shape or a non-finite value; TypeError if simulator is not a RolloutSimulator.
     """
     if not isinstance(simulator, RolloutSimulator):
         raise TypeError(f"simulator: expected a flsh.torch.RolloutSimulator, got "
@@ -443,11 +448,10 @@ def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
     T, K, n = simulator.steps, simulator.num_betas, simulator.num_dofs
     if betas is not None:
         _check_fixed(betas, "betas", (-1,), f"(K',) with K' <= {K}")
-        if simulator.soft_tissue and betas.requires_grad:
-            raise ValueError(f"betas: gradients with respect to the shape through soft tissue "
-                             f"(model={simulator.model!r}: its rest nodes, masses and "
-                             f"materials) are not available yet; pass betas without "
-                             f"requires_grad, or use model='skeleton'")
+        if simulator.model == "rom" and betas.requires_grad:
+            raise ValueError("betas: gradients with respect to the shape through the ROM's "
+                             "reduced elastic term are not available yet; pass betas without "
+                             "requires_grad, or use model='fem' or 'skeleton'")
         if betas.shape[0] > K:
             raise ValueError(f"betas: expected at most {K} values (the model's shape "
                              f"components), got shape {tuple(betas.shape)}")

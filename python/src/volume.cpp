@@ -355,6 +355,19 @@ void bind_volume(py::module_& m) {
           "the ROM's basis, cubatures and rest-split floors), every tet's materials "
           "re-evaluated. Cheap next to a build. ValueError on a wrong size or a material that "
           "is not physical.")
+      .def(
+          "with_shape",
+          [](const SoftAvatar& a, const py::object& betas) {
+            const VecX b = to_vector(betas, "betas", -1);
+            py::gil_scoped_release release;
+            return a.withShape(b);
+          },
+          py::arg("betas"),
+          "This avatar at another shape β′ ((K',), K' ≤ K, zero padded), for fitting β: the "
+          "same discretization (tet mesh, bone nodes, frames; the ROM's basis, cubatures and "
+          "rest-split floors) with the rest data of β′ (surface, joints, inertias, rest nodes "
+          "X̄(β′), every tet's materials; the ROM's K). The soft models' β gradient is exact for "
+          "this model. Cheap next to a build. ValueError on a bad β.")
       .def_property_readonly(
           "reduced_data", [](const SoftAvatar& a) -> const ReducedData& { return a.reducedData(); },
           py::return_value_policy::reference_internal,

@@ -139,11 +139,6 @@ void Rollout::checkVariables(const RolloutVariables& v, const std::string& who) 
   const int T = numSteps(), n = numDofs();
   const Simulable& sim = *simulable_;
   checkVector(v.shape, sim.parameterSize(SimParameter::Shape), who, "shape");
-  if (sim.hasReducedModel() && v.shape.size())
-    throw Error(who +
-                ": shape: β's derivatives through the ROM soft skeleton (its reduced elastic "
-                "term) are not available yet; leave shape empty (the FEM and the skeleton have "
-                "them)");
   checkVector(v.rest_joints, 72, who, "rest_joints");
   checkVector(v.bone_inertia, sim.parameterSize(SimParameter::BoneInertia), who, "bone_inertia");
   checkMatrix(v.pose_targets, T, 72, who, "pose_targets");
@@ -326,9 +321,8 @@ Rollout::VerticesCotangent Rollout::verticesCotangent(int t, const MatX3& dL_dve
     // from q_0 itself).
     VecX increments, previous;
     simulable_->getNodesCotangents(dL_dvertices, &increments, &previous, &out.direct.rest_joints,
-                                   simulable_->hasReducedModel() ? nullptr : &out.direct.shape);
-    if (out.direct.shape.size())
-      chainShapeCotangent(avatar, out.direct.rest_joints, VecX(), out.direct.shape);
+                                   &out.direct.shape);
+    chainShapeCotangent(avatar, out.direct.rest_joints, VecX(), out.direct.shape);
     if (t == 0) increments += previous;
     out.state = model.incrementToStateCotangent(increments);
     if (t > 0)  // at q_{t−1}, the state recorded before step t

@@ -17,22 +17,12 @@ struct SimulableSnapshot final : StepSnapshot {
   SimulableStep step;
 };
 
-// The adjoint's groups are the registry's, in SimParameter order; the ROM's Shape group is
-// empty (β through its reduced elastic term is not written yet).
-std::vector<SimParameter> differentiatedGroups(const Simulable& s) {
+// The adjoint's groups: the registry's, in SimParameter order (every model differentiates
+// every group; a group of size 0, the skeleton's Material, is empty).
+std::vector<SimParameter> allGroups() {
   std::vector<SimParameter> groups;
-  for (const SimParameterInfo& info : simParameters())
-    if (!(s.hasReducedModel() && info.id == SimParameter::Shape)) groups.push_back(info.id);
+  for (const SimParameterInfo& info : simParameters()) groups.push_back(info.id);
   return groups;
-}
-
-// Results per differentiated group into registry order, the groups left out empty.
-template <class Block>
-std::vector<Block> inRegistryOrder(const std::vector<SimParameter>& groups,
-                                   std::vector<Block> values, const Block& empty) {
-  std::vector<Block> out(size_t(kNumSimParameters), empty);
-  for (size_t k = 0; k < groups.size(); ++k) out[size_t(groups[k])] = std::move(values[k]);
-  return out;
 }
 
 void checkSize(const VecX& v, int n, const char* who, const char* what) {
@@ -60,11 +50,7 @@ int SimulableAdjointModel::numDofs() const { return simulable_->numDofs(); }
 std::vector<ParameterGroupInfo> SimulableAdjointModel::parameterGroups() const {
   std::vector<ParameterGroupInfo> groups;
   for (const SimParameterInfo& info : simParameters())
-    groups.push_back({info.name,
-                      info.id == SimParameter::Shape && simulable_->hasReducedModel()
-                          ? 0
-                          : simulable_->parameterSize(info.id),
-                      info.per_step});
+    groups.push_back({info.name, simulable_->parameterSize(info.id), info.per_step});
   return groups;
 }
 
@@ -99,9 +85,7 @@ SpMat SimulableAdjointModel::previousStateJacobian(int which) const {
 }
 
 void SimulableAdjointModel::parameterJacobians(std::vector<MatX>& out) const {
-  const std::vector<SimParameter> groups = differentiatedGroups(*simulable_);
-  out = inRegistryOrder(groups, simulable_->getGradientParameterJacobians(groups),
-                        MatX(numDofs(), 0));
+  out = simulable_->getGradientParameterJacobians(allGroups());
 }
 
 void SimulableAdjointModel::previousStatesVJP(const VecX& lambda, VecX& a_n, VecX& a_nm1) const {
@@ -113,13 +97,9 @@ VecX SimulableAdjointModel::previousStatesJVP(const VecX& dq_n, const VecX& dq_n
 }
 
 void SimulableAdjointModel::parameterVJPs(const VecX& lambda, std::vector<VecX>& out) const {
-  const std::vector<SimParameter> groups = differentiatedGroups(*simulable_);
   const bool material = simulable_->hasSoftTissue();
-  out = inRegistryOrder(groups,
-                        simulable_->getGradientParameterVJPs(lambda, groups,
-                                                             /*shape_surface_only=*/true,
-                                                             material ? &material_sum_ : nullptr),
-                        VecX());
+  out = simulable_->getGradientParameterVJPs(lambda, allGroups(), /*shape_surface_only=*/true,
+                                             material ? &material_sum_ : nullptr);
   material_pending_ = material_pending_ || material;
 }
 

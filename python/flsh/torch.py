@@ -424,7 +424,8 @@ def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
     simulator: RolloutSimulator (body, mocap, options, colliders, T). Inputs, float64 CPU
     tensors or None (= the simulable's own):
       betas (K',) body shape, K' ≤ K (zero padded): the default avatar at β with its
-        discretization kept (SoftAvatar.with_shape; the ROM's β gradient is not available);
+        discretization kept (SoftAvatar.with_shape: for the soft models the tet mesh, bone
+        nodes and frames, and the ROM's basis and cubatures);
       material (P,) the soft models' material coefficients (RolloutSimulator.own_material,
         material_names: log-values and log-slopes of the material file), P = 40·(1 + K); the
         avatar's discretization is kept (SoftAvatar.with_material);
@@ -439,8 +440,8 @@ def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
     Returns joints (T, 24, 3), the bone positions t_b after steps 1..T (m); with vertices=True
     (joints, vertices) with the vertices (T, V, 3) (m): the SMPL vertices (skeleton; a skinning
     per step forward and an SMPL Jacobian per step backward) or the simulated surface (soft
-    models). With model "rom", betas may not require grad. ValueError on a wrong dtype, device,
-    shape or a non-finite value; TypeError if simulator is not a RolloutSimulator.
+    models). ValueError on a wrong dtype, device, shape or a non-finite value; TypeError if
+    simulator is not a RolloutSimulator.
     """
     if not isinstance(simulator, RolloutSimulator):
         raise TypeError(f"simulator: expected a flsh.torch.RolloutSimulator, got "
@@ -448,10 +449,6 @@ def simulate(simulator: RolloutSimulator, betas: torch.Tensor | None = None,
     T, K, n = simulator.steps, simulator.num_betas, simulator.num_dofs
     if betas is not None:
         _check_fixed(betas, "betas", (-1,), f"(K',) with K' <= {K}")
-        if simulator.model == "rom" and betas.requires_grad:
-            raise ValueError("betas: gradients with respect to the shape through the ROM's "
-                             "reduced elastic term are not available yet; pass betas without "
-                             "requires_grad, or use model='fem' or 'skeleton'")
         if betas.shape[0] > K:
             raise ValueError(f"betas: expected at most {K} values (the model's shape "
                              f"components), got shape {tuple(betas.shape)}")

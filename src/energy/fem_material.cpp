@@ -344,27 +344,75 @@ Mat3 tetDeformationGradient(const TetElementRest& rest, const Mat34& u) {
   return Mat3::Identity() + Du * rest.Dm_inv;
 }
 
+namespace {
+
+/// Adds the cotangent of Dm (3 × 3) to the four rest nodes: column k to node k + 1, minus their
+/// sum to node 0.
+void addEdgeCotangent(const Mat3& Dm_bar, Mat34& X_bar) {
+  X_bar.rightCols<3>() += Dm_bar;
+  X_bar.col(0) -= Dm_bar.rowwise().sum();
+}
+
+Mat3 edges(const Mat34& x) {
+  Mat3 D;
+  D << x.col(1) - x.col(0), x.col(2) - x.col(0), x.col(3) - x.col(0);
+  return D;
+}
+
+/// The symmetric matrix of a Voigt stress (11, 22, 33, 23, 13, 12): ⟨it, G⟩ = σ · ε(G).
+Mat3 voigtStressMatrix(const Vec6& s) {
+  Mat3 m;
+  m << s[0], s[5], s[4], s[5], s[1], s[3], s[4], s[3], s[2];
+  return m;
+}
+
+}  // namespace
+
 void addTetGradientRestCotangent(const TetElementRest& rest, const FemMaterialPoint& material,
-                                 const Mat34& u, const Mat34& lambda, double scale,
-                                 Mat34& X_bar) {
+                                 const Mat34& u, const Mat34& lambda, double scale, Mat34& X_bar) {
   if (!u.allFinite())
     throw InputError("addTetGradientRestCotangent: nodal displacements u have a non-finite entry");
   const Mat3& W = rest.Dm_inv;
   const Mat3 F = tetDeformationGradient(rest, u);
-  Mat3 Dl;
-  Dl << lambda.col(1) - lambda.col(0), lambda.col(2) - lambda.col(0),
-      lambda.col(3) - lambda.col(0);
-  const Mat3 G = Dl * W;
+  const Mat3 G = edges(lambda) * W;
   Mat3 P;
   Mat9 dPdF;
   fungEnergyDensity(F, material, &P, &dPdF, false);
   const Mat3 AG = Eigen::Map<const Mat3>(Vec9(dPdF * Eigen::Map<const Vec9>(G.data())).data());
-  const Mat3 dDm = (scale * rest.volume) *
-                   (P.cwiseProduct(G).sum() * Mat3::Identity() -
-                    (F - Mat3::Identity()).transpose() * AG - G.transpose() * P) *
-                   W.transpose();
-  X_bar.rightCols<3>() += dDm;
-  X_bar.col(0) -= dDm.rowwise().sum();
+  addEdgeCotangent((scale * rest.volume) *
+                       (P.cwiseProduct(G).sum() * Mat3::Identity() -
+                        (F - Mat3::Identity()).transpose() * AG - G.transpose() * P) *
+                       W.transpose(),
+                   X_bar);
+}
+
+void addTetEnergyRestCotangent(const TetElementRest& rest, const FemMaterialPoint& material,
+                               const Mat34& u, double scale, Mat34& X_bar) {
+  if (!u.allFinite())
+    throw InputError("addTetEnergyRestCotangent: nodal displacements u have a non-finite entry");
+  const Mat3& W = rest.Dm_inv;
+  const Mat3 F = tetDeformationGradient(rest, u);
+  Mat3 P;
+  const double psi = fungEnergyDensity(F, material, &P);
+  addEdgeCotangent((scale * rest.volume) *
+                       (psi * Mat3::Identity() - (F - Mat3::Identity()).transpose() * P) *
+                       W.transpose(),
+                   X_bar);
+}
+
+void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_world, const Mat34& u,
+                                   const Mat34& lambda, double scale, Mat34& X_bar) {
+  if (!u.allFinite() || !lambda.allFinite())
+    throw InputError("addTetLinearFormRestCotangent: u or lambda has a non-finite entry");
+  const Mat3& W = rest.Dm_inv;
+  const Mat3 Gu = edges(u) * W, Gl = edges(lambda) * W;
+  const Vec6 su = C_world * voigtLinearStrain(Gu), sl = C_world * voigtLinearStrain(Gl);
+  const double form = su.dot(voigtLinearStrain(Gl));
+  addEdgeCotangent((scale * rest.volume) *
+                       (form * Mat3::Identity() - Gu.transpose() * voigtStressMatrix(sl) -
+                        Gl.transpose() * voigtStressMatrix(su)) *
+                       W.transpose(),
+                   X_bar);
 }
 
 namespace {

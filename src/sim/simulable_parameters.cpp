@@ -17,54 +17,11 @@ using detail::kDofsPerBone;
 
 namespace {
 
-void requireDifferentiable(const Simulable::Impl& m, const std::vector<SimParameter>& groups,
-                           const char* who);
-
 void checkStateSized(const VecX& x, int n, const char* who, const char* name) {
   if (x.size() != n)
     throw InputError(std::string("Simulable::") + who + ": " + name + " has " +
                      std::to_string(x.size()) +
                      " values, expected numDofs() = " + std::to_string(n));
-}
-
-}  // namespace
-
-namespace {
-
-// The groups every term of a soft skeleton differentiates: those the node terms do not depend
-// on (pose and root targets, bone inertias: the bones' springs alone), the contact stiffness and
-// collider offsets (the node contact term), the rest joints (the tet nodes' skinning in inertia,
-// its prediction, gravity and contact), the material (elasticity and the node masses) and, for
-// the FEM, β (the rest nodes X̄(β), masses, materials and contact areas; SoftTissue::
-// addShapeProducts). The ROM's elastic term has no β derivatives yet.
-bool softDifferentiable(const Simulable::Impl& m, SimParameter p) {
-  switch (p) {
-    case SimParameter::Shape:
-      return m.soft->shapeDifferentiable();
-    case SimParameter::Material:
-    case SimParameter::RestJoints:
-    case SimParameter::PoseTargets:
-    case SimParameter::RootTranslationTarget:
-    case SimParameter::BoneInertia:
-    case SimParameter::Stiffnesses:
-    case SimParameter::ColliderOffsets:
-      return true;
-    default:
-      return false;
-  }
-}
-
-void requireDifferentiable(const Simulable::Impl& m, const std::vector<SimParameter>& groups,
-                           const char* who) {
-  if (!m.soft) return;
-  for (SimParameter p : groups) {
-    simParameterInfo(p);  // throws for a value outside the enum
-    if (!softDifferentiable(m, p))
-      throw Error(std::string("Simulable::") + who + ": " + simParameterInfo(p).enum_name +
-                  ": parameter derivatives of the ROM soft skeleton cover every group but Shape "
-                  "(β through the reduced elastic term is not written yet); the FEM soft "
-                  "skeleton has every group, the articulated skeleton every group but Material");
-  }
 }
 
 }  // namespace
@@ -131,7 +88,6 @@ MatX materialParametersJacobian(const Simulable::Impl& m, const MatX& values_jac
 std::vector<MatX> Simulable::getGradientParameterJacobians(const std::vector<SimParameter>& groups,
                                                            bool shape_surface_only) const {
   const Impl& m = *impl_;
-  requireDifferentiable(m, groups, "getGradientParameterJacobians");
   ParameterProducts<MatX> jacobians;
   const bool chain = askFor(*this, groups, numDofs(), jacobians) && !shape_surface_only;
   if (chain)
@@ -165,7 +121,6 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
                                                       bool shape_surface_only,
                                                       MaterialProducts* material_sum) const {
   const Impl& m = *impl_;
-  requireDifferentiable(m, groups, "getGradientParameterVJPs");
   checkStateSized(lambda, numDofs(), "getGradientParameterVJPs", "lambda");
   ParameterProducts<VecX> products;
   const bool chain = askFor(*this, groups, 1, products) && !shape_surface_only;
@@ -229,11 +184,6 @@ std::vector<VecX> Simulable::getGradientParameterJVPs(
     const std::vector<ParameterDirection>& directions, bool shape_surface_only) const {
   const Impl& m = *impl_;
   std::vector<ParameterDirection> given = directions;
-  if (m.soft)
-    for (const ParameterDirection& d : directions)
-      for (const SimParameterInfo& info : simParameters())
-        if (d[size_t(info.id)] && d[size_t(info.id)]->size())
-          requireDifferentiable(m, {info.id}, "getGradientParameterJVPs");
   std::vector<VecX> chained(2 * directions.size());
   for (size_t d = 0; d < directions.size(); ++d)
     for (const SimParameterInfo& info : simParameters()) {

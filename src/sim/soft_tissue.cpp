@@ -90,27 +90,22 @@ void SoftTissue::addPoseBlendTangent(const TermContext& c, const VecX& dq_n, Vec
     term->addNodeOffsetTangent(c, dY, out);
 }
 
-void SoftTissue::addShapeProducts(const TermContext& c, const VecX& lambda,
-                                  VecX& beta_bar) const {
-  if (!shapeDifferentiable()) throw Error("SoftTissue: the ROM's Shape derivatives are not written");
+void SoftTissue::addShapeProducts(const TermContext& c, const VecX& lambda, VecX& beta_bar) const {
   MatX3 node_cotangent = MatX3::Zero(numNodes(), 3);
   for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
     term->addNodeOffsetProducts(c, lambda, node_cotangent);
   shape_chain_.addNodeCotangent(node_cotangent, beta_bar);
-  static_cast<const FemElasticityTerm&>(*elastic_).addShapeProducts(lambda, shape_chain_,
-                                                                    beta_bar);
+  elastic_->addShapeProducts(lambda, shape_chain_, beta_bar);
 }
 
 void SoftTissue::addShapeTangent(const TermContext& c, const VecX& dbeta, VecX& out) const {
-  if (!shapeDifferentiable()) throw Error("SoftTissue: the ROM's Shape derivatives are not written");
   const MatX3 dY = shape_chain_.nodeTangent(dbeta);
   for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
     term->addNodeOffsetTangent(c, dY, out);
-  static_cast<const FemElasticityTerm&>(*elastic_).addShapeTangent(dbeta, shape_chain_, out);
+  elastic_->addShapeTangent(dbeta, shape_chain_, out);
 }
 
 void SoftTissue::addShapeJacobian(const TermContext& c, MatX& J) const {
-  if (!shapeDifferentiable()) throw Error("SoftTissue: the ROM's Shape derivatives are not written");
   for (int k = 0; k < shape_chain_.numBetas(); ++k) {
     const MatX3 dY = shape_chain_.nodeTangent(VecX::Unit(shape_chain_.numBetas(), k));
     VecX column = VecX::Zero(J.rows());
@@ -118,7 +113,7 @@ void SoftTissue::addShapeJacobian(const TermContext& c, MatX& J) const {
       term->addNodeOffsetTangent(c, dY, column);
     J.col(k) += column;
   }
-  static_cast<const FemElasticityTerm&>(*elastic_).addShapeJacobian(shape_chain_, J);
+  elastic_->addShapeJacobian(shape_chain_, J);
 }
 
 std::vector<const EnergyTerm*> SoftTissue::terms() const {

@@ -131,9 +131,8 @@ class SoftTissue final : public TwoThreadSchedule {
 
   // ---- Shape (β) beyond the node terms' own blocks (the masses' and the contact areas'
   // ∂/∂β: inertia, gravity, contact) — the rest nodes through every node term's Y
-  // (node_offset_derivatives.h) and the FEM's elastic rest shape and materials
-  // (FemElasticityTerm); the ROM's elastic term has none yet ----
-  bool shapeDifferentiable() const { return !reduced(); }
+  // (node_offset_derivatives.h) and the elastic term's rest shapes and materials
+  // (ElasticityTerm::addShapeProducts) ----
   /// ADDS λᵀ ∂g/∂β into beta_bar (K).
   void addShapeProducts(const TermContext& c, const VecX& lambda, VecX& beta_bar) const;
   /// ADDS ∂g/∂β dβ into out / ∂g/∂β into J (numDofs × K).

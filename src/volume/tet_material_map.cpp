@@ -223,9 +223,9 @@ double TetMaterialMap::densityTangent(int t, const VecX& values_direction, doubl
   const double d_tissue = values_direction[ix.layer[MaterialModel::kSoftTissue][kDensity]];
   double df = 0.0;
   if (f > 0 && f < 1)  // f = A t / |vol|
-    df = f * (d_area / geometry_.boundary_area[t] +
-              values_direction[ix.skin_thickness] / skin_thickness_ -
-              d_volume / geometry_.volume[t]);
+    df = f *
+         (d_area / geometry_.boundary_area[t] +
+          values_direction[ix.skin_thickness] / skin_thickness_ - d_volume / geometry_.volume[t]);
   return f * d_skin + (1 - f) * d_tissue + df * (rho_skin - rho_tissue);
 }
 

@@ -1,10 +1,10 @@
 // Rollout through the soft skeletons (FEM and ROM): for every input group (the material through
-// SoftAvatar::withMaterial avatars, β through withShape avatars, the FEM only), the directional
+// SoftAvatar::withMaterial avatars, β through withShape avatars), the directional
 // derivative of a whole-rollout loss (joint positions, the state vectors with their soft part,
 // and the simulated surface at every step, which moves with the pose blend held from the
 // previous state) against a central difference of re-run rollouts, with and without contact (a
 // ground plane the walk touches and a sphere); forward sensitivities against the reverse pass;
-// backward leaves the simulable bitwise unchanged; a β direction is refused clearly by the ROM.
+// backward leaves the simulable bitwise unchanged.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -221,9 +221,7 @@ void expectDirectionalDerivative(const Case& c, const RolloutVariables& d, doubl
   const RolloutVariables grad = lossFor(c.model).gradient(rollout);
   const SimulableStep after = sim->saveStep();
   EXPECT_TRUE(sameStep(before, after)) << "backward() changed the simulable";
-  EXPECT_EQ(grad.shape.size(),
-            c.model == SoftModel::Rom ? 0 : sim->parameterSize(SimParameter::Shape))
-      << "β is differentiated through the FEM (not the ROM yet)";
+  EXPECT_EQ(grad.shape.size(), sim->parameterSize(SimParameter::Shape));
   const double analytic = dot(grad, d);
   ASSERT_GT(std::abs(analytic), 1e-8) << "the directional derivative is zero: vacuous check";
   const double fd = (lossAlong(c, d, eps) - lossAlong(c, d, -eps)) / (2.0 * eps);
@@ -290,18 +288,13 @@ TEST_P(SoftRolloutGradient, Material) {
   expectDirectionalDerivative(c, d, 1e-4);
 }
 
-// β (the FEM): rollouts of SoftAvatar::withShape avatars (the same discretization at β′); the
-// loss sees β through the rest nodes, masses, materials, joints and the simulated surface.
-TEST(SoftRolloutShape, FemWithContact) {
+// β: rollouts of SoftAvatar::withShape avatars (the same discretization at β′); the loss sees β
+// through the rest nodes, masses, materials, joints and the simulated surface.
+TEST_P(SoftRolloutGradient, Shape) {
+  const Case c = scenario();
   RolloutVariables d;
-  d.shape = randomVector(int(test::smallSoftAvatar(SoftModel::Fem)->betas().size()), 1.0, 18);
-  expectDirectionalDerivative({SoftModel::Fem, true}, d, 1e-4);
-}
-
-TEST(SoftRolloutShape, FemWithoutContact) {
-  RolloutVariables d;
-  d.shape = randomVector(int(test::smallSoftAvatar(SoftModel::Fem)->betas().size()), 1.0, 19);
-  expectDirectionalDerivative({SoftModel::Fem, false}, d, 1e-4);
+  d.shape = randomVector(int(test::smallSoftAvatar(c.model)->betas().size()), 1.0, 18);
+  expectDirectionalDerivative(c, d, 1e-4);
 }
 
 TEST_P(SoftRolloutGradient, InitialState) {
@@ -358,8 +351,7 @@ TEST_P(SoftRollout, ForwardSensitivitiesAgreeWithTheReversePass) {
   d.initial_state = randomVector(n, 0.001, 15);
   d.initial_velocity = randomVector(n, 0.01, 16);
   d.material = randomVector(sim->parameterSize(SimParameter::Material), 0.1, 17);
-  if (c.model == SoftModel::Fem)
-    d.shape = randomVector(sim->parameterSize(SimParameter::Shape), 1.0, 18);
+  d.shape = randomVector(sim->parameterSize(SimParameter::Shape), 1.0, 18);
   const std::vector<RowMatX> dq = rollout.forwardSensitivities({d});
   ASSERT_EQ(dq.size(), 1u);
   const double forward = (a.array() * dq[0].array()).sum();
@@ -396,17 +388,6 @@ TEST_P(SoftRollout, SnapshotTapeMatchesTheFactorTape) {
   EXPECT_LT((results[0].pose_targets - results[1].pose_targets).norm(),
             1e-9 * results[0].pose_targets.norm());
   EXPECT_LT((sensitivities[0] - sensitivities[1]).norm(), 1e-9 * sensitivities[0].norm());
-}
-
-TEST(SoftRolloutShape, RomRefusesItWithAClearMessage) {
-  auto sim = makeSimulable({SoftModel::Rom, false});
-  Rollout rollout(sim, tightOptions());
-  rollout.run(2);
-  RolloutVariables d;
-  d.shape = VecX::Ones(sim->parameterSize(SimParameter::Shape));
-  const std::string message = test::messageOf<Error>([&] { rollout.forwardSensitivities({d}); });
-  EXPECT_NE(message.find("shape"), std::string::npos) << message;
-  EXPECT_NE(message.find("ROM"), std::string::npos) << message;
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, SoftRollout, ::testing::Values(SoftModel::Fem, SoftModel::Rom),

@@ -164,9 +164,51 @@ TEST(FemMaterialParameters, GradientRestCotangentMatchesFiniteDifferences) {
       return VecX::Constant(1, 2.0 * Eigen::Map<const Vec12>(lambda.data()).dot(g));
     };
     const MatX analytic = scale * Eigen::Map<const MatX>(X_bar.data(), 1, 12);
-    EXPECT_TRUE(
-        jacobianMatchesFiniteDifferences(product, VecX::Zero(12), analytic, 1e-6, 1e-6));
+    EXPECT_TRUE(jacobianMatchesFiniteDifferences(product, VecX::Zero(12), analytic, 1e-6, 1e-6));
   }
+}
+
+// The element energy's and the rest bilinear form's rest-shape derivatives
+// (addTetEnergyRestCotangent, addTetLinearFormRestCotangent): against central differences of
+// volume · Ψ and of λᵀ H₀ u (H₀ the exact element Hessian at zero displacement, the tet's rest
+// stiffness) under moved rest nodes.
+TEST(FemMaterialParameters, EnergyAndRestFormCotangentsMatchFiniteDifferences) {
+  Mat34 X;
+  X << 0.0, 0.03, 0.004, 0.006, 0.0, 0.002, 0.025, 0.003, 0.0, 0.001, 0.004, 0.028;
+  const VecX lambda_values = randomVector(12, 1.0, 32), v_values = randomVector(12, 0.004, 33);
+  const Mat34 lambda = Eigen::Map<const Mat34>(lambda_values.data());
+  const Mat34 v = Eigen::Map<const Mat34>(v_values.data());
+  const double scale = 0.01;  // steps in units of 1 cm
+  const auto moved = [&](const VecX& d) {
+    return tetElementRest(X + scale * Eigen::Map<const Mat34>(d.data()), 0);
+  };
+  for (const Regime& r : regimes()) {
+    SCOPED_TRACE(r.name);
+    const FemMaterialPoint m =
+        makeFemMaterialPoint(kYoung, kPoisson, kShear, rodrigues(Vec3(0.2, 0.9, -0.4)), r.gamma);
+    Mat34 u;
+    for (int a = 0; a < 4; ++a) u.col(a) = (r.F - Mat3::Identity()) * (X.col(a) - X.col(0));
+    Mat34 X_bar = Mat34::Zero();
+    addTetEnergyRestCotangent(tetElementRest(X, 0), m, u, 1.5, X_bar);
+    ASSERT_GT(X_bar.norm(), 0.0);
+    EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+        [&](const VecX& d) { return VecX::Constant(1, 1.5 * tetElasticEnergy(moved(d), m, u)); },
+        VecX::Zero(12), scale * Eigen::Map<const MatX>(X_bar.data(), 1, 12), 1e-6, 1e-6));
+  }
+  const FemMaterialPoint m =
+      makeFemMaterialPoint(kYoung, kPoisson, kShear, rodrigues(Vec3(-0.6, 0.1, 0.8)), 3.0);
+  Mat34 X_bar = Mat34::Zero();
+  addTetLinearFormRestCotangent(tetElementRest(X, 0), m.C_world, v, lambda, 0.5, X_bar);
+  ASSERT_GT(X_bar.norm(), 0.0);
+  const auto form = [&](const VecX& d) {
+    Vec12 g;
+    Mat12 H;
+    tetElasticEnergy(moved(d), m, Mat34::Zero(), &g, &H);
+    return VecX::Constant(
+        1, 0.5 * Eigen::Map<const Vec12>(lambda.data()).dot(H * Eigen::Map<const Vec12>(v.data())));
+  };
+  EXPECT_TRUE(jacobianMatchesFiniteDifferences(
+      form, VecX::Zero(12), scale * Eigen::Map<const MatX>(X_bar.data(), 1, 12), 1e-6, 1e-6));
 }
 
 }  // namespace

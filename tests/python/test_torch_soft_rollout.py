@@ -1,7 +1,7 @@
 """flsh.torch.simulate through the soft skeletons (model="fem" and "rom"): torch.autograd.gradcheck
 on the input groups (pose and root targets, stiffnesses, initial state and velocity, the soft
-state included, the material coefficients, β for the FEM), on joints and on the simulated
-surface, with ground contact; the ROM's β refused with a clear message. A 800-vertex synthetic body with a coarse interior walking for T = 4 steps; the
+state included, the material coefficients, β), on joints and on the simulated surface, with
+ground contact. A 800-vertex synthetic body with a coarse interior walking for T = 4 steps; the
 FEM's large groups are checked by random projections (fast_mode), its small ones column by
 column."""
 import numpy as np
@@ -137,10 +137,11 @@ def test_material_is_for_soft_models_only(body, walk, simulators):
         flsh.torch.simulate(simulator, material=torch.zeros(3, dtype=torch.float64))
 
 
-def test_gradcheck_betas_fem(simulators, rng):
-    """β through the FEM (rest nodes, masses, materials, joints, the simulated surface), on the
-    surface and the joints: the avatar at β keeps the default one's discretization."""
-    simulator = simulators["fem"]
+@pytest.mark.parametrize("model", ["fem", "rom"])
+def test_gradcheck_betas(simulators, model, rng):
+    """β through the soft tissue (rest nodes, masses, materials, joints, the simulated surface),
+    on the surface and the joints: the avatar at β keeps the default one's discretization."""
+    simulator = simulators[model]
     inputs = base_inputs(simulator, rng)
     weights = torch.tensor(rng.normal(size=(STEPS, 800, 3)))
 
@@ -152,16 +153,6 @@ def test_gradcheck_betas_fem(simulators, rng):
     (grad,) = torch.autograd.grad(f(x).sum(), x)
     assert grad.abs().max() > 1e-6
     assert torch.autograd.gradcheck(f, (x,), eps=1e-4, atol=5e-8, rtol=1e-5)
-
-
-def test_betas_gradient_is_refused_clearly_by_the_rom(simulators):
-    simulator = simulators["rom"]
-    betas = torch.zeros(simulator.num_betas, dtype=torch.float64, requires_grad=True)
-    with pytest.raises(ValueError, match="ROM"):
-        flsh.torch.simulate(simulator, betas=betas)
-    # Without requires_grad β just moves the avatar (SoftAvatar.with_shape).
-    joints = flsh.torch.simulate(simulator, betas=betas.detach())
-    assert joints.shape == (STEPS, 24, 3)
 
 
 def test_unknown_model_is_refused(body):

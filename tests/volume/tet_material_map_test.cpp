@@ -94,8 +94,8 @@ TEST(TetMaterialMap, CotangentMatchesFiniteDifferences) {
 TEST(TetMaterialMap, GeometryDerivativesMatchFiniteDifferences) {
   const VolumetricData& d = data();
   const TetMesh& mesh = d.templ->mesh;
-  const MatX3 dX = Eigen::Map<const MatX3>(randomVector(3 * d.numNodes(), 1e-3, 5).data(),
-                                           d.numNodes(), 3);
+  const MatX3 dX =
+      Eigen::Map<const MatX3>(randomVector(3 * d.numNodes(), 1e-3, 5).data(), d.numNodes(), 3);
   VecX d_area, d_volume;
   tetMaterialGeometryTangent(mesh, d.rest_nodes, dX, d_area, d_volume);
   ASSERT_GT(d_area.norm(), 0.0);
@@ -106,8 +106,7 @@ TEST(TetMaterialMap, GeometryDerivativesMatchFiniteDifferences) {
   };
   const double h = 1e-4;
   const TetMaterialGeometry plus = geometry_at(h), minus = geometry_at(-h);
-  EXPECT_LT(relativeDifference((plus.boundary_area - minus.boundary_area) / (2 * h), d_area),
-            1e-6);
+  EXPECT_LT(relativeDifference((plus.boundary_area - minus.boundary_area) / (2 * h), d_area), 1e-6);
   EXPECT_LT(relativeDifference((plus.volume - minus.volume) / (2 * h), d_volume), 1e-6);
 
   // The material point and density of a skin-mixture tet as functions of (area, volume, c).
@@ -263,8 +262,7 @@ TEST(TetMaterialMap, WithShapeKeepsTheDiscretization) {
                 1e-12);
     }
     const auto same = avatar->withShape(avatar->betas());
-    EXPECT_LT(relativeDifference(same->volumetricData().materials.young, d.materials.young),
-              1e-12);
+    EXPECT_LT(relativeDifference(same->volumetricData().materials.young, d.materials.young), 1e-12);
     EXPECT_THROW(avatar->withShape(VecX::Ones(K + 1)), InputError);
   }
 }

@@ -149,6 +149,19 @@ double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& mate
 void addTetGradientRestCotangent(const TetElementRest& rest, const FemMaterialPoint& material,
                                  const Mat34& u, const Mat34& lambda, double scale, Mat34& X_bar);
 
+/// The rest shape's derivative of an element's energy: ADDS scale · ∂(volume · Ψ(F))/∂X (3 × 4)
+/// into X_bar at the displacements u, the material point held:
+///   ∂/∂Dm = volume (Ψ Wᵀ − (F − I)ᵀ P Wᵀ). InputError on non-finite u.
+void addTetEnergyRestCotangent(const TetElementRest& rest, const FemMaterialPoint& material,
+                               const Mat34& u, double scale, Mat34& X_bar);
+
+/// The rest shape's derivative of the linear-elastic bilinear form of a tet (its rest Hessian:
+/// λᵀ K_tet u = volume · ε(Dλ W)ᵀ C_world ε(Du W), ε the linear Voigt strain, W = Dm⁻¹): ADDS
+/// scale · ∂(λᵀ K_tet u)/∂X (3 × 4) into X_bar, with σ(G) the symmetric stress of C_world ε(G):
+///   ∂/∂Dm = volume (⟨σ(Gu), Gλ⟩ Wᵀ − Guᵀ σ(Gλ) Wᵀ − Gλᵀ σ(Gu) Wᵀ),  Gu = Du W, Gλ = Dλ W.
+void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_world, const Mat34& u,
+                                   const Mat34& lambda, double scale, Mat34& X_bar);
+
 /// Reduced tets (the ROM's elastic term): the tet's nodal displacements are a linear map of n
 /// reduced 3-vectors z_s, u_a = Σ_s Φ(a, s) z_s (Φ: the 4 × n basis rows of the tet's nodes).
 /// Then F = I + Z G̃ᵀ with Z (3 × n, columns z_s) and G̃ = G Φ (3 × n), G the shape-function

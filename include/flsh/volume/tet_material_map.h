@@ -86,8 +86,7 @@ class TetMaterialMap {
                     TetGeometryCotangent* geometry_bar = nullptr) const;
   /// Direction of tet t's density for directions of the coefficient values (numCoefficients())
   /// and of its boundary area and volume.
-  double densityTangent(int t, const VecX& values_direction, double d_area,
-                        double d_volume) const;
+  double densityTangent(int t, const VecX& values_direction, double d_area, double d_volume) const;
 
  private:
   struct Layer {

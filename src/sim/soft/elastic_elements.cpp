@@ -124,20 +124,27 @@ void ElasticityTerm::addAccumulatedMaterialProducts(const MatX& elements, const 
   if (rest_outer.size() > 0) addRestStiffnessProducts(rest_outer, values_bar);
 }
 
-template <class Row>
-void ElasticityTerm::materialElementRows(int e, std::vector<int>& dofs, VecX& values,
-                                         Row&& row) const {
+template <class Visit>
+void ElasticityTerm::forEachLocalUnit(int e, std::vector<int>& dofs, Visit&& visit) const {
   materialElementDofs(e, dofs);
   const Eigen::Index columns = Eigen::Index(dofs.size() / 3);
   for (size_t i = 0; i < dofs.size(); ++i) {
     if (dofs[i] < 0) continue;
     Mat3X unit = Mat3X::Zero(3, columns);
     unit(Eigen::Index(i % 3), Eigen::Index(i / 3)) = 1.0;
+    visit(dofs[i], unit);
+  }
+}
+
+template <class Row>
+void ElasticityTerm::materialElementRows(int e, std::vector<int>& dofs, VecX& values,
+                                         Row&& row) const {
+  forEachLocalUnit(e, dofs, [&](int dof, const Mat3X& unit) {
     values.setZero(chain_.numValues());
     chain_.map().addCotangent(materialElementTet(e),
                               materialCotangent(materialElementGradient(e, unit)), values);
-    row(dofs[i], values);
-  }
+    row(dof, values);
+  });
 }
 
 void ElasticityTerm::addParameterTangents(const TermContext&,
@@ -165,6 +172,74 @@ void ElasticityTerm::addParameterJacobians(const TermContext&, ParameterProducts
   for (int e = 0; e < numMaterialElements(); ++e)
     materialElementRows(e, dofs, values,
                         [&](int dof, const VecX& row) { J.row(dof) += row.transpose(); });
+}
+
+// ---- Shape ----------------------------------------------------------------------------------
+
+void ElasticityTerm::addElementShapeCotangent(int e, const Mat3X& Lambda, const ShapeChain& shape,
+                                              VecX& beta_bar, VecX& values_bar) const {
+  Mat34 X_bar = Mat34::Zero();
+  materialElementRestCotangent(e, Lambda, X_bar);
+  const Eigen::Vector4i nodes = materialElementNodes(e);
+  for (int a = 0; a < 4; ++a)
+    beta_bar.noalias() += shape.nodeDirections(nodes[a]).transpose() * X_bar.col(a);
+  const int t = materialElementTet(e);
+  TetGeometryCotangent geometry;
+  chain_.map().addCotangent(t, materialCotangent(materialElementGradient(e, Lambda)), values_bar,
+                            &geometry);
+  beta_bar.noalias() += geometry.area * shape.areaJacobian().row(t).transpose() +
+                        geometry.volume * shape.volumeJacobian().row(t).transpose();
+}
+
+// Element by element on the available threads (per-thread sums added in thread order), the
+// coefficient values' share chained once.
+void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shape,
+                                      VecX& beta_bar) const {
+  const int E = numMaterialElements(), K = shape.numBetas();
+  const int threads = E > 1000 ? std::max(1, omp_get_max_threads()) : 1;
+  std::vector<VecX> betas(size_t(threads), VecX::Zero(K));
+  std::vector<VecX> values(size_t(threads), VecX::Zero(chain_.numValues()));
+  FirstFailure failure;
+#pragma omp parallel num_threads(threads)
+  {
+    const int k = omp_get_thread_num();
+    std::vector<int> dofs;
+#pragma omp for schedule(static)
+    for (int e = 0; e < E; ++e)
+      failure.run([&] {
+        materialElementDofs(e, dofs);
+        const Mat3X Lambda = gatherDirections(dofs, lambda, 0);
+        if (!Lambda.isZero(0.0))
+          addElementShapeCotangent(e, Lambda, shape, betas[size_t(k)], values[size_t(k)]);
+      });
+  }
+  failure.rethrow();
+  for (int k = 0; k < threads; ++k) {
+    beta_bar += betas[size_t(k)];
+    beta_bar.noalias() += shape.valuesJacobian().transpose() * values[size_t(k)];
+  }
+}
+
+template <class Row>
+void ElasticityTerm::shapeRows(const ShapeChain& shape, Row&& row) const {
+  std::vector<int> dofs;
+  VecX beta(shape.numBetas()), values(chain_.numValues());
+  for (int e = 0; e < numMaterialElements(); ++e)
+    forEachLocalUnit(e, dofs, [&](int dof, const Mat3X& unit) {
+      beta.setZero();
+      values.setZero();
+      addElementShapeCotangent(e, unit, shape, beta, values);
+      beta.noalias() += shape.valuesJacobian().transpose() * values;
+      row(dof, beta);
+    });
+}
+
+void ElasticityTerm::addShapeTangent(const VecX& dbeta, const ShapeChain& shape, VecX& out) const {
+  shapeRows(shape, [&](int dof, const VecX& r) { out[dof] += r.dot(dbeta); });
+}
+
+void ElasticityTerm::addShapeJacobian(const ShapeChain& shape, MatX& J) const {
+  shapeRows(shape, [&](int dof, const VecX& r) { J.row(dof) += r.transpose(); });
 }
 
 }  // namespace flsh::detail

@@ -11,6 +11,7 @@
 #include "flsh/sim/energy_term.h"
 #include "sim/soft/material_chain.h"
 #include "sim/soft/node_term.h"
+#include "sim/soft/shape_chain.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
@@ -81,6 +82,15 @@ class ElasticityTerm : public NodeTerm<1> {
                                       VecX& values_bar) const;
   static constexpr int kMaterialPointValues = 38;
 
+  // ---- Shape (β): element by element, the rest nodes X̄(β) move Λᵀ g_e through the tet's rest
+  // shape (materialElementRestCotangent) and its material point through c(β) and the skin
+  // fraction's area and volume (the per-tet material map; frames held) ----
+  /// ADDS λᵀ ∂g/∂β (K) into beta_bar at the prepared state.
+  void addShapeProducts(const VecX& lambda, const ShapeChain& shape, VecX& beta_bar) const;
+  /// ADDS ∂g/∂β dβ into out (numDofs) / ∂g/∂β into J (numDofs × K): the elements' rows.
+  void addShapeTangent(const VecX& dbeta, const ShapeChain& shape, VecX& out) const;
+  void addShapeJacobian(const ShapeChain& shape, MatX& J) const;
+
  protected:
   ElasticityTerm(const SoftKinematics& kinematics, const MaterialChain& chain)
       : NodeTerm(kinematics), chain_(chain) {}
@@ -92,6 +102,10 @@ class ElasticityTerm : public NodeTerm<1> {
   virtual int materialElementTet(int e) const = 0;
   virtual void materialElementDofs(int e, std::vector<int>& dofs) const = 0;
   virtual FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const = 0;
+  /// The element's tet's four nodes, and ADDS into X_bar (3 × 4, column a: node a) the
+  /// cotangent of their rest positions of Λᵀ g_e, the material point held.
+  virtual Eigen::Vector4i materialElementNodes(int e) const = 0;
+  virtual void materialElementRestCotangent(int e, const Mat3X& Lambda, Mat34& X_bar) const = 0;
   /// The leading material elements whose products take λ element by element (the rest: the
   /// ROM's rest stiffness, through addRestOuter and addRestStiffnessProducts).
   virtual int numProductElements() const { return numMaterialElements(); }
@@ -105,6 +119,18 @@ class ElasticityTerm : public NodeTerm<1> {
   /// Element e's rows ∂g/∂c at its DoFs: row(dof, values) for every local direction with a DoF.
   template <class Row>
   void materialElementRows(int e, std::vector<int>& dofs, VecX& values, Row&& row) const;
+  /// visit(dof, unit) for every local direction of element e with a DoF (unit: that direction,
+  /// 3 × #columns).
+  template <class Visit>
+  void forEachLocalUnit(int e, std::vector<int>& dofs, Visit&& visit) const;
+  /// Element e's share of ∂(Λᵀ g_e)/∂β: ADDS into beta_bar its rest nodes' and area/volume's
+  /// part and into values_bar its coefficient values' cotangent (chained by the caller).
+  void addElementShapeCotangent(int e, const Mat3X& Lambda, const ShapeChain& shape, VecX& beta_bar,
+                                VecX& values_bar) const;
+  /// ∂g/∂β row by row: row(dof, r) with r = ∂g_dof/∂β (K) for every element's local DoF (the
+  /// rows of one DoF come in pieces, to be summed).
+  template <class Row>
+  void shapeRows(const ShapeChain& shape, Row&& row) const;
   const MaterialChain& chain_;
 };
 

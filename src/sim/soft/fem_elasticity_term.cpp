@@ -1,7 +1,5 @@
 #include "sim/soft/fem_elasticity_term.h"
 
-#include <omp.h>
-
 #include <algorithm>
 
 #include "core/first_failure.h"
@@ -109,82 +107,13 @@ FemMaterialDerivative FemElasticityTerm::materialElementGradient(int e, const Ma
   return d;
 }
 
-void FemElasticityTerm::addElementShapeCotangent(int e, const Mat34& Lambda,
-                                                 const ShapeChain& shape, VecX& beta_bar,
-                                                 VecX& values_bar) const {
+// Λᵀ g_e's rest shape: the element's Dm and volume (addTetGradientRestCotangent).
+void FemElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambda,
+                                                     Mat34& X_bar) const {
   Mat34 U;
   for (int a = 0; a < 4; ++a) U.col(a) = kin_.nodeDisplacement(kin_.u, elements_.tets(e, a));
-  Mat34 X_bar = Mat34::Zero();
-  addTetGradientRestCotangent(elements_.rest[size_t(e)], elements_.materials[size_t(e)], U,
-                              Lambda, elements_.weights[e], X_bar);
-  for (int a = 0; a < 4; ++a)
-    beta_bar.noalias() += shape.nodeDirections(elements_.tets(e, a)).transpose() * X_bar.col(a);
-  const int t = elements_.tet[size_t(e)];
-  TetGeometryCotangent geometry;
-  materialChain().map().addCotangent(t, materialCotangent(materialElementGradient(e, Lambda)),
-                                     values_bar, &geometry);
-  beta_bar.noalias() += geometry.area * shape.areaJacobian().row(t).transpose() +
-                        geometry.volume * shape.volumeJacobian().row(t).transpose();
-}
-
-// Element by element on the available threads (per-thread sums added in thread order), the
-// coefficient values' share chained once.
-void FemElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shape,
-                                         VecX& beta_bar) const {
-  const int T = elements_.size(), K = shape.numBetas();
-  const int threads = T > 1000 ? std::max(1, omp_get_max_threads()) : 1;
-  std::vector<VecX> betas(size_t(threads), VecX::Zero(K));
-  std::vector<VecX> values(size_t(threads), VecX::Zero(materialChain().numValues()));
-  FirstFailure failure;
-#pragma omp parallel num_threads(threads)
-  {
-    const int k = omp_get_thread_num();
-    std::vector<int> dofs;
-#pragma omp for schedule(static)
-    for (int e = 0; e < T; ++e)
-      failure.run([&] {
-        materialElementDofs(e, dofs);
-        Mat34 Lambda = Mat34::Zero();
-        for (size_t i = 0; i < dofs.size(); ++i)
-          if (dofs[i] >= 0) Lambda(Eigen::Index(i % 3), Eigen::Index(i / 3)) = lambda[dofs[i]];
-        if (!Lambda.isZero(0.0))
-          addElementShapeCotangent(e, Lambda, shape, betas[size_t(k)], values[size_t(k)]);
-      });
-  }
-  failure.rethrow();
-  for (int k = 0; k < threads; ++k) {
-    beta_bar += betas[size_t(k)];
-    beta_bar.noalias() += shape.valuesJacobian().transpose() * values[size_t(k)];
-  }
-}
-
-template <class Row>
-void FemElasticityTerm::shapeRows(const ShapeChain& shape, Row&& row) const {
-  const int K = shape.numBetas();
-  std::vector<int> dofs;
-  VecX beta(K), values(materialChain().numValues());
-  for (int e = 0; e < elements_.size(); ++e) {
-    materialElementDofs(e, dofs);
-    for (size_t i = 0; i < dofs.size(); ++i) {
-      if (dofs[i] < 0) continue;
-      Mat34 unit = Mat34::Zero();
-      unit(Eigen::Index(i % 3), Eigen::Index(i / 3)) = 1.0;
-      beta.setZero();
-      values.setZero();
-      addElementShapeCotangent(e, unit, shape, beta, values);
-      beta.noalias() += shape.valuesJacobian().transpose() * values;
-      row(dofs[i], beta);
-    }
-  }
-}
-
-void FemElasticityTerm::addShapeTangent(const VecX& dbeta, const ShapeChain& shape,
-                                        VecX& out) const {
-  shapeRows(shape, [&](int dof, const VecX& r) { out[dof] += r.dot(dbeta); });
-}
-
-void FemElasticityTerm::addShapeJacobian(const ShapeChain& shape, MatX& J) const {
-  shapeRows(shape, [&](int dof, const VecX& r) { J.row(dof) += r.transpose(); });
+  addTetGradientRestCotangent(elements_.rest[size_t(e)], elements_.materials[size_t(e)], U, Lambda,
+                              elements_.weights[e], X_bar);
 }
 
 }  // namespace flsh::detail

@@ -11,10 +11,10 @@
 #include "flsh/sim/energy_term.h"
 #include "sim/block_hessian_term.h"
 #include "sim/soft/material_chain.h"
-#include "sim/soft/shape_chain.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/node_offset_derivatives.h"
 #include "sim/soft/node_term.h"
+#include "sim/soft/shape_chain.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {

@@ -110,8 +110,7 @@ void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   const MatX3* dm = material ? &chain_.massDerivatives() : nullptr;
   const MatX* dm_dbeta = shape ? &shape_.massJacobian() : nullptr;
   forEachMassNode([&](int j, double kappa, const Vec3& f, const SkinnedPoint& point) {
-    if (shape)
-      sink.add(SimParameter::Shape, point, 0, Vec3(f / masses_.mass[j]), dm_dbeta->row(j));
+    if (shape) sink.add(SimParameter::Shape, point, 0, Vec3(f / masses_.mass[j]), dm_dbeta->row(j));
     if (material)
       for (int k = 0; k < 3; ++k)
         if ((*dm)(j, k) != 0.0)

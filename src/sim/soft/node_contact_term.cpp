@@ -126,8 +126,7 @@ void NodeContactTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
     // g_x is linear in the node's area a_j(β): ∂g_x/∂β = g_x / a_j ∂a_j/∂β.
     const int node = list[size_t(idx)];
     if (shape && gradient_touching && node_areas_[idx] > 0.0)
-      sink.add(SimParameter::Shape, point, 0,
-               Vec3(gradient.segment<3>(3 * idx) / node_areas_[idx]),
+      sink.add(SimParameter::Shape, point, 0, Vec3(gradient.segment<3>(3 * idx) / node_areas_[idx]),
                c.avatar.vertexAreasShapeJacobian().row(node));
     // J_b moves x_j by −w R_b and turns the lever arm of bone b's rotation rows.
     if (joint_touching) {

@@ -116,7 +116,10 @@ const ReducedElasticityTerm::ReducedTets& ReducedElasticityTerm::everyTet() cons
     MatX4i tets(all.size(), 4);
     for (int k = 0; k < all.size(); ++k)
       tets.row(k) = data.templ->mesh.tets.row(all.tets[size_t(k)]);
-    every_tet_ = std::make_unique<ReducedTets>(reducedTets(all.tets, tets, all.rest));
+    auto every = std::make_unique<ReducedTets>(reducedTets(all.tets, tets, all.rest));
+    every->rest = all.rest;
+    for (const FemMaterialPoint& m : all.materials) every->C_world.push_back(m.C_world);
+    every_tet_ = std::move(every);
   }
   return *every_tet_;
 }
@@ -324,9 +327,46 @@ void addScaled(double a, const FemMaterialDerivative& x, FemMaterialDerivative& 
 }  // namespace
 
 // Samples under the split: λᵀ∇f_e = f_r (λᵀ∇ψ − λᵀb) + f_q λᵀb (b = K̃ z, q = ½ zᵀ b, r = ψ − q;
-// restSplitExcess), whose material derivative adds to f_r, f_q's own terms the second-order
-// part of f in (r, q): in the bounded branch (h′ / ((c − 1) q)) (w λᵀ∇r + x λᵀb) (w dr + x dq).
-// The floors c_e are the discretization's (held). Every tet of K: V ε(Λ) ε(Z)ᵀ on C_world.
+// restSplitExcess), whose derivative (in the material or the rest shape) adds to f_r, f_q's own
+// terms the second-order part of f in (r, q): in the bounded branch
+// (h′ / ((c − 1) q)) (w λᵀ∇r + x λᵀb) (w dr + x dq). The floors c_e are the discretization's
+// (held). So d(λᵀ∇f_e) = a_gψ d(λᵀ∇ψ) + a_gq d(λᵀb) + a_ψ dψ + a_q dq with these weights.
+ReducedElasticityTerm::SampleWeights ReducedElasticityTerm::sampleWeights(
+    int e, const Mat3X& Z, const Mat3X& Lambda) const {
+  const double w = elements_.weights[e];
+  SampleWeights out;
+  out.gpsi = w;
+  if (rest_stiffness_.size() == 0) return out;
+  const int n = int(Z.cols()), m = 3 * n;
+  const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[size_t(e)], m, m);
+  const Eigen::Map<const VecX> z(Z.data(), m), l(Lambda.data(), m);
+  const VecX b = K * z;
+  const double q = 0.5 * z.dot(b), gq = l.dot(b);
+  const int begin = handle_start_[size_t(e)];
+  const Mat3X G = gradients_.middleCols(begin, n);
+  const FemMaterialPoint& material = elements_.materials[size_t(e)];
+  const double V = elements_.rest[size_t(e)].volume;
+  const Mat3 F = Mat3::Identity() + Z * G.transpose(), dF = Lambda * G.transpose();
+  Mat3 P;
+  const double psi = V * fungEnergyDensity(F, material, &P);
+  const double r = psi - q, x = q > 0.0 ? -w * r / q : -1.0;
+  if (x <= 1.0) {
+    out.gq = -w;
+    return out;
+  }
+  const double gpsi = V * P.cwiseProduct(dF).sum();
+  const double c = rest_floors_[e], decay = std::exp(-(x - 1.0) / (c - 1.0));
+  const double h = c - (c - 1.0) * decay, f_r = w * decay, f_q = x * decay - h;
+  const double coef = decay / ((c - 1.0) * q) * (w * (gpsi - gq) + x * gq);
+  out.gpsi = f_r;
+  out.gq = f_q - f_r;
+  out.psi = coef * w;
+  out.q = coef * (x - w);
+  return out;
+}
+
+// Every tet of K: V ε(Λ) ε(Z)ᵀ on C_world; a sample: the weights above on the law's material
+// derivatives.
 FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
                                                                      const Mat3X& Lambda) const {
   FemMaterialDerivative d;
@@ -347,41 +387,53 @@ FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
   for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * handles_[size_t(begin + s)]);
   const Mat3X G = gradients_.middleCols(begin, n);
   const FemMaterialPoint& material = elements_.materials[size_t(e)];
-  const double V = elements_.rest[size_t(e)].volume, w = elements_.weights[e];
+  const double V = elements_.rest[size_t(e)].volume;
   const Mat3 F = Mat3::Identity() + Z * G.transpose(), dF = Lambda * G.transpose();
-  if (rest_stiffness_.size() == 0) {
-    addStressMaterialGradient(F, material, dF, w * V, d);
-    return d;
-  }
-  const int m = 3 * n;
-  const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[size_t(e)], m, m);
-  const Eigen::Map<const VecX> z(Z.data(), m), l(Lambda.data(), m);
-  const VecX b = K * z;
-  const double q = 0.5 * z.dot(b), gq = l.dot(b);
-  Mat3 P;
-  const double psi = V * fungEnergyDensity(F, material, &P);
-  const double gpsi = V * P.cwiseProduct(dF).sum();
-  FemMaterialDerivative Dgpsi, Dq, Dgq;
-  addStressMaterialGradient(F, material, dF, V, Dgpsi);
+  const SampleWeights a = sampleWeights(e, Z, Lambda);
+  FemMaterialDerivative part;
+  addStressMaterialGradient(F, material, dF, V, part);
+  addScaled(a.gpsi, part, d);
   const Vec6 ez = voigtLinearStrain(Z * G.transpose()), el = voigtLinearStrain(dF);
-  Dq.C_world = 0.5 * V * ez * ez.transpose();
-  Dgq.C_world = V * el * ez.transpose();
-  const double r = psi - q, x = q > 0.0 ? -w * r / q : -1.0;
-  if (x <= 1.0) {
-    addScaled(w, Dgpsi, d);
-    addScaled(-w, Dgq, d);
-    return d;
-  }
-  const double c = rest_floors_[e], decay = std::exp(-(x - 1.0) / (c - 1.0));
-  const double h = c - (c - 1.0) * decay, f_r = w * decay, f_q = x * decay - h;
-  FemMaterialDerivative Dpsi;
-  addEnergyDensityMaterialGradient(F, material, V, Dpsi);
-  const double coef = decay / ((c - 1.0) * q) * (w * (gpsi - gq) + x * gq);
-  addScaled(f_r, Dgpsi, d);
-  addScaled(f_q - f_r, Dgq, d);
-  addScaled(coef * w, Dpsi, d);
-  addScaled(coef * (x - w), Dq, d);
+  d.C_world += (a.gq * V) * el * ez.transpose() + (0.5 * a.q * V) * ez * ez.transpose();
+  if (a.psi != 0.0) addEnergyDensityMaterialGradient(F, material, a.psi * V, d);
   return d;
+}
+
+Eigen::Vector4i ReducedElasticityTerm::materialElementNodes(int e) const {
+  return avatar_.volumetricData().templ->mesh.tets.row(materialElementTet(e)).transpose();
+}
+
+// The same weights on the rest-shape kernels, in the tet's nodal form: u = Z Φᵀ, λ_u = Λ Φᵀ (Φ:
+// the four nodes' basis rows on the element's handles), G̃ = G Φ.
+void ReducedElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambda,
+                                                         Mat34& X_bar) const {
+  const bool sample = e < elements_.size();
+  const int k = sample ? e : e - elements_.size();
+  const std::vector<int>& start = sample ? handle_start_ : everyTet().handle_start;
+  const std::vector<int>& handles = sample ? handles_ : everyTet().handles;
+  const int begin = start[size_t(k)], n = start[size_t(k) + 1] - begin;
+  if (n == 0) return;
+  const Eigen::Vector4i nodes = materialElementNodes(e);
+  Mat4X Phi = Mat4X::Zero(4, n);
+  for (int a = 0; a < 4; ++a)
+    for (auto* phi = kin_.basisBegin(nodes[a]); phi != kin_.basisEnd(nodes[a]); ++phi)
+      for (int s = 0; s < n; ++s)
+        if (handles[size_t(begin + s)] == phi->first) Phi(a, s) = phi->second;
+  Mat3X Z(3, n);
+  for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * handles[size_t(begin + s)]);
+  const Mat34 u = Z * Phi.transpose(), lu = Lambda * Phi.transpose();
+  if (!sample) {
+    const ReducedTets& all = everyTet();
+    addTetLinearFormRestCotangent(all.rest[size_t(k)], all.C_world[size_t(k)], u, lu, 1.0, X_bar);
+    return;
+  }
+  const TetElementRest& rest = elements_.rest[size_t(e)];
+  const FemMaterialPoint& material = elements_.materials[size_t(e)];
+  const SampleWeights a = sampleWeights(e, Z, Lambda);
+  addTetGradientRestCotangent(rest, material, u, lu, a.gpsi, X_bar);
+  if (a.gq != 0.0) addTetLinearFormRestCotangent(rest, material.C_world, u, lu, a.gq, X_bar);
+  if (a.psi != 0.0) addTetEnergyRestCotangent(rest, material, u, a.psi, X_bar);
+  if (a.q != 0.0) addTetLinearFormRestCotangent(rest, material.C_world, u, u, 0.5 * a.q, X_bar);
 }
 
 }  // namespace flsh::detail

@@ -48,6 +48,8 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   int materialElementTet(int e) const override;
   void materialElementDofs(int e, std::vector<int>& dofs) const override;
   FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const override;
+  Eigen::Vector4i materialElementNodes(int e) const override;
+  void materialElementRestCotangent(int e, const Mat3X& Lambda, Mat34& X_bar) const override;
   int numProductElements() const override { return elements_.size(); }
   void addRestOuter(const VecX& lambda, MatX& W) const override;
 
@@ -60,6 +62,8 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   struct ReducedTets {
     std::vector<int> tet;
     std::vector<double> volume;
+    std::vector<TetElementRest> rest;  ///< every tet's (everyTet; empty for the samples)
+    std::vector<Mat6> C_world;         ///< every tet's material stiffness (everyTet)
     std::vector<int> handle_start, handles;
     Mat3X gradients;
     int max_handles = 0;
@@ -69,6 +73,13 @@ class ReducedElasticityTerm final : public ElasticityTerm {
                           const std::vector<TetElementRest>& rest) const;
   /// Every elastic tet in the subspace (built on first use, for the Material group).
   const ReducedTets& everyTet() const;
+  /// The weights of a sample's d(Λᵀ ∇f_e) on the derivatives of Λᵀ∇ψ, Λᵀ K̃ z, ψ and q
+  /// (materialElementGradient, materialElementRestCotangent): w on the first alone without the
+  /// split.
+  struct SampleWeights {
+    double gpsi = 0.0, gq = 0.0, psi = 0.0, q = 0.0;
+  };
+  SampleWeights sampleWeights(int e, const Mat3X& Z, const Mat3X& Lambda) const;
   /// Element e (count handles, cubature weight w, their displacements Z) under the
   /// rest-stiffness split: its weighted excess over its rest quadratic, bounded below;
   /// gradient and Hessian (in the handles' coordinates, weighted) written into the views.

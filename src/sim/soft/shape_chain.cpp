@@ -16,8 +16,8 @@ Eigen::Block<const MatX, 3, Eigen::Dynamic> ShapeChain::nodeDirections(int j) co
 void ShapeChain::addNodeCotangent(const MatX3& X_bar, VecX& beta_bar) const {
   const MatX& S = avatar_.volumetricData().templ->fields.shapedirs;
   // S is 3#N × K with row 3j + c: X_bar is row-major, so its storage matches S row for row.
-  beta_bar.noalias() += S.topRows(X_bar.size()).transpose() *
-                        Eigen::Map<const VecX>(X_bar.data(), X_bar.size());
+  beta_bar.noalias() +=
+      S.topRows(X_bar.size()).transpose() * Eigen::Map<const VecX>(X_bar.data(), X_bar.size());
 }
 
 MatX3 ShapeChain::nodeTangent(const VecX& dbeta) const {
@@ -72,8 +72,7 @@ void ShapeChain::build() const {
     const double sign = volume < 0 ? -1.0 : 1.0;
     Eigen::RowVectorXd dm(K);
     for (int k = 0; k < K; ++k) {
-      const double d_rho =
-          map.densityTangent(t, values_.col(k), area_(t, k), volume_(t, k));
+      const double d_rho = map.densityTangent(t, values_.col(k), area_(t, k), volume_(t, k));
       dm[k] = d_rho * volume + data.materials.density[t] * sign * volume_(t, k);
     }
     dm *= cubature.weights[i] / 4;

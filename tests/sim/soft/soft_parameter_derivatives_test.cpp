@@ -1,9 +1,8 @@
-// A soft skeleton's (FEM and ROM) parameter derivatives, the whole simulable: ∂g/∂p for the
-// groups its terms differentiate (rest joints, pose and root targets, bone inertias, stiffnesses,
-// collider offsets, the material, and β for the FEM) against central differences of the total
-// gradient under setParameter (or of simulables on SoftAvatar::withMaterial / withShape
-// avatars), the products against the Jacobians, and a clear error for what is not written yet
-// (the ROM's β).
+// A soft skeleton's (FEM and ROM) parameter derivatives, the whole simulable: ∂g/∂p for every
+// group (rest joints, pose and root targets, bone inertias, stiffnesses, collider offsets, the
+// material, β) against central differences of the total gradient under setParameter (or of
+// simulables on SoftAvatar::withMaterial / withShape avatars), the products against the
+// Jacobians.
 #include "flsh/core/error.h"
 #include "sim/soft/soft_term_checks.h"
 
@@ -122,31 +121,40 @@ TEST_P(SoftParameterDerivatives, MaterialMatchesFiniteDifferences) {
 
 // The ROM's rest split in its bounded branch (a sample's energy far below its rest quadratic,
 // the floor acting): the soft state pushed until some samples get there.
-TEST(SoftMaterialDerivatives, RomRestSplitBoundedBranch) {
-  auto sim = test::softTermScenario(SoftModel::Rom);
-  const int n = sim->numDofs(), nb = sim->numBoneDofs();
-  VecX q = sim->getState();
+int pushIntoTheBoundedBranch(Simulable& sim) {
+  const int n = sim.numDofs(), nb = sim.numBoneDofs();
+  VecX q = sim.getState();
   const VecX push = test::randomVector(n - nb, 1.0, 51);
   int bounded = 0;
   for (double amplitude = 0.01; amplitude <= 0.16 && bounded == 0; amplitude *= 2) {
     q.tail(n - nb) = amplitude * push;
-    sim->setState(q);
-    bounded = sim->restSplitBoundedSamples();
+    sim.setState(q);
+    bounded = sim.restSplitBoundedSamples();
   }
+  return bounded;
+}
+
+TEST(SoftMaterialDerivatives, RomRestSplitBoundedBranch) {
+  auto sim = test::softTermScenario(SoftModel::Rom);
+  const int bounded = pushIntoTheBoundedBranch(*sim);
   ASSERT_GT(bounded, 0) << "no sample reached the bounded branch";
   RecordProperty("bounded_samples", bounded);
   expectMaterialDerivatives(*sim, SoftModel::Rom);
 }
 
-// β (the FEM): ∂g/∂β against central differences of the total gradient of simulables on
+// β: ∂g/∂β against central differences of the total gradient of simulables on
 // SoftAvatar::withShape avatars at the same step, at a β away from the mean shape (so that the
 // materials' log-slopes act), with ground and sphere contact; the products against the Jacobian.
-TEST(SoftShapeDerivatives, FemMatchesFiniteDifferences) {
-  const std::shared_ptr<const SoftAvatar> base = test::smallSoftAvatar(SoftModel::Fem);
-  const int K = int(base->betas().size());
+VecX testBeta(int K) {
   VecX beta = VecX::Zero(K);
   beta.head(3) << 0.4, -0.3, 0.2;
-  auto sim = test::softTermScenario(base->withShape(beta));
+  return beta;
+}
+
+void expectShapeDerivatives(Simulable& simulable, const std::shared_ptr<const SoftAvatar>& base,
+                            const VecX& beta) {
+  Simulable* sim = &simulable;
+  const int K = int(beta.size());
   const int n = sim->numDofs();
   const VecX q0 = sim->getState();
   const SimulableStep step = sim->saveStep();
@@ -206,19 +214,21 @@ TEST(SoftShapeDerivatives, FemMatchesFiniteDifferences) {
   EXPECT_EQ((sim->getState() - q0).norm(), 0.0) << "derivative calls changed the state";
 }
 
-TEST(SoftShapeDerivatives, RomThrowsNamingIt) {
-  auto sim = test::softTermScenario(SoftModel::Rom);
-  for (SimParameter p : {SimParameter::Shape}) {
-    const std::string message =
-        test::messageOf<Error>([&] { sim->getGradientParameterJacobian(p); });
-    EXPECT_NE(message.find(simParameterInfo(p).enum_name), std::string::npos) << message;
-    EXPECT_NE(message.find("ROM"), std::string::npos) << message;
-    EXPECT_THROW(sim->getGradientParameterVJPs(VecX::Zero(sim->numDofs()), {p}), Error);
-    const VecX d = VecX::Ones(sim->parameterSize(p));
-    ParameterDirection along{};
-    along[size_t(p)] = &d;
-    EXPECT_THROW(sim->getGradientParameterJVPs({along}), Error);
-  }
+TEST_P(SoftParameterDerivatives, ShapeMatchesFiniteDifferences) {
+  const std::shared_ptr<const SoftAvatar> base = test::smallSoftAvatar(GetParam());
+  const VecX beta = testBeta(int(base->betas().size()));
+  auto sim = test::softTermScenario(base->withShape(beta));
+  expectShapeDerivatives(*sim, base, beta);
+}
+
+// The ROM's rest split in its bounded branch for β too.
+TEST(SoftShapeDerivatives, RomRestSplitBoundedBranch) {
+  const std::shared_ptr<const SoftAvatar> base = test::smallSoftAvatar(SoftModel::Rom);
+  const VecX beta = testBeta(int(base->betas().size()));
+  auto sim = test::softTermScenario(base->withShape(beta));
+  const int bounded = pushIntoTheBoundedBranch(*sim);
+  ASSERT_GT(bounded, 0) << "no sample reached the bounded branch";
+  expectShapeDerivatives(*sim, base, beta);
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, SoftParameterDerivatives,

@@ -1,6 +1,7 @@
 // The soft skeletons' adjoint (issue 25): the gradient of a whole-rollout loss with respect to
 // every per-step pose and root target, the stiffnesses, the ground's offset, the initial state
-// and velocity and the material vector (40 (1 + K) coefficients), by the reverse pass, against the
+// and velocity, the shape β (K) and the material vector (40 (1 + K) coefficients), by the reverse
+// pass, against the
 // forward pass it follows and the central differences it replaces. The full-size synthetic body
 // (6890 vertices) tracking the built-in walk on a ground plane at h = 1/30 s: the FEM at the
 // default resolution (30 steps by default) or the ROM with the default basis and both cubatures
@@ -19,9 +20,10 @@
 //  - the process's peak resident memory after the runs, and the tape's share of it per step;
 //  - central differences over the same parameters: 2 · #parameters forward passes without tape,
 //    extrapolated from the timed one (not run).
-// One directional derivative is compared with a central difference of two re-run rollouts, and
-// one along the material vector (every coefficient of the material file) with rollouts of
-// SoftAvatar::withMaterial avatars.
+// One directional derivative is compared with a central difference of two re-run rollouts, one
+// along the material vector (every coefficient of the material file) with rollouts of
+// SoftAvatar::withMaterial avatars and one along β with rollouts of SoftAvatar::withShape
+// avatars.
 //
 // Usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] [--tolerance T]
 //                               [--storage factors|snapshots]
@@ -221,7 +223,8 @@ int main(int argc, char** argv) {
         newton_iterations += rollout.tape().stepInfo(t).newton_iterations;
     }
     const long material_size = makeSimulable(s)->parameterSize(SimParameter::Material);
-    const long parameters = long(steps) * 75 + 4 + 3 + 2L * n + material_size;
+    const long shape_size = makeSimulable(s)->parameterSize(SimParameter::Shape);
+    const long parameters = long(steps) * 75 + 4 + 3 + 2L * n + material_size + shape_size;
     const double f_plain = median(plain), f_tape = median(forward), b = median(backward);
     std::printf("loss %.6g; Newton iterations per step %.2f\n", L,
                 double(newton_iterations) / steps);
@@ -294,6 +297,26 @@ int main(int argc, char** argv) {
         "%.10g (relative difference %.2g)\n",
         material_size, material_analytic, material_fd,
         std::abs(material_analytic - material_fd) / std::abs(material_fd));
+
+    // β along a random direction: rollouts of SoftAvatar::withShape avatars (the same
+    // discretization at β ± ε dβ).
+    RolloutVariables db;
+    db.shape = 0.5 * VecX::Random(shape_size);
+    const double shape_analytic = dot(grad, db);
+    auto along_shape = [&](double e) {
+      auto sim = std::make_shared<Simulable>(s.avatar->withShape(s.avatar->betas() + e * db.shape),
+                                             s.walk, s.options);
+      sim->setColliders({s.ground});
+      Rollout r(sim, rollout_options);
+      r.run(steps);
+      return loss.value(r);
+    };
+    const double shape_fd = (along_shape(eps) - along_shape(-eps)) / (2 * eps);
+    std::printf(
+        "check (shape, %ld components): directional derivative %.10g, central difference "
+        "%.10g (relative difference %.2g)\n",
+        shape_size, shape_analytic, shape_fd,
+        std::abs(shape_analytic - shape_fd) / std::abs(shape_fd));
   } catch (const std::exception& e) {
     std::fprintf(stderr, "soft_adjoint_benchmark: %s\n", e.what());
     return 1;

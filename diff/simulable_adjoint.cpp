@@ -109,8 +109,12 @@ void SimulableAdjointModel::finishParameterVJPs(std::vector<VecX>& global) const
   const size_t shape = size_t(SimParameter::Shape), joints = size_t(SimParameter::RestJoints),
                inertia = size_t(SimParameter::BoneInertia);
   if (material_pending_) {  // global holds −Σ_t products (the sweep's sign)
-    if (global.size() == size_t(kNumSimParameters))
-      global[size_t(SimParameter::Material)] -= simulable_->finishMaterialProducts(material_sum_);
+    if (global.size() == size_t(kNumSimParameters)) {
+      VecX shape_share;
+      global[size_t(SimParameter::Material)] -=
+          simulable_->finishMaterialProducts(material_sum_, &shape_share);
+      if (global[shape].size() == shape_share.size()) global[shape] -= shape_share;
+    }
     material_sum_ = Simulable::MaterialProducts();
     material_pending_ = false;
   }

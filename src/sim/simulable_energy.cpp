@@ -201,7 +201,10 @@ void Simulable::setColliders(std::vector<Collider> colliders) {
 }
 
 const std::vector<Collider>& Simulable::colliders() const { return impl_->colliders; }
-void Simulable::setStatic(bool on) { impl_->is_static = on; }
+void Simulable::setStatic(bool on) {
+  impl_->is_static = on;
+  impl_->touch();
+}
 bool Simulable::isStatic() const { return impl_->is_static; }
 const SoftAvatar& Simulable::avatar() const { return *impl_->avatar; }
 std::shared_ptr<const Motion> Simulable::mocap() const { return impl_->mocap; }

@@ -127,18 +127,24 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
   if (chain) askFor(*this, {SimParameter::RestJoints, SimParameter::BoneInertia}, 1, products);
   askForMaterialValues(m, products);
   const bool material = m.soft && products.wants(SimParameter::Material);
+  const bool shape = m.soft && products.wants(SimParameter::Shape);
+  // A sweep sums the elastic elements' material-point cotangents (and the ROM's Σ λ zᵀ) over the
+  // steps: the Material group and β's share through the materials and every tet of K come
+  // from the sums once (finishMaterialProducts).
+  const bool summed = material_sum && (material || shape);
+  if (summed) material_sum->shape = material_sum->shape || shape;
   m.ensureContact();
   const TermContext c = m.context();
   const EnergyTerm* elastic = m.soft ? &m.soft->elasticTerm() : nullptr;
   for (const EnergyTerm* term : m.terms) {
-    if (material && material_sum && term == elastic)
+    if (summed && term == elastic)
       m.soft->elasticTerm().accumulateMaterialProducts(lambda, material_sum->elements,
                                                        material_sum->rest_outer);
     else
       term->addParameterProducts(c, lambda, products);
   }
-  if (m.soft && products.wants(SimParameter::Shape))
-    m.soft->addShapeProducts(c, lambda, products[SimParameter::Shape]);
+  if (shape)
+    m.soft->addShapeProducts(c, lambda, products[SimParameter::Shape], m.state_version, summed);
   if (material) {
     VecX& values = products[SimParameter::Material];
     if (material_sum) {  // summed in coefficient values, chained by finishMaterialProducts
@@ -168,13 +174,20 @@ void Simulable::accumulateMaterialProducts(const VecX& lambda, MaterialProducts&
   getGradientParameterVJPs(lambda, {SimParameter::Material}, false, &sum);
 }
 
-VecX Simulable::finishMaterialProducts(const MaterialProducts& sum) const {
+VecX Simulable::finishMaterialProducts(const MaterialProducts& sum, VecX* shape) const {
   const Impl& m = *impl_;
   if (!m.soft)
     throw Error("Simulable::finishMaterialProducts: the articulated skeleton has no material");
-  VecX values = VecX::Zero(m.soft->materialChain().numValues());
+  const bool with_shape = shape && sum.shape;
+  if (shape) *shape = VecX::Zero(parameterSize(SimParameter::Shape));
+  VecX elastic = VecX::Zero(m.soft->materialChain().numValues());
+  m.soft->elasticTerm().addAccumulatedMaterialProducts(
+      sum.elements, sum.rest_outer, elastic, with_shape ? &m.soft->shapeChain() : nullptr, shape);
+  // β's share through the elastic materials' coefficient values (the masses' is in their own
+  // Shape blocks).
+  if (with_shape) shape->noalias() += m.soft->shapeChain().valuesJacobian().transpose() * elastic;
+  VecX values = elastic;
   if (sum.values.size() > 0) values += sum.values;
-  m.soft->elasticTerm().addAccumulatedMaterialProducts(sum.elements, sum.rest_outer, values);
   return materialParametersCotangent(m, values);
 }
 
@@ -260,7 +273,7 @@ void Simulable::getGradientPreviousStatesVJP(const VecX& lambda, VecX* a_n, VecX
   const TermContext c = m.context();
   for (const EnergyTerm* term : m.terms)
     if (term->dependsOnPreviousStates()) term->addPreviousStatesProducts(c, lambda, a_n, a_nm1);
-  if (m.soft && a_n) m.soft->addPoseBlendProducts(c, lambda, *a_n);
+  if (m.soft && a_n) m.soft->addPoseBlendProducts(c, lambda, *a_n, m.state_version);
 }
 
 VecX Simulable::getGradientPreviousStatesJVP(const VecX& dq_n, const VecX& dq_nm1) const {
@@ -320,7 +333,8 @@ void Simulable::setParameter(SimParameter p, const VecX& value) {
   if (p == SimParameter::Shape)
     throw InputError(
         "Simulable::setParameter: Shape (β) is fixed by the SoftAvatar the simulable was built "
-        "with; build a new SoftAvatar with the new β and a new Simulable on it");
+        "with; build one with SoftAvatar::withShape(β) (the same discretization) and a new "
+        "Simulable on it");
   if (p == SimParameter::Material)
     throw InputError(
         "Simulable::setParameter: Material is fixed by the SoftAvatar the simulable was built "

@@ -48,11 +48,22 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
   contact_ = std::make_unique<NodeContactTerm>(kin_, avatar.vertexAreas());
 }
 
-void SoftTissue::addPoseBlendProducts(const TermContext& c, const VecX& lambda, VecX& a_n) const {
-  MatX3 node_cotangent = MatX3::Zero(numNodes(), 3);
+const MatX3& SoftTissue::nodeOffsetCotangent(const TermContext& c, const VecX& lambda,
+                                             long version) const {
+  if (version == offset_version_ && lambda.size() == offset_lambda_.size() &&
+      lambda == offset_lambda_)
+    return offset_cotangent_;
+  offset_cotangent_ = MatX3::Zero(numNodes(), 3);
   for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
-    term->addNodeOffsetProducts(c, lambda, node_cotangent);
-  addPoseBlendCotangent(c.R_n, node_cotangent, a_n);
+    term->addNodeOffsetProducts(c, lambda, offset_cotangent_);
+  offset_lambda_ = lambda;
+  offset_version_ = version;
+  return offset_cotangent_;
+}
+
+void SoftTissue::addPoseBlendProducts(const TermContext& c, const VecX& lambda, VecX& a_n,
+                                      long version) const {
+  addPoseBlendCotangent(c.R_n, nodeOffsetCotangent(c, lambda, version), a_n);
 }
 
 void SoftTissue::addPoseBlendCotangent(const std::vector<Mat3>& R_n, const MatX3& offsets,
@@ -90,12 +101,10 @@ void SoftTissue::addPoseBlendTangent(const TermContext& c, const VecX& dq_n, Vec
     term->addNodeOffsetTangent(c, dY, out);
 }
 
-void SoftTissue::addShapeProducts(const TermContext& c, const VecX& lambda, VecX& beta_bar) const {
-  MatX3 node_cotangent = MatX3::Zero(numNodes(), 3);
-  for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
-    term->addNodeOffsetProducts(c, lambda, node_cotangent);
-  shape_chain_.addNodeCotangent(node_cotangent, beta_bar);
-  elastic_->addShapeProducts(lambda, shape_chain_, beta_bar);
+void SoftTissue::addShapeProducts(const TermContext& c, const VecX& lambda, VecX& beta_bar,
+                                  long version, bool summed) const {
+  shape_chain_.addNodeCotangent(nodeOffsetCotangent(c, lambda, version), beta_bar);
+  elastic_->addShapeProducts(lambda, shape_chain_, beta_bar, summed);
 }
 
 void SoftTissue::addShapeTangent(const TermContext& c, const VecX& dbeta, VecX& out) const {

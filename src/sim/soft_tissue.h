@@ -121,7 +121,12 @@ class SoftTissue final : public TwoThreadSchedule {
   // kinematics (poseBlendTangent / poseBlendCotangent). The inertia's own dependence on q_n and
   // q_{n−1} through x̂ is the term's (EnergyTerm::addPreviousStatesProducts).
   /// ADDS (∂g/∂ω_n)ᵀ λ into a_n's rotation rows (λ, a_n: the simulable's own DoFs).
-  void addPoseBlendProducts(const TermContext& c, const VecX& lambda, VecX& a_n) const;
+  /// `version`: the simulable's state version (nodeOffsetCotangent's cache).
+  void addPoseBlendProducts(const TermContext& c, const VecX& lambda, VecX& a_n,
+                            long version) const;
+  /// Σ over the node terms of (∂g/∂Y)ᵀ λ (#N × 3): what the pose blend's and β's rest nodes'
+  /// chains both read. Kept for the last (state version, λ): a reverse sweep asks for it twice
+  /// per step (previous states, then parameters).
   /// ADDS ∂g/∂ω_n δω_n (δω_n: dq_n's rotation entries) into out.
   void addPoseBlendTangent(const TermContext& c, const VecX& dq_n, VecX& out) const;
   /// The chain itself: ADDS into a_n's rotation rows the cotangent of q_n's rotation increments
@@ -133,8 +138,10 @@ class SoftTissue final : public TwoThreadSchedule {
   // ∂/∂β: inertia, gravity, contact) — the rest nodes through every node term's Y
   // (node_offset_derivatives.h) and the elastic term's rest shapes and materials
   // (ElasticityTerm::addShapeProducts) ----
-  /// ADDS λᵀ ∂g/∂β into beta_bar (K).
-  void addShapeProducts(const TermContext& c, const VecX& lambda, VecX& beta_bar) const;
+  /// ADDS λᵀ ∂g/∂β into beta_bar (K); `summed`: without the elastic share that comes from a
+  /// sweep's sums (ElasticityTerm::addShapeProducts).
+  void addShapeProducts(const TermContext& c, const VecX& lambda, VecX& beta_bar, long version,
+                        bool summed = false) const;
   /// ADDS ∂g/∂β dβ into out / ∂g/∂β into J (numDofs × K).
   void addShapeTangent(const TermContext& c, const VecX& dbeta, VecX& out) const;
   void addShapeJacobian(const TermContext& c, MatX& J) const;
@@ -156,6 +163,8 @@ class SoftTissue final : public TwoThreadSchedule {
   }
   /// The elastic term (its Material products split for the reverse sweep).
   const ElasticityTerm& elasticTerm() const { return *elastic_; }
+  /// β's chain (rest nodes, materials, masses).
+  const ShapeChain& shapeChain() const { return shape_chain_; }
   /// The Material group's chain (coefficient values ↔ the material file's parameters).
   const MaterialChain& materialChain() const { return material_chain_; }
   /// The node contact term, as the broad phase asks it (refresh).
@@ -177,6 +186,10 @@ class SoftTissue final : public TwoThreadSchedule {
   std::unique_ptr<ElasticityTerm> elastic_;
   const ReducedElasticityTerm* reduced_elastic_ = nullptr;  // elastic_ in the ROM
   std::unique_ptr<NodeContactTerm> contact_;
+  const MatX3& nodeOffsetCotangent(const TermContext& c, const VecX& lambda, long version) const;
+  mutable long offset_version_ = -1;
+  mutable VecX offset_lambda_;
+  mutable MatX3 offset_cotangent_;
   mutable std::vector<Vec3> forces_;
   mutable VecX gradient_scratch_;
 };

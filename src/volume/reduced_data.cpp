@@ -281,7 +281,7 @@ MatX subspaceRestStiffness(const VolumetricData& data, const SpMat& basis,
 #endif
   std::vector<MatX> partial(size_t(threads), MatX::Zero(3 * H, 3 * H));
   detail::FirstFailure failure;
-#pragma omp parallel for schedule(dynamic, 64)
+#pragma omp parallel for schedule(static)
   for (int c = 0; c < E; ++c) {
     failure.run([&] {
       int thread = 0;

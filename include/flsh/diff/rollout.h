@@ -33,11 +33,12 @@
 //    log c₀ and the log-slopes b of every coefficient (docs/materials.md): the gradient of a
 //    rollout of SoftAvatar::withMaterial(model with these parameters). tissue_fraction and the
 //    regions' tissue_scale select the bone nodes (kept by withMaterial): their gradient is 0.
-// Soft tissue (FEM, ROM): every group but shape (β moves the rest nodes, masses and materials,
-// whose derivatives are not written yet: its gradient comes back empty and a shape direction
-// is refused). The ROM's basis, cubature and rest-split floors are part of the avatar's
-// discretization, fixed during a rollout and by withMaterial: the gradient is exact for the
-// reduced model that is simulated. The vertices
+// Soft tissue (FEM, ROM): every group. β also moves the rest nodes X̄(β), the node masses, the
+// materials (c(β) and the tets' areas and volumes) and the contact areas: the gradient of
+// shape is that of a rollout of SoftAvatar::withShape(β). The tet mesh, bone nodes, orthotropy
+// frames and the ROM's basis, cubature and rest-split floors are part of the avatar's
+// discretization, fixed during a rollout and by withMaterial / withShape: the gradient is exact
+// for the model that is simulated. The vertices
 // are the simulated surface (getVertices), which moves with the pose blend held from the
 // previous state (VerticesCotangent::previous_state).
 // Accuracy: the gradients are exact for the converged rollout; they are as accurate as Newton's

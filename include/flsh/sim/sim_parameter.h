@@ -16,10 +16,11 @@ class SoftAvatar;
 /// Parameter groups the total gradient depends on (for the adjoint, ARCHITECTURE.md §6), in the
 /// order of the adjoint's groups (SimulableAdjointModel::parameterGroups).
 enum class SimParameter {
-  /// K: the avatar's shape β (fixed by the SoftAvatar: setParameter throws, build a new
-  /// avatar instead). Its gradient Jacobian goes through the rest joints J(β), the bone
-  /// inertias (SoftAvatar::boneInertiaShapeJacobian), and the rest surface X(β) and vertex areas
-  /// a(β) of the contact nodes x_i = Σ_b w_ib (R_b (X_i − J_b) + t_b).
+  /// K: the avatar's shape β (fixed by the SoftAvatar: setParameter throws, build one with
+  /// SoftAvatar::withShape instead). Its gradient Jacobian goes through the rest joints J(β),
+  /// the bone inertias (SoftAvatar::boneInertiaShapeJacobian), and the rest surface X(β) and
+  /// vertex areas a(β) of the contact nodes x_i = Σ_b w_ib (R_b (X_i − J_b) + t_b); with soft
+  /// tissue also the rest nodes X̄(β), node masses and the tets' materials (docs/adjoint.md).
   Shape,
   RestJoints,   ///< 72: rest joint centres J_b (m), 3 per bone: joint springs, skinning
                 ///< (x_i = Σ w (R(X − J) + t)), tracking/root stiffness moments and the

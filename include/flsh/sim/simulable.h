@@ -76,6 +76,7 @@ struct SimulableMaterialProducts {
   MatX elements;    ///< per elastic element: C_world (36, column-major), μ, γ cotangents
   MatX rest_outer;  ///< ROM with the rest-stiffness split: Σ λ zᵀ (3H × 3H)
   VecX values;      ///< the node masses' share, in coefficient values
+  bool shape = false;  ///< the sums also carry β's share (getGradientParameterVJPs with Shape)
 };
 
 class Simulable {
@@ -274,7 +275,9 @@ class Simulable {
   /// instead of one per step. Error without soft tissue.
   using MaterialProducts = SimulableMaterialProducts;
   void accumulateMaterialProducts(const VecX& lambda, MaterialProducts& sum) const;
-  VecX finishMaterialProducts(const MaterialProducts& sum) const;
+  /// `shape` (may be null): β's share of the sums (K; zero unless the sums were taken with the
+  /// Shape group, SimulableMaterialProducts::shape), to add to the steps' Shape products.
+  VecX finishMaterialProducts(const MaterialProducts& sum, VecX* shape = nullptr) const;
   /// ROM with the elastic cubature's rest-stiffness split: how many sample tets' excess is in
   /// its bounded branch (f_e = −q h(x), the floor acting) at the current state; 0 for other
   /// models. A diagnostic of the cubature (one energy pass over its samples).
@@ -313,7 +316,8 @@ class Simulable {
   /// SoftAvatar::restJointsShapeJacobian / boneInertiaShapeJacobian itself (e.g. once per
   /// rollout). Throws InputError on a wrong size of λ. Does not change the state.
   /// `material_sum` (soft tissue, may be null): the Material products are accumulated into it
-  /// (accumulateMaterialProducts) and the Material entry comes back zero.
+  /// (accumulateMaterialProducts) and the Material entry comes back zero; with Shape, β's share
+  /// through the materials (and the ROM's every tet of K) too, finishMaterialProducts' `shape`.
   std::vector<VecX> getGradientParameterVJPs(const VecX& lambda,
                                              const std::vector<SimParameter>& groups,
                                              bool shape_surface_only = false,
@@ -336,8 +340,9 @@ class Simulable {
   /// The terms whose sum is the articulated skeleton's energy: rigid inertia (the dynamic part),
   /// bone gravity, joint springs, tracking and root springs, collider contact. With soft tissue
   /// (FEM or ROM): the bones' joint and tracking springs, then the node terms — nodal inertia,
-  /// nodal gravity, elasticity, node contact — that read the soft kinematics (their parameter
-  /// products are not written yet: the soft-tissue adjoint is issue 25). Owned by the simulable.
+  /// nodal gravity, elasticity, node contact — that read the soft kinematics (β's share through
+  /// the rest nodes and the elastic rest shapes is added by the simulable's parameter
+  /// derivatives, not by the terms' own products). Owned by the simulable.
   std::vector<const EnergyTerm*> energyTerms() const;
   /// The view the terms read at the current state, with contact (and the soft kinematics) up to
   /// date. Its references

@@ -103,11 +103,13 @@ void ElasticityTerm::accumulateMaterialProducts(const VecX& lambda, MatX& elemen
 // On the available threads, per-thread sums added in thread order (deterministic for a fixed
 // thread count).
 void ElasticityTerm::addAccumulatedMaterialProducts(const MatX& elements, const MatX& rest_outer,
-                                                    VecX& values_bar) const {
+                                                    VecX& values_bar, const ShapeChain* shape,
+                                                    VecX* beta_bar) const {
   const TetMaterialMap& map = chain_.map();
   const int E = int(elements.rows());
   const int threads = E > 1000 ? std::max(1, omp_get_max_threads()) : 1;
   std::vector<VecX> partial(size_t(threads), VecX::Zero(values_bar.size()));
+  std::vector<VecX> betas(size_t(threads), VecX::Zero(shape ? shape->numBetas() : 0));
 #pragma omp parallel num_threads(threads)
   {
     const int k = omp_get_thread_num();
@@ -117,11 +119,16 @@ void ElasticityTerm::addAccumulatedMaterialProducts(const MatX& elements, const 
       bar.C_world = Eigen::Map<const Mat6>(elements.row(e).head<36>().eval().data());
       bar.modulus = elements(e, 36);
       bar.gamma = elements(e, 37);
-      map.addCotangent(materialElementTet(e), bar, partial[size_t(k)]);
+      const int t = materialElementTet(e);
+      TetGeometryCotangent geometry;
+      map.addCotangent(t, bar, partial[size_t(k)], shape ? &geometry : nullptr);
+      if (shape) shape->addGeometryCotangent(t, geometry, betas[size_t(k)]);
     }
   }
   for (const VecX& p : partial) values_bar += p;
-  if (rest_outer.size() > 0) addRestStiffnessProducts(rest_outer, values_bar);
+  if (beta_bar)
+    for (const VecX& b : betas) *beta_bar += b;
+  if (rest_outer.size() > 0) addRestStiffnessProducts(rest_outer, values_bar, shape, beta_bar);
 }
 
 template <class Visit>
@@ -176,26 +183,28 @@ void ElasticityTerm::addParameterJacobians(const TermContext&, ParameterProducts
 
 // ---- Shape ----------------------------------------------------------------------------------
 
-void ElasticityTerm::addElementShapeCotangent(int e, const Mat3X& Lambda, const ShapeChain& shape,
-                                              VecX& beta_bar, VecX& values_bar) const {
+void ElasticityTerm::addElementRestShapeCotangent(int e, const Mat3X& Lambda,
+                                                  const ShapeChain& shape, VecX& beta_bar) const {
   Mat34 X_bar = Mat34::Zero();
   materialElementRestCotangent(e, Lambda, X_bar);
-  const Eigen::Vector4i nodes = materialElementNodes(e);
-  for (int a = 0; a < 4; ++a)
-    beta_bar.noalias() += shape.nodeDirections(nodes[a]).transpose() * X_bar.col(a);
+  shape.addTetNodesCotangent(materialElementNodes(e), X_bar, beta_bar);
+}
+
+void ElasticityTerm::addElementShapeCotangent(int e, const Mat3X& Lambda, const ShapeChain& shape,
+                                              VecX& beta_bar, VecX& values_bar) const {
+  addElementRestShapeCotangent(e, Lambda, shape, beta_bar);
   const int t = materialElementTet(e);
   TetGeometryCotangent geometry;
   chain_.map().addCotangent(t, materialCotangent(materialElementGradient(e, Lambda)), values_bar,
                             &geometry);
-  beta_bar.noalias() += geometry.area * shape.areaJacobian().row(t).transpose() +
-                        geometry.volume * shape.volumeJacobian().row(t).transpose();
+  shape.addGeometryCotangent(t, geometry, beta_bar);
 }
 
 // Element by element on the available threads (per-thread sums added in thread order), the
 // coefficient values' share chained once.
-void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shape,
-                                      VecX& beta_bar) const {
-  const int E = numMaterialElements(), K = shape.numBetas();
+void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shape, VecX& beta_bar,
+                                      bool summed) const {
+  const int E = summed ? numProductElements() : numMaterialElements(), K = shape.numBetas();
   const int threads = E > 1000 ? std::max(1, omp_get_max_threads()) : 1;
   std::vector<VecX> betas(size_t(threads), VecX::Zero(K));
   std::vector<VecX> values(size_t(threads), VecX::Zero(chain_.numValues()));
@@ -209,7 +218,10 @@ void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shap
       failure.run([&] {
         materialElementDofs(e, dofs);
         const Mat3X Lambda = gatherDirections(dofs, lambda, 0);
-        if (!Lambda.isZero(0.0))
+        if (Lambda.isZero(0.0)) return;
+        if (summed)
+          addElementRestShapeCotangent(e, Lambda, shape, betas[size_t(k)]);
+        else
           addElementShapeCotangent(e, Lambda, shape, betas[size_t(k)], values[size_t(k)]);
       });
   }

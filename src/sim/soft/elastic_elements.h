@@ -78,15 +78,24 @@ class ElasticityTerm : public NodeTerm<1> {
   void accumulateMaterialProducts(const VecX& lambda, MatX& elements, MatX& rest_outer) const;
   /// ADDS into values_bar (coefficient values) the cotangent of such sums: each element's
   /// through the material map, the rest stiffness's with one pass over every elastic tet.
+  /// `shape` (may be null): also ADDS into beta_bar β's share of the same sums that does not
+  /// need the steps one by one — the tets' areas and volumes through the material map, and for
+  /// the ROM the rest shapes of every tet of ½ zᵀ K z (bilinear in λ and z: from Σ λ zᵀ); the
+  /// coefficient values' share is the caller's (values_bar through ∂c/∂β).
   void addAccumulatedMaterialProducts(const MatX& elements, const MatX& rest_outer,
-                                      VecX& values_bar) const;
+                                      VecX& values_bar, const ShapeChain* shape = nullptr,
+                                      VecX* beta_bar = nullptr) const;
   static constexpr int kMaterialPointValues = 38;
 
   // ---- Shape (β): element by element, the rest nodes X̄(β) move Λᵀ g_e through the tet's rest
   // shape (materialElementRestCotangent) and its material point through c(β) and the skin
   // fraction's area and volume (the per-tet material map; frames held) ----
-  /// ADDS λᵀ ∂g/∂β (K) into beta_bar at the prepared state.
-  void addShapeProducts(const VecX& lambda, const ShapeChain& shape, VecX& beta_bar) const;
+  /// ADDS λᵀ ∂g/∂β (K) into beta_bar at the prepared state. `summed` (a reverse sweep that also
+  /// accumulates the material products, accumulateMaterialProducts): only the share that needs
+  /// this step's state — the rest shapes of the product elements (the FEM's tets, the ROM's
+  /// samples) —, the rest coming once from addAccumulatedMaterialProducts.
+  void addShapeProducts(const VecX& lambda, const ShapeChain& shape, VecX& beta_bar,
+                        bool summed = false) const;
   /// ADDS ∂g/∂β dβ into out (numDofs) / ∂g/∂β into J (numDofs × K): the elements' rows.
   void addShapeTangent(const VecX& dbeta, const ShapeChain& shape, VecX& out) const;
   void addShapeJacobian(const ShapeChain& shape, MatX& J) const;
@@ -112,8 +121,11 @@ class ElasticityTerm : public NodeTerm<1> {
   /// ROM with the split: ADDS λ zᵀ over the handles' coordinates into W (resized from empty).
   virtual void addRestOuter(const VecX& lambda, MatX& W) const {}
   /// ROM with the split: ADDS into values_bar the rest stiffness's share for Σ λ zᵀ = W (one
-  /// pass over every elastic tet). Nothing otherwise.
-  virtual void addRestStiffnessProducts(const MatX& W, VecX& values_bar) const {}
+  /// pass over every elastic tet) and, with `shape`, β's share of the tets' areas, volumes and
+  /// rest shapes into beta_bar. Nothing otherwise.
+  virtual void addRestStiffnessProducts(const MatX& W, VecX& values_bar,
+                                        const ShapeChain* shape = nullptr,
+                                        VecX* beta_bar = nullptr) const {}
 
  private:
   /// Element e's rows ∂g/∂c at its DoFs: row(dof, values) for every local direction with a DoF.
@@ -123,6 +135,9 @@ class ElasticityTerm : public NodeTerm<1> {
   /// 3 × #columns).
   template <class Visit>
   void forEachLocalUnit(int e, std::vector<int>& dofs, Visit&& visit) const;
+  /// Element e's rest shape's share of ∂(Λᵀ g_e)/∂β, ADDED into beta_bar.
+  void addElementRestShapeCotangent(int e, const Mat3X& Lambda, const ShapeChain& shape,
+                                    VecX& beta_bar) const;
   /// Element e's share of ∂(Λᵀ g_e)/∂β: ADDS into beta_bar its rest nodes' and area/volume's
   /// part and into values_bar its coefficient values' cotangent (chained by the caller).
   void addElementShapeCotangent(int e, const Mat3X& Lambda, const ShapeChain& shape, VecX& beta_bar,

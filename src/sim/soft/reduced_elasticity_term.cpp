@@ -75,6 +75,17 @@ ReducedElasticityTerm::ReducedElasticityTerm(const SoftAvatar& avatar,
   }
 }
 
+// Φ(a, s) = φ_{handles[s]}(nodes[a]) from the nodes' basis rows.
+Mat4X ReducedElasticityTerm::nodeBasis(const Eigen::Vector4i& nodes, const int* handles,
+                                       int n) const {
+  Mat4X Phi = Mat4X::Zero(4, n);
+  for (int a = 0; a < 4; ++a)
+    for (auto* phi = kin_.basisBegin(nodes[a]); phi != kin_.basisEnd(nodes[a]); ++phi)
+      for (int s = 0; s < n; ++s)
+        if (handles[s] == phi->first) Phi(a, s) = phi->second;
+  return Phi;
+}
+
 ReducedElasticityTerm::ReducedTets ReducedElasticityTerm::reducedTets(
     const std::vector<int>& tet, const MatX4i& tets,
     const std::vector<TetElementRest>& rest) const {
@@ -90,13 +101,8 @@ ReducedElasticityTerm::ReducedTets ReducedElasticityTerm::reducedTets(
         handles.push_back(phi->first);
     std::sort(handles.begin(), handles.end());
     handles.erase(std::unique(handles.begin(), handles.end()), handles.end());
-    Mat4X Phi = Mat4X::Zero(4, Eigen::Index(handles.size()));
-    for (size_t s = 0; s < handles.size(); ++s) {
-      out.handles.push_back(handles[s]);
-      for (int a = 0; a < 4; ++a)
-        for (auto* phi = kin_.basisBegin(tets(e, a)); phi != kin_.basisEnd(tets(e, a)); ++phi)
-          if (phi->first == handles[s]) Phi(a, Eigen::Index(s)) = phi->second;
-    }
+    for (int h : handles) out.handles.push_back(h);
+    const Mat4X Phi = nodeBasis(tets.row(e).transpose(), handles.data(), int(handles.size()));
     gradients.push_back(reducedShapeGradients(rest[size_t(e)], Phi));
     out.volume.push_back(rest[size_t(e)].volume);
     columns += int(handles.size());
@@ -279,18 +285,25 @@ void ReducedElasticityTerm::addRestOuter(const VecX& lambda, MatX& W) const {
   W.noalias() += lambda.segment(kin_.boneDofs(), m) * kin_.u.transpose();
 }
 
-void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values_bar) const {
+// With `shape`, each tet's rest shape too: λᵀ K_t z is bilinear in the nodal λ_u = P λ and
+// u = P z (P = Φ_t ⊗ I₃, 12 × 3n), so Σ over the steps is a function of the nodal sum
+// N = P W_t Pᵀ = Σ_c e_c r_cᵀ (r_c: row c), i.e. of 12 rank-one terms (λ = e_c, u = r_c).
+void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values_bar,
+                                                     const ShapeChain* shape,
+                                                     VecX* beta_bar) const {
   if (rest_stiffness_.size() == 0 || W.size() == 0) return;
   const ReducedTets& all = everyTet();
   const TetMaterialMap& map = materialChain().map();
   const int T = int(all.tet.size());
   const int threads = T > 1000 ? std::max(1, omp_get_max_threads()) : 1;
   std::vector<VecX> partial(size_t(threads), VecX::Zero(values_bar.size()));
+  std::vector<VecX> betas(size_t(threads), VecX::Zero(shape ? shape->numBetas() : 0));
 #pragma omp parallel num_threads(threads)
   {
     const int k = omp_get_thread_num();
     Eigen::Matrix<double, 6, Eigen::Dynamic> B;
-    MatX We;
+    MatX We, P;
+    Mat12 N;
 #pragma omp for schedule(static)
     for (int t = 0; t < T; ++t) {
       const int begin = all.handle_start[size_t(t)], n = all.count(t);
@@ -310,10 +323,31 @@ void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values
       }
       TetMaterialCotangent bar;
       bar.C_world = all.volume[size_t(t)] * B * We * B.transpose();
-      map.addCotangent(all.tet[size_t(t)], bar, partial[size_t(k)]);
+      TetGeometryCotangent geometry;
+      map.addCotangent(all.tet[size_t(t)], bar, partial[size_t(k)], shape ? &geometry : nullptr);
+      if (!shape) continue;
+      shape->addGeometryCotangent(all.tet[size_t(t)], geometry, betas[size_t(k)]);
+      const Eigen::Vector4i nodes = materialElementNodes(elements_.size() + t);
+      const Mat4X Phi = nodeBasis(nodes, &all.handles[size_t(begin)], n);
+      P = MatX::Zero(12, 3 * n);
+      for (int a = 0; a < 4; ++a)
+        for (int s = 0; s < n; ++s) P.block<3, 3>(3 * a, 3 * s) = Phi(a, s) * Mat3::Identity();
+      N = P * We * P.transpose();
+      Mat34 X_bar = Mat34::Zero();
+      for (int c = 0; c < 12; ++c) {
+        if (N.row(c).isZero(0.0)) continue;
+        Mat34 unit = Mat34::Zero();
+        unit(c % 3, c / 3) = 1.0;
+        const Vec12 row = N.row(c).transpose();
+        addTetLinearFormRestCotangent(all.rest[size_t(t)], all.C_world[size_t(t)],
+                                      Eigen::Map<const Mat34>(row.data()), unit, 1.0, X_bar);
+      }
+      shape->addTetNodesCotangent(nodes, X_bar, betas[size_t(k)]);
     }
   }
   for (const VecX& p : partial) values_bar += p;
+  if (beta_bar)
+    for (const VecX& b : betas) *beta_bar += b;
 }
 
 namespace {
@@ -413,12 +447,7 @@ void ReducedElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lam
   const std::vector<int>& handles = sample ? handles_ : everyTet().handles;
   const int begin = start[size_t(k)], n = start[size_t(k) + 1] - begin;
   if (n == 0) return;
-  const Eigen::Vector4i nodes = materialElementNodes(e);
-  Mat4X Phi = Mat4X::Zero(4, n);
-  for (int a = 0; a < 4; ++a)
-    for (auto* phi = kin_.basisBegin(nodes[a]); phi != kin_.basisEnd(nodes[a]); ++phi)
-      for (int s = 0; s < n; ++s)
-        if (handles[size_t(begin + s)] == phi->first) Phi(a, s) = phi->second;
+  const Mat4X Phi = nodeBasis(materialElementNodes(e), &handles[size_t(begin)], n);
   Mat3X Z(3, n);
   for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * handles[size_t(begin + s)]);
   const Mat34 u = Z * Phi.transpose(), lu = Lambda * Phi.transpose();

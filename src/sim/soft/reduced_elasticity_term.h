@@ -54,7 +54,9 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   void addRestOuter(const VecX& lambda, MatX& W) const override;
 
  public:
-  void addRestStiffnessProducts(const MatX& rest_outer, VecX& values_bar) const override;
+  void addRestStiffnessProducts(const MatX& rest_outer, VecX& values_bar,
+                                const ShapeChain* shape = nullptr,
+                                VecX* beta_bar = nullptr) const override;
 
  private:
   /// Tets in the subspace: each one's handles (ascending) and its shape gradients through the
@@ -73,6 +75,8 @@ class ReducedElasticityTerm final : public ElasticityTerm {
                           const std::vector<TetElementRest>& rest) const;
   /// Every elastic tet in the subspace (built on first use, for the Material group).
   const ReducedTets& everyTet() const;
+  /// The four nodes' basis rows on n handles (4 × n): Φ(a, s) = φ_{handles[s]}(nodes[a]).
+  Mat4X nodeBasis(const Eigen::Vector4i& nodes, const int* handles, int n) const;
   /// The weights of a sample's d(Λᵀ ∇f_e) on the derivatives of Λᵀ∇ψ, Λᵀ K̃ z, ψ and q
   /// (materialElementGradient, materialElementRestCotangent): w on the first alone without the
   /// split.

@@ -15,9 +15,24 @@ Eigen::Block<const MatX, 3, Eigen::Dynamic> ShapeChain::nodeDirections(int j) co
 
 void ShapeChain::addNodeCotangent(const MatX3& X_bar, VecX& beta_bar) const {
   const MatX& S = avatar_.volumetricData().templ->fields.shapedirs;
-  // S is 3#N × K with row 3j + c: X_bar is row-major, so its storage matches S row for row.
-  beta_bar.noalias() +=
-      S.topRows(X_bar.size()).transpose() * Eigen::Map<const VecX>(X_bar.data(), X_bar.size());
+  // S is 3#N × K with row 3j + c. Row by row: the node terms' cotangents are nonzero on their
+  // few nodes only (the mass nodes and the contact candidates).
+  for (Eigen::Index j = 0; j < X_bar.rows(); ++j)
+    if (!X_bar.row(j).isZero(0.0))
+      beta_bar.noalias() += S.middleRows<3>(3 * j).transpose() * X_bar.row(j).transpose();
+}
+
+void ShapeChain::addTetNodesCotangent(const Eigen::Vector4i& nodes, const Mat34& X_bar,
+                                      VecX& beta_bar) const {
+  for (int a = 0; a < 4; ++a)
+    beta_bar.noalias() += nodeDirections(nodes[a]).transpose() * X_bar.col(a);
+}
+
+void ShapeChain::addGeometryCotangent(int t, const TetGeometryCotangent& geometry,
+                                      VecX& beta_bar) const {
+  if (geometry.area == 0.0 && geometry.volume == 0.0) return;
+  beta_bar.noalias() += geometry.area * areaJacobian().row(t).transpose() +
+                        geometry.volume * volumeJacobian().row(t).transpose();
 }
 
 MatX3 ShapeChain::nodeTangent(const VecX& dbeta) const {

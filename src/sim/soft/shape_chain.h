@@ -12,7 +12,9 @@
 #include <memory>
 
 #include "flsh/core/types.h"
+#include "flsh/energy/fem_material.h"
 #include "flsh/volume/soft_avatar.h"
+#include "flsh/volume/tet_material_map.h"
 #include "sim/soft/material_chain.h"
 
 namespace flsh::detail {
@@ -30,6 +32,10 @@ class ShapeChain {
   /// ADDS Σ_j (∂X̄_j/∂β)ᵀ X_bar_j (X_bar: rows for nodes 0 … rows − 1, at most #N) into
   /// beta_bar (K).
   void addNodeCotangent(const MatX3& X_bar, VecX& beta_bar) const;
+  /// ADDS Σ_a (∂X̄_{nodes[a]}/∂β)ᵀ X_bar.col(a) into beta_bar (a tet's four nodes).
+  void addTetNodesCotangent(const Eigen::Vector4i& nodes, const Mat34& X_bar, VecX& beta_bar) const;
+  /// ADDS tet t's boundary area and volume cotangent's share into beta_bar.
+  void addGeometryCotangent(int t, const TetGeometryCotangent& geometry, VecX& beta_bar) const;
   /// dX̄ = S dβ (#N × 3).
   MatX3 nodeTangent(const VecX& dbeta) const;
   /// ∂c/∂β (numCoefficients() × K).

@@ -206,6 +206,21 @@ void expectShapeDerivatives(Simulable& simulable, const std::shared_ptr<const So
   const VecX lambda = test::randomVector(n, 1.0, 61);
   const VecX vjp = sim->getGradientParameterVJPs(lambda, {SimParameter::Shape}).front();
   EXPECT_LT((vjp - J.transpose() * lambda).norm(), 1e-10 * (1.0 + vjp.norm()));
+  // The reverse sweep's form (the materials' and the ROM's K share summed over the steps and
+  // finished once) gives the same, and is linear in λ.
+  const VecX lambda2 = test::randomVector(n, 1.0, 63);
+  Simulable::MaterialProducts sum;
+  VecX steps = VecX::Zero(K);
+  for (const VecX* l : {&lambda, &lambda2})
+    steps += sim->getGradientParameterVJPs(*l, {SimParameter::Shape, SimParameter::Material}, false,
+                                           &sum)
+                 .front();
+  ASSERT_TRUE(sum.shape);
+  VecX share;
+  sim->finishMaterialProducts(sum, &share);
+  ASSERT_GT(share.norm(), 0.0);
+  const VecX both = J.transpose() * (lambda + lambda2);
+  EXPECT_LT((steps + share - both).norm(), 1e-10 * (1.0 + both.norm()));
   const VecX direction = test::randomVector(K, 1.0, 62);
   ParameterDirection along{};
   along[size_t(SimParameter::Shape)] = &direction;

@@ -359,13 +359,6 @@ Mat3 edges(const Mat34& x) {
   return D;
 }
 
-/// The symmetric matrix of a Voigt stress (11, 22, 33, 23, 13, 12): ⟨it, G⟩ = σ · ε(G).
-Mat3 voigtStressMatrix(const Vec6& s) {
-  Mat3 m;
-  m << s[0], s[5], s[4], s[5], s[1], s[3], s[4], s[3], s[2];
-  return m;
-}
-
 }  // namespace
 
 void addTetGradientRestCotangent(const TetElementRest& rest, const FemMaterialPoint& material,
@@ -406,12 +399,30 @@ void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_wor
     throw InputError("addTetLinearFormRestCotangent: u or lambda has a non-finite entry");
   const Mat3& W = rest.Dm_inv;
   const Mat3 Gu = edges(u) * W, Gl = edges(lambda) * W;
-  const Vec6 su = C_world * voigtLinearStrain(Gu), sl = C_world * voigtLinearStrain(Gl);
-  const double form = su.dot(voigtLinearStrain(Gl));
-  addEdgeCotangent((scale * rest.volume) *
-                       (form * Mat3::Identity() - Gu.transpose() * voigtStressMatrix(sl) -
-                        Gl.transpose() * voigtStressMatrix(su)) *
-                       W.transpose(),
+  const Mat9 T = Eigen::Map<const Vec9>(Gl.data()) * Eigen::Map<const Vec9>(Gu.data()).transpose();
+  addTetLinearFormRestCotangent(rest, C_world, T, scale, X_bar);
+}
+
+// With L (6 × 9) the linear Voigt strain of vec(G) and Q = Lᵀ C L (LᵀC L vec(G) = vec(σ(G))):
+// the form is ⟨T, Q⟩, and Σ Guᵀ σ(Gλ) has entry (a, b) = Σ_i (Q T)[(i, b), (i, a)], Σ Gλᵀ σ(Gu)
+// likewise with Tᵀ.
+void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_world, const Mat9& T,
+                                   double scale, Mat34& X_bar) {
+  static const Eigen::Matrix<double, 6, 9> L = [] {
+    Eigen::Matrix<double, 6, 9> m = Eigen::Matrix<double, 6, 9>::Zero();
+    // vec index i + 3j of G(i, j); rows 11, 22, 33, 23, 13, 12.
+    m(0, 0) = m(1, 4) = m(2, 8) = 1.0;
+    m(3, 7) = m(3, 5) = m(4, 6) = m(4, 2) = m(5, 3) = m(5, 1) = 1.0;
+    return m;
+  }();
+  const Mat9 Q = L.transpose() * C_world * L;
+  const Mat9 QT = Q * T, QTt = Q * T.transpose();
+  Mat3 A = Mat3::Zero();
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b)
+      for (int i = 0; i < 3; ++i) A(a, b) += QT(i + 3 * b, i + 3 * a) + QTt(i + 3 * b, i + 3 * a);
+  const double form = T.cwiseProduct(Q).sum();
+  addEdgeCotangent((scale * rest.volume) * (form * Mat3::Identity() - A) * rest.Dm_inv.transpose(),
                    X_bar);
 }
 

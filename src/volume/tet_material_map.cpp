@@ -175,41 +175,48 @@ TetMaterials TetMaterialMap::materials() const {
   return out;
 }
 
-void tetMaterialGeometryTangent(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX3& dX,
-                                VecX& d_area, VecX& d_volume) {
+// Each tet's (and boundary face's) gradient in its nodes, once, applied to the D directions.
+void tetMaterialGeometryTangent(const TetMesh& mesh, const MatX3& shaped_nodes,
+                                const MatX& directions, MatX& d_area, MatX& d_volume) {
   detail::checkTetMesh(mesh, shaped_nodes, "tetMaterialGeometryTangent", false);
-  if (dX.rows() != shaped_nodes.rows())
-    throw InputError("tetMaterialGeometryTangent: dX has " + std::to_string(dX.rows()) +
-                     " rows, expected " + std::to_string(shaped_nodes.rows()) + " (one per node)");
+  if (directions.rows() != 3 * shaped_nodes.rows())
+    throw InputError("tetMaterialGeometryTangent: directions has " +
+                     std::to_string(directions.rows()) +
+                     " rows, expected 3 · #nodes = " + std::to_string(3 * shaped_nodes.rows()));
   const int nt = mesh.numTets();
-  d_area = VecX::Zero(nt);
-  d_volume.resize(nt);
-  auto node = [&](const MatX3& m, int t, int a) -> Vec3 { return m.row(mesh.tets(t, a)); };
+  const Eigen::Index D = directions.cols();
+  d_area = MatX::Zero(nt, D);
+  d_volume = MatX::Zero(nt, D);
+  auto x = [&](int j) -> Vec3 { return shaped_nodes.row(j).transpose(); };
+  auto add = [&](MatX& out, int row, int j, const Vec3& gradient) {
+    out.row(row).noalias() += gradient.transpose() * directions.middleRows<3>(3 * Eigen::Index(j));
+  };
   for (int t = 0; t < nt; ++t) {
-    // vol = det[x1 − x0, x2 − x0, x3 − x0]/6; |vol|' = sign(vol) vol'.
-    Mat3 D, dD;
-    for (int k = 0; k < 3; ++k) {
-      D.col(k) = node(shaped_nodes, t, k + 1) - node(shaped_nodes, t, 0);
-      dD.col(k) = node(dX, t, k + 1) - node(dX, t, 0);
-    }
-    // d det D = Σ_k (cofactor column k) · dD column k.
-    const double d_det = D.col(1).cross(D.col(2)).dot(dD.col(0)) +
-                         D.col(2).cross(D.col(0)).dot(dD.col(1)) +
-                         D.col(0).cross(D.col(1)).dot(dD.col(2));
-    d_volume[t] = (D.determinant() < 0 ? -d_det : d_det) / 6;
+    // vol = det[x1 − x0, x2 − x0, x3 − x0]/6, ∂det/∂x_k = cofactor column k − 1; |vol|' =
+    // sign(vol) vol'.
+    Mat3 Dm;
+    for (int k = 0; k < 3; ++k) Dm.col(k) = x(mesh.tets(t, k + 1)) - x(mesh.tets(t, 0));
+    const double sign = (Dm.determinant() < 0 ? -1.0 : 1.0) / 6;
+    Mat3 cof;
+    cof << Dm.col(1).cross(Dm.col(2)), Dm.col(2).cross(Dm.col(0)), Dm.col(0).cross(Dm.col(1));
+    for (int k = 0; k < 3; ++k) add(d_volume, t, mesh.tets(t, k + 1), sign * cof.col(k));
+    add(d_volume, t, mesh.tets(t, 0), -sign * cof.rowwise().sum());
   }
   std::vector<int> owners;
   const MatX3i F = detail::outwardBoundaryFaces(mesh, "tetMaterialGeometryTangent", &owners);
   for (int f = 0; f < F.rows(); ++f) {
-    // A = ½ |n|, n = (b − a) × (c − a): dA = ½ n̂ · dn.
-    const Vec3 a = shaped_nodes.row(F(f, 0)), b = shaped_nodes.row(F(f, 1)),
-               c = shaped_nodes.row(F(f, 2));
-    const Vec3 da = dX.row(F(f, 0)), db = dX.row(F(f, 1)), dc = dX.row(F(f, 2));
+    // A = ½ |n|, n = (b − a) × (c − a): ∂A/∂b = ½ (c − a) × n̂, ∂A/∂c = ½ n̂ × (b − a),
+    // ∂A/∂a = −(the two).
+    const Vec3 a = x(F(f, 0)), b = x(F(f, 1)), c = x(F(f, 2));
     const Vec3 n = (b - a).cross(c - a);
     const double length = n.norm();
     if (length == 0) continue;
-    const Vec3 dn = (db - da).cross(c - a) + (b - a).cross(dc - da);
-    d_area[owners[size_t(f)]] += 0.5 * n.dot(dn) / length;
+    const Vec3 unit = n / length;
+    const Vec3 gb = 0.5 * (c - a).cross(unit), gc = 0.5 * unit.cross(b - a);
+    const int t = owners[size_t(f)];
+    add(d_area, t, F(f, 0), -(gb + gc));
+    add(d_area, t, F(f, 1), gb);
+    add(d_area, t, F(f, 2), gc);
   }
 }
 

@@ -94,10 +94,11 @@ TEST(TetMaterialMap, CotangentMatchesFiniteDifferences) {
 TEST(TetMaterialMap, GeometryDerivativesMatchFiniteDifferences) {
   const VolumetricData& d = data();
   const TetMesh& mesh = d.templ->mesh;
-  const MatX3 dX =
-      Eigen::Map<const MatX3>(randomVector(3 * d.numNodes(), 1e-3, 5).data(), d.numNodes(), 3);
-  VecX d_area, d_volume;
-  tetMaterialGeometryTangent(mesh, d.rest_nodes, dX, d_area, d_volume);
+  const VecX direction = randomVector(3 * d.numNodes(), 1e-3, 5);
+  const MatX3 dX = Eigen::Map<const MatX3>(direction.data(), d.numNodes(), 3);
+  MatX area_tangent, volume_tangent;
+  tetMaterialGeometryTangent(mesh, d.rest_nodes, MatX(direction), area_tangent, volume_tangent);
+  const VecX d_area = area_tangent.col(0), d_volume = volume_tangent.col(0);
   ASSERT_GT(d_area.norm(), 0.0);
   ASSERT_GT(d_volume.norm(), 0.0);
   const auto geometry_at = [&](double s) {

@@ -161,6 +161,10 @@ void addTetEnergyRestCotangent(const TetElementRest& rest, const FemMaterialPoin
 ///   ∂/∂Dm = volume (⟨σ(Gu), Gλ⟩ Wᵀ − Guᵀ σ(Gλ) Wᵀ − Gλᵀ σ(Gu) Wᵀ),  Gu = Du W, Gλ = Dλ W.
 void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_world, const Mat34& u,
                                    const Mat34& lambda, double scale, Mat34& X_bar);
+/// The same for a sum of such forms, given by T = Σ vec(Gλ) vec(Gu)ᵀ (9 × 9, vec column-major):
+/// the form is bilinear, so a sum over many (λ, u) (a reverse sweep's steps) needs only T.
+void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_world, const Mat9& T,
+                                   double scale, Mat34& X_bar);
 
 /// Reduced tets (the ROM's elastic term): the tet's nodal displacements are a linear map of n
 /// reduced 3-vectors z_s, u_a = Σ_s Φ(a, s) z_s (Φ: the 4 × n basis rows of the tet's nodes).

@@ -44,10 +44,11 @@ TetMaterialGeometry tetMaterialGeometry(const TetMesh& mesh, const MatX3& shaped
 TetMaterialGeometry tetMaterialGeometry(const VolumetricData& data);
 
 /// Derivative of every tet's boundary area and volume (TetMaterialGeometry) in the rest nodes,
-/// for the adjoint's Shape group: d_area, d_volume (#T) for a direction dX (#N × 3) of the
-/// nodes `shaped_nodes` (#N × 3) of `mesh`. InputError on shapes that do not match.
-void tetMaterialGeometryTangent(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX3& dX,
-                                VecX& d_area, VecX& d_volume);
+/// for the adjoint's Shape group: d_area, d_volume (#T × D) for D directions of the nodes
+/// `shaped_nodes` (#N × 3) of `mesh`, `directions` 3#N × D (row 3j + c: coordinate c of node j;
+/// e.g. the shape directions S). InputError on shapes that do not match.
+void tetMaterialGeometryTangent(const TetMesh& mesh, const MatX3& shaped_nodes,
+                                const MatX& directions, MatX& d_area, MatX& d_volume);
 
 /// Cotangent of one tet's boundary area and volume (the geometry the map reads).
 struct TetGeometryCotangent {

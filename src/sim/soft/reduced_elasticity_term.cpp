@@ -285,9 +285,8 @@ void ReducedElasticityTerm::addRestOuter(const VecX& lambda, MatX& W) const {
   W.noalias() += lambda.segment(kin_.boneDofs(), m) * kin_.u.transpose();
 }
 
-// With `shape`, each tet's rest shape too: λᵀ K_t z is bilinear in the nodal λ_u = P λ and
-// u = P z (P = Φ_t ⊗ I₃, 12 × 3n), so Σ over the steps is a function of the nodal sum
-// N = P W_t Pᵀ = Σ_c e_c r_cᵀ (r_c: row c), i.e. of 12 rank-one terms (λ = e_c, u = r_c).
+// With `shape`, each tet's rest shape too: λᵀ K_t z = V ⟨σ(Z G̃ᵀ), Λ G̃ᵀ⟩ is bilinear, so Σ over
+// the steps is a function of T = Σ vec(Λ G̃ᵀ) vec(Z G̃ᵀ)ᵀ (9 × 9), which W_t gives.
 void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values_bar,
                                                      const ShapeChain* shape,
                                                      VecX* beta_bar) const {
@@ -302,8 +301,7 @@ void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values
   {
     const int k = omp_get_thread_num();
     Eigen::Matrix<double, 6, Eigen::Dynamic> B;
-    MatX We, P;
-    Mat12 N;
+    MatX We, X;
 #pragma omp for schedule(static)
     for (int t = 0; t < T; ++t) {
       const int begin = all.handle_start[size_t(t)], n = all.count(t);
@@ -328,20 +326,17 @@ void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values
       if (!shape) continue;
       shape->addGeometryCotangent(all.tet[size_t(t)], geometry, betas[size_t(k)]);
       const Eigen::Vector4i nodes = materialElementNodes(elements_.size() + t);
-      const Mat4X Phi = nodeBasis(nodes, &all.handles[size_t(begin)], n);
-      P = MatX::Zero(12, 3 * n);
-      for (int a = 0; a < 4; ++a)
-        for (int s = 0; s < n; ++s) P.block<3, 3>(3 * a, 3 * s) = Phi(a, s) * Mat3::Identity();
-      N = P * We * P.transpose();
+      // T[(i, j), (k, l)] = Σ_{s, r} G̃(j, s) G̃(l, r) W_t(3s + i, 3r + k): X = W_t (G̃ᵀ ⊗ I₃)
+      // first (3n × 9), then T = (G̃ ⊗ I₃) X.
+      const auto G = all.gradients.middleCols(begin, n);
+      X.setZero(3 * n, 9);
+      for (int r = 0; r < n; ++r)
+        for (int l = 0; l < 3; ++l) X.middleCols<3>(3 * l) += G(l, r) * We.middleCols<3>(3 * r);
+      Mat9 T = Mat9::Zero();
+      for (int s = 0; s < n; ++s)
+        for (int j = 0; j < 3; ++j) T.middleRows<3>(3 * j) += G(j, s) * X.middleRows<3>(3 * s);
       Mat34 X_bar = Mat34::Zero();
-      for (int c = 0; c < 12; ++c) {
-        if (N.row(c).isZero(0.0)) continue;
-        Mat34 unit = Mat34::Zero();
-        unit(c % 3, c / 3) = 1.0;
-        const Vec12 row = N.row(c).transpose();
-        addTetLinearFormRestCotangent(all.rest[size_t(t)], all.C_world[size_t(t)],
-                                      Eigen::Map<const Mat34>(row.data()), unit, 1.0, X_bar);
-      }
+      addTetLinearFormRestCotangent(all.rest[size_t(t)], all.C_world[size_t(t)], T, 1.0, X_bar);
       shape->addTetNodesCotangent(nodes, X_bar, betas[size_t(k)]);
     }
   }

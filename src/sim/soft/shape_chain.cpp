@@ -66,15 +66,7 @@ void ShapeChain::build() const {
   const TetMesh& mesh = data.templ->mesh;
   const int K = numBetas(), T = data.numTets();
   values_ = data.material_model.coefficientValuesShapeJacobian(avatar_.betas());
-  area_.resize(T, K);
-  volume_.resize(T, K);
-  VecX d_area, d_volume;
-  for (int k = 0; k < K; ++k) {
-    tetMaterialGeometryTangent(mesh, data.rest_nodes, nodeTangent(VecX::Unit(K, k)), d_area,
-                               d_volume);
-    area_.col(k) = d_area;
-    volume_.col(k) = d_volume;
-  }
+  tetMaterialGeometryTangent(mesh, data.rest_nodes, data.templ->fields.shapedirs, area_, volume_);
   const Cubature cubature = massCubature(avatar_);
   const TetMaterialMap& map = materials_.map();
   mass_ = MatX::Zero(data.numNodes(), K);

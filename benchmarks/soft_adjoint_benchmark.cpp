@@ -277,46 +277,35 @@ int main(int argc, char** argv) {
         analytic, fd, std::abs(analytic - fd) / std::abs(fd));
 
     // The material vector along a random direction (every coefficient's log-value and
-    // log-slopes): rollouts of SoftAvatar::withMaterial avatars.
+    // log-slopes): rollouts of SoftAvatar::withMaterial avatars; β likewise with withShape
+    // avatars (the same discretization at β ± ε dβ).
+    auto check = [&](const char* what, long size, double analytic,
+                     const std::function<std::shared_ptr<SoftAvatar>(double)>& avatar_at) {
+      auto along = [&](double e) {
+        auto sim = std::make_shared<Simulable>(avatar_at(e), s.walk, s.options);
+        sim->setColliders({s.ground});
+        Rollout r(sim, rollout_options);
+        r.run(steps);
+        return loss.value(r);
+      };
+      const double fd = (along(eps) - along(-eps)) / (2 * eps);
+      std::printf(
+          "check (%s, %ld values): directional derivative %.10g, central difference %.10g "
+          "(relative difference %.2g)\n",
+          what, size, analytic, fd, std::abs(analytic - fd) / std::abs(fd));
+    };
     RolloutVariables dm;
     dm.material = 0.05 * VecX::Random(material_size);
-    const double material_analytic = dot(grad, dm);
     const MaterialModel base_model = s.avatar->volumetricData().material_model;
-    auto along_material = [&](double e) {
+    check("material", material_size, dot(grad, dm), [&](double e) {
       MaterialModel m = base_model;
       m.setParameters(base_model.parameters() + e * dm.material);
-      auto sim = std::make_shared<Simulable>(s.avatar->withMaterial(m), s.walk, s.options);
-      sim->setColliders({s.ground});
-      Rollout r(sim, rollout_options);
-      r.run(steps);
-      return loss.value(r);
-    };
-    const double material_fd = (along_material(eps) - along_material(-eps)) / (2 * eps);
-    std::printf(
-        "check (material, %ld coefficients): directional derivative %.10g, central difference "
-        "%.10g (relative difference %.2g)\n",
-        material_size, material_analytic, material_fd,
-        std::abs(material_analytic - material_fd) / std::abs(material_fd));
-
-    // β along a random direction: rollouts of SoftAvatar::withShape avatars (the same
-    // discretization at β ± ε dβ).
+      return s.avatar->withMaterial(m);
+    });
     RolloutVariables db;
     db.shape = 0.5 * VecX::Random(shape_size);
-    const double shape_analytic = dot(grad, db);
-    auto along_shape = [&](double e) {
-      auto sim = std::make_shared<Simulable>(s.avatar->withShape(s.avatar->betas() + e * db.shape),
-                                             s.walk, s.options);
-      sim->setColliders({s.ground});
-      Rollout r(sim, rollout_options);
-      r.run(steps);
-      return loss.value(r);
-    };
-    const double shape_fd = (along_shape(eps) - along_shape(-eps)) / (2 * eps);
-    std::printf(
-        "check (shape, %ld components): directional derivative %.10g, central difference "
-        "%.10g (relative difference %.2g)\n",
-        shape_size, shape_analytic, shape_fd,
-        std::abs(shape_analytic - shape_fd) / std::abs(shape_fd));
+    check("shape", shape_size, dot(grad, db),
+          [&](double e) { return s.avatar->withShape(s.avatar->betas() + e * db.shape); });
   } catch (const std::exception& e) {
     std::fprintf(stderr, "soft_adjoint_benchmark: %s\n", e.what());
     return 1;

@@ -95,33 +95,26 @@ void NodalGravityTerm::reducedHessian(const Vec3& gravity, std::vector<Triplet>&
 
 // g = Σ_j J_jᵀ f_j with the constant f_j = −m_j g: the rest joint J_b turns only the lever
 // arms of bone b's rotation rows, Σ_j w_jb [f_j]× R_b = [−g]× R_b Σ_j m_j w_jb.
-// The masses (Material, in coefficient values): ∂g/∂m_j = J_jᵀ (−g), through each mass
-// coefficient k as ∂m_j/∂c_k.
+// The masses (Material, in coefficient values; Shape): ∂g/∂m_j = J_jᵀ (−g), through each mass
+// coefficient k as ∂m_j/∂c_k and through β as ∂m_j/∂β.
 template <class Sink>
 void NodalGravityTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
-  if (sink.wants(SimParameter::Shape)) {  // ∂g/∂β = J_jᵀ (−g) ∂m_j/∂β
-    const MatX& dm = shape_.massJacobian();
+  const bool shape = sink.wants(SimParameter::Shape);
+  const bool material = sink.wants(SimParameter::Material);
+  if (shape || material) {
+    const MatX* dm_dbeta = shape ? &shape_.massJacobian() : nullptr;
+    const MatX3* dm = material ? &chain_.massDerivatives() : nullptr;
     SkinnedPoint point;
     const Vec3 force = -c.options.gravity;
     for (size_t idx = 0; idx < masses_.nodes.size(); ++idx) {
       const int j = masses_.nodes[idx];
       kin_.point(j, point);
       point.id = int(idx);
-      sink.add(SimParameter::Shape, point, 0, force, dm.row(j));
-    }
-  }
-  if (sink.wants(SimParameter::Material)) {
-    const MatX3& dm = chain_.massDerivatives();
-    SkinnedPoint point;
-    const Vec3 force = -c.options.gravity;
-    for (size_t idx = 0; idx < masses_.nodes.size(); ++idx) {
-      const int j = masses_.nodes[idx];
-      kin_.point(j, point);
-      point.id = int(idx);
-      for (int k = 0; k < 3; ++k)
-        if (dm(j, k) != 0.0)
+      if (shape) sink.add(SimParameter::Shape, point, 0, force, dm_dbeta->row(j));
+      for (int k = 0; material && k < 3; ++k)
+        if ((*dm)(j, k) != 0.0)
           sink.add(SimParameter::Material, point, chain_.massCoefficients()[size_t(k)], force,
-                   Eigen::Matrix<double, 1, 1>(dm(j, k)));
+                   Eigen::Matrix<double, 1, 1>((*dm)(j, k)));
     }
   }
   if (!sink.wants(SimParameter::RestJoints)) return;

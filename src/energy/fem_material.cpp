@@ -318,6 +318,10 @@ void addStressMaterialGradient(const Mat3& F, const FemMaterialPoint& material, 
     out.modulus -= scale * kInversionStiffness * guard.depth * cofactor(F).cwiseProduct(dF).sum();
 }
 
+double tetSignedVolume(const Mat34& X) {
+  return (X.col(1) - X.col(0)).cross(X.col(2) - X.col(0)).dot(X.col(3) - X.col(0)) / 6;
+}
+
 TetElementRest tetElementRest(const Mat34& X, int tet_index) {
   const std::string where = "tetElementRest: tet " + std::to_string(tet_index);
   if (!X.allFinite()) throw InputError(where + ": a rest node is not finite");

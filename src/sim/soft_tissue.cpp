@@ -97,6 +97,10 @@ void SoftTissue::addPoseBlendTangent(const TermContext& c, const VecX& dq_n, Vec
   kin_.poseBlendTangent(c.R_n, rotations, nodes, dP);
   MatX3 dY = MatX3::Zero(numNodes(), 3);
   for (size_t k = 0; k < nodes.size(); ++k) dY.row(nodes[k]) = dP.row(Eigen::Index(k));
+  addNodeOffsetTangent(c, dY, out);
+}
+
+void SoftTissue::addNodeOffsetTangent(const TermContext& c, const MatX3& dY, VecX& out) const {
   for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
     term->addNodeOffsetTangent(c, dY, out);
 }
@@ -108,18 +112,15 @@ void SoftTissue::addShapeProducts(const TermContext& c, const VecX& lambda, VecX
 }
 
 void SoftTissue::addShapeTangent(const TermContext& c, const VecX& dbeta, VecX& out) const {
-  const MatX3 dY = shape_chain_.nodeTangent(dbeta);
-  for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
-    term->addNodeOffsetTangent(c, dY, out);
+  addNodeOffsetTangent(c, shape_chain_.nodeTangent(dbeta), out);
   elastic_->addShapeTangent(dbeta, shape_chain_, out);
 }
 
 void SoftTissue::addShapeJacobian(const TermContext& c, MatX& J) const {
   for (int k = 0; k < shape_chain_.numBetas(); ++k) {
-    const MatX3 dY = shape_chain_.nodeTangent(VecX::Unit(shape_chain_.numBetas(), k));
     VecX column = VecX::Zero(J.rows());
-    for (const NodeOffsetDerivatives* term : nodeOffsetTerms())
-      term->addNodeOffsetTangent(c, dY, column);
+    addNodeOffsetTangent(c, shape_chain_.nodeTangent(VecX::Unit(shape_chain_.numBetas(), k)),
+                         column);
     J.col(k) += column;
   }
   elastic_->addShapeJacobian(shape_chain_, J);

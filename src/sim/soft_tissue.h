@@ -124,9 +124,6 @@ class SoftTissue final : public TwoThreadSchedule {
   /// `version`: the simulable's state version (nodeOffsetCotangent's cache).
   void addPoseBlendProducts(const TermContext& c, const VecX& lambda, VecX& a_n,
                             long version) const;
-  /// Σ over the node terms of (∂g/∂Y)ᵀ λ (#N × 3): what the pose blend's and β's rest nodes'
-  /// chains both read. Kept for the last (state version, λ): a reverse sweep asks for it twice
-  /// per step (previous states, then parameters).
   /// ADDS ∂g/∂ω_n δω_n (δω_n: dq_n's rotation entries) into out.
   void addPoseBlendTangent(const TermContext& c, const VecX& dq_n, VecX& out) const;
   /// The chain itself: ADDS into a_n's rotation rows the cotangent of q_n's rotation increments
@@ -186,7 +183,12 @@ class SoftTissue final : public TwoThreadSchedule {
   std::unique_ptr<ElasticityTerm> elastic_;
   const ReducedElasticityTerm* reduced_elastic_ = nullptr;  // elastic_ in the ROM
   std::unique_ptr<NodeContactTerm> contact_;
+  /// Σ over the node terms of (∂g/∂Y)ᵀ λ (#N × 3): what the pose blend's and β's rest nodes'
+  /// chains both read. Kept for the last (state version, λ): a reverse sweep asks for it twice
+  /// per step (previous states, then parameters).
   const MatX3& nodeOffsetCotangent(const TermContext& c, const VecX& lambda, long version) const;
+  /// ADDS Σ over the node terms of ∂g/∂Y dY into out (dY: #N × 3).
+  void addNodeOffsetTangent(const TermContext& c, const MatX3& dY, VecX& out) const;
   mutable long offset_version_ = -1;
   mutable VecX offset_lambda_;
   mutable MatX3 offset_cotangent_;

@@ -670,8 +670,7 @@ VecX inertialNodeMasses(const VolumetricData& data, const Cubature& inertial) {
       throw InputError(fn + "cubature element " + std::to_string(k) + " = " + std::to_string(t) +
                        ", expected a tet index in [0, " + std::to_string(T) + ")");
     const Mat34 X = tetNodes(data.rest_nodes, tets, t);
-    const double volume =
-        (X.col(1) - X.col(0)).cross(X.col(2) - X.col(0)).dot(X.col(3) - X.col(0)) / 6;
+    const double volume = tetSignedVolume(X);
     const double quarter = inertial.weights[k] * data.materials.density[t] * volume / 4;
     for (int a = 0; a < 4; ++a) masses[tets(t, a)] += quarter;
   }

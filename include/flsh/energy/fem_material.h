@@ -122,6 +122,9 @@ struct TetElementRest {
   double volume = 0.0;  ///< det(Dm)/6 > 0 (m³)
 };
 
+/// Signed volume det[X1 − X0, X2 − X0, X3 − X0] / 6 of a tet's four nodes (columns of X, m³).
+double tetSignedVolume(const Mat34& X);
+
 /// Rest data of tet `tet_index` from its four rest nodes (columns of X, m). InputError naming
 /// the tet if a node is not finite, or the tet is inverted (det Dm < 0) or degenerate
 /// (|det Dm| ≤ 1e-12 · (longest edge)³).

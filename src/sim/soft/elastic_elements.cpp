@@ -226,10 +226,12 @@ void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shap
       });
   }
   failure.rethrow();
-  for (int k = 0; k < threads; ++k) {
-    beta_bar += betas[size_t(k)];
-    beta_bar.noalias() += shape.valuesJacobian().transpose() * values[size_t(k)];
+  for (int k = 1; k < threads; ++k) {
+    betas[0] += betas[size_t(k)];
+    values[0] += values[size_t(k)];
   }
+  beta_bar += betas[0];
+  if (!summed) beta_bar.noalias() += shape.valuesJacobian().transpose() * values[0];
 }
 
 template <class Row>

@@ -26,8 +26,7 @@ void MaterialChain::build() const {
     const int t = cubature.elements[k];
     Mat34 X;
     for (int a = 0; a < 4; ++a) X.col(a) = data.rest_nodes.row(tets(t, a)).transpose();
-    const double volume =
-        (X.col(1) - X.col(0)).cross(X.col(2) - X.col(0)).dot(X.col(3) - X.col(0)) / 6;
+    const double volume = tetSignedVolume(X);
     TetMaterialCotangent density;
     density.density = 1.0;
     bar.setZero();

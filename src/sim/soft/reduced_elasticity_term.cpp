@@ -75,6 +75,12 @@ ReducedElasticityTerm::ReducedElasticityTerm(const SoftAvatar& avatar,
   }
 }
 
+Mat3X ReducedElasticityTerm::handleDisplacements(const int* handles, int n) const {
+  Mat3X Z(3, n);
+  for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * handles[s]);
+  return Z;
+}
+
 // Φ(a, s) = φ_{handles[s]}(nodes[a]) from the nodes' basis rows.
 Mat4X ReducedElasticityTerm::nodeBasis(const Eigen::Vector4i& nodes, const int* handles,
                                        int n) const {
@@ -239,8 +245,7 @@ int ReducedElasticityTerm::boundedSamples() const {
   for (int e = 0; e < elements_.size(); ++e) {
     const int begin = handle_start_[size_t(e)], n = handle_start_[size_t(e) + 1] - begin;
     if (n == 0) continue;
-    Mat3X Z(3, n);
-    for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * handles_[size_t(begin + s)]);
+    const Mat3X Z = handleDisplacements(&handles_[size_t(begin)], n);
     const double psi =
         reducedTetElasticEnergy(elements_.rest[size_t(e)].volume, elements_.materials[size_t(e)],
                                 gradients_.middleCols(begin, n), Z);
@@ -403,8 +408,7 @@ FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
   if (!sample) {
     const ReducedTets& all = everyTet();
     const int k = e - elements_.size(), begin = all.handle_start[size_t(k)], n = all.count(k);
-    Mat3X Z(3, n);
-    for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * all.handles[size_t(begin + s)]);
+    const Mat3X Z = handleDisplacements(&all.handles[size_t(begin)], n);
     const auto G = all.gradients.middleCols(begin, n);
     d.C_world = all.volume[size_t(k)] * voigtLinearStrain(Lambda * G.transpose()) *
                 voigtLinearStrain(Z * G.transpose()).transpose();
@@ -412,8 +416,7 @@ FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
   }
   const int begin = handle_start_[size_t(e)], n = handle_start_[size_t(e) + 1] - begin;
   if (n == 0) return d;
-  Mat3X Z(3, n);
-  for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * handles_[size_t(begin + s)]);
+  const Mat3X Z = handleDisplacements(&handles_[size_t(begin)], n);
   const Mat3X G = gradients_.middleCols(begin, n);
   const FemMaterialPoint& material = elements_.materials[size_t(e)];
   const double V = elements_.rest[size_t(e)].volume;
@@ -443,8 +446,7 @@ void ReducedElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lam
   const int begin = start[size_t(k)], n = start[size_t(k) + 1] - begin;
   if (n == 0) return;
   const Mat4X Phi = nodeBasis(materialElementNodes(e), &handles[size_t(begin)], n);
-  Mat3X Z(3, n);
-  for (int s = 0; s < n; ++s) Z.col(s) = kin_.u.segment<3>(3 * handles[size_t(begin + s)]);
+  const Mat3X Z = handleDisplacements(&handles[size_t(begin)], n);
   const Mat34 u = Z * Phi.transpose(), lu = Lambda * Phi.transpose();
   if (!sample) {
     const ReducedTets& all = everyTet();

@@ -75,6 +75,8 @@ class ReducedElasticityTerm final : public ElasticityTerm {
                           const std::vector<TetElementRest>& rest) const;
   /// Every elastic tet in the subspace (built on first use, for the Material group).
   const ReducedTets& everyTet() const;
+  /// The current z of n handles (3 × n, column s: handle handles[s]).
+  Mat3X handleDisplacements(const int* handles, int n) const;
   /// The four nodes' basis rows on n handles (4 × n): Φ(a, s) = φ_{handles[s]}(nodes[a]).
   Mat4X nodeBasis(const Eigen::Vector4i& nodes, const int* handles, int n) const;
   /// The weights of a sample's d(Λᵀ ∇f_e) on the derivatives of Λᵀ∇ψ, Λᵀ K̃ z, ψ and q

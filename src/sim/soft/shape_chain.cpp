@@ -74,8 +74,7 @@ void ShapeChain::build() const {
     const int t = cubature.elements[i];
     Mat34 X;
     for (int a = 0; a < 4; ++a) X.col(a) = data.rest_nodes.row(mesh.tets(t, a)).transpose();
-    const double volume =
-        (X.col(1) - X.col(0)).cross(X.col(2) - X.col(0)).dot(X.col(3) - X.col(0)) / 6;
+    const double volume = tetSignedVolume(X);
     const double sign = volume < 0 ? -1.0 : 1.0;
     Eigen::RowVectorXd dm(K);
     for (int k = 0; k < K; ++k) {

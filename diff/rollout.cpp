@@ -221,7 +221,7 @@ void Rollout::run(int steps, const RolloutInputs& in) {
   if (!state_from_initialize_) {
     const VecX v = velocity_from_initialize_ ? sim.getVelocity() : in.initial_velocity;
     sim.setState(in.initial_state);
-    sim.postUpdate();  // q_n = q_0
+    sim.postUpdate();           // q_n = q_0
     if (sim.hasSoftTissue()) {  // the pose blend held from q_0, as step 1 will hold it
       SimulableStep step = sim.saveStep();
       step.pose_blend.resize(0, 3);

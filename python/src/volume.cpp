@@ -89,74 +89,98 @@ void bind_volume(py::module_& m) {
       "mesh, fields extended to all nodes, rest nodes at β, bone nodes and per-tet materials.")
       .def_property_readonly("num_nodes", &VolumetricData::numNodes)
       .def_property_readonly("num_tets", &VolumetricData::numTets)
-      .def_property_readonly("num_surface_nodes",
-                             [](const VolumetricData& d) { return d.templ->mesh.num_surface_nodes; },
-                             "V: nodes 0..V−1 are the SMPL surface vertices in order")
+      .def_property_readonly(
+          "num_surface_nodes",
+          [](const VolumetricData& d) { return d.templ->mesh.num_surface_nodes; },
+          "V: nodes 0..V−1 are the SMPL surface vertices in order")
       .def_property_readonly("num_bone_nodes", &VolumetricData::numBoneNodes)
-      .def_property_readonly("template_nodes",
-                             [](const VolumetricData& d) { return to_numpy(d.templ->mesh.nodes); },
-                             "(N, 3) rest nodes of the template (β = 0), m")
-      .def_property_readonly("rest_nodes", [](const VolumetricData& d) { return to_numpy(d.rest_nodes); },
-                             "(N, 3) rest nodes X̄(β) = X̄₀ + S β, m")
-      .def_property_readonly("rest_joints", [](const VolumetricData& d) { return to_numpy(d.rest_joints); },
-                             "(24, 3) J(β), m")
-      .def_property_readonly("tets", [](const VolumetricData& d) { return ints_numpy(d.templ->mesh.tets); },
-                             "(T, 4) node indices, positively oriented")
-      .def_property_readonly("weights", [](const VolumetricData& d) { return to_numpy_col(d.templ->fields.weights); },
-                             "(N, 24) skinning weights on all nodes (rows sum to 1)")
-      .def_property_readonly("shapedirs", [](const VolumetricData& d) { return to_numpy_col(d.templ->fields.shapedirs); },
-                             "(3N, K) shape directions, row 3i + c, m per unit β")
-      .def_property_readonly("posedirs", [](const VolumetricData& d) { return to_numpy_col(d.templ->fields.posedirs); },
-                             "(3N, 207) pose blend shapes, row 3i + c, m")
-      .def_property_readonly("bone_of_node",
-                             [](const VolumetricData& d) {
-                               return take_numpy(VecXi(d.bone_of_node), {py::ssize_t(d.bone_of_node.size())});
-                             },
-                             "(N,) int32: bone a node is attached to, −1 for soft tissue")
-      .def_property_readonly("tissue_thickness", [](const VolumetricData& d) { return to_numpy(d.tissue_thickness); },
-                             "(V,) local soft-tissue thickness at the surface vertices, m")
-      .def_property_readonly("density", [](const VolumetricData& d) { return to_numpy(d.materials.density); },
-                             "(T,) kg/m³")
-      .def_property_readonly("young", [](const VolumetricData& d) { return to_numpy(RowMatX(d.materials.young)); },
-                             "(T, 3) Young's moduli E1, E2, E3 along the frame axes a1, a2, a3, Pa")
-      .def_property_readonly("poisson", [](const VolumetricData& d) { return to_numpy(RowMatX(d.materials.poisson)); },
-                             "(T, 3) Poisson ratios ν12, ν13, ν23")
-      .def_property_readonly("shear", [](const VolumetricData& d) { return to_numpy(RowMatX(d.materials.shear)); },
-                             "(T, 3) shear moduli G12, G13, G23, Pa")
-      .def_property_readonly("fung", [](const VolumetricData& d) { return to_numpy(d.materials.fung); },
-                             "(T,) Fung exponent γ (dimensionless)")
-      .def_property_readonly("skin_fraction", [](const VolumetricData& d) { return to_numpy(d.materials.skin_fraction); },
-                             "(T,) fraction of the tet's volume that is skin")
-      .def_property_readonly("frames",
-                             [](const VolumetricData& d) {
-                               RowMatX f(long(d.materials.frame.size()), 9);
-                               for (size_t t = 0; t < d.materials.frame.size(); ++t)
-                                 Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(f.row(long(t)).data()) =
-                                     d.materials.frame[t];
-                               return take_numpy(std::move(f), {py::ssize_t(d.materials.frame.size()), 3, 3});
-                             },
-                             "(T, 3, 3) material frames; columns a1 (bone axis on the tangent plane), "
-                             "a2 = a3 × a1, a3 (inward normal)")
-      .def_property_readonly("quality", [](const VolumetricData& d) { return quality_dict(d.templ->quality); },
-                             "dict: min/max dihedral angle (deg), max/mean radius–edge ratio, min volume (m³)")
-      .def_property_readonly("total_mass", &VolumetricData::totalMass, "Σ ρ · volume over tets at X̄(β), kg");
+      .def_property_readonly(
+          "template_nodes", [](const VolumetricData& d) { return to_numpy(d.templ->mesh.nodes); },
+          "(N, 3) rest nodes of the template (β = 0), m")
+      .def_property_readonly(
+          "rest_nodes", [](const VolumetricData& d) { return to_numpy(d.rest_nodes); },
+          "(N, 3) rest nodes X̄(β) = X̄₀ + S β, m")
+      .def_property_readonly(
+          "rest_joints", [](const VolumetricData& d) { return to_numpy(d.rest_joints); },
+          "(24, 3) J(β), m")
+      .def_property_readonly(
+          "tets", [](const VolumetricData& d) { return ints_numpy(d.templ->mesh.tets); },
+          "(T, 4) node indices, positively oriented")
+      .def_property_readonly(
+          "weights", [](const VolumetricData& d) { return to_numpy_col(d.templ->fields.weights); },
+          "(N, 24) skinning weights on all nodes (rows sum to 1)")
+      .def_property_readonly(
+          "shapedirs",
+          [](const VolumetricData& d) { return to_numpy_col(d.templ->fields.shapedirs); },
+          "(3N, K) shape directions, row 3i + c, m per unit β")
+      .def_property_readonly(
+          "posedirs",
+          [](const VolumetricData& d) { return to_numpy_col(d.templ->fields.posedirs); },
+          "(3N, 207) pose blend shapes, row 3i + c, m")
+      .def_property_readonly(
+          "bone_of_node",
+          [](const VolumetricData& d) {
+            return take_numpy(VecXi(d.bone_of_node), {py::ssize_t(d.bone_of_node.size())});
+          },
+          "(N,) int32: bone a node is attached to, −1 for soft tissue")
+      .def_property_readonly(
+          "tissue_thickness", [](const VolumetricData& d) { return to_numpy(d.tissue_thickness); },
+          "(V,) local soft-tissue thickness at the surface vertices, m")
+      .def_property_readonly(
+          "density", [](const VolumetricData& d) { return to_numpy(d.materials.density); },
+          "(T,) kg/m³")
+      .def_property_readonly(
+          "young", [](const VolumetricData& d) { return to_numpy(RowMatX(d.materials.young)); },
+          "(T, 3) Young's moduli E1, E2, E3 along the frame axes a1, a2, a3, Pa")
+      .def_property_readonly(
+          "poisson", [](const VolumetricData& d) { return to_numpy(RowMatX(d.materials.poisson)); },
+          "(T, 3) Poisson ratios ν12, ν13, ν23")
+      .def_property_readonly(
+          "shear", [](const VolumetricData& d) { return to_numpy(RowMatX(d.materials.shear)); },
+          "(T, 3) shear moduli G12, G13, G23, Pa")
+      .def_property_readonly(
+          "fung", [](const VolumetricData& d) { return to_numpy(d.materials.fung); },
+          "(T,) Fung exponent γ (dimensionless)")
+      .def_property_readonly(
+          "skin_fraction",
+          [](const VolumetricData& d) { return to_numpy(d.materials.skin_fraction); },
+          "(T,) fraction of the tet's volume that is skin")
+      .def_property_readonly(
+          "frames",
+          [](const VolumetricData& d) {
+            RowMatX f(long(d.materials.frame.size()), 9);
+            for (size_t t = 0; t < d.materials.frame.size(); ++t)
+              Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(f.row(long(t)).data()) =
+                  d.materials.frame[t];
+            return take_numpy(std::move(f), {py::ssize_t(d.materials.frame.size()), 3, 3});
+          },
+          "(T, 3, 3) material frames; columns a1 (bone axis on the tangent plane), "
+          "a2 = a3 × a1, a3 (inward normal)")
+      .def_property_readonly(
+          "quality", [](const VolumetricData& d) { return quality_dict(d.templ->quality); },
+          "dict: min/max dihedral angle (deg), max/mean radius–edge ratio, min volume (m³)")
+      .def_property_readonly("total_mass", &VolumetricData::totalMass,
+                             "Σ ρ · volume over tets at X̄(β), kg");
 
   py::class_<Cubature>(
       m, "Cubature",
       "Sample tets and non-negative weights replacing a sum over all tets (read-only copies).")
-      .def_property_readonly("elements",
-                             [](const Cubature& c) { return indices_numpy(c.elements); },
-                             "(S,) int32 tet indices into the template mesh, ascending")
-      .def_property_readonly("weights", [](const Cubature& c) { return to_numpy(c.weights); },
-                             "(S,) float64 weights > 0 (dimensionless: 1 = the tet itself)")
-      .def_property_readonly("training_error", [](const Cubature& c) { return c.training_error; },
-                             "relative error ‖A_S w − A·1‖ / ‖A·1‖ on the training samples")
-      .def_property_readonly("rounds", [](const Cubature& c) { return c.rounds; },
-                             "greedy rounds of the selection")
+      .def_property_readonly(
+          "elements", [](const Cubature& c) { return indices_numpy(c.elements); },
+          "(S,) int32 tet indices into the template mesh, ascending")
+      .def_property_readonly(
+          "weights", [](const Cubature& c) { return to_numpy(c.weights); },
+          "(S,) float64 weights > 0 (dimensionless: 1 = the tet itself)")
+      .def_property_readonly(
+          "training_error", [](const Cubature& c) { return c.training_error; },
+          "relative error ‖A_S w − A·1‖ / ‖A·1‖ on the training samples")
+      .def_property_readonly(
+          "rounds", [](const Cubature& c) { return c.rounds; }, "greedy rounds of the selection")
       .def("__len__", [](const Cubature& c) { return c.elements.size(); })
       .def("__repr__", [](const Cubature& c) {
-        return "Cubature(tets=" + std::to_string(c.elements.size()) + ", training_error=" +
-               py::repr(py::float_(c.training_error)).cast<std::string>() + ")";
+        return "Cubature(tets=" + std::to_string(c.elements.size()) +
+               ", training_error=" + py::repr(py::float_(c.training_error)).cast<std::string>() +
+               ")";
       });
 
   py::class_<ReducedData>(
@@ -165,42 +189,48 @@ void bind_volume(py::module_& m) {
       "bounded biharmonic basis φ (u_j = Σ_h φ_h(j) z_h) and the elastic / inertial cubatures "
       "with their held-out errors (docs/rom.md).")
       .def_property_readonly("num_handles", &ReducedData::numHandles, "H")
-      .def_property_readonly("handles",
-                             [](const ReducedData& d) { return indices_numpy(d.handles); },
-                             "(H,) int32 tet-node (= surface vertex) indices, farthest-point order")
-      .def_property_readonly("basis", [](const ReducedData& d) { return to_scipy_csc(d.basis); },
-                             "scipy.sparse.csc_matrix (N, H): entry (j, h) = φ_h at tet node j, "
-                             "in [0, 1]; bone-node rows empty, handle rows unit vectors")
-      .def_property_readonly("basis_max_bound_violation",
-                             [](const ReducedData& d) { return d.basis_max_bound_violation; },
-                             "max over free nodes of max(−φ, φ − 1, 0) of the QP solve")
-      .def_property_readonly("basis_max_constraint_error",
-                             [](const ReducedData& d) { return d.basis_max_constraint_error; },
-                             "max |φ_h − δ| at the handles and |φ_h| on bone nodes")
-      .def_property_readonly("basis_converged",
-                             [](const ReducedData& d) { return d.basis_converged; },
-                             "every handle's QP met its KKT tolerance")
-      .def_property_readonly("elastic_cubature", [](const ReducedData& d) { return d.elastic; },
-                             "Cubature of the elastic energy (empty when switched off)")
-      .def_property_readonly("elastic_test_error",
-                             [](const ReducedData& d) { return d.elastic_test_error; },
-                             "held-out relative error of the elastic energy (0 when off)")
-      .def_property_readonly("elastic_rest_stiffness",
-                             [](const ReducedData& d) { return to_numpy(RowMatX(d.elastic_rest_stiffness)); },
-                             "(3H, 3H) exact rest stiffness of the subspace, N/m: the quadratic "
-                             "the elastic cubature's sample tets add their excess to (docs/rom.md; "
-                             "empty when the elastic cubature is off)")
-      .def_property_readonly("inertial_cubature", [](const ReducedData& d) { return d.inertial; },
-                             "Cubature of the kinetic energy (empty when switched off)")
-      .def_property_readonly("inertial_test_error",
-                             [](const ReducedData& d) { return d.inertial_test_error; },
-                             "held-out relative error of the kinetic energy (0 when off)")
-      .def_property_readonly("inertial_rigid_error",
-                             [](const ReducedData& d) { return d.inertial_rigid_error; },
-                             "largest relative error of the kinetic energy over the skeleton's "
-                             "rigid motions (each bone turning about its joint; 0 when off)")
-      .def_property_readonly("key", [](const ReducedData& d) { return d.key; },
-                             "cache key of this level")
+      .def_property_readonly(
+          "handles", [](const ReducedData& d) { return indices_numpy(d.handles); },
+          "(H,) int32 tet-node (= surface vertex) indices, farthest-point order")
+      .def_property_readonly(
+          "basis", [](const ReducedData& d) { return to_scipy_csc(d.basis); },
+          "scipy.sparse.csc_matrix (N, H): entry (j, h) = φ_h at tet node j, "
+          "in [0, 1]; bone-node rows empty, handle rows unit vectors")
+      .def_property_readonly(
+          "basis_max_bound_violation",
+          [](const ReducedData& d) { return d.basis_max_bound_violation; },
+          "max over free nodes of max(−φ, φ − 1, 0) of the QP solve")
+      .def_property_readonly(
+          "basis_max_constraint_error",
+          [](const ReducedData& d) { return d.basis_max_constraint_error; },
+          "max |φ_h − δ| at the handles and |φ_h| on bone nodes")
+      .def_property_readonly(
+          "basis_converged", [](const ReducedData& d) { return d.basis_converged; },
+          "every handle's QP met its KKT tolerance")
+      .def_property_readonly(
+          "elastic_cubature", [](const ReducedData& d) { return d.elastic; },
+          "Cubature of the elastic energy (empty when switched off)")
+      .def_property_readonly(
+          "elastic_test_error", [](const ReducedData& d) { return d.elastic_test_error; },
+          "held-out relative error of the elastic energy (0 when off)")
+      .def_property_readonly(
+          "elastic_rest_stiffness",
+          [](const ReducedData& d) { return to_numpy(RowMatX(d.elastic_rest_stiffness)); },
+          "(3H, 3H) exact rest stiffness of the subspace, N/m: the quadratic "
+          "the elastic cubature's sample tets add their excess to (docs/rom.md; "
+          "empty when the elastic cubature is off)")
+      .def_property_readonly(
+          "inertial_cubature", [](const ReducedData& d) { return d.inertial; },
+          "Cubature of the kinetic energy (empty when switched off)")
+      .def_property_readonly(
+          "inertial_test_error", [](const ReducedData& d) { return d.inertial_test_error; },
+          "held-out relative error of the kinetic energy (0 when off)")
+      .def_property_readonly(
+          "inertial_rigid_error", [](const ReducedData& d) { return d.inertial_rigid_error; },
+          "largest relative error of the kinetic energy over the skeleton's "
+          "rigid motions (each bone turning about its joint; 0 when off)")
+      .def_property_readonly(
+          "key", [](const ReducedData& d) { return d.key; }, "cache key of this level")
       .def("__repr__", [](const ReducedData& d) {
         return "ReducedData(handles=" + std::to_string(d.numHandles()) +
                ", elastic_tets=" + std::to_string(d.elastic.elements.size()) +
@@ -210,29 +240,35 @@ void bind_volume(py::module_& m) {
   py::class_<BoneInertia>(m, "BoneInertia",
                           "Mass properties of one bone about its joint centre J_b (rest pose, "
                           "world axes).")
-      .def_property_readonly("mass", [](const BoneInertia& b) { return b.mass; }, "Σ m, kg")
-      .def_property_readonly("first_moment",
-                             [](const BoneInertia& b) { return to_numpy(VecX(b.first_moment)); },
-                             "(3,) Σ m (X − J_b), kg·m")
-      .def_property_readonly("second_moment",
-                             [](const BoneInertia& b) { return mat3_numpy(b.second_moment); },
-                             "(3, 3) Σ m (X − J_b)(X − J_b)ᵀ, kg·m²")
-      .def("center_of_mass",
-           [](const BoneInertia& b, const py::object& joint) {
-             return to_numpy(VecX(b.centerOfMass(to_vec3(joint, "joint"))));
-           },
-           py::arg("joint"), "(3,) centre of mass J_b + first_moment / mass, m; joint (3,) m.")
+      .def_property_readonly(
+          "mass", [](const BoneInertia& b) { return b.mass; }, "Σ m, kg")
+      .def_property_readonly(
+          "first_moment", [](const BoneInertia& b) { return to_numpy(VecX(b.first_moment)); },
+          "(3,) Σ m (X − J_b), kg·m")
+      .def_property_readonly(
+          "second_moment", [](const BoneInertia& b) { return mat3_numpy(b.second_moment); },
+          "(3, 3) Σ m (X − J_b)(X − J_b)ᵀ, kg·m²")
+      .def(
+          "center_of_mass",
+          [](const BoneInertia& b, const py::object& joint) {
+            return to_numpy(VecX(b.centerOfMass(to_vec3(joint, "joint"))));
+          },
+          py::arg("joint"), "(3,) centre of mass J_b + first_moment / mass, m; joint (3,) m.")
       .def("__repr__", [](const BoneInertia& b) {
         return "BoneInertia(mass=" + py::repr(py::float_(b.mass)).cast<std::string>() + ")";
       });
 
   py::class_<BoneCapsule>(m, "BoneCapsule", "A capsule attached to a bone (rest pose), m.")
-      .def_property_readonly("bone", [](const BoneCapsule& c) { return c.bone; }, "bone index")
-      .def_property_readonly("a", [](const BoneCapsule& c) { return to_numpy(VecX(c.a)); },
-                             "(3,) first end of the axis segment, m")
-      .def_property_readonly("b", [](const BoneCapsule& c) { return to_numpy(VecX(c.b)); },
-                             "(3,) second end of the axis segment, m")
-      .def_property_readonly("radius", [](const BoneCapsule& c) { return c.radius; }, "m")
+      .def_property_readonly(
+          "bone", [](const BoneCapsule& c) { return c.bone; }, "bone index")
+      .def_property_readonly(
+          "a", [](const BoneCapsule& c) { return to_numpy(VecX(c.a)); },
+          "(3,) first end of the axis segment, m")
+      .def_property_readonly(
+          "b", [](const BoneCapsule& c) { return to_numpy(VecX(c.b)); },
+          "(3,) second end of the axis segment, m")
+      .def_property_readonly(
+          "radius", [](const BoneCapsule& c) { return c.radius; }, "m")
       .def("__repr__", [](const BoneCapsule& c) {
         return "BoneCapsule(bone=" + std::to_string(c.bone) +
                ", radius=" + py::repr(py::float_(c.radius)).cast<std::string>() + ")";

@@ -57,11 +57,11 @@ Vec6 symmetricProductStrain(const Vec3& f, const Vec3& g) {
 
 /// Ψ and its first two derivatives with respect to Ψ_S of the (capped) Fung map.
 struct FungMap {
-  double psi;  ///< Ψ (Pa)
-  double d1;   ///< dΨ/dΨ_S (dimensionless, ≥ 1)
-  double d2;   ///< d²Ψ/dΨ_S² (1/Pa, ≥ 0)
-  double x;    ///< the exponent γΨ_S/μ
-  double e1;   ///< ∂d1/∂x (d2 = (γ/μ) e1)
+  double psi;    ///< Ψ (Pa)
+  double d1;     ///< dΨ/dΨ_S (dimensionless, ≥ 1)
+  double d2;     ///< d²Ψ/dΨ_S² (1/Pa, ≥ 0)
+  double x;      ///< the exponent γΨ_S/μ
+  double e1;     ///< ∂d1/∂x (d2 = (γ/μ) e1)
   double ratio;  ///< Ψ/Ψ_S = φ(x)/x (1 at x = 0)
 };
 

@@ -234,8 +234,10 @@ MatX surfacePartitionOfUnity(const VolumetricData& data, const MatX& weights) {
   VecX fixed = VecX::Zero(N);
   for (int j = 0; j < N; ++j) {
     if (data.bone_of_node[j] >= 0) continue;
-    if (j < V) fixed[j] = 1.0;
-    else free_index[size_t(j)] = free_count++;
+    if (j < V)
+      fixed[j] = 1.0;
+    else
+      free_index[size_t(j)] = free_count++;
   }
   VecX f = fixed;
   if (free_count > 0) {
@@ -246,15 +248,18 @@ MatX surfacePartitionOfUnity(const VolumetricData& data, const MatX& weights) {
         const int r = free_index[size_t(it.row())];
         if (r < 0) continue;
         const int cc = free_index[size_t(c)];
-        if (cc >= 0) entries.emplace_back(r, cc, it.value());
-        else rhs[r] -= it.value() * fixed[c];
+        if (cc >= 0)
+          entries.emplace_back(r, cc, it.value());
+        else
+          rhs[r] -= it.value() * fixed[c];
       }
     SpMat Kff(free_count, free_count);
     Kff.setFromTriplets(entries.begin(), entries.end());
     Eigen::SimplicialLDLT<SpMat> solver(Kff);
     if (solver.info() != Eigen::Success)
-      throw Error("buildReducedData: the harmonic fade of the surface partition of unity could "
-                  "not be factored");
+      throw Error(
+          "buildReducedData: the harmonic fade of the surface partition of unity could "
+          "not be factored");
     const VecX interior = solver.solve(rhs);
     for (int j = 0; j < N; ++j)
       if (free_index[size_t(j)] >= 0) f[j] = std::clamp(interior[free_index[size_t(j)]], 0.0, 1.0);
@@ -580,9 +585,8 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
   // then still sum to 1).
   const MatX weights =
       (bbw.weights.array().abs() >= settings.basis_drop_below).select(bbw.weights, 0.0);
-  d.basis = sparseBasis(settings.surface_partition_of_unity
-                            ? surfacePartitionOfUnity(data, weights)
-                            : weights);
+  d.basis = sparseBasis(settings.surface_partition_of_unity ? surfacePartitionOfUnity(data, weights)
+                                                            : weights);
   d.basis_max_bound_violation = bbw.report.max_bound_violation;
   d.basis_max_constraint_error = bbw.report.max_constraint_error;
   d.basis_converged = bbw.report.converged;
@@ -610,8 +614,7 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
                                 settings.training_amplitude, seed);
         },
         settings.elastic_cubature_points, kElasticTrainingTolerance, settings.seed, elements.tets,
-        &d.elastic_test_error,
-        &r.seconds_training, &r.seconds_cubature);
+        &d.elastic_test_error, &r.seconds_training, &r.seconds_cubature);
     t0 = Clock::now();
     d.elastic_rest_stiffness = subspaceRestStiffness(data, d.basis, elements);
     r.seconds_cubature += secondsSince(t0);
@@ -630,8 +633,7 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
           return inertialSamples(data, d.basis, tet_masses, samples, seed);
         },
         settings.inertial_cubature_points, kInertialTrainingTolerance, settings.seed, all_tets,
-        &d.inertial_test_error,
-        &r.seconds_training, &r.seconds_cubature, rigid_rows);
+        &d.inertial_test_error, &r.seconds_training, &r.seconds_cubature, rigid_rows);
     d.inertial_rigid_error = largestRowError(rigid_rows, d.inertial);
   }
 

@@ -39,9 +39,9 @@ std::shared_ptr<const VertexMassMoments> sharedTemplateMoments(
   static std::mutex mutex;
   static std::vector<Entry> cache;
   std::lock_guard<std::mutex> lock(mutex);
-  cache.erase(std::remove_if(cache.begin(), cache.end(),
-                             [](const Entry& e) { return e.body.expired(); }),
-              cache.end());
+  cache.erase(
+      std::remove_if(cache.begin(), cache.end(), [](const Entry& e) { return e.body.expired(); }),
+      cache.end());
   for (const Entry& e : cache)
     if (e.body.lock() == body && e.density == density && e.voxel_size == voxel_size)
       return e.moments;
@@ -150,9 +150,9 @@ void SoftAvatar::buildRestShape() {
   const MatX3 template_vertices = shapedVertices(body, VecX::Zero(K));
   template_volume_ = enclosedVolume(template_vertices, F);
   if (!(template_volume_ > 0))
-    throw InputError("SoftAvatar::initVolumetricData: the template surface of " +
-                     modelName(body) + " encloses a volume of " +
-                     std::to_string(template_volume_) + " m³, expected > 0");
+    throw InputError("SoftAvatar::initVolumetricData: the template surface of " + modelName(body) +
+                     " encloses a volume of " + std::to_string(template_volume_) +
+                     " m³, expected > 0");
   template_moments_ =
       sharedTemplateMoments(body_, template_vertices, settings_.density, settings_.voxel_size);
   const double mass_scale = volume / template_volume_;
@@ -168,8 +168,9 @@ void SoftAvatar::buildRestShape() {
 void SoftAvatar::setReducedData(std::shared_ptr<const ReducedData> data) {
   const std::string fn = "SoftAvatar::setReducedData: ";
   if (!initialized_ || !soft_tissue_ || !reduced_)
-    throw Error(fn + "call it after initVolumetricData() on an avatar with enableSoftTissue() "
-                     "and enableReducedModel()");
+    throw Error(fn +
+                "call it after initVolumetricData() on an avatar with enableSoftTissue() "
+                "and enableReducedModel()");
   if (!data) throw InputError(fn + "data is null");
   const VolumetricData& vol = *volumetric_;
   const int n = vol.numNodes(), T = vol.numTets(), H = data->numHandles();
@@ -338,7 +339,8 @@ void SoftAvatar::buildShapeJacobians(const MatX3& X, const MatX3& J, double mass
     const Vec3 a = X.row(ia), b = X.row(ib), c = X.row(ic);
     const Vec3 n = (b - a).cross(c - a);
     const double length = n.norm();
-    const auto Sa = S.middleRows<3>(3 * ia), Sb = S.middleRows<3>(3 * ib), Sc = S.middleRows<3>(3 * ic);
+    const auto Sa = S.middleRows<3>(3 * ia), Sb = S.middleRows<3>(3 * ib),
+               Sc = S.middleRows<3>(3 * ic);
     // Area = |n|/6 per vertex, with ∂|n|/∂a = n̂ × (c − b) (and cyclically for b, c).
     if (length > 0) {
       const Vec3 nh = n / length;
@@ -377,8 +379,8 @@ void SoftAvatar::buildShapeJacobians(const MatX3& X, const MatX3& J, double mass
       const double sw = mass_scale * w;
       for (long k = 0; k < K; ++k) {
         const Vec3 d = Sv.col(k) - joints_shape_jacobian_.block<3, 1>(3 * b, k);
-        const Mat3 dS = fv * d.transpose() + d * fv.transpose() +
-                        m * (d * o.transpose() + o * d.transpose());
+        const Mat3 dS =
+            fv * d.transpose() + d * fv.transpose() + m * (d * o.transpose() + o * d.transpose());
         auto col = inertia_shape_jacobian_.block<10, 1>(10 * b, k);
         col.segment<3>(1) += sw * m * d;
         col[4] += sw * dS(0, 0);

@@ -24,9 +24,9 @@
 namespace flsh {
 namespace {
 
+using test::atMovedState;
 using test::jacobianMatchesFiniteDifferences;
 using test::randomVector;
-using test::atMovedState;
 
 MatX dense(const std::vector<Triplet>& H, int n) { return test::denseFromTriplets(H, n); }
 
@@ -68,7 +68,9 @@ class StepObjective : public Objective {
  public:
   explicit StepObjective(Simulable& sim) : sim_(sim) {}
   int numDofs() const override { return sim_.numDofs(); }
-  double energy() override { return sim_.getDynamicEnergyScalar() + sim_.getPotentialEnergyScalar(); }
+  double energy() override {
+    return sim_.getDynamicEnergyScalar() + sim_.getPotentialEnergyScalar();
+  }
   void gradient(VecX& g) override {
     g = VecX::Zero(sim_.numDofs());
     sim_.getDynamicGradientVector(g);
@@ -101,8 +103,8 @@ NewtonResult stepOnce(Simulable& sim, LinearSolver* solver, double tolerance = 1
   StepObjective objective(sim);
   NewtonOptions options;
   // As a Scene would: the PSD form for the FEM, the exact one (PSD fallback) for the ROM.
-  options.exact_hessian = (sim.hasReducedModel() ? reducedNewtonDefaults()
-                                                 : softTissueNewtonDefaults()).exact_hessian;
+  options.exact_hessian =
+      (sim.hasReducedModel() ? reducedNewtonDefaults() : softTissueNewtonDefaults()).exact_hessian;
   options.gradient_tolerance = tolerance;
   options.max_iterations = 50;
   const NewtonResult r = newtonSolve(objective, options, solver);
@@ -151,13 +153,17 @@ void checkPart(Simulable& sim, bool dynamic) {
   };
   const auto grad = [&] {
     VecX g = VecX::Zero(n);
-    if (dynamic) sim.getDynamicGradientVector(g);
-    else sim.getPotentialGradientVector(g);
+    if (dynamic)
+      sim.getDynamicGradientVector(g);
+    else
+      sim.getPotentialGradientVector(g);
     return g;
   };
   std::vector<Triplet> T;
-  if (dynamic) sim.getDynamicHessianTripletVector(T, 0, false);
-  else sim.getPotentialHessianTripletVector(T, 0, false);
+  if (dynamic)
+    sim.getDynamicHessianTripletVector(T, 0, false);
+  else
+    sim.getPotentialHessianTripletVector(T, 0, false);
   const MatX H = dense(T, n);
   const VecX g = grad();
   const std::vector<int> idx = checkedCoordinates(sim, 120, dynamic ? 3 : 4);
@@ -193,8 +199,8 @@ TEST_P(SoftTissueModel, StateLayoutFollowsTheVolumetricBody) {
   const bool rom = GetParam() == Model::Rom;
   EXPECT_EQ(sim.hasReducedModel(), rom);
   const int blocks = int(sim.softNodes().size());
-  EXPECT_EQ(blocks, rom ? avatar()->reducedData().numHandles()
-                        : data.numNodes() - data.numBoneNodes());
+  EXPECT_EQ(blocks,
+            rom ? avatar()->reducedData().numHandles() : data.numNodes() - data.numBoneNodes());
   EXPECT_GT(blocks, 0);
   EXPECT_EQ(sim.numDofs(), 144 + 3 * blocks);
   EXPECT_EQ(sim.numBoneDofs(), 144);
@@ -282,10 +288,14 @@ TEST_P(SoftTissueModel, DynamicEnergyDerivativesMatchFiniteDifferences) {
 
 TEST_P(SoftTissueModel, PotentialEnergyDerivativesMatchFiniteDifferences) {
   auto sim = movedSoftAvatar(avatar(), 12);
-  ASSERT_GT(sim->stats().active_contacts + [&] {
-    sim->getPotentialEnergyScalar();
-    return sim->stats().active_contacts;
-  }(), 0) << "the test needs active contacts";
+  ASSERT_GT(
+      sim->stats().active_contacts +
+          [&] {
+            sim->getPotentialEnergyScalar();
+            return sim->stats().active_contacts;
+          }(),
+      0)
+      << "the test needs active contacts";
   checkPart(*sim, false);
 }
 
@@ -326,9 +336,8 @@ TEST_P(SoftTissueModel, GravityDerivativesMatchFiniteDifferences) {
     return atMovedState(with, d, [&] { return atMovedState(without, d, [&] { return f(d); }); });
   };
   const auto energy = [&](const VecX& sub) {
-    return both(sub, [&](const VecX&) {
-      return VecX::Constant(1, potential(with) - potential(without));
-    });
+    return both(
+        sub, [&](const VecX&) { return VecX::Constant(1, potential(with) - potential(without)); });
   };
   const auto gradient = [&](const VecX& sub) {
     return both(sub, [&](const VecX& d) {
@@ -510,8 +519,8 @@ TEST_P(SoftTissueModel, ExtremeCasesStayFinite) {
   struct Case {
     const char* name;
     double h, tracking;
-    double spin;         // rad: initial knee rotation
-    double collider_y;   // ground height relative to the lowest node (+ = inside)
+    double spin;        // rad: initial knee rotation
+    double collider_y;  // ground height relative to the lowest node (+ = inside)
   };
   const Case cases[] = {{"tiny step", 1e-4, 355.0, 0.0, 0.0},
                         {"large step", 0.1, 355.0, 0.0, 0.0},

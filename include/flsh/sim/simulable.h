@@ -73,9 +73,9 @@ struct SimulableStats {
 
 /// Simulable::accumulateMaterialProducts' sums over steps.
 struct SimulableMaterialProducts {
-  MatX elements;    ///< per elastic element: C_world (36, column-major), μ, γ cotangents
-  MatX rest_outer;  ///< ROM with the rest-stiffness split: Σ λ zᵀ (3H × 3H)
-  VecX values;      ///< the node masses' share, in coefficient values
+  MatX elements;       ///< per elastic element: C_world (36, column-major), μ, γ cotangents
+  MatX rest_outer;     ///< ROM with the rest-stiffness split: Σ λ zᵀ (3H × 3H)
+  VecX values;         ///< the node masses' share, in coefficient values
   bool shape = false;  ///< the sums also carry β's share (getGradientParameterVJPs with Shape)
 };
 
@@ -110,14 +110,14 @@ class Simulable {
   void postUpdate();
 
   // ---- state -----------------------------------------------------------------------------
-  int numDofs() const;                       ///< 6 · 24 (+ 3 per soft-tissue node)
-  VecX getState() const;                     ///< layout above
+  int numDofs() const;    ///< 6 · 24 (+ 3 per soft-tissue node)
+  VecX getState() const;  ///< layout above
   /// Throws InputError on a wrong size, a non-finite value, a position or soft-tissue value
   /// beyond ±kMaxStatePosition or a rotation angle beyond kMaxRotationAngle.
   void setState(const VecX& q);
-  void updateState(const VecX& dq);          ///< increment chart
-  void pushState();                          ///< saves q on a stack
-  void popState();                           ///< restores the last pushed q (throws if empty)
+  void updateState(const VecX& dq);  ///< increment chart
+  void pushState();                  ///< saves q on a stack
+  void popState();                   ///< restores the last pushed q (throws if empty)
   /// Drops the last pushed q without restoring it (throws if empty): keeps an accepted trial
   /// state exactly, without a pop-and-reapply.
   void discardState();
@@ -125,7 +125,7 @@ class Simulable {
   /// is `v`: q_{n−1} = q_n − h v (in the increment chart). Throws InputError on a wrong size,
   /// a non-finite value or an entry beyond ±kMaxStateVelocity.
   void setVelocity(const VecX& v);
-  VecX getVelocity() const;                  ///< (q_n ⊖ q_{n−1}) / h
+  VecX getVelocity() const;  ///< (q_n ⊖ q_{n−1}) / h
   double time() const;
   /// Snapshot of the step data (states, time, targets, colliders); restoreStep puts them back
   /// exactly (bitwise) and leaves the state stack alone. Throws InputError, restoring nothing,
@@ -182,7 +182,7 @@ class Simulable {
   // u_j = Σ_h φ_h(j) z_h (bounded biharmonic weights φ; at a handle u = z_h).
   bool hasSoftTissue() const;
   bool hasReducedModel() const;  ///< the ROM (a soft-tissue model with the reduced basis)
-  int numBoneDofs() const;  ///< 6 · 24
+  int numBoneDofs() const;       ///< 6 · 24
   /// The tet node of each 3-value block of the soft state, in state order ((numDofs −
   /// numBoneDofs) / 3 entries): every soft-tissue node (FEM) or the handles (ROM); empty for the
   /// skeleton model.
@@ -354,8 +354,8 @@ class Simulable {
  private:
   /// Both overloads of getDynamicHessianTripletVector / getPotentialHessianTripletVector
   /// (blocks null: every term as triplets).
-  void dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
-                      int offset, bool psd) const;
+  void dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks, int offset,
+                      bool psd) const;
   /// soft_done (ROM): gravity's, the elastic term's and contact's Hessians are already summed
   /// (the ROM's value list; their bone triplets are the caller's to append).
   void potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,

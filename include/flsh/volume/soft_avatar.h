@@ -12,7 +12,8 @@
 // the vertex, X_i(β) = v_template_i + shapedirs_i β, and all masses scale by
 // s(β) = vol(β) / vol(0) (volumes of the closed surfaces, divergence theorem), so the total mass
 // is density × shaped volume. Bone b then gets, with o = X_i(β) − J_b(β) and weights w_ib:
-//   mass = s Σ w m_i,  first = s Σ w (f_i + m_i o),  second = s Σ w (S_i + f_i oᵀ + o f_iᵀ + m_i o oᵀ)
+//   mass = s Σ w m_i,  first = s Σ w (f_i + m_i o),  second = s Σ w (S_i + f_i oᵀ + o f_iᵀ + m_i o
+//   oᵀ)
 // (lumpBoneInertia), a polynomial in β. (Voxelizing the shaped surface instead would jump
 // whenever a voxel centre crosses the surface or changes its nearest vertex: not
 // differentiable.) Avatars of one body model with equal density and voxel size share the
@@ -41,8 +42,8 @@ struct BoneCapsule {
 struct VertexMassMoments;
 
 struct SoftAvatarSettings {
-  double density = 1010.0;    ///< uniform body density for the skeleton model, kg/m³
-  double voxel_size = 0.01;   ///< voxel edge used to integrate mass properties, m
+  double density = 1010.0;   ///< uniform body density for the skeleton model, kg/m³
+  double voxel_size = 0.01;  ///< voxel edge used to integrate mass properties, m
   /// The volumetric body of the soft-tissue models: tet-mesh resolution, material file, cache.
   VolumetricSettings volumetric;
   /// The reduced model's handles, basis and cubatures (used with enableReducedModel(); cached
@@ -178,9 +179,9 @@ class SoftAvatar {
 /// Mass, first and second moments of a voxelized solid lumped to surface vertices, each about
 /// its vertex (see the top of this file).
 struct VertexMassMoments {
-  VecX mass;                         ///< #V, kg
-  MatX3 first_moment;                ///< #V × 3, Σ m (x − X_i), kg·m
-  std::vector<Mat3> second_moment;   ///< #V, Σ m (x − X_i)(x − X_i)ᵀ (with each voxel's own), kg·m²
+  VecX mass;                        ///< #V, kg
+  MatX3 first_moment;               ///< #V × 3, Σ m (x − X_i), kg·m
+  std::vector<Mat3> second_moment;  ///< #V, Σ m (x − X_i)(x − X_i)ᵀ (with each voxel's own), kg·m²
 };
 
 /// Voxelizes the closed surface (V, F) filled with `density` (voxel edge `voxel_size`, m) and

@@ -18,8 +18,8 @@ namespace flsh::detail {
 
 struct ElasticElements {
   std::vector<int> tet;  ///< each element's tet in the avatar's tet mesh
-  MatX4i tets;   ///< nodes of each element
-  VecX weights;  ///< 1, or the elastic cubature's weights
+  MatX4i tets;           ///< nodes of each element
+  VecX weights;          ///< 1, or the elastic cubature's weights
   std::vector<TetElementRest> rest;
   std::vector<FemMaterialPoint> materials;
   int size() const { return int(tets.rows()); }

@@ -389,20 +389,29 @@ RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVaria
   }
   g.initial_state = r.initial_state;
   g.initial_velocity = r.initial_velocity;
-  // The initial conditions initialize() sets move with the rest joints (and so with β).
+  // The initial conditions initialize() sets move with the rest joints (and so with β), both
+  // through the dynamics and through the loss's direct dependence on them (e.g. the soft
+  // surface of step 1, skinned with the pose blend of q_0).
   VecX initial_joints = VecX::Zero(72);
-  if (state_from_initialize_)
-    initial_joints += initial_state_joints_jacobian_.transpose() * r.initial_state_increment;
-  if (velocity_from_initialize_)
-    initial_joints += initial_velocity_joints_jacobian_.transpose() * r.initial_velocity;
+  if (state_from_initialize_) {
+    VecX a0 = r.initial_state_increment;
+    if (direct.initial_state.size())
+      a0 += model_.stateToIncrementCotangentAt(initial_state_, direct.initial_state);
+    initial_joints += initial_state_joints_jacobian_.transpose() * a0;
+  }
+  if (velocity_from_initialize_) {
+    VecX v0 = r.initial_velocity;
+    if (direct.initial_velocity.size()) v0 += direct.initial_velocity;
+    initial_joints += initial_velocity_joints_jacobian_.transpose() * v0;
+  }
   g.rest_joints += initial_joints;
   if (g.shape.size()) chainShapeCotangent(simulable_->avatar(), initial_joints, VecX(), g.shape);
   accumulate(g, direct);
   return g;
 }
 
-std::vector<RowMatX> Rollout::forwardSensitivities(
-    const std::vector<RolloutVariables>& directions) {
+std::vector<RowMatX> Rollout::forwardSensitivities(const std::vector<RolloutVariables>& directions,
+                                                   std::vector<VecX>* initial_states) {
   requireRun("forwardSensitivities");
   requireConverged("forwardSensitivities");
   const std::vector<ParameterGroupInfo> groups = model_.parameterGroups();
@@ -437,7 +446,7 @@ std::vector<RowMatX> Rollout::forwardSensitivities(
     }
     tangents.push_back(std::move(t));
   }
-  return tangentSweep(model_, tape_, tangents);
+  return tangentSweep(model_, tape_, tangents, initial_states);
 }
 
 }  // namespace flsh

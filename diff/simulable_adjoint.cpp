@@ -158,8 +158,12 @@ VecX SimulableAdjointModel::stateToIncrementTangent(const VecX& ds) const {
 }
 
 VecX SimulableAdjointModel::stateToIncrementCotangent(const VecX& a) const {
+  return stateToIncrementCotangentAt(state(), a);
+}
+
+VecX SimulableAdjointModel::stateToIncrementCotangentAt(const VecX& s, const VecX& a) const {
   checkSize(a, numDofs(), "stateToIncrementCotangent", "a");
-  const VecX s = state();
+  checkSize(s, numDofs(), "stateToIncrementCotangentAt", "state");
   VecX out = a;
   for (int b = 0; b < simulable_->numBoneDofs() / 6; ++b)
     out.segment<3>(6 * b + 3) =

@@ -308,7 +308,8 @@ AdjointResult adjointSweep(AdjointModel& model, const Tape& tape,
 }
 
 std::vector<RowMatX> tangentSweep(AdjointModel& model, const Tape& tape,
-                                  const std::vector<TangentDirection>& directions) {
+                                  const std::vector<TangentDirection>& directions,
+                                  std::vector<VecX>* initial_states) {
   const char* who = "tangentSweep";
   requireTape(tape, model, who);
   const int T = tape.numSteps(), n = model.numDofs();
@@ -362,6 +363,7 @@ std::vector<RowMatX> tangentSweep(AdjointModel& model, const Tape& tape,
   // Increments of q_{t−1} and q_{t−2} per direction.
   std::vector<VecX> dq_prev(D), dq_prev2(D);
   model.restoreStep(tape.initialSnapshot());
+  if (initial_states) initial_states->assign(D, VecX());
   for (size_t d = 0; d < D; ++d) {
     const TangentDirection& dir = directions[d];
     VecX dq0 = VecX::Zero(n);
@@ -369,6 +371,7 @@ std::vector<RowMatX> tangentSweep(AdjointModel& model, const Tape& tape,
     if (dir.initial_state_increment.size()) dq0 += dir.initial_state_increment;
     const VecX dv0 = dir.initial_velocity.size() ? dir.initial_velocity : VecX(VecX::Zero(n));
     dq_prev2[d] = model.initialPreviousStateTangent(dq0, dv0);
+    if (initial_states) (*initial_states)[d] = model.incrementToStateTangent(dq0);
     dq_prev[d] = dq0;
   }
   std::vector<RowMatX> out(D, RowMatX::Zero(T, n));

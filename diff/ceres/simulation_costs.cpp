@@ -11,6 +11,7 @@
 #include "flsh/body/body_forward.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
+#include "flsh/volume/materials.h"
 
 namespace flsh::ceres_costs {
 
@@ -26,6 +27,8 @@ const char* parameterName(SequenceParameter p) {
     case SequenceParameter::Stiffnesses: return "Stiffnesses";
     case SequenceParameter::InitialVelocity: return "InitialVelocity";
     case SequenceParameter::PoseTargets: return "PoseTargets";
+    case SequenceParameter::Material:
+      return "Material";
   }
   return "?";
 }
@@ -121,6 +124,35 @@ SimulationSequenceCost::SimulationSequenceCost(std::shared_ptr<const SoftAvatar>
     throw InputError(who + ": blocks lists PoseTargets, but the simulation does not track "
                      "(mocap is null or sim_options.track_mocap is false)");
 
+  // The Material block's entries.
+  if (avatar_->hasVolumetricData()) {
+    const MaterialModel& model = avatar_->volumetricData().material_model;
+    base_material_ = model.parameters();
+    const std::vector<std::string> names = model.parameterNames();
+    if (options_.material_names.empty()) {
+      for (int i = 0; i < int(names.size()); ++i) material_index_.push_back(i);
+    } else {
+      for (size_t k = 0; k < options_.material_names.size(); ++k) {
+        const std::string& name = options_.material_names[k];
+        const auto it = std::find(names.begin(), names.end(), name);
+        if (it == names.end())
+          throw InputError(
+              who + ": options.material_names[" + count(k) + "] = '" + name +
+              "' is not a material parameter (MaterialModel::parameterNames(), e.g. '" +
+              names.front() + "')");
+        const int index = int(it - names.begin());
+        if (std::find(material_index_.begin(), material_index_.end(), index) !=
+            material_index_.end())
+          throw InputError(who + ": options.material_names lists '" + name + "' twice");
+        material_index_.push_back(index);
+      }
+    }
+  } else if (blockIndex(SequenceParameter::Material) >= 0) {
+    throw InputError(who +
+                     ": blocks lists Material, but the avatar has no soft tissue (the "
+                     "skeleton model has no material)");
+  }
+
   // The defaults of the inputs (also validates the options and colliders by building once).
   auto sim = std::make_shared<Simulable>(avatar_, mocap_, sim_options_);
   sim->setColliders(colliders_);
@@ -146,6 +178,8 @@ int SimulationSequenceCost::blockSize(SequenceParameter p) const {
     case SequenceParameter::Stiffnesses: return 4;
     case SequenceParameter::InitialVelocity: return num_dofs_;
     case SequenceParameter::PoseTargets: return 72 * steps_;
+    case SequenceParameter::Material:
+      return int(material_index_.size());
   }
   return 0;
 }
@@ -168,6 +202,15 @@ VecX SimulationSequenceCost::defaultValue(SequenceParameter p) const {
                          "::defaultValue: PoseTargets has no default (the simulation does not "
                          "track a mocap)");
       return Eigen::Map<const VecX>(default_targets_.data(), default_targets_.size());
+    case SequenceParameter::Material: {
+      if (material_index_.empty())
+        throw InputError(std::string(kWho) +
+                         "::defaultValue: Material has no default (the avatar has no soft tissue)");
+      VecX values(material_index_.size());
+      for (size_t j = 0; j < material_index_.size(); ++j)
+        values[j] = base_material_[material_index_[j]];
+      return values;
+    }
   }
   return VecX();
 }
@@ -185,16 +228,24 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
   const int K = avatar_->body().numBetas();
   const bool want_jacobians = std::find(wanted.begin(), wanted.end(), true) != wanted.end();
 
-  // The avatar of the shape block's β (the base avatar when β is unchanged).
+  // The avatar of the shape block's β and the material block's coefficients, with the base
+  // avatar's discretization (the base avatar itself when neither changes).
   std::shared_ptr<const SoftAvatar> avatar = avatar_;
   const int shape_block = blockIndex(SequenceParameter::Shape);
   if (shape_block >= 0) {
     VecX betas = avatar_->betas();
     betas.head(num_betas_) = Eigen::Map<const VecX>(parameters[shape_block], num_betas_);
-    if (betas != avatar_->betas()) {
-      auto shaped = std::make_shared<SoftAvatar>(avatar_->bodyPtr(), betas, avatar_->settings());
-      shaped->initVolumetricData();
-      avatar = shaped;
+    if (betas != avatar_->betas()) avatar = avatar_->withShape(betas);
+  }
+  const int material_block = blockIndex(SequenceParameter::Material);
+  if (material_block >= 0) {
+    VecX material = base_material_;
+    for (size_t j = 0; j < material_index_.size(); ++j)
+      material[material_index_[j]] = parameters[material_block][j];
+    if (material != base_material_) {
+      MaterialModel model = avatar->volumetricData().material_model;
+      model.setParameters(material);
+      avatar = avatar->withMaterial(model);
     }
   }
 
@@ -217,13 +268,17 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
   if (want_convergence && !out.converged) return;
 
   // Points per step and, for the Jacobians, their derivatives with respect to the state vector
-  // (C_t, 3N × n) and, for vertices, directly with respect to β (D_t, 3N × K).
+  // (C_t, 3N × n), for the soft surface also to the previous state vector (P_t, 3N × n: the pose
+  // blend held from q_{t−1}), and for vertices directly to β (D_t, 3N × K).
+  const bool soft = sim->hasSoftTissue();
   const RowMatX& states = rollout.states();
   out.points.resize(T * 3 * N);
-  std::vector<MatX> C(want_jacobians ? T : 0), D(want_jacobians && nv ? T : 0);
-  std::unique_ptr<Simulable> probe;  // poses the skin at a recorded state
-  if (nv) probe = std::make_unique<Simulable>(avatar, nullptr, sim_options_);
+  std::vector<MatX> C(want_jacobians ? T : 0), P(want_jacobians && soft && nv ? T : 0),
+      D(want_jacobians && nv ? T : 0);
+  std::unique_ptr<Simulable> probe;  // poses the skeleton's skin at a recorded state
+  if (nv && !soft) probe = std::make_unique<Simulable>(avatar, nullptr, sim_options_);
   const MatX& joints_shape = avatar->restJointsShapeJacobian();
+  const long num_vertices = avatar->body().numVertices();
   for (int t = 0; t < T; ++t) {
     double* points = out.points.data() + t * 3 * N;
     for (int k = 0; k < nj; ++k)
@@ -234,6 +289,28 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
         for (int c = 0; c < 3; ++c) C[t](3 * k + c, 6 * observations_.joints[k] + c) = 1.0;
     }
     if (!nv) continue;
+    if (soft) {
+      const MatX3 surface = rollout.vertices(t + 1);
+      for (int k = 0; k < nv; ++k)
+        for (int c = 0; c < 3; ++c)
+          points[3 * (nj + k) + c] = surface(observations_.vertices[k], c);
+      if (!want_jacobians) continue;
+      // One pull-back of the surface per observed coordinate.
+      P[t] = MatX::Zero(3 * N, n);
+      D[t] = MatX::Zero(3 * N, K);
+      MatX3 unit = MatX3::Zero(num_vertices, 3);
+      for (int k = 0; k < nv; ++k)
+        for (int c = 0; c < 3; ++c) {
+          const int row = 3 * (nj + k) + c;
+          unit(observations_.vertices[k], c) = 1.0;
+          const Rollout::VerticesCotangent pulled = rollout.verticesCotangent(t + 1, unit);
+          unit(observations_.vertices[k], c) = 0.0;
+          C[t].row(row) = pulled.state.transpose();
+          if (pulled.previous_state.size()) P[t].row(row) = pulled.previous_state.transpose();
+          if (pulled.direct.shape.size()) D[t].row(row) = pulled.direct.shape.transpose();
+        }
+      continue;
+    }
     probe->setState(states.row(t).transpose());
     PosedBodyJacobians jac;
     const PosedBody posed = poseBody(avatar->body(), avatar->betas(), probe->getPose(),
@@ -266,6 +343,7 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
   out.jacobians.assign(blocks_.size(), RowMatX());
   for (size_t i = 0; i < blocks_.size(); ++i)
     if (wanted[i]) out.jacobians[i] = RowMatX::Zero(T * 3 * N, blockSize(blocks_[i]));
+  const int P_all = int(base_material_.size());
 
   if (options_.jacobians == SequenceJacobians::ForwardSensitivities) {
     // One unit direction per column of every block.
@@ -282,19 +360,27 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
             d.pose_targets = RowMatX::Zero(T, 72);
             d.pose_targets(j / 72, j % 72) = 1.0;
             break;
+          case SequenceParameter::Material:
+            d.material = VecX::Unit(P_all, material_index_[size_t(j)]);
+            break;
         }
         directions.push_back(std::move(d));
         columns.emplace_back(int(i), j);
       }
-    const std::vector<RowMatX> tangents = rollout.forwardSensitivities(directions);
+    std::vector<VecX> initial;  // dq_0 per direction
+    const std::vector<RowMatX> tangents = rollout.forwardSensitivities(directions, &initial);
+    const int num_directions = int(tangents.size());
+    MatX Q(n, num_directions), Q_previous(n, num_directions);  // column d: dq along direction d
+    for (int d = 0; d < num_directions; ++d) Q.col(d) = initial[size_t(d)];
     for (int t = 0; t < T; ++t) {
-      MatX Q(n, tangents.size());  // column d: dq_t along direction d
-      for (size_t d = 0; d < tangents.size(); ++d) Q.col(d) = tangents[d].row(t).transpose();
+      Q_previous.swap(Q);
+      for (int d = 0; d < num_directions; ++d) Q.col(d) = tangents[size_t(d)].row(t).transpose();
       // Coefficient-based product: Eigen's GEMM would open an OpenMP region per step, which
       // waits for a descheduled thread on a busy machine (docs/benchmarks.md, Adjoint).
-      const MatX rows = C[t].lazyProduct(Q);  // 3N × directions
-      for (size_t d = 0; d < tangents.size(); ++d) {
-        const auto [block, column] = columns[d];
+      MatX rows = C[t].lazyProduct(Q);  // 3N × directions
+      if (!P.empty()) rows += P[t].lazyProduct(Q_previous);
+      for (int d = 0; d < num_directions; ++d) {
+        const auto [block, column] = columns[size_t(d)];
         out.jacobians[block].block(t * 3 * N, column, 3 * N, 1) = rows.col(d);
         if (blocks_[block] == SequenceParameter::Shape && nv)
           out.jacobians[block].block(t * 3 * N, column, 3 * N, 1) += D[t].col(column);
@@ -311,8 +397,15 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
       cotangent.row(t) = C[t].row(r);
       RolloutVariables direct;
       if (nv) direct.shape = D[t].row(r).transpose();
+      if (!P.empty()) {  // the pose blend held from the previous state
+        if (t > 0)
+          cotangent.row(t - 1) = P[t].row(r);
+        else
+          direct.initial_state = P[t].row(r).transpose();
+      }
       const RolloutVariables g = rollout.backward(cotangent, direct);
       cotangent.row(t).setZero();
+      if (t > 0) cotangent.row(t - 1).setZero();
       const int row = t * 3 * N + r;
       for (size_t i = 0; i < blocks_.size(); ++i) {
         if (!wanted[i]) continue;
@@ -323,6 +416,10 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
           case SequenceParameter::InitialVelocity: J.row(row) = g.initial_velocity.transpose(); break;
           case SequenceParameter::PoseTargets:
             J.row(row) = Eigen::Map<const VecX>(g.pose_targets.data(), 72 * T).transpose();
+            break;
+          case SequenceParameter::Material:
+            for (size_t j = 0; j < material_index_.size(); ++j)
+              J(row, Eigen::Index(j)) = g.material[material_index_[j]];
             break;
         }
       }

@@ -176,8 +176,8 @@ class RolloutSimulator:
     the avatar, fixed during a rollout: the gradients are those of the reduced model). The soft
     models' states are the bones followed by their soft state (num_dofs), their vertices the
     simulated surface; their material coefficients are an input of simulate() (material=, see
-    own_material and material_names); β is not differentiable through them yet (betas may be
-    given, without requires_grad). resolution: interior node density of the tet mesh (soft models);
+    own_material and material_names); β reaches them through SoftAvatar.with_shape (the
+    discretization is held, see simulate). resolution: interior node density of the tet mesh (soft models);
     cache_dir: where soft avatars are cached (None: $FLSH_CACHE_DIR or ~/.cache/flsh);
     avatar_settings: further flsh.SoftAvatar keyword arguments (e.g. handles,
     elastic_cubature_points, material_file). options:

@@ -20,12 +20,17 @@
 #include <vector>
 
 #include "flsh/core/error.h"
+#include "support/ceres_cost_checks.h"
 #include "support/test_support.h"
 
 namespace flsh::ceres_costs {
 namespace {
 
+using test::contactDiffOptions;
+using test::jacobiansOf;
+using test::matchesCentralDifferences;
 using test::messageOf;
+using test::passesGradientChecker;
 using test::randomVector;
 
 constexpr int kSteps = 6;
@@ -39,8 +44,8 @@ std::vector<Collider> ground() {
   return {Collider::plane(Vec3(0, sim.getNodes().col(1).minCoeff() + 0.01, 0), Vec3::UnitY())};
 }
 
-SimulationCostOptions tightOptions(SequenceJacobians method = SequenceJacobians::ForwardSensitivities,
-                                   int num_betas = 3) {
+SimulationCostOptions tightOptions(
+    SequenceJacobians method = SequenceJacobians::ForwardSensitivities, int num_betas = 3) {
   SimulationCostOptions o;
   o.rollout.newton.gradient_tolerance = 1e-12;  // Jacobians are exact for the converged rollout
   o.jacobians = method;
@@ -64,13 +69,12 @@ SequenceObservations someObservations(int steps) {
 using Blocks = std::vector<SequenceParameter>;
 
 // The cost over `steps` steps of the walk, on the ground (or without colliders).
-std::unique_ptr<SimulationSequenceCost> makeCost(const Blocks& blocks, int steps = kSteps,
-                                                 const SimulationCostOptions& options = tightOptions(),
-                                                 bool with_ground = true) {
-  return std::make_unique<SimulationSequenceCost>(
-      scene().avatar, scene().walk, SimulableOptions(),
-      with_ground ? ground() : std::vector<Collider>(), steps, someObservations(steps), blocks,
-      options);
+std::unique_ptr<SimulationSequenceCost> makeCost(
+    const Blocks& blocks, int steps = kSteps, const SimulationCostOptions& options = tightOptions(),
+    bool with_ground = true) {
+  return std::make_unique<SimulationSequenceCost>(scene().avatar, scene().walk, SimulableOptions(),
+                                                  with_ground ? ground() : std::vector<Collider>(),
+                                                  steps, someObservations(steps), blocks, options);
 }
 
 // Parameter values near the defaults (a perturbed β, velocity and targets), one vector per block.
@@ -90,89 +94,6 @@ std::vector<const double*> pointersTo(const std::vector<VecX>& values) {
   std::vector<const double*> p;
   for (const VecX& v : values) p.push_back(v.data());
   return p;
-}
-
-// All Jacobian blocks of one evaluation (row-major, as Ceres fills them).
-std::vector<RowMatX> jacobiansOf(const ceres::CostFunction& cost,
-                                 const std::vector<const double*>& parameters) {
-  std::vector<RowMatX> blocks;
-  std::vector<double*> pointers;
-  for (int32_t size : cost.parameter_block_sizes()) blocks.emplace_back(cost.num_residuals(), size);
-  for (RowMatX& b : blocks) pointers.push_back(b.data());
-  VecX r(cost.num_residuals());
-  EXPECT_TRUE(cost.Evaluate(parameters.data(), r.data(), pointers.data()));
-  return blocks;
-}
-
-// Every analytic block is nonzero and matches central differences of re-run rollouts as a
-// whole: max |analytic − numeric| ≤ 1e-6 · max |numeric| (the sharp check of the chain).
-::testing::AssertionResult matchesCentralDifferences(const ceres::CostFunction& cost,
-                                                     const std::vector<const double*>& parameters) {
-  const std::vector<RowMatX> analytic = jacobiansOf(cost, parameters);
-  const std::vector<int32_t>& sizes = cost.parameter_block_sizes();
-  for (size_t b = 0; b < analytic.size(); ++b) {
-    if (analytic[b].cwiseAbs().maxCoeff() < 1e-8)
-      return ::testing::AssertionFailure() << "analytic Jacobian block " << b << " is zero";
-    const auto f = [&](const VecX& x) {
-      std::vector<const double*> moved = parameters;
-      moved[b] = x.data();
-      VecX r(cost.num_residuals());
-      cost.Evaluate(moved.data(), r.data(), nullptr);
-      return r;
-    };
-    const ::testing::AssertionResult whole = test::jacobianMatchesFiniteDifferences(
-        f, Eigen::Map<const VecX>(parameters[b], sizes[b]), MatX(analytic[b]), 1e-6);
-    if (!whole) return ::testing::AssertionFailure() << "block " << b << ": " << whole.message();
-  }
-  return ::testing::AssertionSuccess();
-}
-
-// Ceres' GradientChecker (entry-wise |analytic − numeric| ≤ relative_precision · max(|·|), Ridders
-// differences), after asserting that every analytic block is nonzero. Dynamics couple every
-// input to every point, so a block's entries span many orders of magnitude (a hand's rotational
-// velocity moves the pelvis by 1e-14 m per rad/s within a few steps); central differences of
-// residuals of ~1 m carry ~1e-16/h round-off, so the smallest entries are only good to a few
-// per cent and the precision is chosen per block kind. Probe gets no ProbeResults: its Eigen
-// members would be allocated inside libceres (built without -march=native) and freed here with
-// another alignment scheme (see smpl_costs_test.cpp).
-::testing::AssertionResult passesGradientChecker(const ceres::CostFunction& cost,
-                                                 const std::vector<const double*>& parameters,
-                                                 double relative_precision,
-                                                 const ceres::NumericDiffOptions& options = {}) {
-  const std::vector<RowMatX> analytic = jacobiansOf(cost, parameters);
-  const std::vector<int32_t>& sizes = cost.parameter_block_sizes();
-  for (size_t b = 0; b < analytic.size(); ++b)
-    if (analytic[b].cwiseAbs().maxCoeff() < 1e-8)
-      return ::testing::AssertionFailure() << "analytic Jacobian block " << b << " is zero";
-  const ceres::GradientChecker checker(
-      &cost, static_cast<const std::vector<const ceres::Manifold*>*>(nullptr), options);
-  if (checker.Probe(parameters.data(), relative_precision, nullptr))
-    return ::testing::AssertionSuccess();
-  // Say which entries fail Ceres' criterion, from a Ridders Jacobian of the same options (its
-  // buffers are ours).
-  auto failure = ::testing::AssertionFailure() << "GradientChecker rejected the Jacobians;";
-  ceres::DynamicNumericDiffCostFunction<ceres::CostFunction, ceres::RIDDERS> numeric(
-      &cost, ceres::DO_NOT_TAKE_OWNERSHIP, options);
-  for (int32_t size : sizes) numeric.AddParameterBlock(size);
-  numeric.SetNumResiduals(cost.num_residuals());
-  std::vector<RowMatX> numeric_blocks;
-  std::vector<double*> pointers;
-  for (int32_t size : sizes) numeric_blocks.emplace_back(cost.num_residuals(), size);
-  for (RowMatX& block : numeric_blocks) pointers.push_back(block.data());
-  VecX r(cost.num_residuals());
-  numeric.Evaluate(parameters.data(), r.data(), pointers.data());
-  for (size_t b = 0; b < sizes.size(); ++b) {
-    int bad = 0;
-    for (int i = 0; i < cost.num_residuals(); ++i)
-      for (int j = 0; j < sizes[b]; ++j) {
-        const double a = analytic[b](i, j), n = numeric_blocks[b](i, j);
-        if (std::abs(a - n) > relative_precision * std::max(std::abs(a), std::abs(n)) && bad++ < 4)
-          failure << " block " << b << " (" << i << ", " << j << "): analytic " << a
-                  << ", numeric " << n << ";";
-      }
-    failure << " block " << b << ": " << bad << " entries off;";
-  }
-  return failure;
 }
 
 TEST(SimulationSequenceCost, ResidualsAreWeightedRolloutPointsMinusObservations) {
@@ -195,20 +116,12 @@ TEST(SimulationSequenceCost, ResidualsAreWeightedRolloutPointsMinusObservations)
     for (int k = 0; k < obs.numPoints(); ++k) {
       const Vec3 x = k < nj ? Vec3(joints.row(t).segment<3>(3 * obs.joints[k]).transpose())
                             : Vec3(vertices.row(obs.vertices[k - nj]).transpose());
-      const Vec3 expected = obs.step_weights[t] * (x - obs.observed.row(t).segment<3>(3 * k).transpose());
+      const Vec3 expected =
+          obs.step_weights[t] * (x - obs.observed.row(t).segment<3>(3 * k).transpose());
       EXPECT_TRUE(r.segment<3>(t * 3 * obs.numPoints() + 3 * k).isApprox(expected, 1e-9))
           << "step " << t + 1 << " point " << k;
     }
   }
-}
-
-// Ridders' extrapolation from a step of 1e-4 relative: Ceres' default 1e-2 crosses contact
-// events (a vertex meeting the ground), where the rollout is only C¹, and was off by up to 10 %.
-ceres::NumericDiffOptions contactDiffOptions() {
-  ceres::NumericDiffOptions options;
-  options.ridders_relative_initial_step_size = 1e-4;
-  options.max_num_ridders_extrapolations = 2;
-  return options;
 }
 
 TEST(SimulationSequenceCost, ShapeAndStiffnessJacobiansPassGradientChecker) {
@@ -233,7 +146,8 @@ TEST(SimulationSequenceCost, InitialVelocityJacobiansPassGradientChecker) {
 
 TEST(SimulationSequenceCost, PoseTargetJacobiansPassGradientChecker) {
   const int steps = 2;  // 144 target columns, each numeric column several rollouts
-  for (SequenceJacobians method : {SequenceJacobians::ForwardSensitivities, SequenceJacobians::Adjoint}) {
+  for (SequenceJacobians method :
+       {SequenceJacobians::ForwardSensitivities, SequenceJacobians::Adjoint}) {
     const auto cost = makeCost({SequenceParameter::PoseTargets}, steps, tightOptions(method));
     ASSERT_EQ(cost->parameter_block_sizes(), (std::vector<int32_t>{72 * steps}));
     const std::vector<VecX> values = valuesNearDefaults(*cost, 21);
@@ -333,7 +247,8 @@ TEST(SimulationSequenceCost, CeresRecoversRootInitialVelocity) {
   const ceres::Solver::Summary summary = solve(problem);
   EXPECT_TRUE(summary.IsSolutionUsable()) << summary.BriefReport();
   EXPECT_LT(summary.final_cost, 1e-16) << summary.BriefReport();
-  EXPECT_LT((velocity - true_velocity).cwiseAbs().maxCoeff(), 1e-6) << velocity.head<6>().transpose();
+  EXPECT_LT((velocity - true_velocity).cwiseAbs().maxCoeff(), 1e-6)
+      << velocity.head<6>().transpose();
 }
 
 TEST(SimulationSequenceCost, EvaluateFailsWithoutThrowingOnBadParameters) {
@@ -371,20 +286,23 @@ TEST(SimulationSequenceCost, ConstructionErrorsNameTheArgument) {
   };
   const Blocks shape{SequenceParameter::Shape};
   SequenceObservations obs = someObservations(kSteps);
-  EXPECT_NE(messageOf<InputError>([&] { make(obs, {}); }).find("blocks is empty"), std::string::npos);
+  EXPECT_NE(messageOf<InputError>([&] { make(obs, {}); }).find("blocks is empty"),
+            std::string::npos);
   EXPECT_NE(messageOf<InputError>([&] {
               make(obs, {SequenceParameter::Shape, SequenceParameter::Shape});
             }).find("Shape twice"),
             std::string::npos);
-  EXPECT_NE(messageOf<InputError>([&] { make(obs, {SequenceParameter::PoseTargets}, nullptr); })
-                .find("PoseTargets"),
+  EXPECT_NE(messageOf<InputError>([&] {
+              make(obs, {SequenceParameter::PoseTargets}, nullptr);
+            }).find("PoseTargets"),
             std::string::npos);
   EXPECT_NE(messageOf<InputError>([&] { make(obs, shape, scene().walk, 0); }).find("steps = 0"),
             std::string::npos);
   SimulationCostOptions too_many = tightOptions();
   too_many.num_betas = 11;
-  EXPECT_NE(messageOf<InputError>([&] { make(obs, shape, scene().walk, kSteps, too_many); })
-                .find("num_betas = 11, expected 1..10"),
+  EXPECT_NE(messageOf<InputError>([&] {
+              make(obs, shape, scene().walk, kSteps, too_many);
+            }).find("num_betas = 11, expected 1..10"),
             std::string::npos);
 
   SequenceObservations bad = obs;
@@ -393,11 +311,14 @@ TEST(SimulationSequenceCost, ConstructionErrorsNameTheArgument) {
             std::string::npos);
   bad = obs;
   bad.vertices[0] = 600;
-  EXPECT_NE(messageOf<InputError>([&] { make(bad, shape); }).find("vertices[0] = 600, expected 0..599"),
-            std::string::npos);
+  EXPECT_NE(
+      messageOf<InputError>([&] { make(bad, shape); }).find("vertices[0] = 600, expected 0..599"),
+      std::string::npos);
   bad = obs;
   bad.observed = RowMatX::Zero(kSteps - 1, 30);
-  EXPECT_NE(messageOf<InputError>([&] { make(bad, shape); }).find("observed has shape (5, 30), expected (6, 30)"),
+  EXPECT_NE(messageOf<InputError>([&] {
+              make(bad, shape);
+            }).find("observed has shape (5, 30), expected (6, 30)"),
             std::string::npos);
   bad = obs;
   bad.observed(2, 4) = std::numeric_limits<double>::infinity();
@@ -412,7 +333,8 @@ TEST(SimulationSequenceCost, ConstructionErrorsNameTheArgument) {
   EXPECT_NE(messageOf<InputError>([&] { make(bad, shape); }).find("no joint and no vertex"),
             std::string::npos);
   EXPECT_NE(messageOf<InputError>([&] {
-              SimulationSequenceCost(nullptr, scene().walk, SimulableOptions(), {}, kSteps, obs, shape);
+              SimulationSequenceCost(nullptr, scene().walk, SimulableOptions(), {}, kSteps, obs,
+                                     shape);
             }).find("avatar is null"),
             std::string::npos);
 }

@@ -1,24 +1,34 @@
 // A Ceres cost function over a simulated sequence: simulated joint positions and/or SMPL surface
 // points of a whole rollout (flsh/diff/rollout.h) against observations, with respect to a few
-// rollout inputs. Target flsh_ceres.
+// rollout inputs. Every model: the articulated skeleton, and the FEM and ROM soft skeletons
+// (whose surface moves with the soft tissue). Target flsh_ceres.
 //
 // Residuals, for steps t = 1..T and observed points k = 0..N−1 (joints first, then vertices),
 // coordinate c:  row (t − 1)·3N + 3k + c  =  w_t (x_{k,t} − observed_{t, 3k+c}), metres × weight,
 // where x_{k,t} is the simulated position of bone `joints[k]`'s joint centre t_b after step t, or
-// of SMPL surface vertex `vertices[k − #joints]` (Simulable::getVertices: skinning of the
-// simulated pose). Ceres minimizes ½ Σ residual².
+// of SMPL surface vertex `vertices[k − #joints]` (Simulable::getVertices: the skeleton's skinning
+// of the simulated pose; the soft models' simulated surface, skinned with the pose blend held
+// from the previous state). Ceres minimizes ½ Σ residual².
 //
 // Parameter blocks (the `blocks` list at construction picks which, in that order; inputs not
 // listed keep the values given at construction):
 //   Shape            (num_betas)  β, the first num_betas components (the others keep the base
-//                                 avatar's); every evaluation builds the avatar of that β
-//                                 (rest joints, bone inertias, contact surface all move).
+//                                 avatar's); every evaluation simulates SoftAvatar::withShape of
+//                                 that β (rest joints, bone inertias, contact surface and, for
+//                                 the soft models, rest nodes, masses and materials all move;
+//                                 the discretization is the base avatar's).
 //   Stiffnesses      (4)          joint (N/m), tracking (1/s²), root (1/s²), contact (N/m³)
 //                                 (SimParameter::Stiffnesses; values < 0 make Evaluate fail).
 //   InitialVelocity  (numDofs)    v_0 per DoF, m/s and world-frame rad/s (setVelocity layout);
 //                                 the initial state stays what initialize() sets.
 //   PoseTargets      (T·72)       the tracking targets of every step, row-major T × 72 rad
 //                                 (SMPL layout: bone b ≥ 1 relative to its parent, root global).
+//   Material         (P or #names) soft models: the material file's coefficients
+//                                 (MaterialModel::parameters(), a = log c₀ and the log-slopes b of
+//                                 every coefficient), or only the entries that
+//                                 SimulationCostOptions::material_names names, in that order (the
+//                                 others keep the base avatar's); every evaluation simulates
+//                                 SoftAvatar::withMaterial of them (after withShape).
 //
 // Jacobians. Forward sensitivities (Rollout::forwardSensitivities) by default: one tangent per
 // parameter column, all sharing each step's Jacobian evaluation and factor, so the cost is one
@@ -28,7 +38,11 @@
 // step's Jacobians, so it only pays when residuals are far fewer than parameter columns
 // (e.g. a final-pose observation against all pose targets); choose it with
 // SimulationCostOptions::jacobians. Both are exact for the converged rollout: use a tight Newton
-// tolerance (rollout.newton.gradient_tolerance ~1e-10) when the Jacobians matter.
+// tolerance (rollout.newton.gradient_tolerance ~1e-10; for the soft models
+// rollout.soft_tissue_newton / reduced_newton) when the Jacobians matter. The soft models'
+// observed vertices add, per step, one pull-back of the surface per observed coordinate
+// (Rollout::verticesCotangent): their Jacobians with respect to the state, the previous state
+// and β.
 //
 // Construction checks every size, index and value and throws flsh::InputError naming the
 // argument, the expected and the actual. Evaluate never throws: it returns false (Ceres rejects
@@ -53,7 +67,7 @@
 namespace flsh::ceres_costs {
 
 /// The rollout inputs a SimulationSequenceCost can expose as parameter blocks.
-enum class SequenceParameter { Shape, Stiffnesses, InitialVelocity, PoseTargets };
+enum class SequenceParameter { Shape, Stiffnesses, InitialVelocity, PoseTargets, Material };
 
 /// How Evaluate computes Jacobians (see the top of this file).
 enum class SequenceJacobians {
@@ -79,6 +93,9 @@ struct SimulationCostOptions {
   SequenceJacobians jacobians = SequenceJacobians::ForwardSensitivities;
   /// Size of the Shape block: the first num_betas of β (−1: all K). 1..K.
   int num_betas = -1;
+  /// Entries of the Material block, by MaterialModel::parameterNames() (e.g.
+  /// "layers.soft_tissue.E1.log_value"), in the block's order; empty: all P of them.
+  std::vector<std::string> material_names;
   /// Evaluate fails when Newton did not converge at some step (its Jacobians would not be
   /// those of the residuals). With false, the residuals of such a rollout are still returned,
   /// but never its Jacobians: Rollout refuses to differentiate an unconverged step, so an
@@ -106,7 +123,8 @@ class SimulationSequenceCost : public ceres::CostFunction {
 
   /// The values the inputs take when they are not parameter blocks, in the block layout: the
   /// base avatar's first num_betas β, the options' stiffnesses, the velocity initialize() sets,
-  /// the mocap's targets at steps 1..T (T·72). Good starting values for the blocks.
+  /// the mocap's targets at steps 1..T (T·72), the base avatar's material coefficients (the
+  /// block's entries). Good starting values for the blocks.
   VecX defaultValue(SequenceParameter p) const;
   /// Size of a block of this kind (whether or not it is one of the cost's blocks).
   int blockSize(SequenceParameter p) const;
@@ -141,6 +159,8 @@ class SimulationSequenceCost : public ceres::CostFunction {
   SimulationCostOptions options_;
   VecX default_velocity_;  // numDofs
   RowMatX default_targets_;  // T × 72 (empty without tracking)
+  VecX base_material_;       // P: the base avatar's (soft models)
+  std::vector<int> material_index_;  // the Material block's entries in parameters()
 };
 
 }  // namespace flsh::ceres_costs

@@ -174,8 +174,11 @@ class Rollout {
   /// NaN, Error before run() or when a step did not converge (TapeStepInfo::converged).
   RolloutVariables backward(const RowMatX& dL_dstates, const RolloutVariables& direct = {});
   /// Forward sensitivities: for each direction v, the T × numDofs changes of the state vectors
-  /// dq_t/dp · v (one back-substitution per direction per step).
-  std::vector<RowMatX> forwardSensitivities(const std::vector<RolloutVariables>& directions);
+  /// dq_t/dp · v (one back-substitution per direction per step). `initial_states` (optional)
+  /// receives each direction's change of q_0 (numDofs; e.g. for the soft surface of step 1,
+  /// which moves with q_0 through the pose blend: VerticesCotangent::previous_state).
+  std::vector<RowMatX> forwardSensitivities(const std::vector<RolloutVariables>& directions,
+                                            std::vector<VecX>* initial_states = nullptr);
 
  private:
   void requireRun(const char* who) const;

@@ -54,6 +54,8 @@ class SimulableAdjointModel final : public AdjointModel {
   /// The same map at another state vector `state` (e.g. a recorded step's, without restoring
   /// it).
   VecX incrementToStateCotangentAt(const VecX& state, const VecX& a) const;
+  /// stateToIncrementCotangent at another state vector `state`.
+  VecX stateToIncrementCotangentAt(const VecX& state, const VecX& a) const;
   VecX initialPreviousStateTangent(const VecX& dq0, const VecX& dv0) const override;
   VecX initialPreviousStateCotangent(const VecX& a_previous, VecX& a0) const override;
 

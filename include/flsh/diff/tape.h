@@ -115,8 +115,11 @@ struct TangentDirection {
 };
 
 /// Forward sweep: for each direction, the T × numDofs changes of the state vectors (row t − 1 =
-/// step t). All directions share each step's Jacobian evaluation and factor.
+/// step t). All directions share each step's Jacobian evaluation and factor. `initial_states`
+/// (optional) receives, per direction, the change of the state vector q_0 itself (the
+/// direction's initial_state and initial_state_increment together, state-vector layout).
 std::vector<RowMatX> tangentSweep(AdjointModel& model, const Tape& tape,
-                                  const std::vector<TangentDirection>& directions);
+                                  const std::vector<TangentDirection>& directions,
+                                  std::vector<VecX>* initial_states = nullptr);
 
 }  // namespace flsh

@@ -16,7 +16,8 @@
 //    exact Hessian for the reverse pass);
 //  - the loss's cotangent (Rollout::trajectoryCotangent: the surface's Jacobians per step);
 //  - backward: Rollout::backward (one back-substitution and the parameter and previous-state
-//    products per step);
+//    products per step), and the first run's alone (the first backward on an avatar builds
+//    what its simulables share: the ROM's table of every tet in the subspace);
 //  - the process's peak resident memory after the runs, and the tape's share of it per step;
 //  - central differences over the same parameters: 2 · #parameters forward passes without tape,
 //    extrapolated from the timed one (not run).
@@ -237,6 +238,10 @@ int main(int argc, char** argv) {
         median(cotangents));
     std::printf("backward              %8.3f s (%.2fx the plain forward, %.2fx with the tape)\n", b,
                 b / f_plain, b / f_tape);
+    std::printf(
+        "backward, first run   %8.3f s (%.2fx the plain forward; the first on this avatar also "
+        "builds what the avatar's simulables share, e.g. the ROM's table of every tet)\n",
+        backward.front(), backward.front() / f_plain);
     std::printf("peak resident memory  %8.0f MB\n", peakResidentMB());
     std::printf(
         "central differences   %8.3g s (2 x %ld parameters x %.3f s, extrapolated): "

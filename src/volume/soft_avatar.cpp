@@ -85,6 +85,7 @@ SoftAvatar::SoftAvatar(std::shared_ptr<const BodyModel> body, const VecX& betas,
 
 void SoftAvatar::initVolumetricData() {
   if (initialized_) return;
+  derived_.forget();
   // The reduced model is a soft-tissue model: without soft tissue there is nothing to reduce,
   // and silently simulating the skeleton instead would hide the mistake. The cubatures refine
   // the reduced model; without it they have nothing to act on and are ignored.
@@ -167,6 +168,7 @@ void SoftAvatar::buildRestShape() {
 
 void SoftAvatar::setReducedData(std::shared_ptr<const ReducedData> data) {
   const std::string fn = "SoftAvatar::setReducedData: ";
+  derived_.forget();
   if (!initialized_ || !soft_tissue_ || !reduced_)
     throw Error(fn +
                 "call it after initVolumetricData() on an avatar with enableSoftTissue() "

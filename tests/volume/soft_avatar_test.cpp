@@ -1,6 +1,7 @@
 // SoftAvatar: constructor checks and β padding, the FEM volumetric body with its cache, the
 // reduced model's need for soft tissue, the rest data it builds (shape, joints, vertex areas,
-// volume, masses, capsules), idempotence, determinism and the effect of β.
+// volume, masses, capsules), idempotence, determinism and the effect of β; derived data (built
+// once per avatar, not copied).
 #include "flsh/volume/soft_avatar.h"
 
 #include <gtest/gtest.h>
@@ -343,6 +344,28 @@ TEST(SoftAvatar, LumpBoneInertiaRejectsMismatchedSizes) {
                     avatar.restJoints(), -1.0);
   });
   EXPECT_NE(msg.find("mass_scale"), std::string::npos) << msg;
+}
+
+// derived(): built once per key and shared; a copy starts empty; initVolumetricData() forgets.
+TEST(SoftAvatar, DerivedDataIsBuiltOncePerAvatarAndNotCopied) {
+  SoftAvatar avatar(smallSyntheticBody(), VecX::Zero(0));
+  int builds = 0;
+  const auto make = [&] {
+    ++builds;
+    return new int(7);
+  };
+  const std::shared_ptr<const int> first = avatar.derived<int>("answer", make);
+  const std::shared_ptr<const int> again = avatar.derived<int>("answer", make);
+  EXPECT_EQ(builds, 1);
+  EXPECT_EQ(first.get(), again.get());
+  EXPECT_EQ(*avatar.derived<double>("other", [] { return new double(2.5); }), 2.5);
+  const SoftAvatar copy = avatar;
+  EXPECT_NE(copy.derived<int>("answer", make).get(), first.get());
+  EXPECT_EQ(builds, 2);
+  avatar.initVolumetricData();
+  EXPECT_NE(avatar.derived<int>("answer", make).get(), first.get());
+  EXPECT_EQ(builds, 3);
+  EXPECT_EQ(*first, 7);  // callers keep what they were given
 }
 
 }  // namespace

@@ -20,7 +20,9 @@
 // template data (voxelized once per process while any of them is alive).
 #pragma once
 
+#include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -149,7 +151,36 @@ class SoftAvatar {
   const VertexMassMoments& templateMassMoments() const { return *template_moments_; }
   double templateVolume() const { return template_volume_; }  ///< vol(0), m³
 
+  /// Data a higher layer derives from this avatar alone (e.g. the reduced elasticity's table of
+  /// every tet in the subspace), built by `make` on the first call with `key` and shared by
+  /// every later caller — every Simulable of this avatar. Thread-safe (make runs under a lock).
+  /// A copy of the avatar (withShape, withMaterial) starts with none, and initVolumetricData()
+  /// and setReducedData() forget them.
+  template <class T, class Make>
+  std::shared_ptr<const T> derived(const std::string& key, Make&& make) const {
+    std::lock_guard<std::mutex> lock(derived_.mutex);
+    std::shared_ptr<const void>& slot = derived_.entries[key];
+    if (!slot) slot = std::shared_ptr<const T>(make());
+    return std::static_pointer_cast<const T>(slot);
+  }
+
  private:
+  // derived()'s entries; copying an avatar does not copy them.
+  struct DerivedData {
+    std::mutex mutex;
+    std::map<std::string, std::shared_ptr<const void>> entries;
+    DerivedData() = default;
+    DerivedData(const DerivedData&) {}
+    DerivedData& operator=(const DerivedData&) {
+      forget();
+      return *this;
+    }
+    void forget() {
+      std::lock_guard<std::mutex> lock(mutex);
+      entries.clear();
+    }
+  };
+
   void buildRestShape();
   void buildShapeJacobians(const MatX3& X, const MatX3& J, double mass_scale);
   /// The ROM data for new volumetric data of the same discretization (K recomputed).
@@ -174,6 +205,7 @@ class SoftAvatar {
   std::shared_ptr<const ReducedData> reduced_data_;
   ReducedBuildReport reduced_report_;
   double skeleton_seconds_ = 0.0;
+  mutable DerivedData derived_;
 };
 
 /// Mass, first and second moments of a voxelized solid lumped to surface vertices, each about

@@ -205,9 +205,12 @@ void ElasticityTerm::addElementShapeCotangent(int e, const Mat3X& Lambda, const 
 void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shape, VecX& beta_bar,
                                       bool summed) const {
   const int E = summed ? numProductElements() : numMaterialElements(), K = shape.numBetas();
-  const int threads = E > 1000 ? std::max(1, omp_get_max_threads()) : 1;
+  // Each element costs microseconds (the law's dP/dF and the rest-shape kernels): threads pay
+  // from a hundred elements on (the ROM's cubature samples).
+  const int threads = E > 100 ? std::max(1, omp_get_max_threads()) : 1;
   std::vector<VecX> betas(size_t(threads), VecX::Zero(K));
-  std::vector<VecX> values(size_t(threads), VecX::Zero(chain_.numValues()));
+  // The coefficient values' cotangents (one per tet of the map: large) only when not summed.
+  std::vector<VecX> values(size_t(threads), VecX::Zero(summed ? 0 : chain_.numValues()));
   FirstFailure failure;
 #pragma omp parallel num_threads(threads)
   {
@@ -228,7 +231,7 @@ void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shap
   failure.rethrow();
   for (int k = 1; k < threads; ++k) {
     betas[0] += betas[size_t(k)];
-    values[0] += values[size_t(k)];
+    if (!summed) values[0] += values[size_t(k)];
   }
   beta_bar += betas[0];
   if (!summed) beta_bar.noalias() += shape.valuesJacobian().transpose() * values[0];

@@ -95,44 +95,54 @@ Mat4X ReducedElasticityTerm::nodeBasis(const Eigen::Vector4i& nodes, const int* 
 ReducedElasticityTerm::ReducedTets ReducedElasticityTerm::reducedTets(
     const std::vector<int>& tet, const MatX4i& tets,
     const std::vector<TetElementRest>& rest) const {
+  const int E = int(tets.rows());
+  // Per tet (in parallel): the handles whose φ reaches one of its nodes, and their gradients.
+  std::vector<std::vector<int>> handles(static_cast<size_t>(E));
+  std::vector<Mat3X> gradients(static_cast<size_t>(E));
+#pragma omp parallel for schedule(dynamic, 256) if (E > 1000)
+  for (int e = 0; e < E; ++e) {
+    std::vector<int>& h = handles[size_t(e)];
+    for (int a = 0; a < 4; ++a)
+      for (auto* phi = kin_.basisBegin(tets(e, a)); phi != kin_.basisEnd(tets(e, a)); ++phi)
+        h.push_back(phi->first);
+    std::sort(h.begin(), h.end());
+    h.erase(std::unique(h.begin(), h.end()), h.end());
+    const Mat4X Phi = nodeBasis(tets.row(e).transpose(), h.data(), int(h.size()));
+    gradients[size_t(e)] = reducedShapeGradients(rest[size_t(e)], Phi);
+  }
   ReducedTets out;
   out.tet = tet;
   out.handle_start.assign(1, 0);
-  std::vector<Mat3X> gradients;
-  int columns = 0;
-  for (Eigen::Index e = 0; e < tets.rows(); ++e) {
-    std::vector<int> handles;
-    for (int a = 0; a < 4; ++a)
-      for (auto* phi = kin_.basisBegin(tets(e, a)); phi != kin_.basisEnd(tets(e, a)); ++phi)
-        handles.push_back(phi->first);
-    std::sort(handles.begin(), handles.end());
-    handles.erase(std::unique(handles.begin(), handles.end()), handles.end());
-    for (int h : handles) out.handles.push_back(h);
-    const Mat4X Phi = nodeBasis(tets.row(e).transpose(), handles.data(), int(handles.size()));
-    gradients.push_back(reducedShapeGradients(rest[size_t(e)], Phi));
+  out.volume.reserve(size_t(E));
+  for (int e = 0; e < E; ++e) {
+    const std::vector<int>& h = handles[size_t(e)];
+    out.handles.insert(out.handles.end(), h.begin(), h.end());
     out.volume.push_back(rest[size_t(e)].volume);
-    columns += int(handles.size());
     out.handle_start.push_back(int(out.handles.size()));
-    out.max_handles = std::max(out.max_handles, int(handles.size()));
+    out.max_handles = std::max(out.max_handles, int(h.size()));
   }
-  out.gradients.resize(3, columns);
-  for (size_t e = 0; e < gradients.size(); ++e)
-    out.gradients.middleCols(out.handle_start[e], gradients[e].cols()) = gradients[e];
+  out.gradients.resize(3, Eigen::Index(out.handles.size()));
+  for (int e = 0; e < E; ++e)
+    out.gradients.middleCols(out.handle_start[size_t(e)], gradients[size_t(e)].cols()) =
+        gradients[size_t(e)];
   return out;
 }
 
+// Shared by every Simulable of the avatar (SoftAvatar::derived): the table depends on the
+// avatar's rest shape, materials and basis only.
 const ReducedElasticityTerm::ReducedTets& ReducedElasticityTerm::everyTet() const {
-  if (!every_tet_) {
-    const VolumetricData& data = avatar_.volumetricData();
-    const ElasticTets all = deformableTets(data);
-    MatX4i tets(all.size(), 4);
-    for (int k = 0; k < all.size(); ++k)
-      tets.row(k) = data.templ->mesh.tets.row(all.tets[size_t(k)]);
-    auto every = std::make_unique<ReducedTets>(reducedTets(all.tets, tets, all.rest));
-    every->rest = all.rest;
-    for (const FemMaterialPoint& m : all.materials) every->C_world.push_back(m.C_world);
-    every_tet_ = std::move(every);
-  }
+  if (!every_tet_)
+    every_tet_ = avatar_.derived<ReducedTets>("reduced_elasticity.every_tet", [&] {
+      const VolumetricData& data = avatar_.volumetricData();
+      const ElasticTets all = deformableTets(data);
+      MatX4i tets(all.size(), 4);
+      for (int k = 0; k < all.size(); ++k)
+        tets.row(k) = data.templ->mesh.tets.row(all.tets[size_t(k)]);
+      auto every = std::make_unique<ReducedTets>(reducedTets(all.tets, tets, all.rest));
+      every->rest = all.rest;
+      for (const FemMaterialPoint& m : all.materials) every->C_world.push_back(m.C_world);
+      return every.release();
+    });
   return *every_tet_;
 }
 
@@ -302,47 +312,49 @@ void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values
   const int threads = T > 1000 ? std::max(1, omp_get_max_threads()) : 1;
   std::vector<VecX> partial(size_t(threads), VecX::Zero(values_bar.size()));
   std::vector<VecX> betas(size_t(threads), VecX::Zero(shape ? shape->numBetas() : 0));
+  // S: vec(∇u) (column-major, entry i + 3j = ∂u_i/∂x_j) ↦ Voigt strain, so that a tet's
+  // K_t = vol Σ_{s,r} B_sᵀ C B_r with B_s = S (I₃ ⊗ g_s) gives λᵀ dK_t z summed over the steps
+  // as vol ⟨dC, S T Sᵀ⟩ with T = (G̃ ⊗ I₃) W_t (G̃ᵀ ⊗ I₃) (9 × 9), the same T the rest shape's
+  // linear form takes.
+  Eigen::Matrix<double, 6, 9> S;
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i) {
+      Mat3 unit = Mat3::Zero();
+      unit(i, j) = 1.0;
+      S.col(i + 3 * j) = voigtLinearStrain(unit);
+    }
 #pragma omp parallel num_threads(threads)
   {
     const int k = omp_get_thread_num();
-    Eigen::Matrix<double, 6, Eigen::Dynamic> B;
-    MatX We, X;
+    MatX X;
 #pragma omp for schedule(static)
     for (int t = 0; t < T; ++t) {
       const int begin = all.handle_start[size_t(t)], n = all.count(t);
       if (n == 0) continue;
-      B.resize(6, 3 * n);
-      We.resize(3 * n, 3 * n);
+      // T[(i, j), (k, l)] = Σ_{s, r} G̃(j, s) G̃(l, r) W(3h_s + i, 3h_r + k): X = W_t (G̃ᵀ ⊗ I₃)
+      // first (3n × 9, read from W's blocks), then T = (G̃ ⊗ I₃) X.
+      const auto G = all.gradients.middleCols(begin, n);
+      X.setZero(3 * n, 9);
       for (int s = 0; s < n; ++s) {
-        const Vec3 g = all.gradients.col(begin + s);
-        for (int c = 0; c < 3; ++c) {
-          Mat3 unit = Mat3::Zero();
-          unit.row(c) = g.transpose();  // e_c g_sᵀ
-          B.col(3 * s + c) = voigtLinearStrain(unit);
+        const int hs = 3 * all.handles[size_t(begin + s)];
+        for (int r = 0; r < n; ++r) {
+          const Mat3 Wsr = W.block<3, 3>(hs, 3 * all.handles[size_t(begin + r)]);
+          for (int l = 0; l < 3; ++l) X.block<3, 3>(3 * s, 3 * l) += G(l, r) * Wsr;
         }
-        for (int r = 0; r < n; ++r)
-          We.block<3, 3>(3 * s, 3 * r) =
-              W.block<3, 3>(3 * all.handles[size_t(begin + s)], 3 * all.handles[size_t(begin + r)]);
       }
+      Mat9 Tt = Mat9::Zero();
+      for (int s = 0; s < n; ++s)
+        for (int j = 0; j < 3; ++j) Tt.middleRows<3>(3 * j) += G(j, s) * X.middleRows<3>(3 * s);
       TetMaterialCotangent bar;
-      bar.C_world = all.volume[size_t(t)] * B * We * B.transpose();
+      bar.C_world = all.volume[size_t(t)] * S * Tt * S.transpose();
       TetGeometryCotangent geometry;
       map.addCotangent(all.tet[size_t(t)], bar, partial[size_t(k)], shape ? &geometry : nullptr);
       if (!shape) continue;
       shape->addGeometryCotangent(all.tet[size_t(t)], geometry, betas[size_t(k)]);
-      const Eigen::Vector4i nodes = materialElementNodes(elements_.size() + t);
-      // T[(i, j), (k, l)] = Σ_{s, r} G̃(j, s) G̃(l, r) W_t(3s + i, 3r + k): X = W_t (G̃ᵀ ⊗ I₃)
-      // first (3n × 9), then T = (G̃ ⊗ I₃) X.
-      const auto G = all.gradients.middleCols(begin, n);
-      X.setZero(3 * n, 9);
-      for (int r = 0; r < n; ++r)
-        for (int l = 0; l < 3; ++l) X.middleCols<3>(3 * l) += G(l, r) * We.middleCols<3>(3 * r);
-      Mat9 T = Mat9::Zero();
-      for (int s = 0; s < n; ++s)
-        for (int j = 0; j < 3; ++j) T.middleRows<3>(3 * j) += G(j, s) * X.middleRows<3>(3 * s);
       Mat34 X_bar = Mat34::Zero();
-      addTetLinearFormRestCotangent(all.rest[size_t(t)], all.C_world[size_t(t)], T, 1.0, X_bar);
-      shape->addTetNodesCotangent(nodes, X_bar, betas[size_t(k)]);
+      addTetLinearFormRestCotangent(all.rest[size_t(t)], all.C_world[size_t(t)], Tt, 1.0, X_bar);
+      shape->addTetNodesCotangent(materialElementNodes(elements_.size() + t), X_bar,
+                                  betas[size_t(k)]);
     }
   }
   for (const VecX& p : partial) values_bar += p;

@@ -73,7 +73,8 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   };
   ReducedTets reducedTets(const std::vector<int>& tet, const MatX4i& tets,
                           const std::vector<TetElementRest>& rest) const;
-  /// Every elastic tet in the subspace (built on first use, for the Material group).
+  /// Every elastic tet in the subspace (for the Material and Shape groups), built on first use
+  /// and shared by the avatar's simulables (SoftAvatar::derived).
   const ReducedTets& everyTet() const;
   /// The current z of n handles (3 × n, column s: handle handles[s]).
   Mat3X handleDisplacements(const int* handles, int n) const;
@@ -107,7 +108,7 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   std::vector<int> rest_hessian_start_;
   VecX rest_hessians_;
   VecX rest_floors_;  // per element: ReducedData::elastic_floors of its sample
-  mutable std::unique_ptr<ReducedTets> every_tet_;
+  mutable std::shared_ptr<const ReducedTets> every_tet_;
 };
 
 }  // namespace flsh::detail

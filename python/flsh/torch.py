@@ -21,6 +21,10 @@ velocity and, for the soft models (model="fem" or "rom"), the material file's co
     joints = flsh.torch.simulate(sim, betas=betas)       # (8, 24, 3)
     joints[-1, 0, 1].backward()                          # betas.grad: (10,)
 
+``point_to_surface(points, vertices, faces)`` is the squared distance of unordered points (a
+scan) to the simulated surface, differentiable in the vertices: the loss of a fit to scans
+without known correspondences (flsh/surface_distance.py).
+
 Tensors are float64 on the CPU. Lengths in m, angles in rad. The model is immutable and never
 changed; inputs are never modified in place; every simulate() call builds its own avatar and
 simulable. Import it as ``flsh.torch`` (``import flsh`` does not import torch).
@@ -32,6 +36,7 @@ import torch
 from torch.autograd.function import once_differentiable
 
 from . import _flsh
+from .surface_distance import point_to_surface  # noqa: F401  (re-export)
 
 __all__ = ["RolloutFunction", "RolloutSimulator", "SmplFunction", "simulate", "smpl"]
 

@@ -8,6 +8,7 @@
 #include <memory>
 
 #include "bindings.h"
+#include "flsh/volume/closest_surface_points.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/soft_avatar.h"
 #include "flsh/volume/tet_mesh.h"
@@ -82,6 +83,27 @@ void bind_volume(py::module_& m) {
       "the surface: returns (nodes (N, 3) m with nodes[:V] == vertices, tets (T, 4) int32 "
       "positively oriented, quality dict). resolution scales the interior node count; "
       "improve_quality runs the flip/smoothing pass on the worst tets (surface untouched).");
+
+  m.def(
+      "closest_surface_points",
+      [](const py::object& V, const py::object& F, const py::object& P) {
+        const MatX3 vertices = to_points(V, "vertices");
+        const MatX3i faces = to_triangles(F, "faces");
+        const MatX3 points = to_points(P, "points");
+        ClosestSurfacePoints hits;
+        {
+          py::gil_scoped_release release;
+          hits = closestSurfacePoints(vertices, faces, points);
+        }
+        py::array_t<int64_t> face(hits.faces.size());
+        for (Eigen::Index i = 0; i < hits.faces.size(); ++i) face.mutable_at(i) = hits.faces[i];
+        return py::make_tuple(face, to_numpy(hits.barycentric), to_numpy(hits.distances));
+      },
+      py::arg("vertices"), py::arg("faces"), py::arg("points"),
+      "The closest point of a triangle surface (vertices (V, 3), faces (F, 3)) to each query "
+      "point (points (P, 3)), exact (bounding-box tree): returns (face (P,) int64, barycentric "
+      "(P, 3) weights on the face's vertices, distance (P,) m). ValueError on a bad shape, index "
+      "or value.");
 
   py::class_<VolumetricData>(
       m, "VolumetricData",

@@ -2,9 +2,13 @@
 workflow on a small body): a body with hidden coefficients (soft tissue twice as stiff along the
 bone, a 1.5× Fung exponent) jumps; its simulated surface with 2 mm noise is the scan. From the
 default material, L-BFGS on the adjoint gradients recovers the stiffness (FEM; the Fung
-exponent, which barely acts at a small body's strains, is left loose by the noise), and one
-coefficient shared by two subjects of different shapes (ROM). The full-size example and its
-figures: examples/fit_soft_tissue.py, docs/adjoint.md."""
+exponent, which barely acts at a small body's strains, is left loose by the noise), one
+coefficient shared by two subjects of different shapes (ROM), and the shape β with the material
+from unordered scan points (point-to-surface, ROM, through examples/python/fit_soft_tissue.py).
+The full-size runs and their figures: examples/python/fit_soft_tissue.py, docs/adjoint.md."""
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -115,3 +119,30 @@ def test_rom_fits_one_material_to_two_subjects(body, jump, tmp_path_factory):
     x = fit(loss, torch.zeros(1, dtype=torch.float64))
     print(f"ROM fit, two subjects: log E1 {x[0]:.4f} (truth {truth[0]:.4f})")
     assert abs(float(x[0] - truth[0])) < 0.25
+
+
+def load_example(name):
+    path = Path(__file__).resolve().parents[2] / "examples" / "python" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"example_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_rom_recovers_shape_and_material_from_unordered_scan_points(tmp_path_factory):
+    """β (two components) and the material from points drawn over the noisy surface in random
+    order, against the nearest point of the simulated surface (flsh.torch.point_to_surface)."""
+    fit = load_example("fit_soft_tissue").fit
+    r = fit(vertices=800, model="rom", steps=24, loss="surface", iterations=20,
+            cache=str(tmp_path_factory.mktemp("fit_scan")), log=print)
+    truth, estimate = r["truth"], r["estimate"]
+    # Converged: the fit explains the scans at least as well as the truth does (measured: 0.9749
+    # against 0.9752), from a start far off (41).
+    assert r["start_loss"] > 10.0 * r["truth_loss"]
+    assert r["final_loss"] <= r["truth_loss"] + 1e-6
+    # β is determined by the surface to a few thousandths (measured: 2e-4, 4.5e-3).
+    np.testing.assert_allclose(estimate[:2], truth[:2], rtol=0, atol=0.02)
+    # The stiffness is found to ~20 % at this small body's strains (measured log 0.52 against
+    # 0.69); the Fung exponent is left loose by the noise, as with known correspondences.
+    assert 0.3 < estimate[2] < 1.0
+    assert r["surface_error_after"] < 0.01 * r["surface_error_before"]

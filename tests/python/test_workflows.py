@@ -1,7 +1,8 @@
 """Short versions of the PyTorch workflows in examples/python on synthetic ground truth:
 workflow 2 (train_physics_loss.py: a network trained through the simulator with a physics loss)
 and workflow 3 (recover_jump.py: β and the take-off velocity of a simulated jump recovered from
-its joint trajectory); and that both scripts run."""
+its joint trajectory); and that the scripts run (also workflow 4, fit_soft_tissue.py, whose fit
+is tested in test_fit_material.py)."""
 import importlib.util
 import subprocess
 import sys
@@ -42,10 +43,12 @@ def test_workflow3_recovers_shape_and_take_off_velocity():
     np.testing.assert_allclose(estimate["spin"], truth["spin"], rtol=0, atol=1e-6)
 
 
-def test_workflow_scripts_run():
+def test_workflow_scripts_run(tmp_path):
     for name, args in (("train_physics_loss", ["--steps", "4", "--sequences", "1",
                                                "--epochs", "2", "--validation", "1"]),
-                       ("recover_jump", ["--steps", "4", "--iterations", "2"])):
+                       ("recover_jump", ["--steps", "4", "--iterations", "2"]),
+                       ("fit_soft_tissue", ["--vertices", "800", "--steps", "2", "--iterations",
+                                            "1", "--loss", "surface", "--cache", str(tmp_path)])):
         result = subprocess.run([sys.executable, str(EXAMPLES / f"{name}.py"), *args],
                                 capture_output=True, text=True)
         assert result.returncode == 0, result.stderr

@@ -95,6 +95,23 @@ def scan_points(vertices, faces, generator):
     return torch.stack(frames)
 
 
+def minimize(objective, x0, iterations, tolerance_grad=1e-9):
+    """L-BFGS with a strong Wolfe line search from x0 (at most `iterations` iterations): the
+    minimizer found and the iterations taken."""
+    x = x0.clone().requires_grad_(True)
+    optimizer = torch.optim.LBFGS([x], lr=1.0, max_iter=iterations, tolerance_grad=tolerance_grad,
+                                  tolerance_change=1e-12, line_search_fn="strong_wolfe")
+
+    def closure():
+        optimizer.zero_grad()
+        value = objective(x)
+        value.backward()
+        return value
+
+    optimizer.step(closure)
+    return x.detach(), optimizer.state[optimizer._params[0]]["n_iter"]
+
+
 def fit(vertices=800, model="rom", steps=24, loss="vertices", subjects=1, iterations=30,
         seed=7, cache=None, log=print):
     """Runs the workflow and returns its figures (a dict)."""
@@ -159,21 +176,9 @@ def fit(vertices=800, model="rom", steps=24, loss="vertices", subjects=1, iterat
     truth = torch.cat([shapes[0], true_material]) if fit_shape else true_material
     with torch.no_grad():
         start_loss, truth_loss = float(objective(x0)), float(objective(truth))
-    x = x0.clone().requires_grad_(True)
-    optimizer = torch.optim.LBFGS([x], lr=1.0, max_iter=iterations, tolerance_grad=1e-9,
-                                  tolerance_change=1e-12, line_search_fn="strong_wolfe")
-
-    def closure():
-        optimizer.zero_grad()
-        value = objective(x)
-        value.backward()
-        return value
-
     fit_started = time.perf_counter()
-    optimizer.step(closure)
+    x, lbfgs_iterations = minimize(objective, x0, iterations)
     fit_seconds = time.perf_counter() - fit_started
-    x = x.detach()
-    lbfgs_iterations = optimizer.state[optimizer._params[0]]["n_iter"]
     with torch.no_grad():
         final_loss = float(objective(x))
     names = (["β₀", "β₁"] if fit_shape else []) + ["log E1 factor", "log γ factor"]

@@ -31,6 +31,7 @@ using test::jacobiansOf;
 using test::matchesCentralDifferences;
 using test::messageOf;
 using test::passesGradientChecker;
+using test::pointersTo;
 using test::randomVector;
 
 constexpr int kSteps = 6;
@@ -88,12 +89,6 @@ std::vector<VecX> valuesNearDefaults(const SimulationSequenceCost& cost, unsigne
     values.push_back(v);
   }
   return values;
-}
-
-std::vector<const double*> pointersTo(const std::vector<VecX>& values) {
-  std::vector<const double*> p;
-  for (const VecX& v : values) p.push_back(v.data());
-  return p;
 }
 
 TEST(SimulationSequenceCost, ResidualsAreWeightedRolloutPointsMinusObservations) {
@@ -163,13 +158,7 @@ TEST(SimulationSequenceCost, AdjointJacobiansEqualForwardSensitivities) {
   const auto forward = makeCost(blocks, 4, tightOptions(SequenceJacobians::ForwardSensitivities));
   const auto adjoint = makeCost(blocks, 4, tightOptions(SequenceJacobians::Adjoint));
   const std::vector<VecX> values = valuesNearDefaults(*forward, 31);
-  const std::vector<RowMatX> a = jacobiansOf(*forward, pointersTo(values));
-  const std::vector<RowMatX> b = jacobiansOf(*adjoint, pointersTo(values));
-  for (size_t k = 0; k < a.size(); ++k) {
-    ASSERT_GT(a[k].cwiseAbs().maxCoeff(), 1e-8) << "block " << k;
-    EXPECT_LE((a[k] - b[k]).cwiseAbs().maxCoeff(), 1e-9 * a[k].cwiseAbs().maxCoeff())
-        << "block " << k;
-  }
+  EXPECT_TRUE(test::sameJacobians(*forward, *adjoint, pointersTo(values), 1e-9));
 }
 
 TEST(SimulationSequenceCost, ConstantBlocksAreSkipped) {
@@ -181,19 +170,6 @@ TEST(SimulationSequenceCost, ConstantBlocksAreSkipped) {
   VecX r(cost->num_residuals());
   ASSERT_TRUE(cost->Evaluate(pointersTo(values).data(), r.data(), jacobians));
   EXPECT_TRUE(velocity.isApprox(all[1], 1e-12));
-}
-
-ceres::Solver::Summary solve(ceres::Problem& problem) {
-  ceres::Solver::Options options;
-  options.linear_solver_type = ceres::DENSE_QR;
-  options.max_num_iterations = 30;
-  options.function_tolerance = 1e-16;
-  options.gradient_tolerance = 1e-16;
-  options.parameter_tolerance = 1e-12;
-  options.num_threads = 1;
-  ceres::Solver::Summary summary;
-  ceres::Solve(options, &problem, &summary);
-  return summary;
 }
 
 // Observations simulated at a true β; Ceres recovers it from the base avatar's β.
@@ -213,7 +189,7 @@ TEST(SimulationSequenceCost, CeresRecoversShape) {
   problem_options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
   problem.AddResidualBlock(&cost, nullptr, betas.data());
-  const ceres::Solver::Summary summary = solve(problem);
+  const ceres::Solver::Summary summary = test::solveTightly(problem);
   EXPECT_TRUE(summary.IsSolutionUsable()) << summary.BriefReport();
   EXPECT_LT(summary.final_cost, 1e-16) << summary.BriefReport();
   EXPECT_LT((betas - true_betas).cwiseAbs().maxCoeff(), 1e-6) << betas.transpose();
@@ -244,7 +220,7 @@ TEST(SimulationSequenceCost, CeresRecoversRootInitialVelocity) {
   ceres::Problem problem(problem_options);
   problem.AddResidualBlock(&cost, nullptr, velocity.data());
   problem.SetManifold(velocity.data(), &root_only);
-  const ceres::Solver::Summary summary = solve(problem);
+  const ceres::Solver::Summary summary = test::solveTightly(problem);
   EXPECT_TRUE(summary.IsSolutionUsable()) << summary.BriefReport();
   EXPECT_LT(summary.final_cost, 1e-16) << summary.BriefReport();
   EXPECT_LT((velocity - true_velocity).cwiseAbs().maxCoeff(), 1e-6)

@@ -3,6 +3,9 @@
 `import flsh` is deliberately unguarded: if the extension module does not import, every test
 must fail (a collection error), never be skipped.
 """
+import importlib.util
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -32,3 +35,17 @@ def walk():
 def rng():
     return np.random.default_rng(20240611)
 
+
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "python"
+
+
+@pytest.fixture(scope="session")
+def example():
+    """A loader of the scripts in examples/python as modules: example("recover_jump")."""
+    def load(name):
+        spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+    return load

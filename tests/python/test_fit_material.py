@@ -6,9 +6,6 @@ exponent, which barely acts at a small body's strains, is left loose by the nois
 coefficient shared by two subjects of different shapes (ROM), and the shape β with the material
 from unordered scan points (point-to-surface, ROM, through examples/python/fit_soft_tissue.py).
 The full-size runs and their figures: examples/python/fit_soft_tissue.py, docs/adjoint.md."""
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
@@ -40,22 +37,14 @@ def material_of(sim, keys):
     return lambda x: own.index_put((index,), own[index] + x)
 
 
-def fit(loss, x0, iterations=25):
-    x = x0.clone().requires_grad_(True)
-    optimizer = torch.optim.LBFGS([x], lr=1.0, max_iter=iterations, tolerance_grad=1e-10,
-                                  tolerance_change=1e-12, line_search_fn="strong_wolfe")
-
-    def closure():
-        optimizer.zero_grad()
-        value = loss(x)
-        value.backward()
-        return value
-
-    optimizer.step(closure)
-    return x.detach()
+@pytest.fixture(scope="module")
+def fit(example):
+    """L-BFGS (the example's) from x0: the minimizer."""
+    minimize = example("fit_soft_tissue").minimize
+    return lambda loss, x0, iterations=25: minimize(loss, x0, iterations, 1e-10)[0]
 
 
-def test_fem_recovers_stiffness_and_fung_exponent(body, jump, tmp_path_factory):
+def test_fem_recovers_stiffness_and_fung_exponent(body, jump, fit, tmp_path_factory):
     sim = simulator(body, jump, "fem", tmp_path_factory.mktemp("fit_fem"))
     material = material_of(sim, ["layers.soft_tissue.E1", "layers.soft_tissue.fung_gamma"])
     truth = torch.tensor([np.log(2.0), np.log(1.5)], dtype=torch.float64)
@@ -91,7 +80,7 @@ def test_fem_recovers_stiffness_and_fung_exponent(body, jump, tmp_path_factory):
     assert after < 0.2 * before
 
 
-def test_rom_fits_one_material_to_two_subjects(body, jump, tmp_path_factory):
+def test_rom_fits_one_material_to_two_subjects(body, jump, fit, tmp_path_factory):
     """One soft-tissue stiffness shared by two bodies of different shape (β₀ = ±1), as the
     FLSH paper fits its soft-tissue parameters to several DYNA subjects at once."""
     sim = simulator(body, jump, "rom", tmp_path_factory.mktemp("fit_rom"))
@@ -121,20 +110,12 @@ def test_rom_fits_one_material_to_two_subjects(body, jump, tmp_path_factory):
     assert abs(float(x[0] - truth[0])) < 0.25
 
 
-def load_example(name):
-    path = Path(__file__).resolve().parents[2] / "examples" / "python" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(f"example_{name}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_rom_recovers_shape_and_material_from_unordered_scan_points(tmp_path_factory):
+def test_rom_recovers_shape_and_material_from_unordered_scan_points(example, tmp_path_factory):
     """β (two components) and the material from points drawn over the noisy surface in random
     order, against the nearest point of the simulated surface (flsh.torch.point_to_surface)."""
-    fit = load_example("fit_soft_tissue").fit
-    r = fit(vertices=800, model="rom", steps=24, loss="surface", iterations=20,
-            cache=str(tmp_path_factory.mktemp("fit_scan")), log=print)
+    r = example("fit_soft_tissue").fit(vertices=800, model="rom", steps=24, loss="surface",
+                                       iterations=20, log=print,
+                                       cache=str(tmp_path_factory.mktemp("fit_scan")))
     truth, estimate = r["truth"], r["estimate"]
     # Converged: the fit explains the scans at least as well as the truth does (measured: 0.9749
     # against 0.9752), from a start far off (41).

@@ -3,7 +3,6 @@ workflow 2 (train_physics_loss.py: a network trained through the simulator with 
 and workflow 3 (recover_jump.py: β and the take-off velocity of a simulated jump recovered from
 its joint trajectory); and that the scripts run (also workflow 4, fit_soft_tissue.py, whose fit
 is tested in test_fit_material.py)."""
-import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -13,23 +12,16 @@ import numpy as np
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "python"
 
 
-def load_example(name):
-    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_workflow2_physics_loss_goes_down():
-    train = load_example("train_physics_loss").train
+def test_workflow2_physics_loss_goes_down(example):
+    train = example("train_physics_loss").train
     losses, _ = train(vertices=600, steps=6, sequences=2, epochs=60, validation=0,
                       log=lambda _: None)
     assert losses[0] > 1e-2, losses  # the unknown arm swings are visible in the joints
     assert losses[-1] < 0.2 * losses[0], losses  # measured: 0.05
 
 
-def test_workflow3_recovers_shape_and_take_off_velocity():
-    recover = load_example("recover_jump").recover
+def test_workflow3_recovers_shape_and_take_off_velocity(example):
+    recover = example("recover_jump").recover
     # 30 steps of 1/60 s: take-off, flight and landing (the ground acts on the true jump).
     result = recover(vertices=600, steps=30, iterations=300, seed=1, log=lambda _: None)
     truth, estimate = result["truth"], result["estimate"]

@@ -7,6 +7,8 @@
 #include <ceres/dynamic_numeric_diff_cost_function.h>
 #include <ceres/gradient_checker.h>
 #include <ceres/manifold.h>
+#include <ceres/problem.h>
+#include <ceres/solver.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -27,6 +29,46 @@ inline std::vector<RowMatX> jacobiansOf(const ceres::CostFunction& cost,
   VecX r(cost.num_residuals());
   EXPECT_TRUE(cost.Evaluate(parameters.data(), r.data(), pointers.data()));
   return blocks;
+}
+
+/// Pointers to each vector's values: a cost's parameter blocks.
+inline std::vector<const double*> pointersTo(const std::vector<VecX>& values) {
+  std::vector<const double*> p;
+  for (const VecX& v : values) p.push_back(v.data());
+  return p;
+}
+
+/// Two costs' Jacobian blocks at the same parameters agree: every block of `a` nonzero and
+/// max |a − b| ≤ tolerance · max |a| per block (e.g. forward sensitivities against the adjoint).
+inline ::testing::AssertionResult sameJacobians(const ceres::CostFunction& a,
+                                                const ceres::CostFunction& b,
+                                                const std::vector<const double*>& parameters,
+                                                double tolerance) {
+  const std::vector<RowMatX> ja = jacobiansOf(a, parameters), jb = jacobiansOf(b, parameters);
+  for (size_t k = 0; k < ja.size(); ++k) {
+    const double scale = ja[k].cwiseAbs().maxCoeff();
+    if (scale < 1e-8) return ::testing::AssertionFailure() << "block " << k << " is zero";
+    const double off = (ja[k] - jb[k]).cwiseAbs().maxCoeff();
+    if (off > tolerance * scale)
+      return ::testing::AssertionFailure()
+             << "block " << k << ": max difference " << off << " against " << scale;
+  }
+  return ::testing::AssertionSuccess();
+}
+
+/// Levenberg–Marquardt with dense QR to tolerances far below round-off, one thread: for solves
+/// that must reach synthetic ground truth.
+inline ceres::Solver::Summary solveTightly(ceres::Problem& problem) {
+  ceres::Solver::Options options;
+  options.linear_solver_type = ceres::DENSE_QR;
+  options.max_num_iterations = 30;
+  options.function_tolerance = 1e-16;
+  options.gradient_tolerance = 1e-16;
+  options.parameter_tolerance = 1e-12;
+  options.num_threads = 1;
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+  return summary;
 }
 
 // Every analytic block is nonzero and matches central differences of re-run rollouts as a

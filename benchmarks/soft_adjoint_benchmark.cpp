@@ -27,11 +27,14 @@
 // avatars.
 //
 // Usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] [--tolerance T]
-//                               [--storage factors|snapshots]
+//                               [--storage factors|snapshots] [--memory-only]
 //   --tolerance: Newton's relative gradient tolerance of the rollouts (default: the rollout's
 //                default, 1e-8);
 //   --storage:   what the tape keeps (RolloutOptions::tape_storage; default Auto: snapshots for
 //                the FEM, factors for the ROM).
+//   --memory-only: one forward with the tape and one backward of a random state cotangent, then
+//                the peak resident memory against the memory before the rollout (for long
+//                horizons: e.g. `fem 1000 --memory-only`; no plain forward, no checks).
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -116,16 +119,19 @@ int main(int argc, char** argv) {
   if (argc < 2 || (std::strcmp(argv[1], "fem") != 0 && std::strcmp(argv[1], "rom") != 0)) {
     std::fprintf(stderr,
                  "usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] "
-                 "[--tolerance T]\n");
+                 "[--tolerance T] [--storage factors|snapshots] [--memory-only]\n");
     return 2;
   }
   const bool rom = std::strcmp(argv[1], "rom") == 0;
   int steps = rom ? 100 : 30, repeats = 3;
   double tolerance = -1.0;
+  bool memory_only = false;
   RolloutOptions rollout_options;
   int positional = 0;
   for (int i = 2; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--tolerance") == 0 && i + 1 < argc) {
+    if (std::strcmp(argv[i], "--memory-only") == 0) {
+      memory_only = true;
+    } else if (std::strcmp(argv[i], "--tolerance") == 0 && i + 1 < argc) {
       tolerance = std::atof(argv[++i]);
     } else if (std::strcmp(argv[i], "--storage") == 0 && i + 1 < argc) {
       const std::string storage = argv[++i];
@@ -157,7 +163,8 @@ int main(int argc, char** argv) {
       s.avatar->enableInertialCubature();
     }
     const double build = timeOf([&] { s.avatar->initVolumetricData(); });
-    s.walk = std::make_shared<Motion>(makeBuiltinMotion("walk", 20.0, 30.0));
+    s.walk = std::make_shared<Motion>(
+        makeBuiltinMotion("walk", std::max(20.0, steps / 30.0 + 1.0), 30.0));
     s.options.time_step = 1.0 / 30.0;
     {
       Simulable probe(s.avatar, s.walk, s.options);
@@ -176,6 +183,24 @@ int main(int argc, char** argv) {
         "%s: %d DoFs, avatar built/loaded in %.2f s; %d steps at h = 1/30 s, walk, "
         "ground; Newton tolerance %.1e (relative)\n",
         rom ? "ROM" : "FEM", n, build, steps, newton.gradient_tolerance);
+
+    if (memory_only) {
+      const double before = peakResidentMB();
+      auto sim = makeSimulable(s);
+      Rollout rollout(sim, rollout_options);
+      const double f = timeOf([&] { rollout.run(steps); });
+      const RowMatX cotangent = 1e-3 * RowMatX::Random(steps, n);
+      RolloutVariables g;
+      const double b = timeOf([&] { g = rollout.backward(cotangent); });
+      const double peak = peakResidentMB();
+      std::printf("forward with tape     %8.3f s (%.2f steps/s)\n", f, steps / f);
+      std::printf("backward              %8.3f s (%.2fx the forward with tape)\n", b, b / f);
+      std::printf("peak resident memory  %8.0f MB (%.0f MB before the rollout: %.2f MB per step)\n",
+                  peak, before, (peak - before) / steps);
+      std::printf("gradient: |shape| %.3g, |material| %.3g (finite: %s)\n", g.shape.norm(),
+                  g.material.norm(), g.shape.allFinite() && g.material.allFinite() ? "yes" : "NO");
+      return 0;
+    }
 
     // Forward without a tape: the scene, at the rollout's Newton settings.
     std::vector<double> plain;

@@ -23,10 +23,14 @@ std::string count(long n) { return std::to_string(n); }
 
 const char* parameterName(SequenceParameter p) {
   switch (p) {
-    case SequenceParameter::Shape: return "Shape";
-    case SequenceParameter::Stiffnesses: return "Stiffnesses";
-    case SequenceParameter::InitialVelocity: return "InitialVelocity";
-    case SequenceParameter::PoseTargets: return "PoseTargets";
+    case SequenceParameter::Shape:
+      return "Shape";
+    case SequenceParameter::Stiffnesses:
+      return "Stiffnesses";
+    case SequenceParameter::InitialVelocity:
+      return "InitialVelocity";
+    case SequenceParameter::PoseTargets:
+      return "PoseTargets";
     case SequenceParameter::Material:
       return "Material";
   }
@@ -69,14 +73,14 @@ SimulationSequenceCost::SimulationSequenceCost(std::shared_ptr<const SoftAvatar>
     throw InputError(who + ": avatar is not initialized (call initVolumetricData() first)");
   if (steps_ < 1) throw InputError(who + ": steps = " + count(steps_) + ", expected ≥ 1");
   if (!sim_options_.kinematic_bones.empty())
-    throw InputError(who + ": sim_options.kinematic_bones has " +
-                     count(sim_options_.kinematic_bones.size()) +
-                     " bones, expected none (the rollout adjoint does not support kinematic bones)");
+    throw InputError(
+        who + ": sim_options.kinematic_bones has " + count(sim_options_.kinematic_bones.size()) +
+        " bones, expected none (the rollout adjoint does not support kinematic bones)");
   const int K = avatar_->body().numBetas();
   num_betas_ = options_.num_betas == -1 ? K : options_.num_betas;
   if (num_betas_ < 1 || num_betas_ > K)
-    throw InputError(who + ": options.num_betas = " + count(options_.num_betas) +
-                     ", expected 1.." + count(K) + " (or −1 for all)");
+    throw InputError(who + ": options.num_betas = " + count(options_.num_betas) + ", expected 1.." +
+                     count(K) + " (or −1 for all)");
 
   // Observations.
   const SequenceObservations& obs = observations_;
@@ -84,13 +88,13 @@ SimulationSequenceCost::SimulationSequenceCost(std::shared_ptr<const SoftAvatar>
   if (N == 0) throw InputError(who + ": observations select no joint and no vertex");
   for (size_t k = 0; k < obs.joints.size(); ++k)
     if (obs.joints[k] < 0 || obs.joints[k] >= 24)
-      throw InputError(who + ": observations.joints[" + count(k) + "] = " +
-                       count(obs.joints[k]) + ", expected 0..23");
+      throw InputError(who + ": observations.joints[" + count(k) + "] = " + count(obs.joints[k]) +
+                       ", expected 0..23");
   const int V = avatar_->body().numVertices();
   for (size_t k = 0; k < obs.vertices.size(); ++k)
     if (obs.vertices[k] < 0 || obs.vertices[k] >= V)
-      throw InputError(who + ": observations.vertices[" + count(k) + "] = " +
-                       count(obs.vertices[k]) + ", expected 0.." + count(V - 1));
+      throw InputError(who + ": observations.vertices[" + count(k) +
+                       "] = " + count(obs.vertices[k]) + ", expected 0.." + count(V - 1));
   if (obs.observed.rows() != steps_ || obs.observed.cols() != 3 * N)
     throw InputError(who + ": observations.observed has shape " +
                      shapeString({long(obs.observed.rows()), long(obs.observed.cols())}) +
@@ -102,9 +106,8 @@ SimulationSequenceCost::SimulationSequenceCost(std::shared_ptr<const SoftAvatar>
     step_weights_ = VecX::Ones(steps_);
   } else {
     if (obs.step_weights.size() != steps_)
-      throw InputError(who + ": observations.step_weights has " +
-                       count(obs.step_weights.size()) + " values, expected one per step (" +
-                       count(steps_) + ") or none");
+      throw InputError(who + ": observations.step_weights has " + count(obs.step_weights.size()) +
+                       " values, expected one per step (" + count(steps_) + ") or none");
     for (int t = 0; t < steps_; ++t)
       if (!(std::isfinite(obs.step_weights[t]) && obs.step_weights[t] >= 0.0))
         throw InputError(who + ": observations.step_weights[" + count(t) +
@@ -117,11 +120,12 @@ SimulationSequenceCost::SimulationSequenceCost(std::shared_ptr<const SoftAvatar>
   for (size_t i = 0; i < blocks_.size(); ++i)
     for (size_t j = 0; j < i; ++j)
       if (blocks_[i] == blocks_[j])
-        throw InputError(who + ": blocks lists " + parameterName(blocks_[i]) +
-                         " twice (entries " + count(j) + " and " + count(i) + ")");
+        throw InputError(who + ": blocks lists " + parameterName(blocks_[i]) + " twice (entries " +
+                         count(j) + " and " + count(i) + ")");
   const bool tracking = mocap_ && sim_options_.track_mocap;
   if (blockIndex(SequenceParameter::PoseTargets) >= 0 && !tracking)
-    throw InputError(who + ": blocks lists PoseTargets, but the simulation does not track "
+    throw InputError(who +
+                     ": blocks lists PoseTargets, but the simulation does not track "
                      "(mocap is null or sim_options.track_mocap is false)");
 
   // The Material block's entries.
@@ -174,10 +178,14 @@ SimulationSequenceCost::SimulationSequenceCost(std::shared_ptr<const SoftAvatar>
 
 int SimulationSequenceCost::blockSize(SequenceParameter p) const {
   switch (p) {
-    case SequenceParameter::Shape: return num_betas_;
-    case SequenceParameter::Stiffnesses: return 4;
-    case SequenceParameter::InitialVelocity: return num_dofs_;
-    case SequenceParameter::PoseTargets: return 72 * steps_;
+    case SequenceParameter::Shape:
+      return num_betas_;
+    case SequenceParameter::Stiffnesses:
+      return 4;
+    case SequenceParameter::InitialVelocity:
+      return num_dofs_;
+    case SequenceParameter::PoseTargets:
+      return 72 * steps_;
     case SequenceParameter::Material:
       return int(material_index_.size());
   }
@@ -191,11 +199,13 @@ int SimulationSequenceCost::blockIndex(SequenceParameter p) const {
 
 VecX SimulationSequenceCost::defaultValue(SequenceParameter p) const {
   switch (p) {
-    case SequenceParameter::Shape: return avatar_->betas().head(num_betas_);
+    case SequenceParameter::Shape:
+      return avatar_->betas().head(num_betas_);
     case SequenceParameter::Stiffnesses:
       return Vec4(sim_options_.joint_stiffness, sim_options_.tracking_stiffness,
                   sim_options_.root_stiffness, sim_options_.contact.stiffness);
-    case SequenceParameter::InitialVelocity: return default_velocity_;
+    case SequenceParameter::InitialVelocity:
+      return default_velocity_;
     case SequenceParameter::PoseTargets:
       if (default_targets_.size() == 0)
         throw InputError(std::string(kWho) +
@@ -221,8 +231,8 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
   const std::string who = std::string(kWho) + "::evaluate";
   for (size_t i = 0; i < blocks_.size(); ++i)
     if (!allFinite(parameters[i], blockSize(blocks_[i])))
-      throw InputError(who + ": parameter block " + count(i) + " (" +
-                       parameterName(blocks_[i]) + ") contains NaN or Inf");
+      throw InputError(who + ": parameter block " + count(i) + " (" + parameterName(blocks_[i]) +
+                       ") contains NaN or Inf");
   const int T = steps_, n = num_dofs_, N = observations_.numPoints();
   const int nj = int(observations_.joints.size()), nv = int(observations_.vertices.size());
   const int K = avatar_->body().numBetas();
@@ -257,14 +267,16 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
   const int stiffness_block = blockIndex(SequenceParameter::Stiffnesses);
   const int velocity_block = blockIndex(SequenceParameter::InitialVelocity);
   const int targets_block = blockIndex(SequenceParameter::PoseTargets);
-  if (stiffness_block >= 0) inputs.stiffnesses = Eigen::Map<const VecX>(parameters[stiffness_block], 4);
+  if (stiffness_block >= 0)
+    inputs.stiffnesses = Eigen::Map<const VecX>(parameters[stiffness_block], 4);
   if (velocity_block >= 0)
     inputs.initial_velocity = Eigen::Map<const VecX>(parameters[velocity_block], n);
   if (targets_block >= 0)
     inputs.pose_targets = Eigen::Map<const RowMatX>(parameters[targets_block], T, 72);
   rollout.run(T, inputs);
   out.converged = true;
-  for (int t = 1; t <= T; ++t) out.converged = out.converged && rollout.tape().stepInfo(t).converged;
+  for (int t = 1; t <= T; ++t)
+    out.converged = out.converged && rollout.tape().stepInfo(t).converged;
   if (want_convergence && !out.converged) return;
 
   // Points per step and, for the Jacobians, their derivatives with respect to the state vector
@@ -334,7 +346,8 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
     MatX increments = pose_trans.lazyProduct(probe->getStateJacobian());  // 3nv × n
     for (int b = 0; b < n / 6; ++b) {
       const Vec3 r = states.row(t).segment<3>(6 * b + 3).transpose();
-      increments.middleCols<3>(6 * b + 3) = increments.middleCols<3>(6 * b + 3) * leftJacobianSO3(r);
+      increments.middleCols<3>(6 * b + 3) =
+          increments.middleCols<3>(6 * b + 3) * leftJacobianSO3(r);
     }
     C[t].bottomRows(3 * nv) = increments;
   }
@@ -353,9 +366,15 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
       for (int j = 0; wanted[i] && j < blockSize(blocks_[i]); ++j) {
         RolloutVariables d;
         switch (blocks_[i]) {
-          case SequenceParameter::Shape: d.shape = VecX::Unit(K, j); break;
-          case SequenceParameter::Stiffnesses: d.stiffnesses = VecX::Unit(4, j); break;
-          case SequenceParameter::InitialVelocity: d.initial_velocity = VecX::Unit(n, j); break;
+          case SequenceParameter::Shape:
+            d.shape = VecX::Unit(K, j);
+            break;
+          case SequenceParameter::Stiffnesses:
+            d.stiffnesses = VecX::Unit(4, j);
+            break;
+          case SequenceParameter::InitialVelocity:
+            d.initial_velocity = VecX::Unit(n, j);
+            break;
           case SequenceParameter::PoseTargets:
             d.pose_targets = RowMatX::Zero(T, 72);
             d.pose_targets(j / 72, j % 72) = 1.0;
@@ -411,9 +430,15 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
         if (!wanted[i]) continue;
         RowMatX& J = out.jacobians[i];
         switch (blocks_[i]) {
-          case SequenceParameter::Shape: J.row(row) = g.shape.head(num_betas_).transpose(); break;
-          case SequenceParameter::Stiffnesses: J.row(row) = g.stiffnesses.transpose(); break;
-          case SequenceParameter::InitialVelocity: J.row(row) = g.initial_velocity.transpose(); break;
+          case SequenceParameter::Shape:
+            J.row(row) = g.shape.head(num_betas_).transpose();
+            break;
+          case SequenceParameter::Stiffnesses:
+            J.row(row) = g.stiffnesses.transpose();
+            break;
+          case SequenceParameter::InitialVelocity:
+            J.row(row) = g.initial_velocity.transpose();
+            break;
           case SequenceParameter::PoseTargets:
             J.row(row) = Eigen::Map<const VecX>(g.pose_targets.data(), 72 * T).transpose();
             break;

@@ -114,8 +114,7 @@ class SimulationSequenceCost : public ceres::CostFunction {
   SimulationSequenceCost(std::shared_ptr<const SoftAvatar> avatar,
                          std::shared_ptr<const Motion> mocap, const SimulableOptions& sim_options,
                          std::vector<Collider> colliders, int steps,
-                         SequenceObservations observations,
-                         std::vector<SequenceParameter> blocks,
+                         SequenceObservations observations, std::vector<SequenceParameter> blocks,
                          const SimulationCostOptions& options = {});
 
   bool Evaluate(double const* const* parameters, double* residuals,
@@ -157,9 +156,9 @@ class SimulationSequenceCost : public ceres::CostFunction {
   VecX step_weights_;  // T
   std::vector<SequenceParameter> blocks_;
   SimulationCostOptions options_;
-  VecX default_velocity_;  // numDofs
-  RowMatX default_targets_;  // T × 72 (empty without tracking)
-  VecX base_material_;       // P: the base avatar's (soft models)
+  VecX default_velocity_;            // numDofs
+  RowMatX default_targets_;          // T × 72 (empty without tracking)
+  VecX base_material_;               // P: the base avatar's (soft models)
   std::vector<int> material_index_;  // the Material block's entries in parameters()
 };
 

@@ -37,7 +37,7 @@ namespace flsh {
 
 /// Diagnostics of one recorded step.
 struct TapeStepInfo {
-  bool converged = true;  ///< Newton met its tolerance
+  bool converged = true;       ///< Newton met its tolerance
   std::string newton_message;  ///< why Newton stopped (NewtonResult::message)
   int newton_iterations = 0;
   double gradient_norm = 0.0;  ///< ‖g‖∞ at the recorded state

@@ -256,6 +256,8 @@ void Rollout::run(int steps, const RolloutInputs& in) {
     TapeStepInfo info;
     info.converged = result.converged;
     info.newton_iterations = result.iterations;
+    info.line_search_steps = result.line_search_steps;
+    info.psd_fallbacks = result.psd_fallbacks;
     info.gradient_norm = result.gradient_norm;
     info.newton_message = result.message;
     tape_.recordStep(model_, info);

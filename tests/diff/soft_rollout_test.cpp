@@ -3,8 +3,9 @@
 // derivative of a whole-rollout loss (joint positions, the state vectors with their soft part,
 // and the simulated surface at every step, which moves with the pose blend held from the
 // previous state) against a central difference of re-run rollouts, with and without contact (a
-// ground plane the walk touches and a sphere); forward sensitivities against the reverse pass;
-// backward leaves the simulable bitwise unchanged.
+// ground plane the walk touches and a sphere), also across steps that needed line-search cuts and
+// PSD directions (the body thrown at the ground); forward sensitivities against the reverse
+// pass; backward leaves the simulable bitwise unchanged; unconverged steps are refused.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -68,6 +69,7 @@ struct Case {
   SoftModel model;
   bool contact;
   bool explicit_initial = false;  // the initial state and velocity as inputs
+  double drop = 0.0;              // m/s added downward to the root's initial velocity (an input)
 };
 
 std::shared_ptr<Simulable> makeSimulable(const Case& c,
@@ -95,6 +97,10 @@ RolloutInputs baseInputs(const Case& c) {
     const auto& start = c.model == SoftModel::Fem ? fem : rom;
     in.initial_state = start.first;
     in.initial_velocity = start.second;
+  }
+  if (c.drop != 0.0) {  // thrown at the ground: hard contact from the first step
+    if (in.initial_velocity.size() == 0) in.initial_velocity = sim.getVelocity();
+    in.initial_velocity[1] -= c.drop;
   }
   in.pose_targets.resize(kSteps, 72);
   in.root_targets.resize(kSteps, 3);
@@ -329,6 +335,46 @@ TEST_P(SoftRollout, ColliderOffsetsGradient) {
   RolloutVariables d;
   d.collider_offsets = randomVector(6, 0.01, 7);
   expectDirectionalDerivative({GetParam(), true}, d, 1e-4);
+}
+
+// Thrown at the ground at 8 m/s: Newton needs PSD directions (and, for the FEM, line-search cuts;
+// the ROM's reduced Newton took none even at 20 m/s) on the way to the converged states; the
+// gradient is that of the converged rollout all the same.
+TEST_P(SoftRollout, GradientAcrossLineSearchCutsAndPsdDirections) {
+  Case c{GetParam(), true};
+  c.drop = 8.0;
+  {
+    auto sim = makeSimulable(c);
+    Rollout rollout(sim, tightOptions());
+    rollout.run(kSteps, baseInputs(c));
+    int cuts = 0, psd = 0;
+    for (int t = 1; t <= kSteps; ++t) {
+      cuts += rollout.tape().stepInfo(t).line_search_steps;
+      psd += rollout.tape().stepInfo(t).psd_fallbacks;
+    }
+    ASSERT_GT(psd, 0);
+    if (c.model == SoftModel::Fem) ASSERT_GT(cuts, 0);
+  }
+  RolloutVariables d;
+  const VecX v = randomVector(kSteps * 72, 0.1, 24);
+  d.pose_targets = Eigen::Map<const RowMatX>(v.data(), kSteps, 72);
+  d.shape = randomVector(int(test::smallSoftAvatar(c.model)->betas().size()), 1.0, 25);
+  expectDirectionalDerivative(c, d, 1e-5);
+}
+
+// A step Newton leaves unconverged is reported, never differentiated.
+TEST_P(SoftRollout, UnconvergedStepsAreRefused) {
+  auto sim = makeSimulable({GetParam(), true});
+  RolloutOptions options = tightOptions();
+  for (NewtonOptions* newton : {&options.soft_tissue_newton, &options.reduced_newton})
+    newton->max_iterations = 1;
+  Rollout rollout(sim, options);
+  rollout.run(2);
+  ASSERT_FALSE(rollout.tape().stepInfo(1).converged);
+  const std::string message =
+      test::messageOf<Error>([&] { rollout.backward(RowMatX::Zero(2, sim->numDofs())); });
+  EXPECT_NE(message.find("step 1 did not converge"), std::string::npos) << message;
+  EXPECT_THROW(rollout.forwardSensitivities({RolloutVariables()}), Error);
 }
 
 // vᵀ(dL/dp) by the reverse pass equals Σ_t a_t · (dq_t/dp v) by forward sensitivities (the

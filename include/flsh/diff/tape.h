@@ -40,6 +40,9 @@ struct TapeStepInfo {
   bool converged = true;       ///< Newton met its tolerance
   std::string newton_message;  ///< why Newton stopped (NewtonResult::message)
   int newton_iterations = 0;
+  /// How Newton got there (NewtonResult): backtracking halvings and iterations whose direction
+  /// came from the PSD form. The derivatives are those of the converged state either way.
+  int line_search_steps = 0, psd_fallbacks = 0;
   double gradient_norm = 0.0;  ///< ‖g‖∞ at the recorded state
   /// How the exact Hessian was factored: "llt" (positive definite), "ldlt" (indefinite),
   /// "lu" (indefinite, LDLᵀ met a zero pivot) or "singular" (the sweeps refuse this step);

@@ -41,8 +41,9 @@ struct MemberDoc {
   const char* name;
   const char* doc;
 };
-constexpr const char* kPoseDoc = "(T, 72) tracking target rotation vectors per step, rad (SMPL layout: "
-                                 "bone b ≥ 1 relative to its parent, the root global)";
+constexpr const char* kPoseDoc =
+    "(T, 72) tracking target rotation vectors per step, rad (SMPL layout: "
+    "bone b ≥ 1 relative to its parent, the root global)";
 constexpr const char* kRootDoc =
     "(T, 3) SMPL trans per step, m (the root joint's target is J_0(β) + trans)";
 constexpr const char* kStateDoc =
@@ -56,8 +57,7 @@ constexpr const char* kColliderDoc = "(3·#colliders,) translation of each colli
 RolloutVariables make_variables(const py::object& shape, const py::object& rest_joints,
                                 const py::object& bone_inertia, const py::object& pose_targets,
                                 const py::object& root_targets, const py::object& stiffnesses,
-                                const py::object& collider_offsets,
-                                const py::object& initial_state,
+                                const py::object& collider_offsets, const py::object& initial_state,
                                 const py::object& initial_velocity) {
   RolloutVariables v;
   v.shape = optional_vector(shape, "shape", -1, "(K,)");
@@ -202,8 +202,7 @@ void bind_diff(py::module_& m) {
           "collider_offsets",
           [](const RolloutInputs& in) { return vector_or_none(in.collider_offsets); },
           [](RolloutInputs& in, const py::object& v) {
-            in.collider_offsets =
-                optional_vector(v, "collider_offsets", -1, "(3·#colliders,)");
+            in.collider_offsets = optional_vector(v, "collider_offsets", -1, "(3·#colliders,)");
           },
           kColliderDoc);
 
@@ -291,13 +290,17 @@ void bind_diff(py::module_& m) {
   py::class_<TapeStepInfo>(m, "TapeStepInfo", "Diagnostics of one recorded rollout step.")
       .def_readonly("converged", &TapeStepInfo::converged, "Newton met its tolerance")
       .def_readonly("newton_iterations", &TapeStepInfo::newton_iterations)
+      .def_readonly("line_search_steps", &TapeStepInfo::line_search_steps,
+                    "backtracking halvings Newton needed")
+      .def_readonly("psd_fallbacks", &TapeStepInfo::psd_fallbacks,
+                    "iterations whose direction came from the PSD form")
       .def_readonly("gradient_norm", &TapeStepInfo::gradient_norm, "‖g‖∞ at the recorded state")
       .def_readonly("factorization", &TapeStepInfo::factorization,
                     "how the exact Hessian was factored: 'llt', 'ldlt', 'lu' or 'singular'")
       .def("__repr__", [](const TapeStepInfo& i) {
         return "TapeStepInfo(converged=" + std::string(i.converged ? "True" : "False") +
-               ", newton_iterations=" + std::to_string(i.newton_iterations) +
-               ", factorization='" + i.factorization + "')";
+               ", newton_iterations=" + std::to_string(i.newton_iterations) + ", factorization='" +
+               i.factorization + "')";
       });
 
   py::class_<Rollout, std::shared_ptr<Rollout>> rollout(
@@ -381,8 +384,8 @@ void bind_diff(py::module_& m) {
       },
       py::arg("t"), "TapeStepInfo of step t (1..T): convergence and factorization.");
   rollout.def_property_readonly(
-      "simulable",
-      [](const Rollout& r) { return &r.simulable(); }, py::return_value_policy::reference_internal,
+      "simulable", [](const Rollout& r) { return &r.simulable(); },
+      py::return_value_policy::reference_internal,
       "The Simulable (left after the last step of the last run).");
 
   rollout.def(
@@ -395,8 +398,8 @@ void bind_diff(py::module_& m) {
   rollout.def(
       "vertices_cotangent",
       [](const Rollout& r, int t, const py::object& dL_dvertices) {
-        const MatX3 g = to_points(dL_dvertices, "dL_dvertices",
-                                  r.simulable().avatar().body().numVertices());
+        const MatX3 g =
+            to_points(dL_dvertices, "dL_dvertices", r.simulable().avatar().body().numVertices());
         Rollout::VerticesCotangent c;
         {
           py::gil_scoped_release release;

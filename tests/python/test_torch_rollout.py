@@ -210,6 +210,8 @@ def test_rollout_reverse_pass_matches_forward_sensitivities(grounded, rng):
     assert rollout.num_steps == STEPS and rollout.states.shape == (STEPS, 144)
     assert all(rollout.step_info(t).factorization in ("llt", "ldlt", "lu")
                for t in range(1, STEPS + 1))
+    assert all(rollout.step_info(t).line_search_steps >= 0
+               and rollout.step_info(t).psd_fallbacks >= 0 for t in range(1, STEPS + 1))
     dL_djoints = rng.normal(size=(STEPS, 24, 3))
     dL_dstates, direct = rollout.trajectory_cotangent(dL_djoints)
     grad = rollout.backward(dL_dstates, direct)

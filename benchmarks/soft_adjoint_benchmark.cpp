@@ -16,8 +16,10 @@
 //    exact Hessian for the reverse pass);
 //  - the loss's cotangent (Rollout::trajectoryCotangent: the surface's Jacobians per step);
 //  - backward: Rollout::backward (one back-substitution and the parameter and previous-state
-//    products per step), and the first run's alone (the first backward on an avatar builds
-//    what its simulables share: the ROM's table of every tet in the subspace);
+//    products per step), the same for every group but β and the material (what a caller who
+//    does not ask for them pays: Rollout::backward's `groups`), and the first run's alone (the
+//    first backward on an avatar builds what its simulables share: the ROM's table of every tet in
+//    the subspace);
 //  - the process's peak resident memory after the runs, and the tape's share of it per step;
 //  - central differences over the same parameters: 2 · #parameters forward passes without tape,
 //    extrapolated from the timed one (not run).
@@ -232,7 +234,7 @@ int main(int argc, char** argv) {
     }
     loss.vertex_targets += 0.02 * RowMatX::Random(steps, 3 * V);
 
-    std::vector<double> forward, backward, cotangents;
+    std::vector<double> forward, backward, backward_cheap, cotangents;
     RolloutVariables grad;
     double L = 0.0;
     int newton_iterations = 0;
@@ -243,6 +245,13 @@ int main(int argc, char** argv) {
       Rollout::TrajectoryCotangent c;
       cotangents.push_back(timeOf([&] { c = loss.cotangent(rollout); }));
       backward.push_back(timeOf([&] { grad = rollout.backward(c.states, c.direct); }));
+      std::vector<SimParameter> cheap;  // every group but β and the material
+      for (const SimParameterInfo& info : simParameters())
+        if (info.id != SimParameter::Shape && info.id != SimParameter::Material)
+          cheap.push_back(info.id);
+      RolloutVariables without;
+      backward_cheap.push_back(
+          timeOf([&] { without = rollout.backward(c.states, c.direct, cheap); }));
       L = loss.value(rollout);
       newton_iterations = 0;
       for (int t = 1; t <= steps; ++t)
@@ -263,6 +272,10 @@ int main(int argc, char** argv) {
         median(cotangents));
     std::printf("backward              %8.3f s (%.2fx the plain forward, %.2fx with the tape)\n", b,
                 b / f_plain, b / f_tape);
+    std::printf(
+        "backward without β and the material %.3f s (%.2fx the plain forward; "
+        "Rollout::backward's groups)\n",
+        median(backward_cheap), median(backward_cheap) / f_plain);
     std::printf(
         "backward, first run   %8.3f s (%.2fx the plain forward; the first on this avatar also "
         "builds what the avatar's simulables share, e.g. the ROM's table of every tet)\n",

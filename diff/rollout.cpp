@@ -2,6 +2,7 @@
 // one Simulable (skeleton, FEM or ROM), in the user's coordinates (see rollout.h).
 #include "flsh/diff/rollout.h"
 
+#include <algorithm>
 #include <string>
 
 #include "flsh/body/body_forward.h"
@@ -375,12 +376,18 @@ Rollout::TrajectoryCotangent Rollout::trajectoryCotangent(const RowMatX& dL_djoi
   return out;
 }
 
-RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVariables& direct) {
+RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVariables& direct,
+                                   const std::vector<SimParameter>& groups) {
   requireRun("backward");
   requireConverged("backward");
   const std::string who = "Rollout::backward";
   checkMatrix(dL_dstates, numSteps(), numDofs(), who, "dL_dstates (steps × numDofs)", false);
   checkVariables(direct, who + ": direct");
+  struct WantedGroups {  // all groups again on exit, also when the sweep throws
+    SimulableAdjointModel& model;
+    ~WantedGroups() { model.setWantedGroups({}); }
+  } wanted{model_};
+  model_.setWantedGroups(groups);
   const AdjointResult r = adjointSweep(model_, tape_, dL_dstates);
   RolloutVariables g;
   for (const SimParameterInfo& info : simParameters()) {
@@ -409,6 +416,14 @@ RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVaria
   g.rest_joints += initial_joints;
   if (g.shape.size()) chainShapeCotangent(simulable_->avatar(), initial_joints, VecX(), g.shape);
   accumulate(g, direct);
+  if (!groups.empty())
+    for (const SimParameterInfo& info : simParameters())
+      if (std::find(groups.begin(), groups.end(), info.id) == groups.end()) {
+        if (info.per_step)
+          *g.perStep(info.id) = RowMatX();
+        else
+          *g.global(info.id) = VecX();
+      }
   return g;
 }
 

@@ -35,7 +35,7 @@ void checkSize(const VecX& v, int n, const char* who, const char* what) {
 }  // namespace
 
 SimulableAdjointModel::SimulableAdjointModel(std::shared_ptr<Simulable> simulable)
-    : simulable_(std::move(simulable)) {
+    : simulable_(std::move(simulable)), wanted_(allGroups()) {
   if (!simulable_) throw InputError("SimulableAdjointModel: simulable is null");
   if (!simulable_->options().kinematic_bones.empty())
     throw Error(
@@ -96,10 +96,35 @@ VecX SimulableAdjointModel::previousStatesJVP(const VecX& dq_n, const VecX& dq_n
   return simulable_->getGradientPreviousStatesJVP(dq_n, dq_nm1);
 }
 
+void SimulableAdjointModel::setWantedGroups(const std::vector<SimParameter>& groups) {
+  if (groups.empty()) {
+    wanted_ = allGroups();
+    return;
+  }
+  std::vector<bool> on(size_t(kNumSimParameters), false);
+  for (SimParameter p : groups) on[size_t(p)] = true;
+  if (on[size_t(SimParameter::Shape)])
+    on[size_t(SimParameter::RestJoints)] = on[size_t(SimParameter::BoneInertia)] = true;
+  wanted_.clear();
+  for (SimParameter p : allGroups())
+    if (on[size_t(p)]) wanted_.push_back(p);
+}
+
 void SimulableAdjointModel::parameterVJPs(const VecX& lambda, std::vector<VecX>& out) const {
-  const bool material = simulable_->hasSoftTissue();
-  out = simulable_->getGradientParameterVJPs(lambda, allGroups(), /*shape_surface_only=*/true,
-                                             material ? &material_sum_ : nullptr);
+  const auto has = [&](SimParameter p) {
+    return std::find(wanted_.begin(), wanted_.end(), p) != wanted_.end();
+  };
+  const bool material =
+      simulable_->hasSoftTissue() && (has(SimParameter::Material) || has(SimParameter::Shape));
+  std::vector<VecX> got = simulable_->getGradientParameterVJPs(
+      lambda, wanted_, /*shape_surface_only=*/true, material ? &material_sum_ : nullptr);
+  if (wanted_.size() == size_t(kNumSimParameters)) {
+    out = std::move(got);
+  } else {  // the groups not wanted: zero products of their size
+    out.assign(size_t(kNumSimParameters), VecX());
+    for (SimParameter p : allGroups()) out[size_t(p)] = VecX::Zero(simulable_->parameterSize(p));
+    for (size_t k = 0; k < wanted_.size(); ++k) out[size_t(wanted_[k])] = std::move(got[k]);
+  }
   material_pending_ = material_pending_ || material;
 }
 

@@ -403,12 +403,16 @@ class RolloutFunction(torch.autograd.Function):
         grad_v = grad_vertices.detach().numpy() if ctx.want_vertices else None
         states_cotangent, direct = rollout.trajectory_cotangent(
             grad_joints.detach().numpy(), grad_v)
-        grad = rollout.backward(states_cotangent, direct)
+        needs = ctx.needs_input_grad
+        # Only the groups asked for (β and the material are the costly ones).
+        groups = [name for name, needed in zip(
+            ("shape", "material", "pose_targets", "root_targets", "stiffnesses"), needs[2:7])
+            if needed]
+        grad = rollout.backward(states_cotangent, direct, groups or ["stiffnesses"])
 
         def as_tensor(needed, values):
             return torch.from_numpy(values) if needed and values is not None else None
 
-        needs = ctx.needs_input_grad
         grad_betas = None
         if needs[2] and grad.shape is not None:  # (K,): the padded components are dropped
             grad_betas = torch.from_numpy(grad.shape[:ctx.num_betas].copy())

@@ -443,22 +443,42 @@ void bind_diff(py::module_& m) {
       "RolloutVariables), the arguments of backward.");
   rollout.def(
       "backward",
-      [](Rollout& r, const py::object& dL_dstates, const py::object& direct) {
+      [](Rollout& r, const py::object& dL_dstates, const py::object& direct,
+         const py::object& groups) {
         const RowMatX a = to_matrix(dL_dstates, "dL_dstates", r.numSteps(), r.numDofs());
         const RolloutVariables d =
             direct.is_none() ? RolloutVariables() : direct.cast<RolloutVariables>();
+        std::vector<SimParameter> wanted;
+        if (!groups.is_none())
+          for (const py::handle& name : groups) {
+            const std::string text = py::str(name);
+            bool found = false;
+            for (const SimParameterInfo& info : simParameters())
+              if (text == info.name) {
+                wanted.push_back(info.id);
+                found = true;
+              }
+            if (!found) {
+              std::string names;
+              for (const SimParameterInfo& info : simParameters())
+                names += std::string(names.empty() ? "" : ", ") + info.name;
+              throw py::value_error("Rollout.backward: groups: unknown group '" + text +
+                                    "', expected some of " + names);
+            }
+          }
         RolloutVariables grad;
         {
           py::gil_scoped_release release;
-          grad = r.backward(a, d);
+          grad = r.backward(a, d, wanted);
         }
         return grad;
       },
-      py::arg("dL_dstates"), py::arg("direct") = py::none(),
+      py::arg("dL_dstates"), py::arg("direct") = py::none(), py::arg("groups") = py::none(),
       "Reverse pass: RolloutVariables of dL/d(every input) for dL/d(states) (T, numDofs, "
       "getState layout) plus the loss's direct dependence on inputs (`direct`, e.g. from "
-      "vertices_cotangent), added to the result. Leaves the simulable bitwise unchanged; "
-      "RuntimeError before run().");
+      "vertices_cotangent), added to the result. groups: names of the registry groups to "
+      "compute (e.g. ['pose_targets', 'material']; None: all); the others come back None and "
+      "cost nothing. Leaves the simulable bitwise unchanged; RuntimeError before run().");
   rollout.def(
       "forward_sensitivities",
       [](Rollout& r, const std::vector<RolloutVariables>& directions) {

@@ -181,8 +181,9 @@ VecX Simulable::finishMaterialProducts(const MaterialProducts& sum, VecX* shape)
   const bool with_shape = shape && sum.shape;
   if (shape) *shape = VecX::Zero(parameterSize(SimParameter::Shape));
   VecX elastic = VecX::Zero(m.soft->materialChain().numValues());
-  m.soft->elasticTerm().addAccumulatedMaterialProducts(
-      sum.elements, sum.rest_outer, elastic, with_shape ? &m.soft->shapeChain() : nullptr, shape);
+  m.soft->elasticTerm().addAccumulatedMaterialProducts(sum.elements, sum.rest_outer, elastic,
+                                                       with_shape ? &m.soft->shapeChain() : nullptr,
+                                                       with_shape ? shape : nullptr);
   // β's share through the elastic materials' coefficient values (the masses' is in their own
   // Shape blocks).
   if (with_shape) shape->noalias() += m.soft->shapeChain().valuesJacobian().transpose() * elastic;

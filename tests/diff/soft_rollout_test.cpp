@@ -362,6 +362,37 @@ TEST_P(SoftRollout, GradientAcrossLineSearchCutsAndPsdDirections) {
   expectDirectionalDerivative(c, d, 1e-5);
 }
 
+// backward(…, groups) returns the groups asked for, as the full backward has them, and no others.
+TEST_P(SoftRollout, BackwardOfSomeGroupsIsTheirShareOfAll) {
+  const Case c{GetParam(), true};
+  auto sim = makeSimulable(c);
+  Rollout rollout(sim, tightOptions());
+  rollout.run(kSteps, baseInputs(c));
+  const VecX values = randomVector(kSteps * sim->numDofs(), 1.0, 31);
+  const RowMatX cotangent = Eigen::Map<const RowMatX>(values.data(), kSteps, sim->numDofs());
+  const RolloutVariables all = rollout.backward(cotangent);
+  const auto close = [](const auto& a, const auto& b) {
+    return a.size() > 0 && a.size() == b.size() &&
+           (a - b).cwiseAbs().maxCoeff() <= 1e-12 * b.cwiseAbs().maxCoeff();
+  };
+  const RolloutVariables some =
+      rollout.backward(cotangent, {}, {SimParameter::PoseTargets, SimParameter::Material});
+  ASSERT_GT(all.material.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_TRUE(close(some.pose_targets, all.pose_targets));
+  EXPECT_TRUE(close(some.material, all.material));
+  EXPECT_TRUE(close(some.initial_state, all.initial_state));
+  EXPECT_EQ(some.shape.size(), 0);
+  EXPECT_EQ(some.stiffnesses.size(), 0);
+  EXPECT_EQ(some.root_targets.size(), 0);
+  const RolloutVariables shape = rollout.backward(cotangent, {}, {SimParameter::Shape});
+  ASSERT_GT(all.shape.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_TRUE(close(shape.shape, all.shape));
+  EXPECT_EQ(shape.material.size(), 0);
+  EXPECT_EQ(shape.rest_joints.size(), 0);
+  // All groups again afterwards.
+  EXPECT_TRUE(close(rollout.backward(cotangent).stiffnesses, all.stiffnesses));
+}
+
 // A step Newton leaves unconverged is reported, never differentiated.
 TEST_P(SoftRollout, UnconvergedStepsAreRefused) {
   auto sim = makeSimulable({GetParam(), true});

@@ -224,6 +224,13 @@ def test_rollout_reverse_pass_matches_forward_sensitivities(grounded, rng):
     assert grad.dot(direction) == pytest.approx(float((dL_dstates * dq).sum()), rel=1e-8)
     # The joints cotangent of one step is the t_b entries of the state cotangent.
     np.testing.assert_array_equal(rollout.joints_cotangent(dL_djoints[0]), dL_dstates[0])
+    # Only the groups asked for: the same values, the others None.
+    some = rollout.backward(dL_dstates, direct, groups=["pose_targets", "shape"])
+    np.testing.assert_allclose(some.pose_targets, grad.pose_targets, rtol=1e-12, atol=1e-300)
+    np.testing.assert_allclose(some.shape, grad.shape, rtol=1e-12, atol=1e-300)
+    assert some.stiffnesses is None and some.root_targets is None
+    with pytest.raises(ValueError, match="unknown group 'betas'"):
+        rollout.backward(dL_dstates, direct, groups=["betas"])
 
 
 def test_rollout_binding_errors(grounded):

@@ -172,7 +172,11 @@ class Rollout {
   /// loss's direct dependence on inputs (`direct`, e.g. VerticesCotangent::direct), added to
   /// the result. The simulable is left bitwise as it was. Throws InputError on wrong shapes /
   /// NaN, Error before run() or when a step did not converge (TapeStepInfo::converged).
-  RolloutVariables backward(const RowMatX& dL_dstates, const RolloutVariables& direct = {});
+  /// `groups`: the registry groups to compute (empty: all); the others come back empty and
+  /// cost nothing (β and the soft models' Material are the expensive ones). The initial state
+  /// and velocity are always computed.
+  RolloutVariables backward(const RowMatX& dL_dstates, const RolloutVariables& direct = {},
+                            const std::vector<SimParameter>& groups = {});
   /// Forward sensitivities: for each direction v, the T × numDofs changes of the state vectors
   /// dq_t/dp · v (one back-substitution per direction per step). `initial_states` (optional)
   /// receives each direction's change of q_0 (numDofs; e.g. for the soft surface of step 1,

@@ -25,6 +25,9 @@ class SimulableAdjointModel final : public AdjointModel {
   explicit SimulableAdjointModel(std::shared_ptr<Simulable> simulable);
 
   Simulable& simulable() const { return *simulable_; }
+  /// The groups parameterVJPs computes (empty: all); the others' products are zero. Shape
+  /// brings RestJoints and BoneInertia with it (β's chain runs through them).
+  void setWantedGroups(const std::vector<SimParameter>& groups);
 
   int numDofs() const override;
   std::vector<ParameterGroupInfo> parameterGroups() const override;
@@ -65,6 +68,7 @@ class SimulableAdjointModel final : public AdjointModel {
   // by finishParameterVJPs.
   mutable Simulable::MaterialProducts material_sum_;
   mutable bool material_pending_ = false;
+  std::vector<SimParameter> wanted_;  // SimParameter order; all by default
 };
 
 }  // namespace flsh

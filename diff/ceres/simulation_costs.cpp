@@ -408,7 +408,29 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
     return;
   }
 
-  // Adjoint: one reverse sweep per residual row of a weighted step.
+  // Adjoint: one reverse sweep per residual row of a weighted step, for the blocks' groups only
+  // (the initial velocity's cotangent comes with every sweep).
+  std::vector<SimParameter> groups;
+  for (size_t i = 0; i < blocks_.size(); ++i) {
+    if (!wanted[i]) continue;
+    switch (blocks_[i]) {
+      case SequenceParameter::Shape:
+        groups.push_back(SimParameter::Shape);
+        break;
+      case SequenceParameter::Stiffnesses:
+        groups.push_back(SimParameter::Stiffnesses);
+        break;
+      case SequenceParameter::PoseTargets:
+        groups.push_back(SimParameter::PoseTargets);
+        break;
+      case SequenceParameter::Material:
+        groups.push_back(SimParameter::Material);
+        break;
+      case SequenceParameter::InitialVelocity:
+        break;
+    }
+  }
+  if (groups.empty()) groups.push_back(SimParameter::Stiffnesses);  // empty would mean all
   RowMatX cotangent = RowMatX::Zero(T, n);
   for (int t = 0; t < T; ++t) {
     if (step_weights_[t] == 0.0) continue;  // rows that Evaluate zeroes anyway
@@ -422,7 +444,7 @@ void SimulationSequenceCost::evaluate(double const* const* parameters, Evaluatio
         else
           direct.initial_state = P[t].row(r).transpose();
       }
-      const RolloutVariables g = rollout.backward(cotangent, direct);
+      const RolloutVariables g = rollout.backward(cotangent, direct, groups);
       cotangent.row(t).setZero();
       if (t > 0) cotangent.row(t - 1).setZero();
       const int row = t * 3 * N + r;

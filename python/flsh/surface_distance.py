@@ -51,7 +51,7 @@ def point_to_surface(points: torch.Tensor, vertices: torch.Tensor, faces) -> tor
         p, x = pts[s], verts[s]
         face, weights, _ = _flsh.closest_surface_points(x.detach().numpy(), faces_np,
                                                         p.detach().numpy())
-        face = torch.from_numpy(face)
+        face = torch.from_numpy(face).long()
         weights = torch.from_numpy(weights)
         q = (weights[..., None] * x[faces[face]]).sum(-2)  # differentiable in x
         out.append(((p - q) ** 2).sum(-1))

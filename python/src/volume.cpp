@@ -95,13 +95,12 @@ void bind_volume(py::module_& m) {
           py::gil_scoped_release release;
           hits = closestSurfacePoints(vertices, faces, points);
         }
-        py::array_t<int64_t> face(hits.faces.size());
-        for (Eigen::Index i = 0; i < hits.faces.size(); ++i) face.mutable_at(i) = hits.faces[i];
-        return py::make_tuple(face, to_numpy(hits.barycentric), to_numpy(hits.distances));
+        return py::make_tuple(indices_numpy(hits.faces), to_numpy(hits.barycentric),
+                              to_numpy(hits.distances));
       },
       py::arg("vertices"), py::arg("faces"), py::arg("points"),
       "The closest point of a triangle surface (vertices (V, 3), faces (F, 3)) to each query "
-      "point (points (P, 3)), exact (bounding-box tree): returns (face (P,) int64, barycentric "
+      "point (points (P, 3)), exact (bounding-box tree): returns (face (P,) int32, barycentric "
       "(P, 3) weights on the face's vertices, distance (P,) m). ValueError on a bad shape, index "
       "or value.");
 

@@ -271,6 +271,20 @@ Vec6 voigtLinearStrain(const Mat3& H) {
   return e;
 }
 
+const Eigen::Matrix<double, 6, 9>& voigtLinearStrainMatrix() {
+  static const Eigen::Matrix<double, 6, 9> L = [] {
+    Eigen::Matrix<double, 6, 9> m;
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) {
+        Mat3 unit = Mat3::Zero();
+        unit(i, j) = 1.0;
+        m.col(i + 3 * j) = voigtLinearStrain(unit);
+      }
+    return m;
+  }();
+  return L;
+}
+
 namespace {
 
 /// (d1 − ratio) / x = h′(x) for h(x) = φ(x)/x, by its series near 0 (γ = 0 included).
@@ -412,13 +426,7 @@ void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_wor
 // likewise with Tᵀ.
 void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_world, const Mat9& T,
                                    double scale, Mat34& X_bar) {
-  static const Eigen::Matrix<double, 6, 9> L = [] {
-    Eigen::Matrix<double, 6, 9> m = Eigen::Matrix<double, 6, 9>::Zero();
-    // vec index i + 3j of G(i, j); rows 11, 22, 33, 23, 13, 12.
-    m(0, 0) = m(1, 4) = m(2, 8) = 1.0;
-    m(3, 7) = m(3, 5) = m(4, 6) = m(4, 2) = m(5, 3) = m(5, 1) = 1.0;
-    return m;
-  }();
+  const Eigen::Matrix<double, 6, 9>& L = voigtLinearStrainMatrix();
   const Mat9 Q = L.transpose() * C_world * L;
   const Mat9 QT = Q * T, QTt = Q * T.transpose();
   Mat3 A = Mat3::Zero();

@@ -23,6 +23,7 @@
 #include "flsh/body/synthetic_body.h"
 #include "flsh/ceres/smpl_costs.h"
 #include "flsh/core/rotation.h"
+#include "support/ceres_cost_checks.h"
 #include "support/test_support.h"
 
 namespace flsh::ceres_costs {
@@ -61,17 +62,9 @@ double medianRotationError(const PosedBody& estimate, const PosedBody& truth) {
   return angles[angles.size() / 2];
 }
 
+// 200 iterations to 1e-12: the keypoint fits start far from the truth.
 ceres::Solver::Summary solve(ceres::Problem& problem) {
-  ceres::Solver::Options options;
-  options.linear_solver_type = ceres::DENSE_QR;
-  options.max_num_iterations = 200;
-  options.function_tolerance = 1e-12;
-  options.gradient_tolerance = 1e-12;
-  options.parameter_tolerance = 1e-12;
-  options.num_threads = 1;
-  ceres::Solver::Summary summary;
-  ceres::Solve(options, &problem, &summary);
-  return summary;
+  return test::solveTightly(problem, 200, 1e-12);
 }
 
 std::shared_ptr<const BodyModel> body() {

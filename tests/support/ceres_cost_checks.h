@@ -56,14 +56,15 @@ inline ::testing::AssertionResult sameJacobians(const ceres::CostFunction& a,
   return ::testing::AssertionSuccess();
 }
 
-/// Levenberg–Marquardt with dense QR to tolerances far below round-off, one thread: for solves
-/// that must reach synthetic ground truth.
-inline ceres::Solver::Summary solveTightly(ceres::Problem& problem) {
+/// Levenberg–Marquardt with dense QR, one thread, to tight tolerances (function and gradient:
+/// `tolerance`; parameters 1e-12): for solves that must reach synthetic ground truth.
+inline ceres::Solver::Summary solveTightly(ceres::Problem& problem, int max_iterations = 30,
+                                           double tolerance = 1e-16) {
   ceres::Solver::Options options;
   options.linear_solver_type = ceres::DENSE_QR;
-  options.max_num_iterations = 30;
-  options.function_tolerance = 1e-16;
-  options.gradient_tolerance = 1e-16;
+  options.max_num_iterations = max_iterations;
+  options.function_tolerance = tolerance;
+  options.gradient_tolerance = tolerance;
   options.parameter_tolerance = 1e-12;
   options.num_threads = 1;
   ceres::Solver::Summary summary;

@@ -115,6 +115,9 @@ void addStressMaterialGradient(const Mat3& F, const FemMaterialPoint& material, 
                                double scale, FemMaterialDerivative& out);
 /// Voigt strain (engineering shear) of sym(H): the linear strain of a displacement gradient H.
 Vec6 voigtLinearStrain(const Mat3& H);
+/// The same as a matrix on vec(H) (column-major, entry i + 3j = H(i, j)):
+/// voigtLinearStrain(H) = L vec(H), L 6 × 9.
+const Eigen::Matrix<double, 6, 9>& voigtLinearStrainMatrix();
 
 /// Rest geometry of a linear tet.
 struct TetElementRest {

@@ -312,17 +312,11 @@ void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values
   const int threads = T > 1000 ? std::max(1, omp_get_max_threads()) : 1;
   std::vector<VecX> partial(size_t(threads), VecX::Zero(values_bar.size()));
   std::vector<VecX> betas(size_t(threads), VecX::Zero(shape ? shape->numBetas() : 0));
-  // S: vec(∇u) (column-major, entry i + 3j = ∂u_i/∂x_j) ↦ Voigt strain, so that a tet's
-  // K_t = vol Σ_{s,r} B_sᵀ C B_r with B_s = S (I₃ ⊗ g_s) gives λᵀ dK_t z summed over the steps
-  // as vol ⟨dC, S T Sᵀ⟩ with T = (G̃ ⊗ I₃) W_t (G̃ᵀ ⊗ I₃) (9 × 9), the same T the rest shape's
+  // S: vec(∇u) ↦ Voigt strain (voigtLinearStrainMatrix), so that a tet's K_t = vol Σ_{s,r}
+  // B_sᵀ C B_r with B_s = S (I₃ ⊗ g_s) gives λᵀ dK_t z summed over the steps as
+  // vol ⟨dC, S T Sᵀ⟩ with T = (G̃ ⊗ I₃) W_t (G̃ᵀ ⊗ I₃) (9 × 9), the same T the rest shape's
   // linear form takes.
-  Eigen::Matrix<double, 6, 9> S;
-  for (int j = 0; j < 3; ++j)
-    for (int i = 0; i < 3; ++i) {
-      Mat3 unit = Mat3::Zero();
-      unit(i, j) = 1.0;
-      S.col(i + 3 * j) = voigtLinearStrain(unit);
-    }
+  const Eigen::Matrix<double, 6, 9>& S = voigtLinearStrainMatrix();
 #pragma omp parallel num_threads(threads)
   {
     const int k = omp_get_thread_num();

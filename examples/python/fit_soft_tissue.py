@@ -28,6 +28,7 @@ import torch
 
 import flsh
 import flsh.torch
+from flsh.fitting import minimize
 
 NOISE = 0.002  # m
 FPS = 30.0
@@ -93,23 +94,6 @@ def scan_points(vertices, faces, generator):
         w = torch.stack([1 - s, s * (1 - r[:, 1]), s * r[:, 1]], -1)
         frames.append((w[:, :, None] * tri[f]).sum(-2))
     return torch.stack(frames)
-
-
-def minimize(objective, x0, iterations, tolerance_grad=1e-9):
-    """L-BFGS with a strong Wolfe line search from x0 (at most `iterations` iterations): the
-    minimizer found and the iterations taken."""
-    x = x0.clone().requires_grad_(True)
-    optimizer = torch.optim.LBFGS([x], lr=1.0, max_iter=iterations, tolerance_grad=tolerance_grad,
-                                  tolerance_change=1e-12, line_search_fn="strong_wolfe")
-
-    def closure():
-        optimizer.zero_grad()
-        value = objective(x)
-        value.backward()
-        return value
-
-    optimizer.step(closure)
-    return x.detach(), optimizer.state[optimizer._params[0]]["n_iter"]
 
 
 def fit(vertices=800, model="rom", steps=24, loss="vertices", subjects=1, iterations=30,

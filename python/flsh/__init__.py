@@ -87,6 +87,7 @@ from ._flsh import (  # noqa: F401  (re-exports)
     write_ply,
     write_png,
     load_scene,
+    load_scene_avatars,
     run_scene,
     fit_betas,
     lowest_point_height,

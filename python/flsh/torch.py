@@ -203,6 +203,65 @@ class RolloutSimulator:
                  colliders=(), newton=None, betas=None, density: float = 1010.0,
                  voxel_size: float = 0.01, resolution: float = 1.0, cache_dir=None,
                  avatar_settings: dict | None = None):
+        if avatar_settings is not None and not isinstance(avatar_settings, dict):
+            raise TypeError(f"avatar_settings: expected a dict of SoftAvatar keyword arguments "
+                            f"or None, got {type(avatar_settings).__name__}")
+        self._configure(body, mocap, steps, model, options, colliders, newton)
+        self.density = float(density)
+        self.voxel_size = float(voxel_size)
+        self.resolution = float(resolution)
+        self.cache_dir = cache_dir
+        self.avatar_settings = dict(avatar_settings or {})
+        self.scene_source = None  # from_scene's file and avatar
+        self.avatar_name = None
+        default_betas = np.zeros(body.num_betas) if betas is None else np.asarray(betas, float)
+        self._set_default_avatar(self._make_avatar(default_betas))
+
+    @classmethod
+    def from_scene(cls, path=None, *, avatar=0, steps: int | None = None, newton=None,
+                   duration: float = 0.0, time_step: float = 0.0, verbose: bool = False):
+        """The simulator of one avatar of a scene file (None: the built-in default scene), built
+        as `flsh simulate` builds it: its body, motion (placed by offset and yaw), shape,
+        simulation model and settings (resolution, materials, ROM basis and cubatures, the
+        avatar cache), SimulableOptions (time step included) and the scene's colliders with its
+        "ground". avatar: index or name in the file's "avatars" (the others are not simulated,
+        and avatar–avatar contact is off). steps: T (None: duration / time_step). newton: as in
+        the constructor (None: tight). duration, time_step: overrides (0 = the file's).
+        ValueError / OSError on a bad file, an unknown avatar or steps < 1."""
+        scene = _flsh.load_scene_avatars(path, duration=duration, time_step=time_step,
+                                         verbose=verbose)
+        parts = scene["avatars"]
+        names = [p["name"] for p in parts]
+        if isinstance(avatar, str):
+            if avatar not in names:
+                raise ValueError(f"avatar: no avatar named {avatar!r} in {scene['spec'].source} "
+                                 f"(avatars: {', '.join(names)})")
+            part = parts[names.index(avatar)]
+        elif isinstance(avatar, (int, np.integer)) and not isinstance(avatar, bool):
+            if not 0 <= avatar < len(parts):
+                raise ValueError(f"avatar: expected an index in [0, {len(parts)}) into "
+                                 f"{scene['spec'].source}'s avatars, got {avatar}")
+            part = parts[avatar]
+        else:
+            raise TypeError(f"avatar: expected an index or a name, got {type(avatar).__name__}")
+        if steps is None:
+            steps = scene["steps"]
+        self = cls.__new__(cls)
+        self._configure(part["body"], part["motion"], steps, part["simulation"],
+                        part["simulable"].options, scene["colliders"], newton)
+        spec = next(a for a in scene["spec"].avatars if a.name == part["name"])
+        self.density = None  # the avatar's own settings (the scene file's)
+        self.voxel_size = None
+        self.resolution = float(spec.resolution)
+        self.cache_dir = None
+        self.avatar_settings = {}
+        self.scene_source = scene["spec"].source
+        self.avatar_name = part["name"]
+        self._set_default_avatar(part["avatar"])
+        return self
+
+    def _configure(self, body, mocap, steps, model, options, colliders, newton):
+        """Checks and keeps the settings every rollout shares."""
         if not isinstance(body, _flsh.BodyModel):
             raise TypeError(f"body: expected a flsh.BodyModel, got {type(body).__name__}")
         if mocap is not None and not isinstance(mocap, _flsh.Motion):
@@ -211,9 +270,6 @@ class RolloutSimulator:
             raise ValueError(f"steps: expected an integer ≥ 1, got {steps!r}")
         if model not in self.MODELS:
             raise ValueError(f"model: expected one of {', '.join(self.MODELS)}, got {model!r}")
-        if avatar_settings is not None and not isinstance(avatar_settings, dict):
-            raise TypeError(f"avatar_settings: expected a dict of SoftAvatar keyword arguments "
-                            f"or None, got {type(avatar_settings).__name__}")
         if options is not None and not isinstance(options, _flsh.SimulableOptions):
             raise TypeError(f"options: expected a flsh.SimulableOptions or None, got "
                             f"{type(options).__name__}")
@@ -245,14 +301,10 @@ class RolloutSimulator:
             setattr(rollout_options, name, newton)
         self.rollout_options = rollout_options
         self.model = model
-        self.density = float(density)
-        self.voxel_size = float(voxel_size)
-        self.resolution = float(resolution)
-        self.cache_dir = cache_dir
-        self.avatar_settings = dict(avatar_settings or {})
-        default_betas = np.zeros(body.num_betas) if betas is None else np.asarray(betas, float)
-        self._default_avatar = self._make_avatar(default_betas)
-        self.num_dofs = _flsh.Simulable(self._default_avatar, self.mocap, self.options).num_dofs
+
+    def _set_default_avatar(self, avatar):
+        self._default_avatar = avatar
+        self.num_dofs = _flsh.Simulable(avatar, self.mocap, self.options).num_dofs
 
     @property
     def num_betas(self) -> int:

@@ -104,26 +104,28 @@ void bind_io(py::module_& m) {
     o.output_dir = out;
     return o;
   };
-  m.def("load_scene_file",
-        [overrides_of](const std::filesystem::path& path, double duration, double time_step,
-                       const std::string& output_dir) {
-          const std::string p = path_string(path);
-          require_existing_file(p, "load_scene_file");
-          const SceneOverrides o = overrides_of(duration, time_step, output_dir);
-          py::gil_scoped_release release;
-          return loadSceneFile(p, o);
-        },
-        py::arg("path"), py::kw_only(), py::arg("duration") = 0.0, py::arg("time_step") = 0.0,
-        py::arg("output_dir") = "",
-        "Parses and validates a scene file (JSON) as a SceneSpec. Overrides (0 / '' = keep): "
-        "duration s, time_step s, output_dir. FileNotFoundError / OSError / ValueError.");
-  m.def("default_scene",
-        [overrides_of](double duration, double time_step, const std::string& output_dir) {
-          return defaultScene(overrides_of(duration, time_step, output_dir));
-        },
-        py::kw_only(), py::arg("duration") = 0.0, py::arg("time_step") = 0.0,
-        py::arg("output_dir") = "",
-        "The built-in default SceneSpec (a synthetic avatar walking, a ball thrown at it).");
+  m.def(
+      "load_scene_file",
+      [overrides_of](const std::filesystem::path& path, double duration, double time_step,
+                     const std::string& output_dir) {
+        const std::string p = path_string(path);
+        require_existing_file(p, "load_scene_file");
+        const SceneOverrides o = overrides_of(duration, time_step, output_dir);
+        py::gil_scoped_release release;
+        return loadSceneFile(p, o);
+      },
+      py::arg("path"), py::kw_only(), py::arg("duration") = 0.0, py::arg("time_step") = 0.0,
+      py::arg("output_dir") = "",
+      "Parses and validates a scene file (JSON) as a SceneSpec. Overrides (0 / '' = keep): "
+      "duration s, time_step s, output_dir. FileNotFoundError / OSError / ValueError.");
+  m.def(
+      "default_scene",
+      [overrides_of](double duration, double time_step, const std::string& output_dir) {
+        return defaultScene(overrides_of(duration, time_step, output_dir));
+      },
+      py::kw_only(), py::arg("duration") = 0.0, py::arg("time_step") = 0.0,
+      py::arg("output_dir") = "",
+      "The built-in default SceneSpec (a synthetic avatar walking, a ball thrown at it).");
 
   // A scene file (or None: the built-in default scene) parsed with its overrides.
   const auto scene_spec = [overrides_of](const py::object& path, double duration, double time_step,
@@ -155,6 +157,48 @@ void bind_io(py::module_& m) {
       "its avatars (Scene.simulables, in the file's order), colliders and \"ground\", solver "
       "settings; step it with Scene.step(). Progress and warnings go to stderr (verbose). "
       "Overrides (0 = keep): duration s, time_step s.");
+  m.def(
+      "load_scene_avatars",
+      [scene_spec, stderr_log](const py::object& path, double duration, double time_step,
+                               bool verbose) {
+        const SceneSpec spec = scene_spec(path, duration, time_step, "", "load_scene_avatars");
+        std::vector<io::SceneAvatar> avatars;
+        std::vector<Collider> colliders;
+        {
+          py::gil_scoped_release release;
+          const io::SceneBuildLog log =
+              verbose ? io::SceneBuildLog(stderr_log("load_scene_avatars: ")) : io::SceneBuildLog();
+          avatars = io::buildSceneAvatars(spec, log);
+          colliders = io::sceneColliders(spec, avatars, log);
+        }
+        py::list parts;
+        for (const io::SceneAvatar& a : avatars) {
+          py::dict part;
+          part["name"] = a.spec->name;
+          part["simulation"] = a.spec->simulation;
+          // Shared with the simulable: read only (Python's holders are non-const).
+          part["body"] = std::const_pointer_cast<BodyModel>(a.body);
+          part["avatar"] = a.avatar;
+          part["motion"] =
+              a.motion ? py::cast(std::const_pointer_cast<Motion>(a.motion)) : py::none();
+          part["simulable"] = a.simulable;
+          parts.append(part);
+        }
+        py::dict scene;
+        scene["spec"] = spec;
+        scene["avatars"] = parts;
+        scene["colliders"] = colliders;
+        scene["steps"] = io::sceneSteps(spec);
+        return scene;
+      },
+      py::arg("path") = py::none(), py::kw_only(), py::arg("duration") = 0.0,
+      py::arg("time_step") = 0.0, py::arg("verbose") = false,
+      "The parts of a scene file (None: the built-in default scene) built as load_scene builds "
+      "them, without a Scene: a dict with 'spec' (SceneSpec), 'avatars' (per avatar a dict "
+      "name, simulation, body, avatar (SoftAvatar, volumetric data ready), motion (Motion or "
+      "None), simulable (not initialized)), 'colliders' (the scene's and its \"ground\") and "
+      "'steps' (duration / time_step). What flsh.torch.RolloutSimulator.from_scene reads; the "
+      "objects are shared: treat them as read only.");
   m.def(
       "run_scene",
       [scene_spec, stderr_log](const py::object& path, const std::string& out_dir, double duration,

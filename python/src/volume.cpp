@@ -2,6 +2,7 @@
 // FLSH paper's camelCase settings as aliases of the snake_case names, the volumetric body of the
 // soft-tissue models and the reduced data (handles, basis, cubatures) of the ROM.
 #include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
 
 #include <cmath>
 #include <cstdint>
@@ -398,6 +399,15 @@ void bind_volume(py::module_& m) {
           [](const SoftAvatar& a) { return a.volumetricData().material_model.parameterNames(); },
           "Names of material_parameters' entries: '<key>.log_value' and '<key>.log_slopes[k]' "
           "with <key> the material file's key path (e.g. 'layers.soft_tissue.E1').")
+      .def(
+          "save_material_file",
+          [](const SoftAvatar& a, const std::filesystem::path& path) {
+            a.volumetricData().material_model.save(path_string(path));
+          },
+          py::arg("path"),
+          "Writes this soft avatar's material coefficients (material_parameters) as a material "
+          "file (docs/materials.md), atomically: a fitted material (with_material) a scene can "
+          "name in \"materials\". OSError on failure; RuntimeError for the skeleton model.")
       .def(
           "with_material",
           [](const SoftAvatar& a, const py::object& parameters) {

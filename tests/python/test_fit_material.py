@@ -38,9 +38,9 @@ def material_of(sim, keys):
 
 
 @pytest.fixture(scope="module")
-def fit(example):
-    """L-BFGS (the example's) from x0: the minimizer."""
-    minimize = example("fit_soft_tissue").minimize
+def fit():
+    """L-BFGS (flsh.fitting's, the example's) from x0: the minimizer."""
+    from flsh.fitting import minimize
     return lambda loss, x0, iterations=25: minimize(loss, x0, iterations, 1e-10)[0]
 
 

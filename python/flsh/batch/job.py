@@ -95,9 +95,14 @@ def run_statistics(report, avatar):
 
 
 def run_job(job, out_dir):
-    """Runs `job` into OUT_DIR/jobs/JOB_ID and returns its manifest record (a dict)."""
+    """Runs `job` into OUT_DIR/jobs/JOB_ID and returns its manifest record (a dict); a
+    fitting job through fit_job.run_fit_job."""
+    if job.kind == "fit":
+        from .fit_job import run_fit_job  # noqa: PLC0415 (fit_job imports this module)
+        return run_fit_job(job, out_dir)
     started = time.perf_counter()
     record = base_record(job)
+    record["kind"] = "simulate"
     jobs_dir = Path(out_dir) / "jobs"
     jobs_dir.mkdir(parents=True, exist_ok=True)
     temp = folders.make_temp(jobs_dir, job.id)

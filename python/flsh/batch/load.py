@@ -6,10 +6,12 @@ from pathlib import Path
 from . import scene_check
 from .checks import Reader, read_json
 from .errors import BatchError
+from .fits import fit_jobs, read_fit_settings
 from .grid import Expander
 from .spec import Plan, read_scene_settings
 
-TOP_KEYS = ("out", "cache_dir", "scene", "grid", "jobs", "max_unconverged_steps", "data_dtype")
+TOP_KEYS = ("out", "cache_dir", "scene", "grid", "jobs", "fits", "fit", "max_unconverged_steps",
+            "data_dtype")
 DATA_DTYPES = ("float32", "float64")
 
 
@@ -22,8 +24,8 @@ def load_spec(path, out=None, check_scenes=True):
     reader = Reader(path)
     spec = reader.object(read_json(path), "", TOP_KEYS)
     spec_dir = path.resolve().parent
-    if "grid" not in spec and "jobs" not in spec:
-        reader.fail("", 'expected "grid" or "jobs" (or both): the spec lists no job')
+    if not any(k in spec for k in ("grid", "jobs", "fits")):
+        reader.fail("", 'expected "grid", "jobs" or "fits" (or several): the spec lists no job')
 
     out_dir = Path(out if out is not None else
                    reader.string(spec.get("out", f"out/batch/{path.stem}"), "out"))
@@ -51,6 +53,11 @@ def load_spec(path, out=None, check_scenes=True):
         jobs += expander.grid(spec["grid"], "grid")
     if "jobs" in spec:
         jobs += expander.listed(spec["jobs"], "jobs")
+    if "fits" in spec:
+        defaults = read_fit_settings(reader, spec.get("fit", {}), "fit")
+        jobs += fit_jobs(expander, spec["fits"], "fits", defaults)
+    elif "fit" in spec:
+        reader.fail("fit", 'settings for fitting jobs, but the spec has no "fits"')
     check_unique_ids(reader, jobs)
     if check_scenes:
         scene_check.check_scenes(reader, jobs)

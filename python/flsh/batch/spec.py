@@ -36,15 +36,28 @@ class Job:
     keep_states: bool = True
     max_unconverged_steps: object = None  # int, or None: no limit
     data_dtype: str = "float32"
+    # A fitting job (spec "fits"): its settings (betas, material, iterations, noise) with the
+    # scan file's absolute path ("scans") and the sha256 of its content ("scans_sha256");
+    # None for a simulation job.
+    fit: object = None
     origin: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def kind(self):
+        """"simulate" (a flsh.run_scene of the scene) or "fit" (flsh.fitting.fit_scans)."""
+        return "simulate" if self.fit is None else "fit"
 
     def content(self):
         """What the spec hash covers: everything that changes the job's outputs or status;
-        not the id, not the cache folder (moving the cache redoes nothing)."""
+        not the id, not the cache folder (moving the cache redoes nothing). A fitting job's
+        covers its scan file's content (an edited scan file is fitted again)."""
         scene = {k: v for k, v in self.scene.items() if k != "cache_dir"}
-        return {"scene": scene, "keep_states": self.keep_states,
-                "max_unconverged_steps": self.max_unconverged_steps,
-                "data_dtype": self.data_dtype}
+        content = {"scene": scene, "keep_states": self.keep_states,
+                   "max_unconverged_steps": self.max_unconverged_steps,
+                   "data_dtype": self.data_dtype}
+        if self.fit is not None:
+            content["fit"] = self.fit
+        return content
 
     @property
     def spec_hash(self):

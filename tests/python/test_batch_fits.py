@@ -8,6 +8,7 @@ included, so a subject simulated from another material file is another discretiz
 0.34 mm RMS from the fit's avatar with the same coefficients), which no coefficient fits."""
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,3 +202,32 @@ def test_fit_settings_without_fits_are_an_error(tmp_path):
                                               'no "fits"'):
         batch.load_spec(spec, check_scenes=False)
 
+
+
+def test_a_glob_over_a_data_sets_jobs_names_the_fits_by_their_folders(tmp_path):
+    for job in ("ana", "ben"):
+        (tmp_path / "data" / "jobs" / job).mkdir(parents=True)
+        (tmp_path / "data" / "jobs" / job / "data.npz").write_bytes(b"")
+    spec = write(tmp_path / "spec.json", {
+        "fit": {"material": [E1]},
+        "fits": [{"scans": "data/jobs/*/data.npz"}, {"name": "x", "scans": "data/jobs/*/*.npz"}]})
+    jobs = batch.load_spec(spec, check_scenes=False).jobs
+    assert [job.id for job in jobs] == ["ana", "ben", "x-ana", "x-ben"]
+    assert all(job.kind == "fit" for job in jobs)
+    assert jobs[0].fit["scans"] == str(tmp_path / "data" / "jobs" / "ana" / "data.npz")
+
+
+def test_the_worked_example_recovers_each_subjects_stiffness(tmp_path, client):
+    # docs/batch.md's two specs, copied with their material file: the fit spec reads the
+    # subjects' data sets at ../../out/batch/subjects relative to itself.
+    examples = Path(__file__).resolve().parents[2] / "examples" / "batch"
+    copy = tmp_path / "examples" / "batch"
+    shutil.copytree(examples / "materials", copy / "materials")
+    for name in ("subjects.json", "fit_subjects.json"):
+        shutil.copy(examples / name, copy / name)
+    out = tmp_path / "out" / "batch"
+    assert run(copy / "subjects.json", client, out=out / "subjects").done == 2
+    assert run(copy / "fit_subjects.json", client, out=out / "fit_subjects").done == 2
+    for subject in ("ana", "ben"):
+        figures = json.loads((out / "fit_subjects" / "jobs" / subject / "fit.json").read_text())
+        assert figures["material"][f"{E1}.log_value"]["factor"] == pytest.approx(2.0, rel=1e-3)

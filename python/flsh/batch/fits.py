@@ -6,7 +6,8 @@ soft-tissue material of one avatar of its scene to the subject's scans (flsh.fit
     "fits": [{"name": "dyna", "scans": "scans/*.npz", "motion": "builtin:jump",
               "simulation": "rom", "avatar": {"model": "synthetic"}, "fit": {...}}]
 
-A glob in "scans" makes one job per file (ids NAME-STEM, or STEM without a name). The top-level
+A glob in "scans" makes one job per file (ids NAME-STEM, or STEM without a name; the folder's
+name instead of the stem when stems repeat, as in a data set's jobs/*/data.npz). The top-level
 "fit" holds defaults every entry's "fit" overrides key by key."""
 import glob
 import hashlib
@@ -83,8 +84,7 @@ def fit_jobs(expander, value, key, defaults):
         read_scene_settings(r, scene, child(where, "scene"))
         variant = Part("", scene, child(where, "scene"))
         motion = motion or Part("", {}, child(where, "motion"))
-        for path in scans:
-            stem = re.sub(r"[^A-Za-z0-9_-]", "_", Path(path).stem)[:64]
+        for path, stem in zip(scans, file_names(scans)):
             if len(scans) > 1:
                 job_id = f"{name}-{stem}"[:64] if name else stem
             else:
@@ -93,6 +93,18 @@ def fit_jobs(expander, value, key, defaults):
             job.fit = {**settings, "scans": path, "scans_sha256": file_sha256(path)}
             jobs.append(job)
     return jobs
+
+
+def file_names(paths):
+    """The names of scan files in job ids: their stems, or, when stems repeat (a glob over
+    data sets' jobs/*/data.npz), their folders' names (letters, digits, _ and - only)."""
+    def clean(text):
+        return re.sub(r"[^A-Za-z0-9_-]", "_", text)[:64]
+
+    stems = [clean(Path(p).stem) for p in paths]
+    if len(set(stems)) == len(stems):
+        return stems
+    return [clean(Path(p).parent.name) for p in paths]
 
 
 def scan_files(expander, value, key):

@@ -30,7 +30,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from . import _flsh
 from . import torch as flsh_torch
 
 __all__ = ["FitResult", "Scans", "fit_scans", "load_scans", "material_entries", "minimize"]

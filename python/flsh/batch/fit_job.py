@@ -10,14 +10,11 @@ a hidden temporary folder renamed into place at the end, as simulation jobs are 
                         betas (K,), faces (F, 3)
     scene.json, log.txt, job.json as for simulation jobs"""
 import json
-import shutil
-import time
 from pathlib import Path
 
 import numpy as np
 
-from . import folders
-from .job import base_record, log_tail, output_to
+from .job import output_to, run_in_folder
 
 FIT_OUTPUTS = ("fit.json", "fitted.npz", "fitted_scene.json", "material.json")
 
@@ -37,60 +34,42 @@ def fitted_scene(scene, betas, soft):
 def run_fit_job(job, out_dir):
     """Runs the fitting job `job` into OUT_DIR/jobs/JOB_ID and returns its manifest record;
     never raises for a failing job (its record says "failed" and why)."""
+    return run_in_folder(job, out_dir, fit_into)
+
+
+def fit_into(job, temp, record):
+    """A fitting job's work in its temporary folder `temp` (scene.json written): the fit and
+    its outputs; fills `record`."""
     import flsh.fitting  # noqa: PLC0415 (imports torch: only where fits run)
     import flsh.torch  # noqa: PLC0415
 
-    started = time.perf_counter()
-    record = base_record(job)
-    record["kind"] = "fit"
-    jobs_dir = Path(out_dir) / "jobs"
-    jobs_dir.mkdir(parents=True, exist_ok=True)
-    temp = folders.make_temp(jobs_dir, job.id)
-    try:
-        scene_path = temp / "scene.json"
-        scene_path.write_text(json.dumps(job.scene, indent=1) + "\n")
-        settings = job.fit
-        with output_to(temp / "log.txt"):
-            simulator = flsh.torch.RolloutSimulator.from_scene(str(scene_path), verbose=True)
-            scans = flsh.fitting.load_scans(settings["scans"], simulator)
-            result = flsh.fitting.fit_scans(
-                simulator, scans, betas=settings["betas"], material=settings["material"],
-                iterations=settings["iterations"], noise=settings["noise"], log=print)
-        soft = result.material is not None
-        if soft:
-            result.save_material(temp / "material.json")
-        h = simulator.options.time_step
-        np.savez(temp / "fitted.npz", times=h * np.arange(1, simulator.steps + 1),
-                 vertices=result.vertices.astype(job.data_dtype), betas=result.betas,
-                 faces=np.asarray(simulator.body.faces, dtype=np.int32))
-        (temp / "fitted_scene.json").write_text(
-            json.dumps(fitted_scene(job.scene, result.betas, soft), indent=1) + "\n")
-        figures = result.summary()
-        figures.update(scans=settings["scans"], scan_kind=scans.kind,
-                       scan_frames=scans.num_frames, skipped_start_frames=scans.skipped,
-                       steps=simulator.steps, time_step=h)
-        (temp / "fit.json").write_text(json.dumps(figures, indent=1) + "\n")
-        folder = f"jobs/{job.id}"
-        written = [name for name in FIT_OUTPUTS if (temp / name).exists()]
-        record.update(
-            status="done", error=None, steps=simulator.steps, scan_frames=scans.num_frames,
-            start_rms_mm=figures["start_rms_mm"], final_rms_mm=figures["final_rms_mm"],
-            iterations=result.iterations, evaluations=result.evaluations,
-            fit_seconds=result.seconds, betas=figures["betas"],
-            outputs={"folder": folder, "scene": f"{folder}/scene.json",
-                     "log": f"{folder}/log.txt",
-                     **{Path(n).stem: f"{folder}/{n}" for n in written}},
-            wall_seconds=time.perf_counter() - started)
-        (temp / "job.json").write_text(json.dumps({**record, "spec": job.content()}, indent=1)
-                                       + "\n")
-        folders.place(temp, jobs_dir / job.id)
-        return record
-    except Exception as error:
-        record.update(status="failed", error=f"{type(error).__name__}: {error}",
-                      log_tail=log_tail(temp / "log.txt"),
-                      wall_seconds=time.perf_counter() - started)
-        shutil.rmtree(temp, ignore_errors=True)
-        return record
-    except BaseException:
-        shutil.rmtree(temp, ignore_errors=True)
-        raise
+    settings = job.fit
+    with output_to(temp / "log.txt"):
+        simulator = flsh.torch.RolloutSimulator.from_scene(str(temp / "scene.json"),
+                                                           verbose=True)
+        scans = flsh.fitting.load_scans(settings["scans"], simulator)
+        result = flsh.fitting.fit_scans(
+            simulator, scans, betas=settings["betas"], material=settings["material"],
+            iterations=settings["iterations"], noise=settings["noise"], log=print)
+    soft = result.material is not None
+    if soft:
+        result.save_material(temp / "material.json")
+    h = simulator.options.time_step
+    np.savez(temp / "fitted.npz", times=h * np.arange(1, simulator.steps + 1),
+             vertices=result.vertices.astype(job.data_dtype), betas=result.betas,
+             faces=np.asarray(simulator.body.faces, dtype=np.int32))
+    (temp / "fitted_scene.json").write_text(
+        json.dumps(fitted_scene(job.scene, result.betas, soft), indent=1) + "\n")
+    figures = result.summary()
+    figures.update(scans=settings["scans"], scan_kind=scans.kind, scan_frames=scans.num_frames,
+                   skipped_start_frames=scans.skipped, steps=simulator.steps, time_step=h)
+    (temp / "fit.json").write_text(json.dumps(figures, indent=1) + "\n")
+    folder = f"jobs/{job.id}"
+    written = [name for name in FIT_OUTPUTS if (temp / name).exists()]
+    record.update(
+        steps=simulator.steps, scan_frames=scans.num_frames,
+        start_rms_mm=figures["start_rms_mm"], final_rms_mm=figures["final_rms_mm"],
+        iterations=result.iterations, evaluations=result.evaluations,
+        fit_seconds=result.seconds, betas=figures["betas"],
+        outputs={"folder": folder, "scene": f"{folder}/scene.json", "log": f"{folder}/log.txt",
+                 **{Path(n).stem: f"{folder}/{n}" for n in written}})

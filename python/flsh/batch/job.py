@@ -100,38 +100,50 @@ def run_job(job, out_dir):
     if job.kind == "fit":
         from .fit_job import run_fit_job  # noqa: PLC0415 (fit_job imports this module)
         return run_fit_job(job, out_dir)
+    return run_in_folder(job, out_dir, simulate_into)
+
+
+def simulate_into(job, temp, record):
+    """A simulation job's work in its temporary folder `temp`: flsh.run_scene of scene.json,
+    data.npz; fills `record` (statistics, vertices, outputs)."""
+    with output_to(temp / "log.txt"):
+        report = flsh.run_scene(str(temp / "scene.json"), str(temp / "sim"), progress=False)
+        record.update(run_statistics(report, job.avatar))
+        limit = job.max_unconverged_steps
+        if limit is not None and report["unconverged"] > limit:
+            raise JobFailed(f"{report['unconverged']} of {report['steps']} steps did not "
+                            f"converge, more than max_unconverged_steps = {limit}")
+        arrays = frame_arrays(temp / "sim" / "states.npz", job.avatar, job.simulation,
+                              job.data_dtype)
+    np.savez(temp / "data.npz", **arrays)
+    written = [f"sim/{name}" for name in report["written"]]
+    if not job.keep_states:
+        (temp / "sim" / "states.npz").unlink()
+        written.remove("sim/states.npz")
+        if not any((temp / "sim").iterdir()):
+            (temp / "sim").rmdir()
+    folder = f"jobs/{job.id}"
+    record.update(vertices=int(arrays["vertices"].shape[1]),
+                  outputs={"folder": folder, "data": f"{folder}/data.npz",
+                           "scene": f"{folder}/scene.json", "log": f"{folder}/log.txt",
+                           "flsh": [f"{folder}/{name}" for name in written]})
+
+
+def run_in_folder(job, out_dir, work):
+    """What every job does around its work: its manifest record, a hidden temporary folder
+    holding scene.json, then `work(job, temp, record)`, job.json, and the folder renamed into
+    place as OUT_DIR/jobs/JOB_ID. Returns the record; an exception in the work makes it a
+    "failed" record (the temporary folder removed), a KeyboardInterrupt propagates."""
     started = time.perf_counter()
     record = base_record(job)
-    record["kind"] = "simulate"
+    record["kind"] = job.kind
     jobs_dir = Path(out_dir) / "jobs"
     jobs_dir.mkdir(parents=True, exist_ok=True)
     temp = folders.make_temp(jobs_dir, job.id)
     try:
-        scene_path = temp / "scene.json"
-        scene_path.write_text(json.dumps(job.scene, indent=1) + "\n")
-        with output_to(temp / "log.txt"):
-            report = flsh.run_scene(str(scene_path), str(temp / "sim"), progress=False)
-            record.update(run_statistics(report, job.avatar))
-            limit = job.max_unconverged_steps
-            if limit is not None and report["unconverged"] > limit:
-                raise JobFailed(f"{report['unconverged']} of {report['steps']} steps did not "
-                                f"converge, more than max_unconverged_steps = {limit}")
-            arrays = frame_arrays(temp / "sim" / "states.npz", job.avatar, job.simulation,
-                                  job.data_dtype)
-        np.savez(temp / "data.npz", **arrays)
-        written = [f"sim/{name}" for name in report["written"]]
-        if not job.keep_states:
-            (temp / "sim" / "states.npz").unlink()
-            written.remove("sim/states.npz")
-            if not any((temp / "sim").iterdir()):
-                (temp / "sim").rmdir()
-        folder = f"jobs/{job.id}"
-        record.update(
-            status="done", vertices=int(arrays["vertices"].shape[1]), error=None,
-            outputs={"folder": folder, "data": f"{folder}/data.npz",
-                     "scene": f"{folder}/scene.json", "log": f"{folder}/log.txt",
-                     "flsh": [f"{folder}/{name}" for name in written]},
-            wall_seconds=time.perf_counter() - started)
+        (temp / "scene.json").write_text(json.dumps(job.scene, indent=1) + "\n")
+        work(job, temp, record)
+        record.update(status="done", error=None, wall_seconds=time.perf_counter() - started)
         (temp / "job.json").write_text(json.dumps({**record, "spec": job.content()}, indent=1)
                                        + "\n")
         folders.place(temp, jobs_dir / job.id)

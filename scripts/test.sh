@@ -1,17 +1,20 @@
 #!/usr/bin/env bash
-# Builds flsh (if needed) and runs every test: C++ (GoogleTest, CLI scripts, the installed
-# package, the fuzzers' regression inputs) and Python (pytest), all through ctest, in BUILD_DIR
-# (default build/). Two more stages run when asked for in FLSH_TEST_STAGES (default: suite):
-#   sanitize  the C++ suite again under AddressSanitizer + UndefinedBehaviorSanitizer
-#             (scripts/sanitize.sh, in build-sanitize/);
+# Builds flsh (if needed) and runs every test, in three stages (FLSH_TEST_STAGES, default
+# suite,sanitize,fuzz; CI runs all three):
+#   suite     C++ (GoogleTest, CLI scripts, the installed package, the fuzzers' regression
+#             inputs) and Python (pytest), all through ctest, in BUILD_DIR (default build/);
+#   sanitize  the C++ tests of the areas holding the file readers, solvers, contact, energy
+#             densities, rendering and core, and the CLI tests, again under AddressSanitizer +
+#             UndefinedBehaviorSanitizer (scripts/sanitize.sh, in build-sanitize/;
+#             FLSH_SANITIZE_AREAS=all for every area);
 #   fuzz      each libFuzzer target of the readers for FLSH_FUZZ_SECONDS (default 30) seconds
-#             (scripts/fuzz.sh, in build-fuzz/).
-# Usage: [FLSH_TEST_STAGES=suite,sanitize,fuzz] bash scripts/test.sh [BUILD_DIR]
+#             (scripts/fuzz.sh, in the same build-sanitize/).
+# Usage: [FLSH_TEST_STAGES=suite] bash scripts/test.sh [BUILD_DIR]
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=${1:-$root/build}
 jobs=$(nproc 2>/dev/null || echo 2)
-stages=",${FLSH_TEST_STAGES:-suite},"
+stages=",${FLSH_TEST_STAGES:-suite,sanitize,fuzz},"
 started=$SECONDS
 
 if [[ $stages == *,suite,* ]]; then

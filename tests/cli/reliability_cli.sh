@@ -168,7 +168,11 @@ for n in 300 3000; do
 EOF
 done
 $py - "$flsh" <<'PY'
-import resource, subprocess, sys
+import os, resource, subprocess, sys
+if "ASAN_OPTIONS" in os.environ:
+    # Under AddressSanitizer freed memory waits in a quarantine (256 MB) before reuse: without
+    # it, RSS measures what flsh keeps (leaks themselves are LeakSanitizer's to find).
+    os.environ["ASAN_OPTIONS"] += ":quarantine_size_mb=0:thread_local_quarantine_size_kb=0"
 def peak_kb(scene):
     # ru_maxrss of the children is the largest over those waited for: measure each in a child.
     out = subprocess.run([sys.executable, "-c",

@@ -180,5 +180,6 @@ __all__ = [
     "upright_warning",
     "world_from_up_axis",
     "load_scene",
+    "load_scene_avatars",
     "run_scene",
 ]

@@ -9,14 +9,11 @@ soft-tissue material of one avatar of its scene to the subject's scans (flsh.fit
 A glob in "scans" makes one job per file (ids NAME-STEM, or STEM without a name; the folder's
 name instead of the stem when stems repeat, as in a data set's jobs/*/data.npz). The top-level
 "fit" holds defaults every entry's "fit" overrides key by key."""
-import glob
 import hashlib
-import os
-import re
 from pathlib import Path
 
 from .checks import child
-from .grid import Part
+from .grid import Part, id_part
 from .spec import read_scene_settings
 
 FIT_ENTRY_KEYS = ("name", "scans", "avatar", "motion", "simulation", "scene", "fit")
@@ -70,7 +67,8 @@ def fit_jobs(expander, value, key, defaults):
         if "scans" not in item:
             r.fail(child(where, "scans"), "missing (a scan file .npz, or a glob of them: one "
                                           "job per file)")
-        scans = scan_files(expander, item["scans"], child(where, "scans"))
+        scans = expander.files(r.string(item["scans"], child(where, "scans")),
+                               child(where, "scans"), "scan file")
         name = r.name(item["name"], child(where, "name")) if "name" in item else None
         avatar = expander.avatar(item.get("avatar", {}), child(where, "avatar"), "avatar")[0]
         motion = (expander.motion(item["motion"], child(where, "motion"))[0] if "motion" in item
@@ -97,25 +95,8 @@ def fit_jobs(expander, value, key, defaults):
 
 def file_names(paths):
     """The names of scan files in job ids: their stems, or, when stems repeat (a glob over
-    data sets' jobs/*/data.npz), their folders' names (letters, digits, _ and - only)."""
-    def clean(text):
-        return re.sub(r"[^A-Za-z0-9_-]", "_", text)[:64]
-
-    stems = [clean(Path(p).stem) for p in paths]
+    data sets' jobs/*/data.npz), their folders' names."""
+    stems = [id_part(Path(p).stem) for p in paths]
     if len(set(stems)) == len(stems):
         return stems
-    return [clean(Path(p).parent.name) for p in paths]
-
-
-def scan_files(expander, value, key):
-    """The scan files of a "scans" value: a file, or each file of a glob (sorted)."""
-    text = expander.r.string(value, key)
-    path = expander.path(text)
-    if re.search(r"[*?[]", text):
-        files = sorted(p for p in glob.glob(path) if os.path.isfile(p))
-        if not files:
-            expander.r.fail(key, f"matches no file: {path}")
-        return files
-    if not os.path.isfile(path):
-        expander.r.fail(key, f"scan file not found: {path}")
-    return [path]
+    return [id_part(Path(p).parent.name) for p in paths]

@@ -26,6 +26,11 @@ JOB_KEYS = ("name", "avatar", "motion", "simulation", "scene")
 MERGED_SCENE_KEYS = ("outputs", "newton")  # merged key by key; other keys are replaced
 
 
+def id_part(text):
+    """`text` as part of a job id: letters, digits, _ and - (others become _), at most 64."""
+    return re.sub(r"[^A-Za-z0-9_-]", "_", text)[:64]
+
+
 @dataclass
 class Part:
     """One value of one grid axis: its name in job ids, the scene keys it sets (avatar keys,
@@ -160,15 +165,22 @@ class Expander:
                 self.r.fail(key, f"unknown built-in motion '{text}' (known: builtin:"
                                  f"{', builtin:'.join(known)})")
             return [(name, text)]
+        files = self.files(text, key, "motion file", allow_glob)
+        return [(id_part(Path(p).stem), p) for p in files]
+
+    def files(self, text, key, what, allow_glob=True):
+        """The files of a path string (resolved as self.path): the file, which must exist, or
+        (allow_glob) each file a glob matches, sorted, at least one. `what` names the file in
+        the message ("motion file not found: …")."""
         if allow_glob and re.search(r"[*?[]", text):
             files = sorted(p for p in glob.glob(self.path(text)) if os.path.isfile(p))
             if not files:
                 self.r.fail(key, f"matches no file: {self.path(text)}")
-        else:
-            files = [self.path(text)]
-            if not os.path.isfile(files[0]):
-                self.r.fail(key, f"motion file not found: {files[0]}")
-        return [(re.sub(r"[^A-Za-z0-9_-]", "_", Path(p).stem)[:64], p) for p in files]
+            return files
+        path = self.path(text)
+        if not os.path.isfile(path):
+            self.r.fail(key, f"{what} not found: {path}")
+        return [path]
 
     def simulation(self, value, key, default_name=""):
         """A simulation entry: "skeleton", "fem", "rom" or {"simulation": ..., "name", and

@@ -2,26 +2,23 @@
 // nodes (volume_fields.h).
 #include "flsh/volume/volume_fields.h"
 
-#include <cholmod.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <mutex>
 #include <string>
 
 #include "flsh/core/error.h"
-#include "volume/surface_query.h"
 #include "volume/kinematic_tree.h"
+#include "volume/sparse_cholesky.h"
+#include "volume/surface_query.h"
 
 namespace flsh {
 
 namespace {
 
-// Columns solved together: wide enough for CHOLMOD's blocked (BLAS-3) triangular solves, narrow
-// enough to bound the dense work arrays (N_I × 256 doubles).
-constexpr int kSolveBlockColumns = 256;
 // Surface nodes must match the body's template vertices this closely (m): the tet mesher keeps
 // them bit for bit, so anything larger means the mesh belongs to another body.
 constexpr double kSurfaceMatchTolerance = 1e-6;
@@ -67,23 +64,8 @@ SpMat cotangentLaplacian(const TetMesh& mesh) {
 
 struct HarmonicExtension::Factor {
   int num_nodes = 0, num_surface = 0;
-  SpMat coupling;            ///< K_IB, N_I × V
-  mutable std::mutex mutex;  // cholmod_common is scratch space: one solve at a time
-  mutable cholmod_common common;
-  cholmod_factor* factor = nullptr;
-
-  Factor() {
-    cholmod_start(&common);
-    common.supernodal = CHOLMOD_SUPERNODAL;
-    common.print = 0;
-    common.error_handler = nullptr;
-  }
-  ~Factor() {
-    if (factor) cholmod_free_factor(&factor, &common);
-    cholmod_finish(&common);
-  }
-  Factor(const Factor&) = delete;
-  Factor& operator=(const Factor&) = delete;
+  SpMat coupling;                                    ///< K_IB, N_I × V
+  std::unique_ptr<detail::SparseCholesky> interior;  ///< K_II (null without interior nodes)
 };
 
 HarmonicExtension::HarmonicExtension(const TetMesh& mesh) {
@@ -97,33 +79,17 @@ HarmonicExtension::HarmonicExtension(const TetMesh& mesh) {
       throw InputError(
           "HarmonicExtension: the tet mesh has 0 surface nodes, expected the "
           "boundary as nodes 0..V−1 (Dirichlet data)");
-    SpMat interior_block = K.bottomRightCorner(interior, interior);
-    interior_block.makeCompressed();
     f->coupling = K.bottomLeftCorner(interior, f->num_surface);
-    cholmod_sparse view;
-    std::memset(&view, 0, sizeof(view));
-    view.nrow = view.ncol = size_t(interior);
-    view.nzmax = size_t(interior_block.nonZeros());
-    view.p = interior_block.outerIndexPtr();
-    view.i = interior_block.innerIndexPtr();
-    view.x = interior_block.valuePtr();
-    view.stype = -1;  // symmetric: lower triangle used
-    view.itype = CHOLMOD_INT;
-    view.xtype = CHOLMOD_REAL;
-    view.dtype = CHOLMOD_DOUBLE;
-    view.sorted = 1;
-    view.packed = 1;
-    f->factor = cholmod_analyze(&view, &f->common);
-    if (!f->factor || f->common.status < CHOLMOD_OK)
-      throw Error("HarmonicExtension: cholmod_analyze failed (status " +
-                  std::to_string(f->common.status) + ") on the " + std::to_string(interior) +
-                  " interior nodes");
-    const int ok = cholmod_factorize(&view, f->factor, &f->common);
-    if (!ok || f->common.status != CHOLMOD_OK || f->factor->minor < f->factor->n)
-      throw Error("HarmonicExtension: the interior block of the Laplacian (" +
-                  std::to_string(interior) + " nodes) is not positive definite (CHOLMOD status " +
-                  std::to_string(f->common.status) +
-                  "): some interior nodes are not connected to the surface");
+    try {
+      f->interior = std::make_unique<detail::SparseCholesky>(
+          K.bottomRightCorner(interior, interior), "HarmonicExtension");
+    } catch (const InputError&) {
+      throw;
+    } catch (const Error& e) {
+      throw Error(std::string(e.what()) +
+                  ": the interior block of the Laplacian is singular, some interior nodes are "
+                  "not connected to the surface");
+    }
   }
   factor_ = std::move(f);
 }
@@ -144,27 +110,7 @@ MatX HarmonicExtension::extend(const MatX& surface_values) const {
   MatX out(f.num_nodes, k);
   out.topRows(f.num_surface) = surface_values;
   if (interior == 0 || k == 0) return out;
-
-  std::lock_guard<std::mutex> lock(f.mutex);
-  for (Eigen::Index begin = 0; begin < k; begin += kSolveBlockColumns) {
-    const Eigen::Index width = std::min<Eigen::Index>(kSolveBlockColumns, k - begin);
-    MatX rhs = -(f.coupling * surface_values.middleCols(begin, width));
-    cholmod_dense b;
-    std::memset(&b, 0, sizeof(b));
-    b.nrow = b.d = size_t(interior);
-    b.ncol = size_t(width);
-    b.nzmax = size_t(rhs.size());
-    b.x = rhs.data();
-    b.xtype = CHOLMOD_REAL;
-    b.dtype = CHOLMOD_DOUBLE;
-    cholmod_dense* x = cholmod_solve(CHOLMOD_A, f.factor, &b, &f.common);
-    if (!x)
-      throw Error("HarmonicExtension::extend: cholmod_solve failed (status " +
-                  std::to_string(f.common.status) + ")");
-    out.block(f.num_surface, begin, interior, width) =
-        Eigen::Map<const MatX>(static_cast<const double*>(x->x), interior, width);
-    cholmod_free_dense(&x, &f.common);
-  }
+  out.bottomRows(interior) = f.interior->solve(-(f.coupling * surface_values));
   return out;
 }
 
@@ -363,8 +309,8 @@ VecXi selectBoneNodes(const TetMesh& mesh, const MatX3& shaped_nodes, const MatX
   }
   for (int b = 0; b < nb; ++b) {
     const int total = attached_count[b] + int(dominated[b].size());
-    const int wanted = std::min(
-        total, std::max(kMinAnchorNodes, int(std::ceil(kMinAnchorFraction * total))));
+    const int wanted =
+        std::min(total, std::max(kMinAnchorNodes, int(std::ceil(kMinAnchorFraction * total))));
     if (attached_count[b] >= wanted) continue;
     std::sort(dominated[b].begin(), dominated[b].end());
     for (int k = 0; k < wanted - attached_count[b]; ++k) bone[dominated[b][k].second] = b;

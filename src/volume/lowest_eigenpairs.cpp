@@ -81,8 +81,8 @@ LowestEigenpairs lowestEigenpairs(const SpMat& K, const SparseCholesky& factor, 
       MatX W = factor.solve(m.asDiagonal() * last);
       out.solves += int(last.cols());
       orthogonalizeAgainst(V, m, W);
-      W = massOrthonormalize(W, m, 1e-10);
-      orthogonalizeAgainst(V, m, W);  // the drop above mixes columns: keep W ⟂ V
+      // Combinations of W's columns stay ⟂ V (to rounding; the Rayleigh–Ritz step below does
+      // not need more than that).
       W = massOrthonormalize(W, m, 1e-10);
       if (W.cols() == 0) break;
       MatX grown(n, V.cols() + W.cols());

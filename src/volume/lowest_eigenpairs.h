@@ -23,7 +23,7 @@ struct LowestEigenpairsOptions {
   /// Extra columns of the block beyond the pairs wanted (≥ 1): they speed up the convergence of
   /// the highest wanted pairs.
   int extra_columns = 12;
-  int krylov_blocks = 3;  ///< blocks per restart (≥ 2)
+  int krylov_blocks = 4;  ///< blocks per restart (≥ 2)
   std::uint64_t seed = 1;
 };
 

@@ -156,7 +156,7 @@ TEST(ModalBasis, IsMassOrthonormalAndZeroOnBoneNodes) {
   ASSERT_EQ(b.report.frequencies.size(), 20);
   EXPECT_GT(b.report.frequencies[0], 0.0);
   for (int k = 1; k < 20; ++k) EXPECT_GE(b.report.frequencies[k], b.report.frequencies[k - 1]);
-  EXPECT_LE(b.report.max_eigen_residual, 1e-6);
+  EXPECT_LE(b.report.max_eigen_residual, 1e-5);
 }
 
 // M-projection residual of the columns of X on the basis, relative to their M-norms.

@@ -53,7 +53,7 @@ struct ModalBasisSettings {
   /// static and vibration columns) instead of all of them; 0: keep every independent column.
   int columns = 0;
   /// The vibration modes are converged when ‖K φ − λ M φ‖_{M⁻¹} ≤ tol · λ ‖φ‖_M for each.
-  double eigen_tolerance = 1e-6;
+  double eigen_tolerance = 1e-5;
   /// Columns whose M-Gram eigenvalue (each column M-normalized first) is below this fraction of
   /// the largest are dropped as dependent.
   double dependence_tolerance = 1e-10;

@@ -10,6 +10,7 @@
 
 #include "bindings.h"
 #include "flsh/volume/closest_surface_points.h"
+#include "flsh/volume/modal_basis.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/soft_avatar.h"
 #include "flsh/volume/tet_mesh.h"
@@ -104,6 +105,69 @@ void bind_volume(py::module_& m) {
       "point (points (P, 3)), exact (bounding-box tree): returns (face (P,) int32, barycentric "
       "(P, 3) weights on the face's vertices, distance (P,) m). ValueError on a bad shape, index "
       "or value.");
+
+  m.def(
+      "soft_tissue_rest_operators",
+      [](const SoftAvatar& avatar) {
+        SoftTissueRestOperators ops;
+        {
+          py::gil_scoped_release release;
+          ops = softTissueRestOperators(
+              initialized(avatar, "soft_tissue_rest_operators").volumetricData());
+        }
+        py::dict d;
+        d["soft_nodes"] = indices_numpy(ops.soft_nodes);
+        d["stiffness"] = to_scipy_csc(ops.stiffness);
+        d["masses"] = to_numpy(ops.masses);
+        d["coupling"] = to_numpy_col(ops.coupling);
+        return d;
+      },
+      py::arg("avatar"),
+      "The soft tissue of an initialized soft avatar linearized at rest with its bone nodes fixed "
+      "(docs/rom.md, 'A basis from the physics'): a dict with soft_nodes (S,) node indices, "
+      "stiffness K_uu (scipy.sparse, 3S × 3S, N/m; DoF 3i + a is coordinate a of soft_nodes[i]), "
+      "masses (3S,) the lumped M_uu diagonal (kg) and coupling M_ub (3S, 144): the inertial "
+      "coupling to each bone's (δt, δω).");
+
+  m.def(
+      "modal_basis",
+      [](const SoftAvatar& avatar, bool static_modes, int vibration_modes, int columns,
+         double eigen_tolerance, std::uint64_t seed) {
+        ModalBasisSettings settings;
+        settings.static_modes = static_modes;
+        settings.vibration_modes = vibration_modes;
+        settings.columns = columns;
+        settings.eigen_tolerance = eigen_tolerance;
+        settings.seed = seed;
+        ModalBasis basis;
+        {
+          py::gil_scoped_release release;
+          basis = computeModalBasis(initialized(avatar, "modal_basis").volumetricData(), settings);
+        }
+        const ModalBasisReport& r = basis.report;
+        py::dict report;
+        report["static_columns"] = r.static_columns;
+        report["vibration_columns"] = r.vibration_columns;
+        report["dropped_columns"] = r.dropped_columns;
+        report["frequencies"] = to_numpy(r.frequencies);
+        report["max_eigen_residual"] = r.max_eigen_residual;
+        report["eigen_restarts"] = r.eigen_restarts;
+        report["factor_solves"] = r.factor_solves;
+        report["seconds"] = r.seconds_total;
+        const py::ssize_t n = basis.basis.rows() / 3, k = basis.basis.cols();
+        // (N, 3, r): row 3j + a of Ψ is [j, a].
+        return py::make_tuple(take_numpy(RowMatX(basis.basis), {n, 3, k}), report);
+      },
+      py::arg("avatar"), py::kw_only(), py::arg("static_modes") = true,
+      py::arg("vibration_modes") = 50, py::arg("columns") = 0, py::arg("eigen_tolerance") = 1e-5,
+      py::arg("seed") = 1,
+      "The skeleton-aware soft-tissue basis of an initialized soft avatar (issue 26; docs/rom.md, "
+      "'A basis from the physics'): one static-correction mode per bone DoF (static_modes) plus "
+      "the lowest fixed-interface vibration modes, mass-orthonormal, dependent columns dropped, "
+      "mass-PCA to `columns` when > 0. Returns (basis (N, 3, r): displacement of node j in "
+      "column k is basis[j, :, k], zero on bone nodes; report dict with the column counts, the "
+      "vibration frequencies in Hz and the eigensolver's residual, restarts and solves). "
+      "ValueError for settings out of range.");
 
   py::class_<VolumetricData>(
       m, "VolumetricData",

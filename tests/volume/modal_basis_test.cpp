@@ -24,11 +24,9 @@ using test::messageOf;
 // The 800-vertex synthetic body's soft avatar on a coarse interior, built once per binary.
 const VolumetricData& volume() {
   static std::shared_ptr<const SoftAvatar> avatar = [] {
-    SoftAvatarSettings settings;
-    settings.voxel_size = 0.02;
-    settings.volumetric.cache_dir = test::freshTempDir("modal_basis_volume_cache");
-    settings.volumetric.tet_mesh.resolution = 0.5;
-    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), settings);
+    auto a = std::make_shared<SoftAvatar>(
+        test::smallScene(800).body, VecX(),
+        test::smallSoftAvatarSettings(test::freshTempDir("modal_basis_volume_cache")));
     a->enableSoftTissue();
     a->initVolumetricData();
     return a;

@@ -14,7 +14,6 @@
 // --vertices 6890 (the default) is the full-size synthetic body; every figure is a relative error
 // or a build time.
 #include <Eigen/Cholesky>
-#include <Eigen/Geometry>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -28,6 +27,7 @@
 #include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
 #include "flsh/solve/linear_solver.h"
 #include "flsh/solve/scene.h"
 #include "flsh/volume/modal_basis.h"
@@ -48,16 +48,6 @@ std::vector<std::string> split(const std::string& text) {
   for (std::string item; std::getline(in, item, ',');)
     if (!item.empty()) out.push_back(item);
   return out;
-}
-
-Mat3 rotationOf(const Vec3& r) {
-  const double angle = r.norm();
-  return angle > 0 ? Mat3(Eigen::AngleAxisd(angle, r / angle)) : Mat3::Identity();
-}
-
-Vec3 logOf(const Mat3& R) {
-  const Eigen::AngleAxisd a(R);
-  return a.angle() * a.axis();
 }
 
 // Per step: the 6B bone accelerations (each bone's δt and δω in its own frame) of a skeleton run.
@@ -85,9 +75,9 @@ std::vector<VecX> boneAccelerations(const std::shared_ptr<BodyModel>& body,
     VecX v(6 * B);
     for (int b = 0; b < B; ++b) {
       v.segment<3>(6 * b) = (states[k + 1].segment<3>(6 * b) - states[k].segment<3>(6 * b)) / h;
-      const Mat3 R1 = rotationOf(states[k + 1].segment<3>(6 * b + 3));
-      const Mat3 R0 = rotationOf(states[k].segment<3>(6 * b + 3));
-      v.segment<3>(6 * b + 3) = logOf(R1 * R0.transpose()) / h;
+      const Mat3 R1 = rodrigues(states[k + 1].segment<3>(6 * b + 3));
+      const Mat3 R0 = rodrigues(states[k].segment<3>(6 * b + 3));
+      v.segment<3>(6 * b + 3) = logSO3(R1 * R0.transpose()) / h;
     }
     return v;
   };
@@ -96,7 +86,7 @@ std::vector<VecX> boneAccelerations(const std::shared_ptr<BodyModel>& body,
     const VecX a = (velocity(k + 1) - velocity(k)) / h;
     VecX local(6 * B);
     for (int b = 0; b < B; ++b) {
-      const Mat3 R = rotationOf(states[k + 1].segment<3>(6 * b + 3));
+      const Mat3 R = rodrigues(states[k + 1].segment<3>(6 * b + 3));
       local.segment<3>(6 * b) = R.transpose() * a.segment<3>(6 * b);
       local.segment<3>(6 * b + 3) = R.transpose() * a.segment<3>(6 * b + 3);
     }

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "flsh/core/error.h"
+#include "flsh/core/rotation.h"
 #include "flsh/energy/fem_material.h"
 #include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/reduced_data.h"
@@ -23,12 +24,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-Mat3 cross(const Vec3& r) {
-  Mat3 c;
-  c << 0, -r.z(), r.y(), r.z(), 0, -r.x(), -r.y(), r.x(), 0;
-  return c;
 }
 
 }  // namespace
@@ -91,10 +86,7 @@ SoftTissueRestOperators softTissueRestOperators(const VolumetricData& data) {
   ops.stiffness = 0.5 * (ops.stiffness + transposed);  // exactly symmetric
 
   // M_uu (lumped) and M_ub at rest: x_j = Σ_b w_jb (δt_b + δω_b × (X̄_j − J_b)) + u_j.
-  Cubature every;
-  every.elements = VecXi::LinSpaced(data.numTets(), 0, data.numTets() - 1);
-  every.weights = VecX::Ones(data.numTets());
-  const VecX node_mass = inertialNodeMasses(data, every);
+  const VecX node_mass = inertialNodeMasses(data, exactCubature(data.numTets()));
   ops.masses.resize(3 * S);
   ops.coupling = MatX::Zero(3 * S, 6 * B);
   for (int i = 0; i < S; ++i) {
@@ -109,7 +101,7 @@ SoftTissueRestOperators softTissueRestOperators(const VolumetricData& data) {
       if (w == 0.0) continue;
       const Vec3 r = (data.rest_nodes.row(j) - data.rest_joints.row(b)).transpose();
       ops.coupling.block<3, 3>(3 * i, 6 * b) = (mass * w) * Mat3::Identity();
-      ops.coupling.block<3, 3>(3 * i, 6 * b + 3) = -(mass * w) * cross(r);
+      ops.coupling.block<3, 3>(3 * i, 6 * b + 3) = -(mass * w) * skew(r);
     }
   }
   return ops;

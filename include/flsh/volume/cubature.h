@@ -38,6 +38,9 @@ struct Cubature {
 /// out of range.
 Cubature selectCubature(const MatX& A, const CubatureOptions& options = {});
 
+/// Exact integration as a cubature: every one of `elements` elements with weight 1.
+Cubature exactCubature(int elements);
+
 /// Relative error ‖A_S w − A·1‖ / ‖A·1‖ of a cubature on a (held-out) matrix A (#samples ×
 /// #elements). Throws InputError if A is empty or non-finite, A·1 = 0, elements and weights differ
 /// in length, or an element index is outside [0, #elements).

@@ -8,11 +8,7 @@ namespace flsh::detail {
 Cubature massCubature(const SoftAvatar& avatar) {
   const ReducedData* rom = avatar.reducedModelEnabled() ? &avatar.reducedData() : nullptr;
   if (rom && rom->inertial.elements.size() > 0) return rom->inertial;
-  const int T = avatar.volumetricData().numTets();  // lumped masses: every tet, weight 1
-  Cubature every;
-  every.elements = VecXi::LinSpaced(T, 0, T - 1);
-  every.weights = VecX::Ones(T);
-  return every;
+  return exactCubature(avatar.volumetricData().numTets());  // lumped masses: every tet
 }
 
 NodeMasses nodeMasses(const SoftAvatar& avatar) {

@@ -151,7 +151,7 @@ void bind_volume(py::module_& m) {
         report["dropped_columns"] = r.dropped_columns;
         report["frequencies"] = to_numpy(r.frequencies);
         report["max_eigen_residual"] = r.max_eigen_residual;
-        report["eigen_restarts"] = r.eigen_restarts;
+        report["eigen_iterations"] = r.eigen_iterations;
         report["factor_solves"] = r.factor_solves;
         report["seconds"] = r.seconds_total;
         const py::ssize_t n = basis.basis.rows() / 3, k = basis.basis.cols();
@@ -166,7 +166,7 @@ void bind_volume(py::module_& m) {
       "the lowest fixed-interface vibration modes, mass-orthonormal, dependent columns dropped, "
       "mass-PCA to `columns` when > 0. Returns (basis (N, 3, r): displacement of node j in "
       "column k is basis[j, :, k], zero on bone nodes; report dict with the column counts, the "
-      "vibration frequencies in Hz and the eigensolver's residual, restarts and solves). "
+      "vibration frequencies in Hz and the eigensolver's residual, Lanczos steps and solves). "
       "ValueError for settings out of range.");
 
   py::class_<VolumetricData>(

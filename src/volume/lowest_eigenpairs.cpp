@@ -35,10 +35,24 @@ MatX massOrthonormalize(const MatX& X, const VecX& m, double tolerance, int keep
 namespace {
 
 // W minus its M-projection on the columns of V (M-orthonormal), twice (classical Gram–Schmidt
-// loses orthogonality once; twice is enough, Giraud et al. 2005).
-void orthogonalizeAgainst(const MatX& V, const VecX& m, MatX& W) {
-  if (V.cols() == 0) return;
-  for (int pass = 0; pass < 2; ++pass) W -= V * (V.transpose() * (m.asDiagonal() * W));
+// loses orthogonality once; twice is enough, Giraud et al. 2005). Returns the first pass's
+// coefficients Vᵀ M W.
+MatX orthogonalizeAgainst(const Eigen::Ref<const MatX>& V, const VecX& m, MatX& W) {
+  MatX first = V.transpose() * (m.asDiagonal() * W);
+  W.noalias() -= V * first;
+  W.noalias() -= V * (V.transpose() * (m.asDiagonal() * W));
+  return first;
+}
+
+// Relative residuals ‖Kx − λMx‖_{M⁻¹} / (λ ‖x‖_M) of M-orthonormal pairs.
+double largestResidual(const SpMat& K, const VecX& m, const VecX& values, const MatX& X) {
+  const MatX R = K * X - m.asDiagonal() * X * values.asDiagonal();
+  const VecX inverse_m = m.cwiseInverse();
+  double largest = 0.0;
+  for (Eigen::Index i = 0; i < X.cols(); ++i)
+    largest =
+        std::max(largest, std::sqrt(R.col(i).cwiseAbs2().dot(inverse_m)) / std::abs(values[i]));
+  return largest;
 }
 
 }  // namespace
@@ -56,8 +70,8 @@ LowestEigenpairs lowestEigenpairs(const SpMat& K, const SparseCholesky& factor, 
                      std::to_string(n) + "]");
   if (!(m.minCoeff() > 0.0) || !m.allFinite())
     throw InputError(fn + "the masses must be positive and finite");
-  if (options.extra_columns < 1 || options.krylov_blocks < 2 || options.max_restarts < 0)
-    throw InputError(fn + "options: extra_columns ≥ 1, krylov_blocks ≥ 2, max_restarts ≥ 0");
+  if (options.block_size < 1 || options.max_columns < 0 || !(options.tolerance > 0.0))
+    throw InputError(fn + "options: block_size ≥ 1, max_columns ≥ 0, tolerance > 0");
   LowestEigenpairs out;
   out.values.resize(0);
   out.vectors.resize(n, 0);
@@ -65,57 +79,92 @@ LowestEigenpairs lowestEigenpairs(const SpMat& K, const SparseCholesky& factor, 
     out.converged = true;
     return out;
   }
-  const int block = int(std::min<Eigen::Index>(n, count + options.extra_columns));
+  const Eigen::Index p = std::min<Eigen::Index>(n, options.block_size);
+  const Eigen::Index cap =
+      options.max_columns > 0
+          ? std::min<Eigen::Index>(n, std::max<Eigen::Index>(options.max_columns, count))
+          : std::min<Eigen::Index>(n, 10 * Eigen::Index(count) + 20 * p);
   std::mt19937_64 rng(options.seed);
   std::normal_distribution<double> normal(0.0, 1.0);
-  MatX start(n, block);
-  for (Eigen::Index c = 0; c < start.cols(); ++c)
-    for (Eigen::Index r = 0; r < n; ++r) start(r, c) = normal(rng);
-  const VecX inverse_m = m.cwiseInverse();
+  // Random columns (normal entries, from the seed).
+  auto randomBlock = [&](Eigen::Index columns) {
+    MatX Q(n, columns);
+    for (Eigen::Index c = 0; c < Q.cols(); ++c)
+      for (Eigen::Index r = 0; r < n; ++r) Q(r, c) = normal(rng);
+    return Q;
+  };
 
-  for (int restart = 0;; ++restart) {
-    // The Krylov space [Q, (K⁻¹M) Q, (K⁻¹M)² Q, ...], M-orthonormal.
-    MatX V = massOrthonormalize(start, m, 1e-12);
-    MatX last = V;
-    for (int b = 1; b < options.krylov_blocks && V.cols() < n; ++b) {
-      MatX W = factor.solve(m.asDiagonal() * last);
-      out.solves += int(last.cols());
-      orthogonalizeAgainst(V, m, W);
-      // Combinations of W's columns stay ⟂ V (to rounding; the Rayleigh–Ritz step below does
-      // not need more than that).
-      W = massOrthonormalize(W, m, 1e-10);
-      if (W.cols() == 0) break;
-      MatX grown(n, V.cols() + W.cols());
-      grown << V, W;
-      V.swap(grown);
-      last = std::move(W);
+  const VecX inverse_m = m.cwiseInverse();
+  MatX V(n, cap);  // the Krylov space's M-orthonormal columns [0, k)
+  MatX T = MatX::Zero(cap, cap);
+  Eigen::Index k = 0;
+  MatX block = massOrthonormalize(randomBlock(p), m, 1e-12);
+  V.leftCols(block.cols()) = block;
+  k = block.cols();
+  for (Eigen::Index last = 0;; ++out.iterations) {
+    // W = K⁻¹ M V_last; T's columns of the last block from the first Gram–Schmidt pass.
+    const Eigen::Index width = k - last;
+    MatX W = factor.solve(m.asDiagonal() * V.middleCols(last, width));
+    out.solves += int(width);
+    const MatX C = orthogonalizeAgainst(V.leftCols(k), m, W);
+    T.block(0, last, k, width) = C;
+    T.block(last, 0, width, k) = C.transpose();
+    T.block(last, last, width, width) =
+        0.5 * (C.bottomRows(width) + C.bottomRows(width).transpose());
+    // The next block: W's remainder, topped up with random directions if it lost rank.
+    MatX next = massOrthonormalize(W, m, 1e-10);
+    if (next.cols() < width && k + next.cols() < n) {
+      MatX extra = randomBlock(std::min<Eigen::Index>(width - next.cols(), n - k - next.cols()));
+      orthogonalizeAgainst(V.leftCols(k), m, extra);
+      if (next.cols() > 0) orthogonalizeAgainst(next, m, extra);
+      extra = massOrthonormalize(extra, m, 1e-10);
+      MatX both(n, next.cols() + extra.cols());
+      both << next, extra;
+      next.swap(both);
     }
-    // Rayleigh–Ritz: VᵀKV y = θ y (VᵀMV = I).
-    const MatX KV = K * V;
-    MatX A = V.transpose() * KV;
-    A = 0.5 * (A + A.transpose());
-    const Eigen::SelfAdjointEigenSolver<MatX> ritz(A);
-    const int wanted = int(std::min<Eigen::Index>(count, V.cols()));
-    const int next = int(std::min<Eigen::Index>(block, V.cols()));
-    const MatX Y = ritz.eigenvectors().leftCols(next);
-    MatX X = V * Y;
-    const MatX KX = KV * Y;
-    out.max_residual = 0.0;
-    for (int i = 0; i < wanted; ++i) {
-      const double theta = ritz.eigenvalues()[i];
-      const VecX r = KX.col(i) - theta * m.cwiseProduct(X.col(i));
-      const double residual = std::sqrt(r.cwiseAbs2().dot(inverse_m)) / std::abs(theta);
-      out.max_residual = std::max(out.max_residual, residual);
+    // B = V₊ᵀ M W (the Lanczos relation's coupling, W = V₊ B after the Gram–Schmidt passes).
+    const MatX B = next.transpose() * (m.asDiagonal() * W);
+    // G = (KV₊)ᵀ M⁻¹ (KV₊): ‖K V₊ c‖²_{M⁻¹} = cᵀ G c.
+    const MatX KN = K * next;
+    const MatX G = KN.transpose() * (inverse_m.asDiagonal() * KN);
+
+    // Ritz pairs (μ, x = Vy) of T, once the space can hold the pairs wanted and a block more: μ
+    // largest ↔ λ = 1/μ smallest. Their residuals come from the Lanczos relation: K⁻¹Mx − μx =
+    // V₊ B y_last =: r, so Kx − λMx = −λ K r and the relative residual ‖Kx − λMx‖_{M⁻¹} / λ is
+    // ‖K r‖_{M⁻¹} (through G), exactly, without forming x.
+    const bool full = next.cols() == 0 || k + next.cols() > cap;
+    if (k < count + p && !full) {
+      V.middleCols(k, next.cols()) = next;
+      last = k;
+      k += next.cols();
+      continue;
     }
-    out.restarts = restart;
-    if ((wanted == count && out.max_residual <= options.tolerance) ||
-        restart >= options.max_restarts) {
+    const Eigen::SelfAdjointEigenSolver<MatX> ritz(T.topLeftCorner(k, k));
+    const Eigen::Index wanted = std::min<Eigen::Index>(count, k);
+    double residual = 0.0;
+    for (Eigen::Index i = 0; i < wanted; ++i) {
+      const VecX c = B * ritz.eigenvectors().col(k - 1 - i).tail(width);
+      residual = std::max(residual, std::sqrt(std::max(0.0, c.dot(G * c))));
+    }
+    if ((wanted == count && residual <= options.tolerance) || full) {
+      // The wanted Ritz vectors, refined by Rayleigh–Ritz with K in their span (which can only
+      // lower the Ritz values towards the eigenvalues), and their residuals measured.
+      MatX Y(k, wanted);
+      for (Eigen::Index i = 0; i < wanted; ++i) Y.col(i) = ritz.eigenvectors().col(k - 1 - i);
+      const MatX X = V.leftCols(k) * Y;
+      MatX A = X.transpose() * (K * X);
+      A = 0.5 * (A + A.transpose());
+      const Eigen::SelfAdjointEigenSolver<MatX> refined(A);
+      out.values = refined.eigenvalues();
+      out.vectors = X * refined.eigenvectors();
+      out.max_residual = largestResidual(K, m, out.values, out.vectors);
+      out.columns = int(k);
       out.converged = wanted == count && out.max_residual <= options.tolerance;
-      out.values = ritz.eigenvalues().head(wanted);
-      out.vectors = X.leftCols(wanted);
-      return out;
+      if (out.converged || full) return out;
     }
-    start = std::move(X);
+    V.middleCols(k, next.cols()) = next;
+    last = k;
+    k += next.cols();
   }
 }
 

@@ -154,12 +154,13 @@ MatX modalColumns(const SoftTissueRestOperators& ops, const ModalBasisSettings& 
         detail::lowestEigenpairs(ops.stiffness, factor, ops.masses, settings.vibration_modes, eig);
     if (!modes.converged)
       throw Error(fn + "the vibration modes did not converge: relative residual " +
-                  std::to_string(modes.max_residual) + " after " + std::to_string(modes.restarts) +
-                  " restarts, expected ≤ " + std::to_string(settings.eigen_tolerance));
+                  std::to_string(modes.max_residual) + " after " +
+                  std::to_string(modes.iterations) + " Lanczos steps, expected ≤ " +
+                  std::to_string(settings.eigen_tolerance));
     r.vibration_columns = int(modes.values.size());
     r.frequencies = modes.values.cwiseSqrt() / (2.0 * M_PI);
     r.max_eigen_residual = modes.max_residual;
-    r.eigen_restarts = modes.restarts;
+    r.eigen_iterations = modes.iterations;
     r.factor_solves += modes.solves;
     r.seconds_vibration = secondsSince(t0);
   }

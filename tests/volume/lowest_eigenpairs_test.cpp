@@ -1,4 +1,4 @@
-// The block Krylov eigensolver of the vibration modes (volume/lowest_eigenpairs.h) and the
+// The block Lanczos eigensolver of the vibration modes (volume/lowest_eigenpairs.h) and the
 // CHOLMOD factor it runs on (volume/sparse_cholesky.h), against dense generalized eigensolves.
 #include "volume/lowest_eigenpairs.h"
 
@@ -63,6 +63,54 @@ TEST(LowestEigenpairs, MatchDenseGeneralizedEigenvalues) {
     EXPECT_LT(std::sqrt(R.col(k).cwiseAbs2().dot(p.m.cwiseInverse())), 1e-6 * e.values[k]);
   EXPECT_LE(e.max_residual, 1e-6);
   EXPECT_GT(e.solves, 0);
+}
+
+// A square grid's Laplacian with unit masses has eigenvalues of multiplicity 2 (the modes
+// (a, b) and (b, a)): every block size, down to single vectors, must find both copies.
+TEST(LowestEigenpairs, FindRepeatedEigenvaluesWithEveryBlockSize) {
+  const int side = 14, n = side * side;
+  std::vector<Triplet> t;
+  for (int i = 0; i < side; ++i)
+    for (int j = 0; j < side; ++j) {
+      const int id = i * side + j;
+      t.emplace_back(id, id, 4.0);
+      if (i + 1 < side) t.emplace_back(id, id + side, -1.0), t.emplace_back(id + side, id, -1.0);
+      if (j + 1 < side) t.emplace_back(id, id + 1, -1.0), t.emplace_back(id + 1, id, -1.0);
+    }
+  SpMat K(n, n);
+  K.setFromTriplets(t.begin(), t.end());
+  const VecX m = VecX::Ones(n);
+  const SparseCholesky factor(K, "test");
+  const Eigen::SelfAdjointEigenSolver<MatX> dense{MatX(K)};
+  const int count = 12;
+  ASSERT_NEAR(dense.eigenvalues()[1], dense.eigenvalues()[2], 1e-12);  // a repeated pair
+  for (int block : {1, 2, 4, 8}) {
+    LowestEigenpairsOptions options;
+    options.block_size = block;
+    options.max_columns = n;
+    const LowestEigenpairs e = lowestEigenpairs(K, factor, m, count, options);
+    ASSERT_TRUE(e.converged) << block << ": residual " << e.max_residual;
+    ASSERT_EQ(e.values.size(), count);
+    for (int k = 0; k < count; ++k)
+      EXPECT_NEAR(e.values[k], dense.eigenvalues()[k], 1e-9 * dense.eigenvalues()[k])
+          << "block " << block << ", pair " << k;
+    EXPECT_GE(e.columns, count);
+    EXPECT_GT(e.iterations, 0);
+  }
+}
+
+// A Krylov space too small for the tolerance: the best pairs it has, reported as not converged.
+TEST(LowestEigenpairs, ReportsNonConvergenceWithinTheLargestSpace) {
+  const Pencil p = gridPencil(18, 7);
+  const SparseCholesky factor(p.K, "test");
+  LowestEigenpairsOptions options;
+  options.max_columns = 24;
+  options.tolerance = 1e-12;
+  const LowestEigenpairs e = lowestEigenpairs(p.K, factor, p.m, 20, options);
+  EXPECT_FALSE(e.converged);
+  EXPECT_EQ(e.values.size(), 20);
+  EXPECT_GT(e.max_residual, 1e-12);
+  EXPECT_LE(e.columns, 24);
 }
 
 TEST(LowestEigenpairs, ZeroCountAndErrors) {

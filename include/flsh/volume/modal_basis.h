@@ -66,7 +66,7 @@ struct ModalBasisReport {
   int dropped_columns = 0;        ///< dependent (or, with `columns`, compressed away)
   VecX frequencies;               ///< Hz, ascending, of the vibration modes: √λ / 2π
   double max_eigen_residual = 0;  ///< largest relative residual of a vibration mode
-  int eigen_restarts = 0;         ///< restarts of the block Krylov eigensolver
+  int eigen_iterations = 0;       ///< block Lanczos steps of the eigensolver
   int factor_solves = 0;          ///< columns solved with K_uu's factor
   double seconds_operators = 0, seconds_factor = 0, seconds_static = 0, seconds_vibration = 0;
   double seconds_orthonormalize = 0, seconds_total = 0;
@@ -82,7 +82,7 @@ struct ModalBasis {
 
 /// Builds the basis of `data` (see the file comment). InputError for settings out of range
 /// (naming the field and the range) or data as softTissueRestOperators rejects; Error when the
-/// eigensolver does not converge within its restarts (naming the residual reached).
+/// eigensolver does not converge within its largest Krylov space (naming the residual reached).
 ModalBasis computeModalBasis(const VolumetricData& data, const ModalBasisSettings& settings = {});
 
 /// The same from operators already assembled (the basis' rows come out per soft DoF, 3S × r:

@@ -164,7 +164,8 @@ void bind_volume(py::module_& m) {
       "The skeleton-aware soft-tissue basis of an initialized soft avatar (issue 26; docs/rom.md, "
       "'A basis from the physics'): one static-correction mode per bone DoF (static_modes) plus "
       "the lowest fixed-interface vibration modes, mass-orthonormal, dependent columns dropped, "
-      "mass-PCA to `columns` when > 0. Returns (basis (N, 3, r): displacement of node j in "
+      "compressed to `columns` when > 0 (mass-PCA of the columns weighted by the load each "
+      "answers). Returns (basis (N, 3, r): displacement of node j in "
       "column k is basis[j, :, k], zero on bone nodes; report dict with the column counts, the "
       "vibration frequencies in Hz and the eigensolver's residual, Lanczos steps and solves). "
       "ValueError for settings out of range.");

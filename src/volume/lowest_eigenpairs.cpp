@@ -10,10 +10,10 @@
 
 namespace flsh::detail {
 
-MatX massOrthonormalize(const MatX& X, const VecX& m, double tolerance, int keep) {
+MatX massOrthonormalize(const MatX& X, const VecX& m, double tolerance, int keep, bool normalize) {
   if (X.cols() == 0) return X;
   MatX Y = X;
-  for (Eigen::Index c = 0; c < Y.cols(); ++c) {
+  for (Eigen::Index c = 0; c < Y.cols() && normalize; ++c) {
     const double norm = std::sqrt(Y.col(c).cwiseAbs2().dot(m));
     if (norm > 0.0) Y.col(c) /= norm;
   }

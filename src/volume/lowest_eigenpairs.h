@@ -50,8 +50,10 @@ LowestEigenpairs lowestEigenpairs(const SpMat& K, const SparseCholesky& factor, 
                                   int count, const LowestEigenpairsOptions& options = {});
 
 /// Columns of X made M-orthonormal (diag(m)), dropping those whose Gram eigenvalue is below
-/// tolerance × the largest (after each column is M-normalized); the result spans the kept
-/// directions ordered by decreasing Gram eigenvalue. `keep` > 0 keeps at most that many.
-MatX massOrthonormalize(const MatX& X, const VecX& m, double tolerance, int keep = 0);
+/// tolerance × the largest (after each column is M-normalized, unless `normalize` is off: then
+/// the columns' own sizes weigh them); the result spans the kept directions ordered by
+/// decreasing Gram eigenvalue (a mass-PCA). `keep` > 0 keeps at most that many.
+MatX massOrthonormalize(const MatX& X, const VecX& m, double tolerance, int keep = 0,
+                        bool normalize = true);
 
 }  // namespace flsh::detail

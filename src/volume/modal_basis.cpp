@@ -167,8 +167,17 @@ MatX modalColumns(const SoftTissueRestOperators& ops, const ModalBasisSettings& 
   t0 = Clock::now();
   MatX columns(n, statics.cols() + modes.vectors.cols());
   columns << statics, modes.vectors;
+  // Compression weighs each column by the load it answers: the static modes as they are (the
+  // response to a unit acceleration of their bone DoF), each vibration mode by its static
+  // participation ‖φᵀ M_ub‖ / λ (its share of those responses). Normalized columns would count
+  // a mode that barely moves as much as the main ones (docs/benchmarks.md: 2–3× the error).
+  const bool weighted = settings.columns > 0;
+  if (weighted)
+    for (Eigen::Index i = 0; i < modes.values.size(); ++i)
+      columns.col(statics.cols() + i) *=
+          (modes.vectors.col(i).transpose() * ops.coupling).norm() / modes.values[i];
   MatX basis = detail::massOrthonormalize(columns, ops.masses, settings.dependence_tolerance,
-                                          settings.columns);
+                                          settings.columns, !weighted);
   r.dropped_columns = int(columns.cols() - basis.cols());
   r.seconds_orthonormalize = secondsSince(t0);
   return basis;

@@ -49,8 +49,10 @@ struct ModalBasisSettings {
   bool static_modes = true;
   /// Lowest fixed-interface vibration modes (≥ 0).
   int vibration_modes = 50;
-  /// > 0: keep the r mass-principal components of the columns (mass-PCA of the M-normalized
-  /// static and vibration columns) instead of all of them; 0: keep every independent column.
+  /// > 0: keep the r mass-principal components of the columns, each weighted by the load it
+  /// answers (the static modes as they are: the response to a unit acceleration of their bone
+  /// DoF; each vibration mode φ scaled by its static participation ‖φᵀ M_ub‖ / λ), instead of
+  /// all of them; 0: keep every independent column.
   int columns = 0;
   /// The vibration modes are converged when ‖K φ − λ M φ‖_{M⁻¹} ≤ tol · λ ‖φ‖_M for each.
   double eigen_tolerance = 1e-5;

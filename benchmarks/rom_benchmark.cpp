@@ -1,3 +1,6 @@
+// (Past 800 lines on purpose: one file for the ROM's measurements — speed, --compare, --sag,
+// --galerkin, --modal-fit — since they share the avatar builder, the scenarios and the runs.)
+//
 // ROM soft skeleton at the default resolution (synthetic SMPL-size body: 6890 surface vertices,
 // ~10 000 nodes, ~39 000 tets; 87 handles, 500 + 500 cubature tets) tracking a built-in motion on
 // a ground plane at h = 1/30 s, the way `flsh simulate` runs it (Scene with
@@ -14,6 +17,7 @@
 //        rom_benchmark --plot-csv CSV [--png PATH]   (plots a --csv file of --compare again)
 //        rom_benchmark --sag [--frames F]   (gravity's sag of a standing body: FEM and ROMs)
 //        rom_benchmark --galerkin LIST      (linear static sag: Galerkin against best fit)
+//        rom_benchmark --modal-fit LIST [--frames F]   (the FEM's u against modal bases' spans)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
 //   --exact: no cubature (every tet and node integrated);
 //   --surface-pou: ReducedSettings::surface_partition_of_unity (the partition-of-unity basis);
@@ -34,8 +38,8 @@
 //
 // --compare: the speed–accuracy trade. The FEM soft skeleton is the reference; on each scenario
 // (walk, jumping jacks: F frames each, tracking the motion on the ground; ball: a standing body
-// whose belly a ball presses 4 cm in at 0.3 m/s and releases) the skeleton, ROMs of several handle and
-// cubature counts and the FEM run the same frames. Per frame, a model's displacement error is
+// whose belly a ball presses 4 cm in at 0.3 m/s and releases) the skeleton, ROMs of several handle
+// and cubature counts and the FEM run the same frames. Per frame, a model's displacement error is
 // the RMS over the surface vertices of ‖u_model − u_FEM‖ (soft-tissue displacements, unposed
 // space) divided by the RMS of ‖u_FEM‖ (frames where that RMS is below 0.5 mm are skipped): 0 is
 // the FEM, 1 is the skeleton (u = 0). Also printed: the RMS distance of the posed surfaces
@@ -57,6 +61,12 @@
 // surface RMS errors relative to the FEM's. The entry "all" is the limit of ever more handles:
 // every soft surface node free and the tissue inside the biharmonic extension of the surface
 // (a constrained solve).
+//
+// --modal-fit LIST: what the nonlinear FEM (Fung stiffening, contact, pose-dependent coupling)
+// leaves outside the span of the modal bases (docs/rom.md, "A basis from the physics"), on the
+// scenarios of --compare: per frame the least-squares fit of the FEM's surface u, as --compare's
+// basis best fit. Entries V (static modes + V vibration modes) or V:C (compressed to C columns),
+// e.g. --modal-fit 0,24,24:72.
 #include <omp.h>
 
 #include <Eigen/SparseCholesky>
@@ -81,6 +91,7 @@
 #include "flsh/render/plot.h"
 #include "flsh/render/render.h"
 #include "flsh/solve/scene.h"
+#include "flsh/volume/modal_basis.h"
 #include "flsh/volume/reduced_basis.h"
 #include "flsh/volume/reduced_data.h"
 
@@ -100,15 +111,17 @@ std::string g_material_file;  // --materials: every soft model's material file (
 struct ModelSpec {
   Kind kind = Kind::Rom;
   int handles = 87, elastic = 500, inertial = 500;  // 0 cubature tets: exact integration
-  bool pou = false;  // ReducedSettings::surface_partition_of_unity
+  bool pou = false;                                 // ReducedSettings::surface_partition_of_unity
   double basis_drop = -1.0;  // ReducedSettings::basis_drop_below (negative: its default)
   int training_samples = 0;  // ReducedSettings::training_samples (0: its default)
   std::string name() const {
     if (kind == Kind::Skeleton) return "skeleton";
     if (kind == Kind::Fem) return "FEM";
     char buf[64];
-    if (elastic == 0 && inertial == 0) std::snprintf(buf, sizeof(buf), "ROM %d exact", handles);
-    else std::snprintf(buf, sizeof(buf), "ROM %d/%d/%d", handles, elastic, inertial);
+    if (elastic == 0 && inertial == 0)
+      std::snprintf(buf, sizeof(buf), "ROM %d exact", handles);
+    else
+      std::snprintf(buf, sizeof(buf), "ROM %d/%d/%d", handles, elastic, inertial);
     return std::string(buf) + (pou ? " PoU" : "");
   }
 };
@@ -131,8 +144,8 @@ ModelSpec parseModel(const std::string& text) {
   const int fields = std::sscanf(rest.c_str(), "%d/%d/%d%n", &h, &e, &i, &consumed);
   const bool whole = fields == 3 && consumed == int(rest.size());
   int consumed_h = 0;
-  const bool handles_only = std::sscanf(rest.c_str(), "%d%n", &h, &consumed_h) == 1 &&
-                            consumed_h == int(rest.size());
+  const bool handles_only =
+      std::sscanf(rest.c_str(), "%d%n", &h, &consumed_h) == 1 && consumed_h == int(rest.size());
   if (!(whole && !exact) && !handles_only)
     throw std::runtime_error("--models: '" + text +
                              "' is not H, H/E/I or Hexact (each optionally followed by pou)");
@@ -172,7 +185,8 @@ std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, co
   return avatar;
 }
 
-// ---- one scenario ---------------------------------------------------------------------------------
+// ---- one scenario
+// ---------------------------------------------------------------------------------
 
 struct Scenario {
   std::string name;
@@ -214,11 +228,19 @@ Run makeRun(std::shared_ptr<SoftAvatar> avatar, const Scenario& sc, const SceneO
     const Vec3 start = belly + Vec3(0.0, 0.0, radius + 0.02);
     const double turn = travel / speed;
     Collider ball = Collider::sphere(start, radius);
-    ball.path = ColliderPath{{0.0, turn, 2 * turn},
-                             {Vec3::Zero(), Vec3(0.0, 0.0, -travel), Vec3::Zero()}};
+    ball.path =
+        ColliderPath{{0.0, turn, 2 * turn}, {Vec3::Zero(), Vec3(0.0, 0.0, -travel), Vec3::Zero()}};
     r.scene->addCollider(ball);
   }
   return r;
+}
+
+// The comparison's scenarios: walk, jumping jacks, a ball pressing the belly of a standing body.
+std::vector<Scenario> comparisonScenarios() {
+  return {{"walk", std::make_shared<Motion>(makeBuiltinMotion("walk", 20.0, 30.0)), false},
+          {"jumping jacks",
+           std::make_shared<Motion>(makeBuiltinMotion("jumping_jacks", 20.0, 30.0)), false},
+          {"ball", std::make_shared<Motion>(makeBuiltinMotion("stand", 20.0, 30.0)), true}};
 }
 
 struct Trajectory {
@@ -268,6 +290,59 @@ double basisBestFit(const SoftAvatar& avatar, const Trajectory& fem) {
   return counted ? sum / counted : 0.0;
 }
 
+// --modal-fit: the best fit of the FEM's u in the span of modal bases' surface rows (3V × r).
+int modalFit(int frames, const std::string& list) {
+  auto body = std::make_shared<BodyModel>(makeSyntheticBody({}));
+  auto fem = makeAvatar(body, {Kind::Fem}, nullptr);
+  const Eigen::Index V = body->numVertices();
+  std::vector<std::pair<std::string, MatX>> bases;
+  for (size_t start = 0; start < list.size();) {
+    const size_t comma = std::min(list.find(',', start), list.size());
+    const std::string entry = list.substr(start, comma - start);
+    start = comma + 1;
+    ModalBasisSettings s;
+    s.vibration_modes = std::atoi(entry.c_str());
+    const size_t colon = entry.find(':');
+    if (colon != std::string::npos) s.columns = std::atoi(entry.c_str() + colon + 1);
+    const ModalBasis b = computeModalBasis(fem->volumetricData(), s);
+    bases.emplace_back("static + " + std::to_string(s.vibration_modes) + " modes, " +
+                           std::to_string(b.columns()) + " columns",
+                       b.basis.topRows(3 * V));
+  }
+  std::printf(
+      "best fit of the FEM's surface u in each basis' span, relative to RMS ‖u_FEM‖, mean "
+      "(max) over %d frames\n| basis | walk | jumping jacks | ball |\n|---|---|---|---|\n",
+      frames);
+  std::vector<std::vector<std::string>> cells(bases.size());
+  for (const Scenario& sc : comparisonScenarios()) {
+    const Trajectory t = simulate(fem, sc, frames);
+    for (size_t k = 0; k < bases.size(); ++k) {
+      const MatX& P = bases[k].second;
+      const Eigen::LDLT<MatX> normal(P.transpose() * P);
+      double sum = 0.0, largest = 0.0;
+      int counted = 0;
+      for (size_t f = 0; f < t.u.size(); ++f) {
+        if (t.displacement[f] < 5e-4) continue;
+        const MatX rows = t.u[f].transpose();  // 3 × V: entry 3i + a is vertex i's a
+        const Eigen::Map<const VecX> target(rows.data(), 3 * V);
+        const VecX fit = P * normal.solve(P.transpose() * target) - target;
+        const double e = std::sqrt(fit.squaredNorm() / double(V)) / t.displacement[f];
+        sum += e;
+        largest = std::max(largest, e);
+        ++counted;
+      }
+      char cell[64];
+      std::snprintf(cell, sizeof(cell), "%.1f %% (%.1f %%)", 100 * sum / std::max(1, counted),
+                    100 * largest);
+      cells[k].push_back(cell);
+    }
+  }
+  for (size_t k = 0; k < bases.size(); ++k)
+    std::printf("| %s | %s | %s | %s |\n", bases[k].first.c_str(), cells[k][0].c_str(),
+                cells[k][1].c_str(), cells[k][2].c_str());
+  return 0;
+}
+
 struct Row {
   std::string model, scenario;
   double mean_error = 0, max_error = 0, steps_per_second = 0, speedup = 0;
@@ -294,8 +369,8 @@ void plotRows(const std::vector<Row>& rows, const std::string& png) {
       if (r.scenario == scenarios[s]) {
         ps.x.push_back(r.steps_per_second);
         ps.y.push_back(100 * r.mean_error);
-        const bool variant = r.model.find("/250") != std::string::npos ||
-                             r.model.find("/1000") != std::string::npos;
+        const bool variant =
+            r.model.find("/250") != std::string::npos || r.model.find("/1000") != std::string::npos;
         ps.point_labels.push_back(s == 0 && !variant ? r.model : "");
         if (r.model == "FEM") fem_speed = std::max(fem_speed, r.steps_per_second);
       }
@@ -356,11 +431,7 @@ int compare(int frames, const std::string& png, const std::string& csv,
     models.insert(models.end(), roms.begin(), roms.end());
   }
   models.push_back({Kind::Fem});
-  std::vector<Scenario> scenarios = {
-      {"walk", std::make_shared<Motion>(makeBuiltinMotion("walk", 20.0, 30.0)), false},
-      {"jumping jacks", std::make_shared<Motion>(makeBuiltinMotion("jumping_jacks", 20.0, 30.0)),
-       false},
-      {"ball", std::make_shared<Motion>(makeBuiltinMotion("stand", 20.0, 30.0)), true}};
+  const std::vector<Scenario> scenarios = comparisonScenarios();
 
   std::map<std::string, std::shared_ptr<SoftAvatar>> avatars;
   for (const ModelSpec& m : models) {
@@ -374,8 +445,7 @@ int compare(int frames, const std::string& png, const std::string& csv,
     std::fflush(stdout);
     const Trajectory fem = simulate(avatars["FEM"], sc, frames);
     for (const ModelSpec& m : models) {
-      const Trajectory t =
-          m.kind == Kind::Fem ? fem : simulate(avatars[m.name()], sc, frames);
+      const Trajectory t = m.kind == Kind::Fem ? fem : simulate(avatars[m.name()], sc, frames);
       Row row;
       row.model = m.name();
       row.scenario = sc.name;
@@ -404,16 +474,18 @@ int compare(int frames, const std::string& png, const std::string& csv,
       if (row.unconverged > 0)
         std::snprintf(unconverged, sizeof(unconverged), " (%d steps not converged)",
                       row.unconverged);
-      std::printf("  %-18s displacement error mean %6.1f %% max %6.1f %%%s, surface %5.1f mm, "
-                  "%8.1f steps/s (%7.1f x FEM)%s\n",
-                  row.model.c_str(), 100 * row.mean_error, 100 * row.max_error, fit,
-                  row.surface_mm, row.steps_per_second, row.speedup, unconverged);
+      std::printf(
+          "  %-18s displacement error mean %6.1f %% max %6.1f %%%s, surface %5.1f mm, "
+          "%8.1f steps/s (%7.1f x FEM)%s\n",
+          row.model.c_str(), 100 * row.mean_error, 100 * row.max_error, fit, row.surface_mm,
+          row.steps_per_second, row.speedup, unconverged);
       std::fflush(stdout);
     }
   }
 
-  std::printf("\n| model | scenario | displacement error, mean (max) | basis best fit | posed "
-              "surface, mm | steps/s | × FEM |\n");
+  std::printf(
+      "\n| model | scenario | displacement error, mean (max) | basis best fit | posed "
+      "surface, mm | steps/s | × FEM |\n");
   std::printf("|---|---|---|---|---|---|---|\n");
   for (const Row& r : rows) {
     char fit[32] = "—";
@@ -435,7 +507,8 @@ int compare(int frames, const std::string& png, const std::string& csv,
   return 0;
 }
 
-// ---- steps/s of one ROM --------------------------------------------------------------------------
+// ---- steps/s of one ROM
+// --------------------------------------------------------------------------
 
 int speed(int steps, const ModelSpec& m, double tolerance, const std::string& motion_name,
           bool ground, int hessian, bool lag, double reference) {
@@ -445,14 +518,14 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   const VolumetricData& data = avatar->volumetricData();
   const ReducedData& rom = avatar->reducedData();
   const ReducedBuildReport& rep = avatar->reducedBuildReport();
-  std::printf("avatar: %d nodes (%d bone nodes), %d tets; %d handles, cubature %d elastic / %d "
-              "inertial tets (held-out errors %.2f %% / %.2f %%, rigid motions within %.2f %%); "
-              "built/loaded in %.2f s (reduced level %s, %.2f s)\n",
-              data.numNodes(), data.numBoneNodes(), data.numTets(), rom.numHandles(),
-              int(rom.elastic.elements.size()), int(rom.inertial.elements.size()),
-              100 * rom.elastic_test_error, 100 * rom.inertial_test_error,
-              100 * rom.inertial_rigid_error, build,
-              rep.from_cache ? "from the cache" : "built", rep.seconds_total);
+  std::printf(
+      "avatar: %d nodes (%d bone nodes), %d tets; %d handles, cubature %d elastic / %d "
+      "inertial tets (held-out errors %.2f %% / %.2f %%, rigid motions within %.2f %%); "
+      "built/loaded in %.2f s (reduced level %s, %.2f s)\n",
+      data.numNodes(), data.numBoneNodes(), data.numTets(), rom.numHandles(),
+      int(rom.elastic.elements.size()), int(rom.inertial.elements.size()),
+      100 * rom.elastic_test_error, 100 * rom.inertial_test_error, 100 * rom.inertial_rigid_error,
+      build, rep.from_cache ? "from the cache" : "built", rep.seconds_total);
 
   SceneOptions scene_options;
   if (tolerance > 0) scene_options.reduced_newton.gradient_tolerance = tolerance;
@@ -492,9 +565,9 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
           std::max(largest_u, r.sim->getSoftTissueDisplacements().rowwise().norm().maxCoeff());
     if (ref) {
       ref->scene->step();
-      largest_difference = std::max(
-          largest_difference,
-          (r.sim->getVertices() - ref->sim->getVertices()).rowwise().norm().maxCoeff());
+      largest_difference =
+          std::max(largest_difference,
+                   (r.sim->getVertices() - ref->sim->getVertices()).rowwise().norm().maxCoeff());
     }
     untimed += Clock::now() - pause;
   }
@@ -502,17 +575,20 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   const double n = steps;
   std::printf("steps: %d in %.3f s -> %.1f steps/s (%d not converged)\n", steps, total,
               steps / total, unconverged);
-  std::printf("per step: %.2f Newton iterations, %.2f Hessian assemblies (%.2f reused), %.2f "
-              "factorizations, %.1f PCG iterations\n",
-              sum.iterations / n, sum.hessian_evaluations / n, sum.hessian_reuses / n,
-              sum.factorizations / n, sum.cg_iterations / n);
-  std::printf("per step ms: energy %.3f, gradient %.3f, Hessian %.3f, factorization %.3f, "
-              "solves %.3f, other %.3f\n",
-              1e3 * sum.seconds_energy / n, 1e3 * sum.seconds_gradient / n,
-              1e3 * sum.seconds_hessian / n, 1e3 * sum.seconds_factorization / n,
-              1e3 * sum.seconds_solve / n,
-              1e3 * (total - sum.seconds_energy - sum.seconds_gradient - sum.seconds_hessian -
-                     sum.seconds_factorization - sum.seconds_solve) / n);
+  std::printf(
+      "per step: %.2f Newton iterations, %.2f Hessian assemblies (%.2f reused), %.2f "
+      "factorizations, %.1f PCG iterations\n",
+      sum.iterations / n, sum.hessian_evaluations / n, sum.hessian_reuses / n,
+      sum.factorizations / n, sum.cg_iterations / n);
+  std::printf(
+      "per step ms: energy %.3f, gradient %.3f, Hessian %.3f, factorization %.3f, "
+      "solves %.3f, other %.3f\n",
+      1e3 * sum.seconds_energy / n, 1e3 * sum.seconds_gradient / n, 1e3 * sum.seconds_hessian / n,
+      1e3 * sum.seconds_factorization / n, 1e3 * sum.seconds_solve / n,
+      1e3 *
+          (total - sum.seconds_energy - sum.seconds_gradient - sum.seconds_hessian -
+           sum.seconds_factorization - sum.seconds_solve) /
+          n);
   std::printf("largest soft-tissue displacement (every 10th step): %.1f mm\n", 1000.0 * largest_u);
   if (ref)
     std::printf("largest surface vertex distance from the run at tolerance %.0e: %.4f mm\n",
@@ -602,8 +678,9 @@ int galerkin(const std::string& list) {
   const double fem_rms = surfaceRms(u_fem);
   std::printf("linear static sag of a standing body: FEM %.3f mm RMS on the surface\n",
               1e3 * fem_rms);
-  std::printf("| handles | prescribed: Galerkin (sag) / best fit | partition of unity: Galerkin "
-              "(sag) / best fit |\n|---|---|---|\n");
+  std::printf(
+      "| handles | prescribed: Galerkin (sag) / best fit | partition of unity: Galerkin "
+      "(sag) / best fit |\n|---|---|---|\n");
   for (const std::string& entry : entries) {
     if (entry == "all") {
       // Constraints Σ_j Q_ij u_j = 0 per interior soft node i (Q the biharmonic energy matrix,
@@ -678,46 +755,77 @@ int main(int argc, char** argv) {
   bool lag = true;
   double reference = -1.0;
   std::string motion = "walk", png = "rom_tradeoff.png", csv, plot_csv, models_option,
-      galerkin_list;
+              galerkin_list, modal_list;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--handles" && i + 1 < argc) m.handles = std::atoi(argv[++i]);
-    else if (a == "--elastic" && i + 1 < argc) m.elastic = std::atoi(argv[++i]);
-    else if (a == "--inertial" && i + 1 < argc) m.inertial = std::atoi(argv[++i]);
-    else if (a == "--exact") m.elastic = m.inertial = 0;
-    else if (a == "--surface-pou") m.pou = true;
-    else if (a == "--basis-drop" && i + 1 < argc) m.basis_drop = std::atof(argv[++i]);
-    else if (a == "--training-samples" && i + 1 < argc) m.training_samples = std::atoi(argv[++i]);
-    else if (a == "--max-iterations" && i + 1 < argc) max_iterations_option = std::atoi(argv[++i]);
-    else if (a == "--tolerance" && i + 1 < argc) tolerance = std::atof(argv[++i]);
-    else if (a == "--motion" && i + 1 < argc) motion = argv[++i];
-    else if (a == "--no-ground") ground = false;
-    else if (a == "--exact-hessian") hessian = 1;
-    else if (a == "--psd-hessian") hessian = 0;
-    else if (a == "--no-lag") lag = false;
-    else if (a == "--reference" && i + 1 < argc) reference = std::atof(argv[++i]);
-    else if (a == "--threads" && i + 1 < argc) omp_set_num_threads(std::atoi(argv[++i]));
-    else if (a == "--compare") comparison = true;
-    else if (a == "--models" && i + 1 < argc) models_option = argv[++i];
-    else if (a == "--sag") sag_only = true;
-    else if (a == "--galerkin" && i + 1 < argc) galerkin_list = argv[++i];
-    else if (a == "--materials" && i + 1 < argc) g_material_file = argv[++i];
-    else if (a == "--inertia-floor" && i + 1 < argc) inertia_floor_option = std::atof(argv[++i]);
-    else if (a == "--frames" && i + 1 < argc) frames = std::max(1, std::atoi(argv[++i]));
-    else if (a == "--png" && i + 1 < argc) png = argv[++i];
-    else if (a == "--csv" && i + 1 < argc) csv = argv[++i];
-    else if (a == "--plot-csv" && i + 1 < argc) plot_csv = argv[++i];
-    else if (!a.empty() && a[0] != '-') steps = std::max(1, std::atoi(a.c_str()));
+    if (a == "--handles" && i + 1 < argc)
+      m.handles = std::atoi(argv[++i]);
+    else if (a == "--elastic" && i + 1 < argc)
+      m.elastic = std::atoi(argv[++i]);
+    else if (a == "--inertial" && i + 1 < argc)
+      m.inertial = std::atoi(argv[++i]);
+    else if (a == "--exact")
+      m.elastic = m.inertial = 0;
+    else if (a == "--surface-pou")
+      m.pou = true;
+    else if (a == "--basis-drop" && i + 1 < argc)
+      m.basis_drop = std::atof(argv[++i]);
+    else if (a == "--training-samples" && i + 1 < argc)
+      m.training_samples = std::atoi(argv[++i]);
+    else if (a == "--max-iterations" && i + 1 < argc)
+      max_iterations_option = std::atoi(argv[++i]);
+    else if (a == "--tolerance" && i + 1 < argc)
+      tolerance = std::atof(argv[++i]);
+    else if (a == "--motion" && i + 1 < argc)
+      motion = argv[++i];
+    else if (a == "--no-ground")
+      ground = false;
+    else if (a == "--exact-hessian")
+      hessian = 1;
+    else if (a == "--psd-hessian")
+      hessian = 0;
+    else if (a == "--no-lag")
+      lag = false;
+    else if (a == "--reference" && i + 1 < argc)
+      reference = std::atof(argv[++i]);
+    else if (a == "--threads" && i + 1 < argc)
+      omp_set_num_threads(std::atoi(argv[++i]));
+    else if (a == "--compare")
+      comparison = true;
+    else if (a == "--models" && i + 1 < argc)
+      models_option = argv[++i];
+    else if (a == "--sag")
+      sag_only = true;
+    else if (a == "--galerkin" && i + 1 < argc)
+      galerkin_list = argv[++i];
+    else if (a == "--modal-fit" && i + 1 < argc)
+      modal_list = argv[++i];
+    else if (a == "--materials" && i + 1 < argc)
+      g_material_file = argv[++i];
+    else if (a == "--inertia-floor" && i + 1 < argc)
+      inertia_floor_option = std::atof(argv[++i]);
+    else if (a == "--frames" && i + 1 < argc)
+      frames = std::max(1, std::atoi(argv[++i]));
+    else if (a == "--png" && i + 1 < argc)
+      png = argv[++i];
+    else if (a == "--csv" && i + 1 < argc)
+      csv = argv[++i];
+    else if (a == "--plot-csv" && i + 1 < argc)
+      plot_csv = argv[++i];
+    else if (!a.empty() && a[0] != '-')
+      steps = std::max(1, std::atoi(a.c_str()));
     else {
       std::fprintf(stderr,
                    "usage: rom_benchmark [STEPS] [--handles H] [--elastic N] [--inertial N] "
-                   "[--exact] [--surface-pou] [--tolerance T] [--exact-hessian | --psd-hessian] [--no-lag] [--motion NAME] "
+                   "[--exact] [--surface-pou] [--tolerance T] [--exact-hessian | --psd-hessian] "
+                   "[--no-lag] [--motion NAME] "
                    "[--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I] "
                    "[--basis-drop T] [--max-iterations N]\n"
                    "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] "
                    "[--models LIST]\n"
                    "       rom_benchmark --sag [--frames F]\n"
                    "       rom_benchmark --galerkin LIST\n"
+                   "       rom_benchmark --modal-fit LIST [--frames F]\n"
                    "       rom_benchmark --plot-csv CSV [--png PATH]\n");
       return 2;
     }
@@ -740,6 +848,7 @@ int main(int argc, char** argv) {
     }
     if (sag_only) return sag(frames);
     if (!galerkin_list.empty()) return galerkin(galerkin_list);
+    if (!modal_list.empty()) return modalFit(frames, modal_list);
     return speed(steps, m, tolerance, motion, ground, hessian, lag, reference);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "rom_benchmark: %s\n", e.what());

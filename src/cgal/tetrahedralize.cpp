@@ -36,6 +36,7 @@
 #include <unordered_set>
 #include <vector>
 
+#include "core/seconds_since.h"
 #include "flsh/core/error.h"
 
 namespace flsh::cgal {
@@ -45,9 +46,7 @@ using K = CGAL::Exact_predicates_inexact_constructions_kernel;
 using Point = K::Point_3;
 using SurfaceMesh = CGAL::Surface_mesh<Point>;
 
-double secondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
+using detail::secondsSince;
 
 Point toPoint(const MatX3& X, Eigen::Index i) { return Point(X(i, 0), X(i, 1), X(i, 2)); }
 
@@ -57,9 +56,9 @@ SurfaceMesh toSurfaceMesh(const MatX3& V, const MatX3i& F) {
                SurfaceMesh::size_type(F.rows()));
   for (Eigen::Index i = 0; i < V.rows(); ++i) mesh.add_vertex(toPoint(V, i));
   for (Eigen::Index f = 0; f < F.rows(); ++f) {
-    const auto face = mesh.add_face(SurfaceMesh::Vertex_index(F(f, 0)),
-                                    SurfaceMesh::Vertex_index(F(f, 1)),
-                                    SurfaceMesh::Vertex_index(F(f, 2)));
+    const auto face =
+        mesh.add_face(SurfaceMesh::Vertex_index(F(f, 0)), SurfaceMesh::Vertex_index(F(f, 1)),
+                      SurfaceMesh::Vertex_index(F(f, 2)));
     // The caller has checked that F is a closed, oriented 2-manifold.
     if (face == SurfaceMesh::null_face())
       throw Error("tetrahedralize: face " + std::to_string(f) +
@@ -146,10 +145,9 @@ class BoundaryRecovery {
       bool improved = false;
       for (const Crossing& x : *crossed) {
         const size_t mark = log_.size();
-        const bool flipped = x.is_face
-                                 ? (!isSurfaceFace(x.v[0], x.v[1], x.v[2]) &&
-                                    flip23(x.v[0], x.v[1], x.v[2]))
-                                 : removeEdge(x.v[0], x.v[1], {a, b, a});
+        const bool flipped =
+            x.is_face ? (!isSurfaceFace(x.v[0], x.v[1], x.v[2]) && flip23(x.v[0], x.v[1], x.v[2]))
+                      : removeEdge(x.v[0], x.v[1], {a, b, a});
         if (flipped && improves(a, b, crossed->size())) {
           improved = true;
           break;
@@ -241,8 +239,7 @@ class BoundaryRecovery {
   static bool isNode(Vh v) { return v->info() >= 0; }
 
   CGAL::Sign orient(Vh p, Vh q, Vh r, Vh s) const {
-    return tr_.geom_traits().orientation_3_object()(p->point(), q->point(), r->point(),
-                                                     s->point());
+    return tr_.geom_traits().orientation_3_object()(p->point(), q->point(), r->point(), s->point());
   }
 
   // 2–3 flip of face uvw (it must not be a surface face); logged for undo.
@@ -321,8 +318,7 @@ class BoundaryRecovery {
     int fi, fj, fk;
     if (!tr_.is_facet(c, d, x, face_cell, fi, fj, fk)) return false;
     tr_.tds().flip_flippable(face_cell, 6 - fi - fj - fk);  // creates ab and the flat tet abcd
-    if (!tr_.is_edge(c, d, cell, i, j))
-      throw Error("tetrahedralize: internal error in a 4-4 flip");
+    if (!tr_.is_edge(c, d, cell, i, j)) throw Error("tetrahedralize: internal error in a 4-4 flip");
     tr_.tds().flip_flippable(cell, i, j);  // removes cd and the flat tet
     log_.push_back({FlipKind::four_to_four, {a, b, c, d}});
     return true;
@@ -436,7 +432,8 @@ class BoundaryRecovery {
       } else {
         // The cell around the crossed edge qr whose open wedge contains b.
         const Vh q = entry.v[0], r = entry.v[1];
-        auto circulator = tr_.incident_cells(from, from->index(q), from->index(r)), done = circulator;
+        auto circulator = tr_.incident_cells(from, from->index(q), from->index(r)),
+             done = circulator;
         bool located = false;
         do {
           const Ch cell = circulator;
@@ -590,8 +587,7 @@ MatX3 meshInteriorPoints(const MatX3& V, const MatX3i& F, double cell_size, doub
   // restricted surface close enough that cells are classified inside correctly.
   const MeshCriteria criteria(params::facet_size = 4 * cell_size,
                               params::facet_distance = cell_size,
-                              params::cell_radius_edge_ratio = 2.5,
-                              params::cell_size = cell_size);
+                              params::cell_radius_edge_ratio = 2.5, params::cell_size = cell_size);
   const MeshComplex complex =
       CGAL::make_mesh_3<MeshComplex>(domain, criteria, params::no_perturb(), params::no_exude());
 
@@ -721,7 +717,8 @@ BoundaryConformingTets boundaryConformingTets(const MatX3& nodes, const MatX3i& 
   // Inside = the cells not reached from the infinite cells without crossing a surface face.
   std::unordered_set<std::array<int, 3>, TripleHash> surface;
   surface.reserve(size_t(F.rows()));
-  for (Eigen::Index f = 0; f < F.rows(); ++f) surface.insert(sortedTriple(F(f, 0), F(f, 1), F(f, 2)));
+  for (Eigen::Index f = 0; f < F.rows(); ++f)
+    surface.insert(sortedTriple(F(f, 0), F(f, 1), F(f, 2)));
   std::vector<Ch> stack;
   for (auto cell = tr.all_cells_begin(); cell != tr.all_cells_end(); ++cell) {
     cell->info() = tr.is_infinite(cell) ? 1 : 0;

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "core/seconds_since.h"
 #include "flsh/core/error.h"
 #include "flsh/core/memory_check.h"
 #include "flsh/io/output_dir.h"
@@ -19,9 +20,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using detail::secondsSince;
 
 std::string number(double value) {
   char text[32];

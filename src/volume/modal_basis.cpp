@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "core/seconds_since.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
 #include "flsh/energy/fem_material.h"
@@ -22,9 +23,7 @@ namespace flsh {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using detail::secondsSince;
 
 }  // namespace
 

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/first_failure.h"
+#include "core/seconds_since.h"
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
 #include "flsh/energy/fem_material.h"
@@ -30,9 +31,7 @@ namespace flsh {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using detail::secondsSince;
 
 // Revision of the rules of this level (handle choice, sample distributions, basis drop
 // threshold): bump it when they change so that data cached under older rules are rebuilt.

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "cgal/tetrahedralize.h"
+#include "core/seconds_since.h"
 #include "flsh/core/error.h"
 #include "volume/tet_mesh_internal.h"
 
@@ -37,10 +38,7 @@ constexpr double kCountExponent = -4.5;
 constexpr double kCountTolerance = 0.12;
 constexpr int kMaxInteriorRuns = 4;
 
-double secondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
+using detail::secondsSince;
 std::string tripleString(int a, int b, int c) {
   return "(" + std::to_string(a) + ", " + std::to_string(b) + ", " + std::to_string(c) + ")";
 }

@@ -4,6 +4,7 @@
 #include <Eigen/Geometry>
 #include <chrono>
 
+#include "core/seconds_since.h"
 #include "flsh/body/body_forward.h"
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
@@ -14,9 +15,7 @@ namespace flsh {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double secondsSince(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
+using detail::secondsSince;
 
 void hashBody(Sha256& h, const BodyModel& body) {
   h.updateMatrix("v_template", body.v_template);

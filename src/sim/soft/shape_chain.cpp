@@ -64,7 +64,7 @@ void ShapeChain::build() const {
   if (built_) return;
   const VolumetricData& data = avatar_.volumetricData();
   const TetMesh& mesh = data.templ->mesh;
-  const int K = numBetas(), T = data.numTets();
+  const int K = numBetas();
   values_ = data.material_model.coefficientValuesShapeJacobian(avatar_.betas());
   tetMaterialGeometryTangent(mesh, data.rest_nodes, data.templ->fields.shapedirs, area_, volume_);
   const Cubature cubature = massCubature(avatar_);

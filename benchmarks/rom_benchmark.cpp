@@ -65,10 +65,11 @@
 // --modal-fit LIST: what the nonlinear FEM (Fung stiffening, contact, pose-dependent coupling)
 // leaves outside the span of the modal bases (docs/rom.md, "A basis from the physics"), on the
 // scenarios of --compare: per frame the least-squares fit of the FEM's surface u, as --compare's
-// basis best fit. Entries V (static modes + V vibration modes) or V:C (compressed to C columns),
-// e.g. --modal-fit 0,24,24:72.
+// basis best fit. Entries V (static modes + V vibration modes), V:C (compressed to C columns),
+// V+H (with the columns of H handles appended), e.g. --modal-fit 0,24,24:72,24+87.
 #include <omp.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseLU>
 #include <algorithm>
@@ -302,12 +303,32 @@ int modalFit(int frames, const std::string& list) {
     start = comma + 1;
     ModalBasisSettings s;
     s.vibration_modes = std::atoi(entry.c_str());
-    const size_t colon = entry.find(':');
+    const size_t colon = entry.find(':'), plus = entry.find('+');
     if (colon != std::string::npos) s.columns = std::atoi(entry.c_str() + colon + 1);
     const ModalBasis b = computeModalBasis(fem->volumetricData(), s);
-    bases.emplace_back("static + " + std::to_string(s.vibration_modes) + " modes, " +
-                           std::to_string(b.columns()) + " columns",
-                       b.basis.topRows(3 * V));
+    MatX P = b.basis.topRows(3 * V);
+    std::string name = "static + " + std::to_string(s.vibration_modes) + " modes, " +
+                       std::to_string(b.columns()) + " columns";
+    if (plus != std::string::npos) {  // the handle basis' columns φ_h ⊗ e_a appended
+      const int H = std::atoi(entry.c_str() + plus + 1);
+      const auto handles = makeAvatar(body, {Kind::Rom, H, 0, 0}, nullptr);
+      const SpMat& phi = handles->reducedData().basis;
+      MatX both = MatX::Zero(3 * V, P.cols() + 3 * H);
+      both.leftCols(P.cols()) = P;
+      for (int h = 0; h < H; ++h)
+        for (SpMat::InnerIterator it(phi, h); it; ++it)
+          if (it.row() < V)
+            for (int a = 0; a < 3; ++a) both(3 * it.row() + a, P.cols() + 3 * h + a) = it.value();
+      P.swap(both);
+      name += " + " + std::to_string(H) + " handles";
+    }
+    // An orthonormal basis of the surface rows' span (dependent directions dropped).
+    const Eigen::SelfAdjointEigenSolver<MatX> gram(P.transpose() * P);
+    const VecX& w = gram.eigenvalues();
+    Eigen::Index kept = 0;
+    while (kept < w.size() && w[w.size() - 1 - kept] > 1e-10 * w.maxCoeff()) ++kept;
+    bases.emplace_back(name, P * gram.eigenvectors().rightCols(kept) *
+                                 w.tail(kept).cwiseSqrt().cwiseInverse().asDiagonal());
   }
   std::printf(
       "best fit of the FEM's surface u in each basis' span, relative to RMS ‖u_FEM‖, mean "
@@ -317,15 +338,14 @@ int modalFit(int frames, const std::string& list) {
   for (const Scenario& sc : comparisonScenarios()) {
     const Trajectory t = simulate(fem, sc, frames);
     for (size_t k = 0; k < bases.size(); ++k) {
-      const MatX& P = bases[k].second;
-      const Eigen::LDLT<MatX> normal(P.transpose() * P);
+      const MatX& Q = bases[k].second;
       double sum = 0.0, largest = 0.0;
       int counted = 0;
       for (size_t f = 0; f < t.u.size(); ++f) {
         if (t.displacement[f] < 5e-4) continue;
         const MatX rows = t.u[f].transpose();  // 3 × V: entry 3i + a is vertex i's a
         const Eigen::Map<const VecX> target(rows.data(), 3 * V);
-        const VecX fit = P * normal.solve(P.transpose() * target) - target;
+        const VecX fit = Q * (Q.transpose() * target) - target;
         const double e = std::sqrt(fit.squaredNorm() / double(V)) / t.displacement[f];
         sum += e;
         largest = std::max(largest, e);

@@ -309,7 +309,11 @@ TEST_P(SoftRolloutGradient, InitialState) {
   RolloutVariables d;
   d.initial_state = randomVector(n, 0.01, 8);
   d.initial_state.tail(n - 144) *= 0.1;  // soft state: mm
-  expectDirectionalDerivative(c, d, 1e-4);
+  // ε = 1e-3, not 1e-4: here the central difference's error is the rollout's convergence noise
+  // (Newton stops at a 1e-11 gradient), which grows as 1/ε — RomWithContact 7e-8 at 1e-4,
+  // 5e-7 at 1e-5, 8e-9 at 1e-3 (GCC -O3), but 1.7e-6 at 1e-4 in the clang -O1 sanitizer build —
+  // while the truncation error is still ≤ 4e-8 at 1e-3 in all four cases.
+  expectDirectionalDerivative(c, d, 1e-3);
 }
 
 TEST_P(SoftRolloutGradient, InitialVelocity) {

@@ -97,10 +97,9 @@ LowestEigenpairs lowestEigenpairs(const SpMat& K, const SparseCholesky& factor, 
   const VecX inverse_m = m.cwiseInverse();
   MatX V(n, cap);  // the Krylov space's M-orthonormal columns [0, k)
   MatX T = MatX::Zero(cap, cap);
-  Eigen::Index k = 0;
-  MatX block = massOrthonormalize(randomBlock(p), m, 1e-12);
+  const MatX block = massOrthonormalize(randomBlock(p), m, 1e-12);
   V.leftCols(block.cols()) = block;
-  k = block.cols();
+  Eigen::Index k = block.cols();
   for (Eigen::Index last = 0;; ++out.iterations) {
     // W = K⁻¹ M V_last; T's columns of the last block from the first Gram–Schmidt pass.
     const Eigen::Index width = k - last;
@@ -122,45 +121,40 @@ LowestEigenpairs lowestEigenpairs(const SpMat& K, const SparseCholesky& factor, 
       both << next, extra;
       next.swap(both);
     }
-    // B = V₊ᵀ M W (the Lanczos relation's coupling, W = V₊ B after the Gram–Schmidt passes).
-    const MatX B = next.transpose() * (m.asDiagonal() * W);
-    // G = (KV₊)ᵀ M⁻¹ (KV₊): ‖K V₊ c‖²_{M⁻¹} = cᵀ G c.
-    const MatX KN = K * next;
-    const MatX G = KN.transpose() * (inverse_m.asDiagonal() * KN);
-
     // Ritz pairs (μ, x = Vy) of T, once the space can hold the pairs wanted and a block more: μ
     // largest ↔ λ = 1/μ smallest. Their residuals come from the Lanczos relation: K⁻¹Mx − μx =
     // V₊ B y_last =: r, so Kx − λMx = −λ K r and the relative residual ‖Kx − λMx‖_{M⁻¹} / λ is
     // ‖K r‖_{M⁻¹} (through G), exactly, without forming x.
     const bool full = next.cols() == 0 || k + next.cols() > cap;
-    if (k < count + p && !full) {
-      V.middleCols(k, next.cols()) = next;
-      last = k;
-      k += next.cols();
-      continue;
-    }
-    const Eigen::SelfAdjointEigenSolver<MatX> ritz(T.topLeftCorner(k, k));
-    const Eigen::Index wanted = std::min<Eigen::Index>(count, k);
-    double residual = 0.0;
-    for (Eigen::Index i = 0; i < wanted; ++i) {
-      const VecX c = B * ritz.eigenvectors().col(k - 1 - i).tail(width);
-      residual = std::max(residual, std::sqrt(std::max(0.0, c.dot(G * c))));
-    }
-    if ((wanted == count && residual <= options.tolerance) || full) {
-      // The wanted Ritz vectors, refined by Rayleigh–Ritz with K in their span (which can only
-      // lower the Ritz values towards the eigenvalues), and their residuals measured.
-      MatX Y(k, wanted);
-      for (Eigen::Index i = 0; i < wanted; ++i) Y.col(i) = ritz.eigenvectors().col(k - 1 - i);
-      const MatX X = V.leftCols(k) * Y;
-      MatX A = X.transpose() * (K * X);
-      A = 0.5 * (A + A.transpose());
-      const Eigen::SelfAdjointEigenSolver<MatX> refined(A);
-      out.values = refined.eigenvalues();
-      out.vectors = X * refined.eigenvectors();
-      out.max_residual = largestResidual(K, m, out.values, out.vectors);
-      out.columns = int(k);
-      out.converged = wanted == count && out.max_residual <= options.tolerance;
-      if (out.converged || full) return out;
+    if (k >= count + p || full) {
+      // B = V₊ᵀ M W (the Lanczos relation's coupling, W = V₊ B after the Gram–Schmidt passes);
+      // G = (KV₊)ᵀ M⁻¹ (KV₊): ‖K V₊ c‖²_{M⁻¹} = cᵀ G c.
+      const MatX B = next.transpose() * (m.asDiagonal() * W);
+      const MatX KN = K * next;
+      const MatX G = KN.transpose() * (inverse_m.asDiagonal() * KN);
+      const Eigen::SelfAdjointEigenSolver<MatX> ritz(T.topLeftCorner(k, k));
+      const Eigen::Index wanted = std::min<Eigen::Index>(count, k);
+      double residual = 0.0;
+      for (Eigen::Index i = 0; i < wanted; ++i) {
+        const VecX c = B * ritz.eigenvectors().col(k - 1 - i).tail(width);
+        residual = std::max(residual, std::sqrt(std::max(0.0, c.dot(G * c))));
+      }
+      if ((wanted == count && residual <= options.tolerance) || full) {
+        // The wanted Ritz vectors, refined by Rayleigh–Ritz with K in their span (which can only
+        // lower the Ritz values towards the eigenvalues), and their residuals measured.
+        MatX Y(k, wanted);
+        for (Eigen::Index i = 0; i < wanted; ++i) Y.col(i) = ritz.eigenvectors().col(k - 1 - i);
+        const MatX X = V.leftCols(k) * Y;
+        MatX A = X.transpose() * (K * X);
+        A = 0.5 * (A + A.transpose());
+        const Eigen::SelfAdjointEigenSolver<MatX> refined(A);
+        out.values = refined.eigenvalues();
+        out.vectors = X * refined.eigenvectors();
+        out.max_residual = largestResidual(K, m, out.values, out.vectors);
+        out.columns = int(k);
+        out.converged = wanted == count && out.max_residual <= options.tolerance;
+        if (out.converged || full) return out;
+      }
     }
     V.middleCols(k, next.cols()) = next;
     last = k;

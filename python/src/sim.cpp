@@ -104,8 +104,8 @@ void bind_sim(py::module_& m) {
                                "Stiffnesses and physical settings of a Simulable (SI units).")
       .def(py::init([](double time_step, const py::object& gravity, double joint_stiffness,
                        double tracking_stiffness, double tracking_inertia_floor,
-                       double root_stiffness, bool track_mocap,
-                       const py::object& kinematic_bones, const py::object& contact) {
+                       double root_stiffness, bool track_mocap, const py::object& kinematic_bones,
+                       const py::object& contact) {
              if (!(std::isfinite(time_step) && time_step > 0.0))
                throw py::value_error("time_step: expected a finite value > 0 (s), got " +
                                      std::to_string(time_step));
@@ -135,9 +135,10 @@ void bind_sim(py::module_& m) {
            "Keyword arguments; None keeps the default (gravity (0, −9.81, 0) m/s², no kinematic "
            "bones, default ContactOptions).")
       .def_readwrite("time_step", &SimulableOptions::time_step, "h, s")
-      .def_property("gravity", [](const SimulableOptions& o) { return to_numpy(VecX(o.gravity)); },
-                    [](SimulableOptions& o, const py::object& g) { o.gravity = to_vec3(g, "gravity"); },
-                    "(3,) m/s²")
+      .def_property(
+          "gravity", [](const SimulableOptions& o) { return to_numpy(VecX(o.gravity)); },
+          [](SimulableOptions& o, const py::object& g) { o.gravity = to_vec3(g, "gravity"); },
+          "(3,) m/s²")
       .def_readwrite("joint_stiffness", &SimulableOptions::joint_stiffness, "k_J, N/m")
       .def_readwrite("tracking_stiffness", &SimulableOptions::tracking_stiffness,
                      "ω_T², 1/s² (joint springs k_b = ω_T² (I_b + tracking_inertia_floor))")
@@ -148,15 +149,14 @@ void bind_sim(py::module_& m) {
                      "1/s² (root springs scaled by mass and polar inertia)")
       .def_readwrite("track_mocap", &SimulableOptions::track_mocap,
                      "False: no tracking springs (a passive ragdoll)")
-      .def_property("kinematic_bones",
-                    [](const SimulableOptions& o) { return o.kinematic_bones; },
-                    [](SimulableOptions& o, const py::object& b) {
-                      o.kinematic_bones = kinematic_list(b);
-                    },
-                    "bones prescribed by the mocap, e.g. [0] pins the root")
+      .def_property(
+          "kinematic_bones", [](const SimulableOptions& o) { return o.kinematic_bones; },
+          [](SimulableOptions& o, const py::object& b) { o.kinematic_bones = kinematic_list(b); },
+          "bones prescribed by the mocap, e.g. [0] pins the root")
       .def_readwrite("contact", &SimulableOptions::contact, "ContactOptions (a copy on read)")
       .def("__repr__", [](const SimulableOptions& o) {
-        return "SimulableOptions(time_step=" + py::repr(py::float_(o.time_step)).cast<std::string>() +
+        return "SimulableOptions(time_step=" +
+               py::repr(py::float_(o.time_step)).cast<std::string>() +
                ", track_mocap=" + (o.track_mocap ? "True" : "False") + ")";
       });
 
@@ -212,8 +212,9 @@ void bind_sim(py::module_& m) {
   // ---- state
   sim.def("numDofs", &S::numDofs, "Number of DoFs (144 for the skeleton).");
   sim.def_property_readonly("num_dofs", &S::numDofs, "Number of DoFs (144 for the skeleton).");
-  sim.def("getState", [](const S& s) { return to_numpy(s.getState()); },
-          "(numDofs,) state: per bone [t_b (m, 3), r_b rotation vector (rad, 3)].");
+  sim.def(
+      "getState", [](const S& s) { return to_numpy(s.getState()); },
+      "(numDofs,) state: per bone [t_b (m, 3), r_b rotation vector (rad, 3)].");
   alias("getState", "get_state");
   sim.def(
       "setState", [](S& s, const py::object& q) { s.setState(dof_vector(s, q, "q")); },
@@ -225,10 +226,10 @@ void bind_sim(py::module_& m) {
       "get_soft_tissue_displacements() does not depend on it (C++ restoreStep puts a "
       "step's held pose blend back too).");
   alias("setState", "set_state");
-  sim.def("updateState",
-          [](S& s, const py::object& dq) { s.updateState(dof_vector(s, dq, "dq")); },
-          py::arg("dq"),
-          "Applies an increment dq (numDofs,): t_b += δt_b (m), R_b ← exp([δω_b]×) R_b (rad).");
+  sim.def(
+      "updateState", [](S& s, const py::object& dq) { s.updateState(dof_vector(s, dq, "dq")); },
+      py::arg("dq"),
+      "Applies an increment dq (numDofs,): t_b += δt_b (m), R_b ← exp([δω_b]×) R_b (rad).");
   alias("updateState", "update_state");
   sim.def("pushState", &S::pushState, "Saves the state on a stack.");
   alias("pushState", "push_state");
@@ -238,32 +239,37 @@ void bind_sim(py::module_& m) {
   sim.def("discardState", &S::discardState,
           "Drops the last pushed state without restoring it (RuntimeError if the stack is empty).");
   alias("discardState", "discard_state");
-  sim.def("setVelocity",
-          [](S& s, const py::object& v) { s.setVelocity(dof_vector(s, v, "v")); }, py::arg("v"),
-          "Sets the velocity v (numDofs,), m/s and rad/s (world frame): q_{n−1} = q_n − h v.");
+  sim.def(
+      "setVelocity", [](S& s, const py::object& v) { s.setVelocity(dof_vector(s, v, "v")); },
+      py::arg("v"),
+      "Sets the velocity v (numDofs,), m/s and rad/s (world frame): q_{n−1} = q_n − h v.");
   alias("setVelocity", "set_velocity");
-  sim.def("getVelocity", [](const S& s) { return to_numpy(s.getVelocity()); },
-          "(numDofs,) velocity (q_n ⊖ q_{n−1}) / h, m/s and rad/s.");
+  sim.def(
+      "getVelocity", [](const S& s) { return to_numpy(s.getVelocity()); },
+      "(numDofs,) velocity (q_n ⊖ q_{n−1}) / h, m/s and rad/s.");
   alias("getVelocity", "get_velocity");
   sim.def_property_readonly("time", &S::time, "Simulated time, s.");
 
   // ---- outputs
-  sim.def("getPose", [](const S& s) { return to_numpy(s.getPose()); },
-          "(72,) SMPL pose read off the state, rad.");
+  sim.def(
+      "getPose", [](const S& s) { return to_numpy(s.getPose()); },
+      "(72,) SMPL pose read off the state, rad.");
   alias("getPose", "get_pose");
-  sim.def("getTrans", [](const S& s) { return to_numpy(VecX(s.getTrans())); },
-          "(3,) SMPL root translation t_0 − J_0, m.");
+  sim.def(
+      "getTrans", [](const S& s) { return to_numpy(VecX(s.getTrans())); },
+      "(3,) SMPL root translation t_0 − J_0, m.");
   alias("getTrans", "get_trans");
-  sim.def("getStateJacobian",
-          [](const S& s) {
-            RowMatX J;
-            {
-              py::gil_scoped_release release;
-              J = s.getStateJacobian();
-            }
-            return to_numpy(J);
-          },
-          "(75, numDofs) d(pose (72), trans (3)) / dq.");
+  sim.def(
+      "getStateJacobian",
+      [](const S& s) {
+        RowMatX J;
+        {
+          py::gil_scoped_release release;
+          J = s.getStateJacobian();
+        }
+        return to_numpy(J);
+      },
+      "(75, numDofs) d(pose (72), trans (3)) / dq.");
   alias("getStateJacobian", "get_state_jacobian");
   sim.def(
       "getVertices",
@@ -278,26 +284,28 @@ void bind_sim(py::module_& m) {
       "(V, 3) mesh vertices, m: SMPL skinning of getPose()/getTrans(); with soft tissue the "
       "simulated surface get_nodes() (held pose blend and displacements included).");
   alias("getVertices", "get_vertices");
-  sim.def("getNodes", [](const S& s) { return to_numpy(s.getNodes()); },
-          "(V, 3) simulation nodes (linear blend skinning of the bone transforms), m.");
+  sim.def(
+      "getNodes", [](const S& s) { return to_numpy(s.getNodes()); },
+      "(V, 3) simulation nodes (linear blend skinning of the bone transforms), m.");
   alias("getNodes", "get_nodes");
-  sim.def("getNodesStateJacobian",
-          [](const S& s) {
-            SpMat J;
-            {
-              py::gil_scoped_release release;
-              J = s.getNodesStateJacobian();
-            }
-            return to_scipy_csc(J);
-          },
-          "d nodes / dq as a scipy.sparse.csc_matrix (3V, numDofs), row 3i + c.");
+  sim.def(
+      "getNodesStateJacobian",
+      [](const S& s) {
+        SpMat J;
+        {
+          py::gil_scoped_release release;
+          J = s.getNodesStateJacobian();
+        }
+        return to_scipy_csc(J);
+      },
+      "d nodes / dq as a scipy.sparse.csc_matrix (3V, numDofs), row 3i + c.");
   alias("getNodesStateJacobian", "get_nodes_state_jacobian");
-  sim.def_property_readonly("bone_rotations",
-                            [](const S& s) { return rotations_numpy(s.boneRotations()); },
-                            "(24, 3, 3) bone rotations R_b relative to the rest pose.");
-  sim.def_property_readonly("bone_positions",
-                            [](const S& s) { return to_numpy(s.bonePositions()); },
-                            "(24, 3) joint centres t_b, m.");
+  sim.def_property_readonly(
+      "bone_rotations", [](const S& s) { return rotations_numpy(s.boneRotations()); },
+      "(24, 3, 3) bone rotations R_b relative to the rest pose.");
+  sim.def_property_readonly(
+      "bone_positions", [](const S& s) { return to_numpy(s.bonePositions()); },
+      "(24, 3) joint centres t_b, m.");
 
   // ---- soft tissue (FEM and ROM soft skeletons)
   sim.def("hasSoftTissue", &S::hasSoftTissue,
@@ -312,17 +320,18 @@ void bind_sim(py::module_& m) {
   sim.def("numBoneDofs", &S::numBoneDofs, "Number of bone DoFs, 6 · 24 = 144 (the state's head).");
   sim.def_property_readonly("num_bone_dofs", &S::numBoneDofs,
                             "Number of bone DoFs, 6 · 24 = 144 (the state's head).");
-  sim.def("softNodes",
-          [](const S& s) {
-            const VecXi& nodes = s.softNodes();
-            py::array_t<int> a(py::ssize_t(nodes.size()));
-            std::copy(nodes.data(), nodes.data() + nodes.size(), a.mutable_data());
-            return a;
-          },
-          "(S,) int32 tet node of each 3-value block of the soft state, in state order: block k "
-          "is state[numBoneDofs() + 3k : … + 3], the displacement u (m) of node softNodes()[k] "
-          "(FEM: every soft-tissue node; ROM: the handles, whose u equals their z_h); empty for "
-          "the skeleton.");
+  sim.def(
+      "softNodes",
+      [](const S& s) {
+        const VecXi& nodes = s.softNodes();
+        py::array_t<int> a(py::ssize_t(nodes.size()));
+        std::copy(nodes.data(), nodes.data() + nodes.size(), a.mutable_data());
+        return a;
+      },
+      "(S,) int32 tet node of each 3-value block of the soft state, in state order: block k "
+      "is state[numBoneDofs() + 3k : … + 3], the displacement u (m) of node softNodes()[k] "
+      "(FEM: every soft-tissue node; ROM: the handles, whose u equals their z_h); empty for "
+      "the skeleton.");
   alias("softNodes", "soft_nodes");
   sim.def("nodeSoftDof", &S::nodeSoftDof, py::arg("j"),
           "State index of tet node j's first displacement value when u_j is a state entry of its "
@@ -330,31 +339,35 @@ void bind_sim(py::module_& m) {
           "node but the handles (see nodeDisplacementBasis); ValueError for j outside the nodes.");
   alias("nodeSoftDof", "node_soft_dof");
   sim.def("nodeDisplacementBasis", &S::nodeDisplacementBasis, py::arg("j"),
-          "u_j (m) as a combination of state entries: list of (index, weight) pairs with "
-          "u_j = Σ weight · state[index : index + 3]. FEM: [(nodeSoftDof(j), 1.0)]; ROM: "
-          "(index of z_h, φ_h(j)) for the handles whose φ reaches j; [] for bone nodes and the "
-          "skeleton model. ValueError for j outside the nodes.");
+          "u_j (m) as a combination of state entries: list of (index, B) pairs, B a (3, 3) "
+          "float64 array, with u_j = Σ B @ state[index : index + 3]. FEM: [(nodeSoftDof(j), I)]; "
+          "ROM: (index of z_h, φ_h(j) I) for the handles whose φ reaches j, then with modes one "
+          "pair per three modal coordinates (the block of Ψ_j's three columns); [] for bone nodes "
+          "and the skeleton model. ValueError for j outside the nodes.");
   alias("nodeDisplacementBasis", "node_displacement_basis");
-  sim.def("getSoftTissueDisplacements",
-          [](const S& s) { return to_numpy(s.getSoftTissueDisplacements()); },
-          "(V, 3) float64 soft-tissue displacements u of the surface vertices, m, in the unposed "
-          "(rest) space; zero on bone nodes and for the skeleton model.");
+  sim.def(
+      "getSoftTissueDisplacements",
+      [](const S& s) { return to_numpy(s.getSoftTissueDisplacements()); },
+      "(V, 3) float64 soft-tissue displacements u of the surface vertices, m, in the unposed "
+      "(rest) space; zero on bone nodes and for the skeleton model.");
   alias("getSoftTissueDisplacements", "get_soft_tissue_displacements");
-  sim.def("getUnposedSurface", [](const S& s) { return to_numpy(s.getUnposedSurface()); },
-          "(V, 3) float64 unposed surface Y, m: the rest surface X̄(β), plus for the soft-tissue "
-          "model the held pose blend offsets and u.");
+  sim.def(
+      "getUnposedSurface", [](const S& s) { return to_numpy(s.getUnposedSurface()); },
+      "(V, 3) float64 unposed surface Y, m: the rest surface X̄(β), plus for the soft-tissue "
+      "model the held pose blend offsets and u.");
   alias("getUnposedSurface", "get_unposed_surface");
-  sim.def("getVolumeNodes",
-          [](const S& s) {
-            MatX3 X;
-            {
-              py::gil_scoped_release release;
-              X = s.getVolumeNodes();
-            }
-            return to_numpy(X);
-          },
-          "(N, 3) float64 world positions of every tet node, m (surface vertices first); the "
-          "skeleton model: the (V, 3) surface nodes.");
+  sim.def(
+      "getVolumeNodes",
+      [](const S& s) {
+        MatX3 X;
+        {
+          py::gil_scoped_release release;
+          X = s.getVolumeNodes();
+        }
+        return to_numpy(X);
+      },
+      "(N, 3) float64 world positions of every tet node, m (surface vertices first); the "
+      "skeleton model: the (V, 3) surface nodes.");
   alias("getVolumeNodes", "get_volume_nodes");
 
   // ---- energies
@@ -364,110 +377,119 @@ void bind_sim(py::module_& m) {
   sim.def("getPotentialEnergyScalar", &S::getPotentialEnergyScalar,
           "Gravity + joint + tracking springs + contact, J.");
   alias("getPotentialEnergyScalar", "get_potential_energy_scalar");
-  sim.def("getDynamicGradientVector",
-          [](const S& s) {
-            VecX g = VecX::Zero(s.numDofs());
-            s.getDynamicGradientVector(g);
-            return to_numpy(g);
-          },
-          "(numDofs,) gradient of the dynamic energy (a new vector), J per m or rad.");
+  sim.def(
+      "getDynamicGradientVector",
+      [](const S& s) {
+        VecX g = VecX::Zero(s.numDofs());
+        s.getDynamicGradientVector(g);
+        return to_numpy(g);
+      },
+      "(numDofs,) gradient of the dynamic energy (a new vector), J per m or rad.");
   alias("getDynamicGradientVector", "get_dynamic_gradient_vector");
-  sim.def("getPotentialGradientVector",
-          [](const S& s) {
-            VecX g = VecX::Zero(s.numDofs());
-            s.getPotentialGradientVector(g);
-            return to_numpy(g);
-          },
-          "(numDofs,) gradient of the potential energy (a new vector), J per m or rad.");
+  sim.def(
+      "getPotentialGradientVector",
+      [](const S& s) {
+        VecX g = VecX::Zero(s.numDofs());
+        s.getPotentialGradientVector(g);
+        return to_numpy(g);
+      },
+      "(numDofs,) gradient of the potential energy (a new vector), J per m or rad.");
   alias("getPotentialGradientVector", "get_potential_gradient_vector");
-  sim.def("getGradientVector",
-          [](const S& s) {
-            VecX g = VecX::Zero(s.numDofs());
-            {
-              py::gil_scoped_release release;
-              s.getGradientVector(g);
-            }
-            return to_numpy(g);
-          },
-          "(numDofs,) gradient of the whole objective (dynamic + potential, a new vector), in one "
-          "call as a Scene sums it (the ROM evaluates its node terms beside contact on two "
-          "threads). The sum of getDynamicGradientVector and getPotentialGradientVector.");
+  sim.def(
+      "getGradientVector",
+      [](const S& s) {
+        VecX g = VecX::Zero(s.numDofs());
+        {
+          py::gil_scoped_release release;
+          s.getGradientVector(g);
+        }
+        return to_numpy(g);
+      },
+      "(numDofs,) gradient of the whole objective (dynamic + potential, a new vector), in one "
+      "call as a Scene sums it (the ROM evaluates its node terms beside contact on two "
+      "threads). The sum of getDynamicGradientVector and getPotentialGradientVector.");
   alias("getGradientVector", "get_gradient_vector");
-  sim.def("getEnergyAndGradientVector",
-          [](const S& s) {
-            VecX g = VecX::Zero(s.numDofs());
-            double energy = 0.0;
-            {
-              py::gil_scoped_release release;
-              energy = s.getEnergyAndGradientVector(g);
-            }
-            return py::make_tuple(energy, to_numpy(g));
-          },
-          "(energy, gradient): the whole objective's energy (J) and its (numDofs,) gradient from "
-          "the same passes, what a line search needs at a trial state; the energy equals "
-          "getDynamicEnergyScalar() + getPotentialEnergyScalar() up to round-off.");
+  sim.def(
+      "getEnergyAndGradientVector",
+      [](const S& s) {
+        VecX g = VecX::Zero(s.numDofs());
+        double energy = 0.0;
+        {
+          py::gil_scoped_release release;
+          energy = s.getEnergyAndGradientVector(g);
+        }
+        return py::make_tuple(energy, to_numpy(g));
+      },
+      "(energy, gradient): the whole objective's energy (J) and its (numDofs,) gradient from "
+      "the same passes, what a line search needs at a trial state; the energy equals "
+      "getDynamicEnergyScalar() + getPotentialEnergyScalar() up to round-off.");
   alias("getEnergyAndGradientVector", "get_energy_and_gradient_vector");
-  sim.def("fixVectorKinematic",
-          [](const S& s, const py::object& g) {
-            VecX v = dof_vector(s, g, "g");
-            s.fixVectorKinematic(v);
-            return to_numpy(v);
-          },
-          py::arg("g"), "Copy of g (numDofs,) with the kinematic DoFs zeroed.");
+  sim.def(
+      "fixVectorKinematic",
+      [](const S& s, const py::object& g) {
+        VecX v = dof_vector(s, g, "g");
+        s.fixVectorKinematic(v);
+        return to_numpy(v);
+      },
+      py::arg("g"), "Copy of g (numDofs,) with the kinematic DoFs zeroed.");
   alias("fixVectorKinematic", "fix_vector_kinematic");
-  sim.def("getDynamicHessianTripletVector",
-          [](const S& s, bool psd) {
-            std::vector<Triplet> H;
-            {
-              py::gil_scoped_release release;
-              s.getDynamicHessianTripletVector(H, 0, psd);
-            }
-            return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
-          },
-          py::arg("psd") = true,
-          "Hessian of the dynamic energy, scipy.sparse.csc_matrix (numDofs, numDofs). psd=True: "
-          "Gauss–Newton (what Newton uses); False: exact.");
+  sim.def(
+      "getDynamicHessianTripletVector",
+      [](const S& s, bool psd) {
+        std::vector<Triplet> H;
+        {
+          py::gil_scoped_release release;
+          s.getDynamicHessianTripletVector(H, 0, psd);
+        }
+        return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
+      },
+      py::arg("psd") = true,
+      "Hessian of the dynamic energy, scipy.sparse.csc_matrix (numDofs, numDofs). psd=True: "
+      "Gauss–Newton (what Newton uses); False: exact.");
   alias("getDynamicHessianTripletVector", "get_dynamic_hessian_triplet_vector");
-  sim.def("getPotentialHessianTripletVector",
-          [](const S& s, bool psd) {
-            std::vector<Triplet> H;
-            {
-              py::gil_scoped_release release;
-              s.getPotentialHessianTripletVector(H, 0, psd);
-            }
-            return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
-          },
-          py::arg("psd") = true,
-          "Hessian of the potential energy, scipy.sparse.csc_matrix (numDofs, numDofs). "
-          "psd=True: projected positive semidefinite; False: exact.");
+  sim.def(
+      "getPotentialHessianTripletVector",
+      [](const S& s, bool psd) {
+        std::vector<Triplet> H;
+        {
+          py::gil_scoped_release release;
+          s.getPotentialHessianTripletVector(H, 0, psd);
+        }
+        return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
+      },
+      py::arg("psd") = true,
+      "Hessian of the potential energy, scipy.sparse.csc_matrix (numDofs, numDofs). "
+      "psd=True: projected positive semidefinite; False: exact.");
   alias("getPotentialHessianTripletVector", "get_potential_hessian_triplet_vector");
-  sim.def("getHessianTripletVector",
-          [](const S& s, bool psd) {
-            std::vector<Triplet> H;
-            {
-              py::gil_scoped_release release;
-              std::vector<FixedHessianBlocks> blocks;
-              s.getHessianTripletVector(H, blocks, 0, psd);
-              appendBlockTriplets(blocks, H);
-            }
-            return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
-          },
-          py::arg("psd") = true,
-          "Hessian of the whole objective (dynamic + potential), scipy.sparse.csc_matrix "
-          "(numDofs, numDofs), in one call as a Scene assembles it (the ROM evaluates its inertia "
-          "beside contact, gravity and elasticity on two threads). The sum of "
-          "getDynamicHessianTripletVector and getPotentialHessianTripletVector of the same form.");
+  sim.def(
+      "getHessianTripletVector",
+      [](const S& s, bool psd) {
+        std::vector<Triplet> H;
+        {
+          py::gil_scoped_release release;
+          std::vector<FixedHessianBlocks> blocks;
+          s.getHessianTripletVector(H, blocks, 0, psd);
+          appendBlockTriplets(blocks, H);
+        }
+        return triplets_to_scipy_csc(H, s.numDofs(), s.numDofs());
+      },
+      py::arg("psd") = true,
+      "Hessian of the whole objective (dynamic + potential), scipy.sparse.csc_matrix "
+      "(numDofs, numDofs), in one call as a Scene assembles it (the ROM evaluates its inertia "
+      "beside contact, gravity and elasticity on two threads). The sum of "
+      "getDynamicHessianTripletVector and getPotentialHessianTripletVector of the same form.");
   alias("getHessianTripletVector", "get_hessian_triplet_vector");
-  sim.def("fixMatrixKinematic",
-          [](const S& s, const py::object& H) {
-            const int n = s.numDofs();
-            std::vector<Triplet> t = to_triplets(H, "H", n, n);
-            s.fixMatrixKinematic(t);
-            return triplets_to_scipy_csc(t, n, n);
-          },
-          py::arg("H"),
-          "H (numDofs, numDofs), scipy.sparse or dense, with kinematic rows/columns made "
-          "identity; returns a csc_matrix.");
+  sim.def(
+      "fixMatrixKinematic",
+      [](const S& s, const py::object& H) {
+        const int n = s.numDofs();
+        std::vector<Triplet> t = to_triplets(H, "H", n, n);
+        s.fixMatrixKinematic(t);
+        return triplets_to_scipy_csc(t, n, n);
+      },
+      py::arg("H"),
+      "H (numDofs, numDofs), scipy.sparse or dense, with kinematic rows/columns made "
+      "identity; returns a csc_matrix.");
   alias("fixMatrixKinematic", "fix_matrix_kinematic");
 
   // ---- scene hooks
@@ -479,55 +501,61 @@ void bind_sim(py::module_& m) {
           "True: drops the dynamic term (static equilibrium).");
   alias("setStatic", "set_static");
   sim.def_property_readonly("is_static", &S::isStatic);
-  sim.def_property_readonly("avatar", [](const S& s) { return &s.avatar(); },
-                            py::return_value_policy::reference_internal, "The SoftAvatar.");
+  sim.def_property_readonly(
+      "avatar", [](const S& s) { return &s.avatar(); }, py::return_value_policy::reference_internal,
+      "The SoftAvatar.");
   sim.def_property_readonly("options", &S::options, "SimulableOptions (a copy).");
-  sim.def_property_readonly("active_contacts", [](const S& s) { return s.stats().active_contacts; },
-                            "Vertex–collider contacts at the last energy evaluation.");
+  sim.def_property_readonly(
+      "active_contacts", [](const S& s) { return s.stats().active_contacts; },
+      "Vertex–collider contacts at the last energy evaluation.");
   // ---- parameter derivatives (for the adjoint)
   sim.def("parameterSize", &S::parameterSize, py::arg("p"),
           "Number of values of the SimParameter group p (ColliderOffsets: 3 per collider).");
   alias("parameterSize", "parameter_size");
-  sim.def("getParameter", [](const S& s, SimParameter p) { return to_numpy(s.getParameter(p)); },
-          py::arg("p"),
-          "(parameterSize(p),) current values of group p in SimParameter's layout and units.");
+  sim.def(
+      "getParameter", [](const S& s, SimParameter p) { return to_numpy(s.getParameter(p)); },
+      py::arg("p"),
+      "(parameterSize(p),) current values of group p in SimParameter's layout and units.");
   alias("getParameter", "get_parameter");
-  sim.def("setParameter",
-          [](S& s, SimParameter p, const py::object& value) {
-            s.setParameter(p, to_vector(value, "value", s.parameterSize(p)));
-          },
-          py::arg("p"), py::arg("value"),
-          "Overrides group p with value (parameterSize(p),); the state is kept. PoseTargets and "
-          "RootTranslationTarget hold until the next preUpdate/initialize. ValueError on size, "
-          "non-finite or invalid values (nothing is changed then); Shape is read only.");
+  sim.def(
+      "setParameter",
+      [](S& s, SimParameter p, const py::object& value) {
+        s.setParameter(p, to_vector(value, "value", s.parameterSize(p)));
+      },
+      py::arg("p"), py::arg("value"),
+      "Overrides group p with value (parameterSize(p),); the state is kept. PoseTargets and "
+      "RootTranslationTarget hold until the next preUpdate/initialize. ValueError on size, "
+      "non-finite or invalid values (nothing is changed then); Shape is read only.");
   alias("setParameter", "set_parameter");
-  sim.def("getGradientParameterJacobian",
-          [](const S& s, SimParameter p) {
-            MatX J;
-            {
-              py::gil_scoped_release release;
-              J = s.getGradientParameterJacobian(p);
-            }
-            return to_numpy(RowMatX(J));
-          },
-          py::arg("p"),
-          "(numDofs, parameterSize(p)) ∂g/∂p of the total gradient at the current state (exact, "
-          "increment chart, kinematic rows not zeroed); units: gradient units (J per m or rad) "
-          "per unit of p. Does not change the state.");
+  sim.def(
+      "getGradientParameterJacobian",
+      [](const S& s, SimParameter p) {
+        MatX J;
+        {
+          py::gil_scoped_release release;
+          J = s.getGradientParameterJacobian(p);
+        }
+        return to_numpy(RowMatX(J));
+      },
+      py::arg("p"),
+      "(numDofs, parameterSize(p)) ∂g/∂p of the total gradient at the current state (exact, "
+      "increment chart, kinematic rows not zeroed); units: gradient units (J per m or rad) "
+      "per unit of p. Does not change the state.");
   alias("getGradientParameterJacobian", "get_gradient_parameter_jacobian");
-  sim.def("getGradientPreviousStateJacobian",
-          [](const S& s, int which) {
-            MatX J;
-            {
-              py::gil_scoped_release release;
-              J = s.getGradientPreviousStateJacobian(which);
-            }
-            return to_numpy(RowMatX(J));
-          },
-          py::arg("which"),
-          "(numDofs, numDofs) ∂g/∂q_n (which=1) or ∂g/∂q_{n−1} (which=2), with respect to "
-          "increments [δt_b m, δω_b rad] of that state; zero when static. ValueError for other "
-          "`which`. Does not change the state.");
+  sim.def(
+      "getGradientPreviousStateJacobian",
+      [](const S& s, int which) {
+        MatX J;
+        {
+          py::gil_scoped_release release;
+          J = s.getGradientPreviousStateJacobian(which);
+        }
+        return to_numpy(RowMatX(J));
+      },
+      py::arg("which"),
+      "(numDofs, numDofs) ∂g/∂q_n (which=1) or ∂g/∂q_{n−1} (which=2), with respect to "
+      "increments [δt_b m, δω_b rad] of that state; zero when static. ValueError for other "
+      "`which`. Does not change the state.");
   alias("getGradientPreviousStateJacobian", "get_gradient_previous_state_jacobian");
 
   sim.def("__repr__", [](const S& s) {

@@ -142,13 +142,13 @@ MatX3 Simulable::getSoftTissueDisplacements() const {
   return u;
 }
 bool Simulable::hasReducedModel() const { return impl_->soft && impl_->soft->reduced(); }
-std::vector<std::pair<int, double>> Simulable::nodeDisplacementBasis(int j) const {
+std::vector<std::pair<int, Mat3>> Simulable::nodeDisplacementBasis(int j) const {
   const Impl& m = *impl_;
   const int n = m.soft ? m.soft->numNodes() : int(m.avatar->restVertices().rows());
   if (j < 0 || j >= n)
     throw InputError("Simulable::nodeDisplacementBasis: node " + std::to_string(j) +
                      " outside [0, " + std::to_string(n) + ")");
-  std::vector<std::pair<int, double>> basis;
+  std::vector<std::pair<int, Mat3>> basis;
   if (!m.soft) return basis;
   m.soft->displacementBasis(j, basis);
   for (auto& entry : basis) entry.first += m.boneDofs();

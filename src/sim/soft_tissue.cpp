@@ -33,7 +33,13 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
       shape_chain_(avatar, material_chain_) {
   kin_.setMassNodes(masses_.nodes);
   ElasticElements elements = elasticElements(avatar);
-  if (kin_.reduced()) {
+  if (kin_.reduced() && kin_.numModes() > 0) {
+    auto modal =
+        std::make_unique<ModalElasticityTerm>(avatar, kin_, material_chain_, std::move(elements));
+    kin_.buildReducedPattern(modal->groupPairs());
+    reduced_elastic_ = modal.get();
+    elastic_ = std::move(modal);
+  } else if (kin_.reduced()) {
     auto reduced =
         std::make_unique<ReducedElasticityTerm>(avatar, kin_, material_chain_, std::move(elements));
     kin_.buildReducedPattern(reduced->handlePairs());
@@ -158,7 +164,7 @@ void SoftTissue::hessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
 double SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
                                    const std::function<void(VecX&)>& potential_first) const {
   if (!reduced_elastic_) throw Error("SoftTissue::reducedGradient: the ROM only");
-  const ReducedElasticityTerm& elastic = *reduced_elastic_;
+  const ReducedElasticity& elastic = *reduced_elastic_;
   const int T = elastic.numElements();
   const int base = offset + kin_.boneDofs();
   const double h = inertia_->timeStep(), k = 1.0 / (h * h);
@@ -196,7 +202,7 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
                                  std::vector<Triplet>& H_potential, int offset, bool psd,
                                  const std::function<void()>& potential_first) const {
   if (!reduced_elastic_) throw Error("SoftTissue::reducedHessians: the ROM only");
-  const ReducedElasticityTerm& elastic = *reduced_elastic_;
+  const ReducedElasticity& elastic = *reduced_elastic_;
   const int T = elastic.numElements();
   kin_.setMirrored(false);
   onTwoThreads([&](int part) {

@@ -17,6 +17,7 @@
 #include "flsh/volume/soft_avatar.h"
 #include "sim/soft/elastic_elements.h"
 #include "sim/soft/material_chain.h"
+#include "sim/soft/modal_elasticity_term.h"
 #include "sim/soft/nodal_gravity_term.h"
 #include "sim/soft/nodal_inertia_term.h"
 #include "sim/soft/node_contact_term.h"
@@ -66,7 +67,7 @@ class SoftTissue final : public TwoThreadSchedule {
   /// a state entry of its own (bone nodes; in the ROM every node but the handles).
   int nodeDof(int j) const { return kin_.nodeDof(j); }
   Vec3 displacementOf(const VecX& state, int j) const { return kin_.nodeDisplacement(state, j); }
-  void displacementBasis(int j, std::vector<std::pair<int, double>>& out) const {
+  void displacementBasis(int j, std::vector<std::pair<int, Mat3>>& out) const {
     kin_.displacementBasis(j, out);
   }
 
@@ -181,7 +182,7 @@ class SoftTissue final : public TwoThreadSchedule {
   std::unique_ptr<NodalInertiaTerm> inertia_;
   std::unique_ptr<NodalGravityTerm> gravity_;
   std::unique_ptr<ElasticityTerm> elastic_;
-  const ReducedElasticityTerm* reduced_elastic_ = nullptr;  // elastic_ in the ROM
+  const ReducedElasticity* reduced_elastic_ = nullptr;  // elastic_ in the ROM
   std::unique_ptr<NodeContactTerm> contact_;
   /// Σ over the node terms of (∂g/∂Y)ᵀ λ (#N × 3): what the pose blend's and β's rest nodes'
   /// chains both read. Kept for the last (state version, λ): a reverse sweep asks for it twice

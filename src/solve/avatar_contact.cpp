@@ -72,14 +72,14 @@ Scene::AvatarContactData& Scene::contactData(int i) const {
     if (data->soft) {
       data->soft_start.assign(1, 0);
       for (int v = 0; v < V; ++v) {
-        for (const auto& [index, weight] : sim.nodeDisplacementBasis(v)) {
+        for (const auto& [index, block] : sim.nodeDisplacementBasis(v)) {
           if (index < sim.numBoneDofs() || index + 3 > sim.numDofs())
             throw Error("Scene::avatarContactEnergy: simulable " + std::to_string(i) +
                         ": nodeDisplacementBasis(" + std::to_string(v) + ") names state index " +
                         std::to_string(index) + ", outside the soft-tissue DoFs [" +
                         std::to_string(sim.numBoneDofs()) + ", " + std::to_string(sim.numDofs()) +
                         ")");
-          data->soft_basis.emplace_back(index, weight);
+          data->soft_basis.emplace_back(index, block);
         }
         data->soft_start.push_back(int(data->soft_basis.size()));
       }
@@ -324,7 +324,8 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
           if (has_u) {
             const Vec3 gu = M.transpose() * gx;
             for (int k = s_begin; k < s_end; ++k)
-              g->segment<3>(offsets_[ia] + A.soft_basis[k].first) += A.soft_basis[k].second * gu;
+              g->segment<3>(offsets_[ia] + A.soft_basis[k].first).noalias() +=
+                  A.soft_basis[k].second.transpose() * gu;
           }
         }
         if (!H) continue;
@@ -376,17 +377,20 @@ double Scene::avatarContactEnergy(VecX* g, std::vector<Triplet>* H, bool psd, in
           }
           for (int k = s_begin; k < s_end; ++k) {
             const int du = offsets_[ia] + A.soft_basis[k].first;
-            const double wk = A.soft_basis[k].second;
+            const Mat3 Bk_t = A.soft_basis[k].second.transpose();
+            const Mat3 Bk_t_Huu = Bk_t * Huu;
             for (int l = s_begin; l < s_end; ++l)
               appendBlock(*H, du, offsets_[ia] + A.soft_basis[l].first,
-                          (wk * A.soft_basis[l].second) * Huu);
+                          Mat3(Bk_t_Huu * A.soft_basis[l].second));
             for (int w = 0; w < nw; ++w) {
               const int bone_k = A.skinned.weights.entries[w_begin + w].bone;
-              appendBlock(*H, du, offsets_[ia] + 6 * bone_k, wk * Huk[w]);
-              appendBlock(*H, offsets_[ia] + 6 * bone_k, du, wk * Huk[w].transpose());
+              const Mat36 block = Bk_t * Huk[w];
+              appendBlock(*H, du, offsets_[ia] + 6 * bone_k, block);
+              appendBlock(*H, offsets_[ia] + 6 * bone_k, du, block.transpose());
             }
-            appendBlock(*H, du, offsets_[ib] + 6 * cap.bone, wk * HuB);
-            appendBlock(*H, offsets_[ib] + 6 * cap.bone, du, wk * HuB.transpose());
+            const Mat36 block = Bk_t * HuB;
+            appendBlock(*H, du, offsets_[ib] + 6 * cap.bone, block);
+            appendBlock(*H, offsets_[ib] + 6 * cap.bone, du, block.transpose());
           }
         }
       }

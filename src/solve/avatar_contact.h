@@ -20,14 +20,14 @@ namespace flsh {
 /// a soft vertex is further off by at most |Σ_b w_ib R_b (Y_i − X_i)| ≤ Σ_b |w_ib| |Y_i − X_i|.
 struct Scene::AvatarContactData {
   int bones = 0;
-  // Soft tissue: each vertex's u as state entries of the simulable, u_i = Σ w q.segment<3>(index)
+  // Soft tissue: each vertex's u as state entries of the simulable, u_i = Σ B q.segment<3>(index)
   // over soft_basis[soft_start[i] .. soft_start[i + 1]) (one entry per soft node in the FEM,
-  // the handles reaching it in the ROM, none on bone nodes), and the unposed surface Y (#V × 3,
-  // m) of the cached posed data; with it the displacement margins of each cluster and bone
-  // group (m).
+  // the handles reaching it and the modal groups in the ROM, none on bone nodes), and the unposed
+  // surface Y (#V × 3, m) of the cached posed data; with it the displacement margins of each
+  // cluster and bone group (m).
   bool soft = false;
   std::vector<int> soft_start;
-  std::vector<std::pair<int, double>> soft_basis;
+  std::vector<std::pair<int, Mat3>> soft_basis;
   MatX3 surface;
   std::vector<double> cluster_shift, group_shift;
   // The skinned surface (body/skinned_surface.h): nonzero weights per vertex, vertices grouped

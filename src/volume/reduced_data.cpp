@@ -122,6 +122,19 @@ std::string reducedKey(const VolumetricData& data, const ReducedSettings& s, boo
   h.updateField("basis_drop_below", &s.basis_drop_below, sizeof(s.basis_drop_below));
   const char flags[2] = {char(elastic ? 1 : 0), char(inertial ? 1 : 0)};
   h.updateField("cubature flags", flags, sizeof(flags));
+  if (s.basis_kind != ReducedBasisKind::Handles) {  // (the handle kind's keys stay as they were)
+    const std::string kind = reducedBasisKindName(s.basis_kind);
+    h.updateField("basis kind", kind.data(), kind.size());
+    const ModalBasisSettings& m = s.modes;
+    const char static_modes = m.static_modes ? 1 : 0;
+    h.updateField("modes.static_modes", &static_modes, 1);
+    h.updateField("modes.vibration_modes", &m.vibration_modes, sizeof(m.vibration_modes));
+    h.updateField("modes.columns", &m.columns, sizeof(m.columns));
+    h.updateField("modes.eigen_tolerance", &m.eigen_tolerance, sizeof(m.eigen_tolerance));
+    h.updateField("modes.dependence_tolerance", &m.dependence_tolerance,
+                  sizeof(m.dependence_tolerance));
+    h.updateField("modes.seed", &m.seed, sizeof(m.seed));
+  }
   return h.hexDigest();
 }
 
@@ -311,26 +324,81 @@ MatX subspaceRestStiffness(const VolumetricData& data, const SpMat& basis,
   return 0.5 * (C + C.transpose());  // symmetric up to rounding: make it exactly so
 }
 
-// samples × #elastic elements: the elastic energy (J) of each tet under u = Φ z for random z:
-// every handle moves in a random direction by a random fraction of the sample's amplitude
-// (log-uniform in [1 mm, training_amplitude]), at most its reach (handle_reach, H, m).
-MatX elasticSamples(const VolumetricData& data, const SpMat& basis, const ElasticTets& elements,
-                    const VecX& handle_reach, int samples, double amplitude, std::uint64_t seed) {
-  const int H = int(basis.cols()), E = int(elements.tets.size());
+// Node displacements (#N × 3) of the modes for modal coordinates z (r).
+MatX modeDisplacements(const MatX& modes, const VecX& z) {
+  const VecX u = modes * z;  // entry 3j + c
+  return Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
+      u.data(), u.size() / 3, 3);
+}
+
+// The subspace's columns on the soft DoFs of `ops` (3S × numSoftDofs): each handle's φ ⊗ I₃,
+// then the modes' rows.
+MatX softDofBasis(const SoftTissueRestOperators& ops, const ReducedData& d) {
+  const int S = ops.numSoftNodes(), H = d.numHandles();
+  MatX B = MatX::Zero(3 * S, d.numSoftDofs());
+  for (int h = 0; h < H; ++h)
+    for (SpMat::InnerIterator it(d.basis, h); it; ++it) {
+      const int dof = ops.dof_of_node[it.row()];
+      if (dof < 0) continue;
+      for (int c = 0; c < 3; ++c) B(dof + c, 3 * h + c) = it.value();
+    }
+  for (int i = 0; i < S; ++i)
+    B.block(3 * i, 3 * H, 3, d.numModes()) = d.modes.middleRows<3>(3 * ops.soft_nodes[i]);
+  return B;
+}
+
+// The exact rest stiffness of d's subspace over every elastic tet: for handles alone per tet
+// (subspaceRestStiffness, sparse blocks), with modes through the assembled K_uu (Bᵀ K_uu B, B
+// dense: one sparse product instead of a dense 9r² sum per tet).
+MatX restStiffnessOf(const VolumetricData& data, const ReducedData& d,
+                     const ElasticTets& elements) {
+  if (d.numModes() == 0) return subspaceRestStiffness(data, d.basis, elements);
+  const SoftTissueRestOperators ops = softTissueRestOperators(data);
+  const MatX B = softDofBasis(ops, d);
+  const MatX KB = ops.stiffness * B;
+  const MatX K = B.transpose() * KB;
+  return 0.5 * (K + K.transpose());
+}
+
+// samples × #elastic elements: the elastic energy (J) of each tet under random displacements of
+// the subspace, of amplitudes log-uniform in [1 mm, training_amplitude]. Handle samples: every
+// handle moves in a random direction by a random fraction of the amplitude, at most its reach
+// (handle_reach, H, m). Modal samples: a random direction z ~ N(0, I) of the (mass-orthonormal)
+// modes, scaled so that the largest node displacement is the amplitude and no surface vertex
+// moves further than its reach (vertex_reach, #V, m). ModesAndHandles alternates the two.
+MatX elasticSamples(const VolumetricData& data, const ReducedData& d, const ElasticTets& elements,
+                    const VecX& handle_reach, const VecX& vertex_reach, int samples,
+                    double amplitude, std::uint64_t seed) {
+  const int H = d.numHandles(), r = d.numModes(), E = int(elements.tets.size());
   const double smallest = std::min(kSmallestTrainingAmplitude, amplitude);
   SampleRandom random(seed);
-  std::vector<MatX> handle_displacements{size_t(samples)};  // each H × 3, m
+  std::vector<MatX> handle_displacements{size_t(samples)};  // each H × 3, m (or empty)
+  std::vector<VecX> mode_coordinates{size_t(samples)};      // each r (or empty)
   for (int s = 0; s < samples; ++s) {
     const double a = smallest * std::exp(random.uniform() * std::log(amplitude / smallest));
-    MatX& z = handle_displacements[size_t(s)];
-    z.resize(H, 3);
-    for (int h = 0; h < H; ++h)
-      z.row(h) = (std::min(a, handle_reach[h]) * random.uniform()) * random.unitDirection();
+    const bool modal = r > 0 && (H == 0 || s % 2 == 0);
+    if (!modal) {
+      MatX& z = handle_displacements[size_t(s)];
+      z.resize(H, 3);
+      for (int h = 0; h < H; ++h)
+        z.row(h) = (std::min(a, handle_reach[h]) * random.uniform()) * random.unitDirection();
+      continue;
+    }
+    VecX z(r);
+    for (int k = 0; k < r; ++k) z[k] = random.normal();
+    const MatX u = modeDisplacements(d.modes, z);
+    const VecX norms = u.rowwise().norm();
+    double scale = norms.maxCoeff() > 0 ? a / norms.maxCoeff() : 0.0;
+    for (Eigen::Index i = 0; i < vertex_reach.size(); ++i)
+      if (norms[i] * scale > vertex_reach[i]) scale = vertex_reach[i] / norms[i];
+    mode_coordinates[size_t(s)] = scale * z;
   }
   const MatX4i& tets = data.templ->mesh.tets;
   MatX A(samples, E);
   parallelFor(samples, [&](int s) {
-    const MatX u = basis * handle_displacements[size_t(s)];  // #N × 3
+    const MatX u = mode_coordinates[size_t(s)].size() > 0
+                       ? modeDisplacements(d.modes, mode_coordinates[size_t(s)])
+                       : MatX(d.basis * handle_displacements[size_t(s)]);  // #N × 3
     for (int c = 0; c < E; ++c) {
       const int t = elements.tets[size_t(c)];
       Mat34 ue;
@@ -368,16 +436,25 @@ void tetKineticEnergies(const VecX& speed_squared, const MatX4i& tets, const Vec
 }
 
 // samples × #T: Σ_{a∈e} (m_e/4)‖v_a‖² (twice the lumped kinetic energy, J) of each tet for random
-// skinned bone twists plus random subspace velocities.
-MatX inertialSamples(const VolumetricData& data, const SpMat& basis, const VecX& tet_masses,
+// skinned bone twists plus random subspace velocities: each handle's of RMS speed kHandleSpeed,
+// the modes' ż ~ N(0, σ² I) with σ such that the soft nodes' mass-weighted RMS speed is
+// kHandleSpeed (the modes are mass-orthonormal: Σ_j m_j ‖v_j‖² = ‖ż‖²).
+MatX inertialSamples(const VolumetricData& data, const ReducedData& rom, const VecX& tet_masses,
                      int samples, std::uint64_t seed) {
   const MatX& W = data.templ->fields.weights;  // #N × bones
-  const int B = int(W.cols()), H = int(basis.cols());
+  const SpMat& basis = rom.basis;
+  const int B = int(W.cols()), H = rom.numHandles(), r = rom.numModes();
+  double soft_mass = 0.0;
+  for (Eigen::Index t = 0; t < tet_masses.size(); ++t)
+    for (int a = 0; a < 4; ++a)
+      if (data.bone_of_node[data.templ->mesh.tets(t, a)] < 0) soft_mass += tet_masses[t] / 4;
+  const double s_mode = r > 0 ? kHandleSpeed * std::sqrt(soft_mass / r) : 0.0;
   const MatX4i& tets = data.templ->mesh.tets;
   const int T = int(tets.rows());
   SampleRandom random(seed);
   struct Velocities {
     MatX bone_linear, bone_angular, handles;  // B × 3, B × 3, H × 3
+    VecX modes;                               // r
   };
   std::vector<Velocities> draws{size_t(samples)};
   const double sv = kBoneSpeed / std::sqrt(3.0), sw = kBoneAngularSpeed / std::sqrt(3.0),
@@ -390,12 +467,16 @@ MatX inertialSamples(const VolumetricData& data, const SpMat& basis, const VecX&
     for (int b = 0; b < B; ++b) d.bone_linear.row(b) = sv * random.normal3();
     for (int b = 0; b < B; ++b) d.bone_angular.row(b) = sw * random.normal3();
     for (int h = 0; h < H; ++h) d.handles.row(h) = sz * random.normal3();
+    d.modes.resize(r);
+    for (int k = 0; k < r; ++k) d.modes[k] = s_mode * random.normal();
   }
   MatX A(samples, T);
   parallelFor(samples, [&](int s) {
     const Velocities& d = draws[size_t(s)];
+    MatX extra = H > 0 ? MatX(basis * d.handles) : MatX::Zero(data.numNodes(), 3);
+    if (r > 0) extra += modeDisplacements(rom.modes, d.modes);
     const MatX v = skinnedBoneVelocities(W, data.rest_nodes, data.rest_joints, d.bone_linear,
-                                         d.bone_angular, MatX(basis * d.handles));
+                                         d.bone_angular, extra);
     tetKineticEnergies(v.rowwise().squaredNorm(), tets, tet_masses, A, s);
   });
   return A;
@@ -532,7 +613,80 @@ Cubature trainCubature(SampleFn&& sample_matrix, int count, double tolerance, st
   return cubature;
 }
 
+// The cubatures the flags ask for on d's basis, then the cache entry.
+void finishReducedData(const VolumetricData& data, const BodyModel& body,
+                       const ReducedSettings& settings, bool elastic_cubature,
+                       bool inertial_cubature, const AvatarCache* cache, ReducedData& d,
+                       ReducedBuildReport& r) {
+  auto t0 = Clock::now();
+  const int samples = settings.training_samples;
+  if (elastic_cubature) {
+    t0 = Clock::now();
+    const ElasticTets elements = deformableTets(data);
+    VecX handle_reach(d.numHandles());
+    for (int h = 0; h < d.numHandles(); ++h)
+      handle_reach[h] = std::max(kMaxTrainingShear * data.tissue_thickness[d.handles[h]],
+                                 kSmallestTrainingAmplitude);
+    VecX vertex_reach(d.numModes() > 0 ? data.tissue_thickness.size() : 0);
+    for (Eigen::Index i = 0; i < vertex_reach.size(); ++i)
+      vertex_reach[i] =
+          std::max(kMaxTrainingShear * data.tissue_thickness[i], kSmallestTrainingAmplitude);
+    r.seconds_training += secondsSince(t0);
+    d.elastic = trainCubature(
+        [&](std::uint64_t seed) {
+          return elasticSamples(data, d, elements, handle_reach, vertex_reach, samples,
+                                settings.training_amplitude, seed);
+        },
+        settings.elastic_cubature_points, kElasticTrainingTolerance, settings.seed, elements.tets,
+        &d.elastic_test_error, &r.seconds_training, &r.seconds_cubature);
+    t0 = Clock::now();
+    d.elastic_rest_stiffness = restStiffnessOf(data, d, elements);
+    r.seconds_cubature += secondsSince(t0);
+  }
+  if (inertial_cubature) {
+    t0 = Clock::now();
+    TetMesh shaped = data.templ->mesh;
+    shaped.nodes = data.rest_nodes;
+    const VecX tet_masses = tetVolumes(shaped).cwiseProduct(data.materials.density);
+    std::vector<int> all_tets(size_t(data.numTets()));
+    for (int t = 0; t < data.numTets(); ++t) all_tets[size_t(t)] = t;
+    const MatX rigid_rows = rigidMotionRows(data, body.parents, tet_masses);
+    r.seconds_training += secondsSince(t0);
+    d.inertial = trainCubature(
+        [&](std::uint64_t seed) { return inertialSamples(data, d, tet_masses, samples, seed); },
+        settings.inertial_cubature_points, kInertialTrainingTolerance, settings.seed, all_tets,
+        &d.inertial_test_error, &r.seconds_training, &r.seconds_cubature, rigid_rows);
+    d.inertial_rigid_error = largestRowError(rigid_rows, d.inertial);
+  }
+
+  if (cache) {
+    t0 = Clock::now();
+    cache->store(d.key, detail::reducedDataArrays(d));
+    r.seconds_cache_store += secondsSince(t0);
+  }
+}
+
 }  // namespace
+
+const char* reducedBasisKindName(ReducedBasisKind kind) {
+  switch (kind) {
+    case ReducedBasisKind::Handles:
+      return "handles";
+    case ReducedBasisKind::Modes:
+      return "modes";
+    case ReducedBasisKind::ModesAndHandles:
+      return "modes+handles";
+  }
+  return "?";
+}
+
+ReducedBasisKind parseReducedBasisKind(const std::string& name, const std::string& where) {
+  for (ReducedBasisKind kind :
+       {ReducedBasisKind::Handles, ReducedBasisKind::Modes, ReducedBasisKind::ModesAndHandles})
+    if (name == reducedBasisKindName(kind)) return kind;
+  throw InputError(where + ": basis kind '" + name +
+                   "', expected one of 'handles', 'modes', 'modes+handles'");
+}
 
 ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
                              const ReducedSettings& settings, bool elastic_cubature,
@@ -573,7 +727,22 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
 
   ReducedData d;
   d.key = key;
+  d.basis_kind = settings.basis_kind;
   auto t0 = Clock::now();
+  if (settings.basis_kind != ReducedBasisKind::Handles) {
+    ModalBasis modal = computeModalBasis(data, settings.modes);
+    const Eigen::Index keep = modal.basis.cols() - modal.basis.cols() % 3;
+    d.modes = modal.basis.leftCols(keep);
+    r.modes = modal.report;
+    r.seconds_basis += secondsSince(t0);
+  }
+  if (settings.basis_kind == ReducedBasisKind::Modes) {
+    d.basis.resize(data.numNodes(), 0);
+    finishReducedData(data, body, settings, elastic_cubature, inertial_cubature, cache, d, r);
+    r.seconds_total = secondsSince(start);
+    return d;
+  }
+  t0 = Clock::now();
   d.handles = chooseHandles(data, body, settings.num_handles);
   r.seconds_handles = secondsSince(t0);
 
@@ -596,53 +765,19 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
         str(bbw.report.max_kkt_residual) +
         " of the tolerance, max_iterations = " + std::to_string(settings.basis.max_iterations) +
         "); using them as they are\n";
-  r.seconds_basis = secondsSince(t0);
-
-  const int samples = settings.training_samples;
-  if (elastic_cubature) {
-    t0 = Clock::now();
-    const ElasticTets elements = deformableTets(data);
-    VecX handle_reach(d.numHandles());
-    for (int h = 0; h < d.numHandles(); ++h)
-      handle_reach[h] = std::max(kMaxTrainingShear * data.tissue_thickness[d.handles[h]],
-                                 kSmallestTrainingAmplitude);
-    r.seconds_training += secondsSince(t0);
-    d.elastic = trainCubature(
-        [&](std::uint64_t seed) {
-          return elasticSamples(data, d.basis, elements, handle_reach, samples,
-                                settings.training_amplitude, seed);
-        },
-        settings.elastic_cubature_points, kElasticTrainingTolerance, settings.seed, elements.tets,
-        &d.elastic_test_error, &r.seconds_training, &r.seconds_cubature);
-    t0 = Clock::now();
-    d.elastic_rest_stiffness = subspaceRestStiffness(data, d.basis, elements);
-    r.seconds_cubature += secondsSince(t0);
-  }
-  if (inertial_cubature) {
-    t0 = Clock::now();
-    TetMesh shaped = data.templ->mesh;
-    shaped.nodes = data.rest_nodes;
-    const VecX tet_masses = tetVolumes(shaped).cwiseProduct(data.materials.density);
-    std::vector<int> all_tets(size_t(data.numTets()));
-    for (int t = 0; t < data.numTets(); ++t) all_tets[size_t(t)] = t;
-    const MatX rigid_rows = rigidMotionRows(data, body.parents, tet_masses);
-    r.seconds_training += secondsSince(t0);
-    d.inertial = trainCubature(
-        [&](std::uint64_t seed) {
-          return inertialSamples(data, d.basis, tet_masses, samples, seed);
-        },
-        settings.inertial_cubature_points, kInertialTrainingTolerance, settings.seed, all_tets,
-        &d.inertial_test_error, &r.seconds_training, &r.seconds_cubature, rigid_rows);
-    d.inertial_rigid_error = largestRowError(rigid_rows, d.inertial);
-  }
-
-  if (cache) {
-    t0 = Clock::now();
-    cache->store(key, detail::reducedDataArrays(d));
-    r.seconds_cache_store += secondsSince(t0);
-  }
+  r.seconds_basis += secondsSince(t0);
+  finishReducedData(data, body, settings, elastic_cubature, inertial_cubature, cache, d, r);
   r.seconds_total = secondsSince(start);
   return d;
+}
+
+MatX elasticRestStiffness(const VolumetricData& data, const ReducedData& rom) {
+  if (rom.basis.rows() != data.numNodes() ||
+      (rom.numModes() > 0 && rom.modes.rows() != 3 * data.numNodes()))
+    throw InputError("elasticRestStiffness: the basis has " + std::to_string(rom.basis.rows()) +
+                     " rows and the modes " + std::to_string(rom.modes.rows()) +
+                     ", expected #nodes (" + std::to_string(data.numNodes()) + ") and 3·#nodes");
+  return restStiffnessOf(data, rom, deformableTets(data));
 }
 
 MatX elasticRestStiffness(const VolumetricData& data, const SpMat& basis) {

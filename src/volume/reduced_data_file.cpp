@@ -38,6 +38,10 @@ void storeCubature(io::NpzWriter& w, const std::string& name, const Cubature& c,
 
 io::NpzWriter reducedDataArrays(const ReducedData& d) {
   io::NpzWriter w;
+  if (d.basis_kind != ReducedBasisKind::Handles) {
+    addIntegers(w, "basis_kind", {int64_t(d.basis_kind)});
+    w.add("modes", d.modes);
+  }
   addIntegers(w, "handles", toInt64(d.handles));
   std::vector<int64_t> rows, cols;
   std::vector<double> values;
@@ -104,8 +108,28 @@ Cubature loadCubature(const io::NpzFile& f, const std::string& name, bool built,
 ReducedData readReducedData(const io::NpzFile& f, const VolumetricData& data, const BodyModel& body,
                             const ReducedSettings& settings, bool elastic, bool inertial) {
   const int N = data.numNodes(), V = body.numVertices(), T = data.numTets();
-  const int H = settings.num_handles;
+  const bool modal = settings.basis_kind != ReducedBasisKind::Handles;
+  const int H = settings.basis_kind == ReducedBasisKind::Modes ? 0 : settings.num_handles;
   ReducedData d;
+  d.basis_kind = settings.basis_kind;
+  if (modal) {
+    const int64_t kind = f.integers("basis_kind", {1})[0];
+    if (kind != int64_t(settings.basis_kind))
+      throw InputError(f.path() + ": key 'basis_kind': " + std::to_string(kind) + ", expected " +
+                       std::to_string(int(settings.basis_kind)) + " (" +
+                       reducedBasisKindName(settings.basis_kind) + ")");
+    d.modes = f.matrix("modes", 3L * N, -1);
+    if (d.modes.cols() % 3 != 0 || d.modes.cols() == 0 || !d.modes.allFinite())
+      throw InputError(f.path() + ": key 'modes': " + std::to_string(d.modes.rows()) + " × " +
+                       std::to_string(d.modes.cols()) +
+                       ", expected 3·#nodes × r finite with r a positive multiple of 3");
+    for (int j = 0; j < N; ++j)
+      if (data.bone_of_node[j] >= 0 && !d.modes.middleRows<3>(3 * j).isZero(0.0))
+        throw InputError(f.path() + ": key 'modes': nonzero rows at bone node " +
+                         std::to_string(j) + ", expected zero (bone nodes do not move)");
+  } else if (f.has("modes")) {
+    throw InputError(f.path() + ": key 'modes' in data of the handle basis kind");
+  }
   const std::vector<int64_t> handles = f.integers("handles", {H});
   d.handles.resize(H);
   std::vector<char> seen(size_t(V), 0);
@@ -157,7 +181,8 @@ ReducedData readReducedData(const io::NpzFile& f, const VolumetricData& data, co
     throw InputError(f.path() + ": key 'inertial_rigid_error': " + str(d.inertial_rigid_error) +
                      ", expected a finite error ≥ 0");
   if (elastic) {
-    d.elastic_rest_stiffness = f.matrix("elastic_rest_stiffness", 3 * H, 3 * H);
+    const long m = 3L * H + d.numModes();
+    d.elastic_rest_stiffness = f.matrix("elastic_rest_stiffness", m, m);
     if (!d.elastic_rest_stiffness.allFinite())
       throw InputError(f.path() + ": key 'elastic_rest_stiffness': NaN or Inf");
   }

@@ -7,6 +7,7 @@
 #include "flsh/energy/fem_material.h"
 #include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/reduced_data.h"
+#include "volume/subspace_tets.h"
 
 namespace flsh {
 
@@ -18,9 +19,9 @@ VecX elasticCubatureFloors(const VolumetricData& data, const ReducedData& rom) {
   const Cubature& cubature = rom.elastic;
   VecX floors = VecX::Constant(cubature.elements.size(), kUnusedRestSplitFloor);
   if (cubature.elements.size() == 0 || rom.elastic_rest_stiffness.size() == 0) return floors;
-  const int H = rom.numHandles(), T = data.numTets();
-  if (rom.elastic_rest_stiffness.rows() != 3 * H || rom.elastic_rest_stiffness.cols() != 3 * H)
-    throw InputError(fn + "elastic_rest_stiffness is not 3·#handles square");
+  const int T = data.numTets(), m = rom.numSoftDofs();
+  if (rom.elastic_rest_stiffness.rows() != m || rom.elastic_rest_stiffness.cols() != m)
+    throw InputError(fn + "elastic_rest_stiffness is not (3·#handles + #modes) square");
   std::vector<int> kept, position;
   for (Eigen::Index k = 0; k < cubature.elements.size(); ++k) {
     const int t = cubature.elements[k];
@@ -34,10 +35,22 @@ VecX elasticCubatureFloors(const VolumetricData& data, const ReducedData& rom) {
   const ElasticTets tets = elasticTets(data, kept, "elasticCubatureFloors");
   const SpMat rows = rom.basis.transpose();  // φ by rows
   const MatX4i& mesh_tets = data.templ->mesh.tets;
-  MatX unit = MatX::Zero(3 * H, 3 * H), weighted = MatX::Zero(3 * H, 3 * H);
+  MatX unit = MatX::Zero(m, m), weighted = MatX::Zero(m, m);
   VecX weights(Eigen::Index(kept.size()));
   for (size_t e = 0; e < kept.size(); ++e) {
     weights[Eigen::Index(e)] = cubature.weights[position[e]];
+    if (rom.numModes() > 0) {  // K̃_e = V Dᵀ A₀ D on the tet's soft-state entries
+      const detail::SubspaceTet st = detail::subspaceTet(data, rom, rows, tets.rest[e], kept[e]);
+      const MatX K =
+          tets.rest[e].volume * st.D.transpose() * (detail::restTangent(tets.materials[e]) * st.D);
+      for (size_t a = 0; a < st.dofs.size(); ++a)
+        for (size_t b = 0; b < st.dofs.size(); ++b) {
+          unit(st.dofs[a], st.dofs[b]) += K(Eigen::Index(a), Eigen::Index(b));
+          weighted(st.dofs[a], st.dofs[b]) +=
+              weights[Eigen::Index(e)] * K(Eigen::Index(a), Eigen::Index(b));
+        }
+      continue;
+    }
     std::vector<int> handles;
     for (int a = 0; a < 4; ++a) {
       const int j = mesh_tets(kept[e], a);

@@ -176,7 +176,26 @@ void SoftAvatar::setReducedData(std::shared_ptr<const ReducedData> data) {
   if (!data) throw InputError(fn + "data is null");
   const VolumetricData& vol = *volumetric_;
   const int n = vol.numNodes(), T = vol.numTets(), H = data->numHandles();
-  if (H < 1) throw InputError(fn + "handles is empty, expected at least one handle");
+  const bool modes = data->basis_kind != ReducedBasisKind::Handles;
+  const bool handles = data->basis_kind != ReducedBasisKind::Modes;
+  if (handles && H < 1) throw InputError(fn + "handles is empty, expected at least one handle");
+  if (!handles && H > 0)
+    throw InputError(fn + "handles has " + std::to_string(H) +
+                     " entries for the basis kind 'modes', expected none");
+  const MatX& Psi = data->modes;
+  if (modes && (Psi.rows() != 3 * n || Psi.cols() < 3 || Psi.cols() % 3 != 0 || !Psi.allFinite()))
+    throw InputError(fn + "modes is " + std::to_string(Psi.rows()) + " × " +
+                     std::to_string(Psi.cols()) + (Psi.allFinite() ? "" : " with NaN or Inf") +
+                     ", expected 3·#nodes × r = " + std::to_string(3 * n) +
+                     " × r, finite, r a positive multiple of 3");
+  if (!modes && Psi.size() > 0)
+    throw InputError(fn + "modes is " + std::to_string(Psi.rows()) + " × " +
+                     std::to_string(Psi.cols()) + " for the basis kind 'handles', expected empty");
+  if (modes)
+    for (int j = 0; j < n; ++j)
+      if (vol.bone_of_node[j] >= 0 && !Psi.middleRows<3>(3 * j).isZero(0.0))
+        throw InputError(fn + "modes: rows of bone node " + std::to_string(j) +
+                         " are not zero, expected zero (bone nodes do not move)");
   if (data->basis.rows() != n || data->basis.cols() != H)
     throw InputError(fn + "basis is " + std::to_string(data->basis.rows()) + " × " +
                      std::to_string(data->basis.cols()) + ", expected #nodes × #handles = " +
@@ -211,11 +230,12 @@ void SoftAvatar::setReducedData(std::shared_ptr<const ReducedData> data) {
   checkCubature(data->elastic, "elastic");
   checkCubature(data->inertial, "inertial");
   const MatX& C = data->elastic_rest_stiffness;
-  if (C.size() > 0 && (C.rows() != 3 * H || C.cols() != 3 * H || !C.allFinite()))
+  const int m = data->numSoftDofs();
+  if (C.size() > 0 && (C.rows() != m || C.cols() != m || !C.allFinite()))
     throw InputError(fn + "elastic_rest_stiffness is " + std::to_string(C.rows()) + " × " +
                      std::to_string(C.cols()) + (C.allFinite() ? "" : " with NaN or Inf") +
-                     ", expected empty or 3·#handles × 3·#handles = " + std::to_string(3 * H) +
-                     " × " + std::to_string(3 * H) + " finite");
+                     ", expected empty or (3·#handles + #modes) square = " + std::to_string(m) +
+                     " × " + std::to_string(m) + " finite");
   if (data->elastic_floors.size() > 0 &&
       data->elastic_floors.size() != data->elastic.elements.size())
     throw InputError(fn + "elastic_floors has " + std::to_string(data->elastic_floors.size()) +
@@ -261,7 +281,7 @@ std::shared_ptr<SoftAvatar> SoftAvatar::withMaterial(const MaterialModel& model)
 std::shared_ptr<const ReducedData> SoftAvatar::reducedDataFor(const VolumetricData& data) const {
   auto rom = std::make_shared<ReducedData>(*reduced_data_);
   if (rom->elastic_rest_stiffness.size() > 0)
-    rom->elastic_rest_stiffness = elasticRestStiffness(data, rom->basis);
+    rom->elastic_rest_stiffness = elasticRestStiffness(data, *rom);
   Sha256 k;
   k.update(reduced_data_->key);
   k.update(data.key);

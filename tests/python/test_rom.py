@@ -211,7 +211,8 @@ def test_rom_state_is_one_z_per_handle_and_u_follows_the_basis(rom, avatar):
     np.testing.assert_allclose(u[handles], z, rtol=0, atol=1e-12)
     pairs = rom.node_displacement_basis(shared)
     assert len(pairs) == basis[shared].nnz >= 2
-    from_pairs = sum(w * q[i:i + 3] for i, w in pairs)
+    assert all(B.shape == (3, 3) for _, B in pairs)
+    from_pairs = sum(B @ q[i:i + 3] for i, B in pairs)
     np.testing.assert_allclose(from_pairs, expected[shared], rtol=0, atol=1e-12)
     np.testing.assert_allclose(rom.get_unposed_surface(), avatar.rest_vertices + u, atol=1e-12)
     bone_node = int(np.flatnonzero(avatar.volumetric_data.bone_of_node >= 0)[0])

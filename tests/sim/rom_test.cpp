@@ -10,6 +10,7 @@
 #include "flsh/core/error.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/scene.h"
+#include "support/small_soft_avatar.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -22,11 +23,16 @@ SoftAvatarSettings settings() {
   return test::smallSoftAvatarSettings(cache);
 }
 
-// kind 0: FEM; 1: ROM with exact integration; 2: ROM with both cubatures.
+// kind 0: FEM; 1: ROM with exact integration; 2: ROM with both cubatures; 3 and 4: ROM with
+// exact integration on the small modes (test::useSmallModes), alone (3) and with the handles (4).
 std::shared_ptr<const SoftAvatar> avatar(int kind) {
-  static std::shared_ptr<const SoftAvatar> avatars[3];
+  static std::shared_ptr<const SoftAvatar> avatars[5];
   if (!avatars[kind]) {
-    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), settings());
+    SoftAvatarSettings s = settings();
+    if (kind >= 3)
+      test::useSmallModes(s,
+                          kind == 3 ? ReducedBasisKind::Modes : ReducedBasisKind::ModesAndHandles);
+    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), s);
     a->enableSoftTissue();
     a->enableReducedModel(kind > 0);
     a->enableElasticCubature(kind == 2);
@@ -43,8 +49,10 @@ SpMat reductionMatrix(const Simulable& fem, const Simulable& rom) {
   for (int i = 0; i < fem.numBoneDofs(); ++i) T.emplace_back(i, i, 1.0);
   for (int k = 0; k < fem.softNodes().size(); ++k) {
     const int j = fem.softNodes()[k];
-    for (const auto& [index, weight] : rom.nodeDisplacementBasis(j))
-      for (int c = 0; c < 3; ++c) T.emplace_back(fem.nodeSoftDof(j) + c, index + c, weight);
+    for (const auto& [index, block] : rom.nodeDisplacementBasis(j))
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+          if (block(r, c) != 0.0) T.emplace_back(fem.nodeSoftDof(j) + r, index + c, block(r, c));
   }
   SpMat P(fem.numDofs(), rom.numDofs());
   P.setFromTriplets(T.begin(), T.end());
@@ -56,12 +64,12 @@ struct Pair {
   SpMat P;
 };
 
-// A FEM and an exact ROM simulable at the same walking state one step in: bones moved, z random,
-// u = Φz; a ground plane 1.5 cm above the lowest vertex.
-Pair samePair(unsigned seed) {
+// A FEM and an exact ROM simulable (avatar `kind`) at the same walking state one step in: bones
+// moved, z random, u = Φz; a ground plane 1.5 cm above the lowest vertex.
+Pair samePair(unsigned seed, int kind = 1) {
   Pair p;
   p.fem = std::make_unique<Simulable>(avatar(0), test::smallScene(800).walk);
-  p.rom = std::make_unique<Simulable>(avatar(1), test::smallScene(800).walk);
+  p.rom = std::make_unique<Simulable>(avatar(kind), test::smallScene(800).walk);
   for (Simulable* s : {p.fem.get(), p.rom.get()}) {
     s->initialize();
     s->preUpdate();
@@ -79,8 +87,11 @@ Pair samePair(unsigned seed) {
   return p;
 }
 
-TEST(ReducedModel, ExactIntegrationIsTheFemThroughTheBasis) {
-  Pair p = samePair(3);
+// Every basis kind: handles (1), modes (3), modes and handles (4).
+class ReducedModelKinds : public ::testing::TestWithParam<int> {};
+
+TEST_P(ReducedModelKinds, ExactIntegrationIsTheFemThroughTheBasis) {
+  Pair p = samePair(3, GetParam());
   const int nf = p.fem->numDofs(), nr = p.rom->numDofs();
   ASSERT_GT(p.rom->getSoftTissueDisplacements().norm(), 0.0);
   EXPECT_LT((p.rom->getVertices() - p.fem->getVertices()).cwiseAbs().maxCoeff(), 1e-12);
@@ -126,6 +137,13 @@ TEST(ReducedModel, ExactIntegrationIsTheFemThroughTheBasis) {
     }
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(Kinds, ReducedModelKinds, ::testing::Values(1, 3, 4),
+                         [](const ::testing::TestParamInfo<int>& info) {
+                           return std::string(info.param == 1   ? "Handles"
+                                              : info.param == 3 ? "Modes"
+                                                                : "ModesAndHandles");
+                         });
 
 TEST(ReducedModel, CubatureApproximatesExactIntegration) {
   const ReducedData& data = avatar(2)->reducedData();
@@ -338,8 +356,9 @@ TEST(ReducedModel, HessianBlocksComeAsOneFixedListPerPart) {
         ASSERT_EQ(blocks[0].offset, offset);
         if (!positions) positions = blocks[0].positions;
         EXPECT_EQ(blocks[0].positions, positions);  // one pattern for both parts
-        for (const Triplet& t : rest)  // the triplets left are bone–bone ones
-          ASSERT_TRUE(t.row() < offset + 144 && t.col() < offset + 144) << t.row() << ", " << t.col();
+        for (const Triplet& t : rest)               // the triplets left are bone–bone ones
+          ASSERT_TRUE(t.row() < offset + 144 && t.col() < offset + 144)
+              << t.row() << ", " << t.col();
         const MatX S = test::denseFromTriplets(plain, n + offset);
         const MatX B = test::denseFromTriplets(test::expanded(blocks), n + offset);
         ASSERT_GT(B.bottomRightCorner(n - 144, n - 144).cwiseAbs().maxCoeff(), 0.0);
@@ -376,8 +395,8 @@ TEST(ReducedModel, BothHessianPartsAtOnceAreThePartsInOrder) {
       for (size_t k = dynamic_lists; k < part_blocks.size(); ++k)
         part_values.push_back(*part_blocks[k].values);
       std::vector<Triplet> potential_whole(parts.begin() + long(dynamic_count), parts.end());
-      for (const Triplet& t : test::expanded({part_blocks.begin() + long(dynamic_lists),
-                                              part_blocks.end()}))
+      for (const Triplet& t :
+           test::expanded({part_blocks.begin() + long(dynamic_lists), part_blocks.end()}))
         potential_whole.push_back(t);
       const MatX expected =
           test::denseFromTriplets(dynamic_whole, n) + test::denseFromTriplets(potential_whole, n);

@@ -12,19 +12,31 @@
 
 namespace flsh::test {
 
-enum class SoftModel { Fem, Rom };
+/// Rom: the handle basis; RomModes: modes and handles (ReducedBasisKind::ModesAndHandles).
+enum class SoftModel { Fem, Rom, RomModes };
 
 inline std::string modelName(const ::testing::TestParamInfo<SoftModel>& info) {
-  return info.param == SoftModel::Fem ? "Fem" : "Rom";
+  return info.param == SoftModel::Fem ? "Fem" : info.param == SoftModel::Rom ? "Rom" : "RomModes";
+}
+
+/// The modal basis of the small tests' avatars: the static modes and 6 vibration modes,
+/// compressed to 24 columns.
+inline void useSmallModes(SoftAvatarSettings& s, ReducedBasisKind kind) {
+  s.reduced.basis_kind = kind;
+  s.reduced.modes.vibration_modes = 6;
+  s.reduced.modes.columns = 24;
 }
 
 /// Soft avatars of the 800-vertex synthetic body (coarse interior), built once per binary: the
-/// FEM soft skeleton, and the ROM with both cubatures (16 handles, 60 tets each).
+/// FEM soft skeleton, and the ROM with both cubatures (16 handles, 60 tets each; RomModes with
+/// the small modes too).
 inline std::shared_ptr<const SoftAvatar> smallSoftAvatar(SoftModel model) {
   static const std::string cache = freshTempDir("soft_term_cache");
-  auto make = [](bool reduced) {
-    auto a =
-        std::make_shared<SoftAvatar>(smallScene(800).body, VecX(), smallSoftAvatarSettings(cache));
+  auto make = [](SoftModel m) {
+    SoftAvatarSettings s = smallSoftAvatarSettings(cache);
+    if (m == SoftModel::RomModes) useSmallModes(s, ReducedBasisKind::ModesAndHandles);
+    auto a = std::make_shared<SoftAvatar>(smallScene(800).body, VecX(), s);
+    const bool reduced = m != SoftModel::Fem;
     a->enableSoftTissue();
     a->enableReducedModel(reduced);
     a->enableElasticCubature(reduced);
@@ -32,10 +44,14 @@ inline std::shared_ptr<const SoftAvatar> smallSoftAvatar(SoftModel model) {
     a->initVolumetricData();
     return a;
   };
-  static std::shared_ptr<const SoftAvatar> fem = make(false);
+  static std::shared_ptr<const SoftAvatar> fem = make(SoftModel::Fem);
   if (model == SoftModel::Fem) return fem;
-  static std::shared_ptr<const SoftAvatar> rom = make(true);
-  return rom;
+  if (model == SoftModel::Rom) {
+    static std::shared_ptr<const SoftAvatar> rom = make(SoftModel::Rom);
+    return rom;
+  }
+  static std::shared_ptr<const SoftAvatar> modes = make(SoftModel::RomModes);
+  return modes;
 }
 
 }  // namespace flsh::test

@@ -191,11 +191,12 @@ class Simulable {
   /// else −1: bone nodes, every vertex of the skeleton model, and in the ROM every node but the
   /// handles (use nodeDisplacementBasis). Throws InputError for j outside the nodes.
   int nodeSoftDof(int j) const;
-  /// u_j as a combination of state entries: u_j = Σ weight · q.segment<3>(index) over the
-  /// returned (index, weight) pairs; empty for bone nodes and the skeleton model. FEM: one pair
-  /// (nodeSoftDof(j), 1); ROM: (index of z_h, φ_h(j)) for the handles whose φ reaches j. Throws
-  /// InputError for j outside the nodes.
-  std::vector<std::pair<int, double>> nodeDisplacementBasis(int j) const;
+  /// u_j as a combination of state entries: u_j = Σ block · q.segment<3>(index) over the
+  /// returned (index, 3 × 3 block) pairs; empty for bone nodes and the skeleton model. FEM: one
+  /// pair (nodeSoftDof(j), I); ROM: (index of z_h, φ_h(j) I) for the handles whose φ reaches j,
+  /// then with modes (ReducedBasisKind) one pair per three modal coordinates, the block Ψ_j's
+  /// three columns. Throws InputError for j outside the nodes.
+  std::vector<std::pair<int, Mat3>> nodeDisplacementBasis(int j) const;
   /// Soft-tissue displacements u of the surface vertices (#V × 3, m, unposed space); zero on
   /// bone nodes and for the skeleton model.
   MatX3 getSoftTissueDisplacements() const;

@@ -26,13 +26,37 @@
 #include "flsh/core/types.h"
 #include "flsh/volume/avatar_cache.h"
 #include "flsh/volume/cubature.h"
+#include "flsh/volume/modal_basis.h"
 #include "flsh/volume/reduced_basis.h"
 #include "flsh/volume/volumetric_data.h"
 
 namespace flsh {
 
+/// What spans the reduced soft tissue's displacements (docs/rom.md). The soft state z is the
+/// handles' 3-vectors first (3 per handle), then the modal coordinates (one per column).
+enum class ReducedBasisKind {
+  /// Point handles with bounded biharmonic weights (reduced_basis.h): u_j = Σ_h φ_h(j) z_h.
+  Handles,
+  /// The avatar's modal basis (modal_basis.h: static-correction and fixed-interface vibration
+  /// modes): u_j = Ψ_j z, Ψ_j node j's 3 rows of the 3#N × r basis.
+  Modes,
+  /// Both, the handles' weights appended to the modes (for local contact): u_j = Σ_h φ_h(j) z_h
+  /// + Ψ_j z_modes.
+  ModesAndHandles,
+};
+/// "handles", "modes" or "modes+handles" (the scene file's and `flsh avatar`'s names).
+const char* reducedBasisKindName(ReducedBasisKind kind);
+/// The kind of a name reducedBasisKindName gives; InputError naming `where` and the known
+/// names otherwise.
+ReducedBasisKind parseReducedBasisKind(const std::string& name, const std::string& where);
+
 struct ReducedSettings {
-  int num_handles = 87;                 ///< point handles on the surface (≥ 1)
+  ReducedBasisKind basis_kind = ReducedBasisKind::Handles;
+  /// The modal basis of the kinds with modes. Its column count is cut to a multiple of 3 (the
+  /// last columns, the least important, go): the simulation groups the modal coordinates in
+  /// threes.
+  ModalBasisSettings modes;
+  int num_handles = 87;  ///< point handles on the surface (≥ 1; kinds with handles)
   /// Sample tets of each cubature (≥ 1); a cubature that is switched off is not built.
   int elastic_cubature_points = 500;
   int inertial_cubature_points = 500;
@@ -42,8 +66,8 @@ struct ReducedSettings {
   /// Largest handle displacement of an elastic training sample, m (samples spread their
   /// amplitudes from small to this, so that the Fung stiffening is represented).
   double training_amplitude = 0.03;
-  std::uint64_t seed = 1;               ///< of the training samples (deterministic)
-  BoundedBiharmonicOptions basis;       ///< the QP solver of the weights
+  std::uint64_t seed = 1;          ///< of the training samples (deterministic)
+  BoundedBiharmonicOptions basis;  ///< the QP solver of the weights
   /// Basis entries below this (in [0, 0.01]) are dropped after the solve: the far tails of the
   /// weights, which move a node by at most this fraction of a handle's displacement, cost the
   /// simulation as much as the rest. Measured on the default body: 1e-4 drops 29 % of the
@@ -63,12 +87,17 @@ struct ReducedSettings {
 };
 
 struct ReducedData {
-  VecXi handles;   ///< H tet-node (= surface vertex) indices, farthest-point order
+  ReducedBasisKind basis_kind = ReducedBasisKind::Handles;
+  /// The modal columns (kinds with modes; empty otherwise): Ψ, 3#N × r with r a multiple of 3,
+  /// node j's rows 3j .. 3j + 2, zero on bone nodes (ModalBasis::basis, its last r mod 3
+  /// columns dropped).
+  MatX modes;
+  VecXi handles;  ///< H tet-node (= surface vertex) indices, farthest-point order (none for Modes)
   /// #N × H (compressed columns), entry (j, h) = φ_h at node j in [0, 1]; bone-node rows are
   /// empty, handle rows are unit vectors. Weights below ReducedSettings::basis_drop_below (and
   /// below 1e-12) are dropped.
   SpMat basis;
-  double basis_max_bound_violation = 0;   ///< BoundedBiharmonicReport figures of the solve
+  double basis_max_bound_violation = 0;  ///< BoundedBiharmonicReport figures of the solve
   double basis_max_constraint_error = 0;
   bool basis_converged = true;
   /// Elastic cubature (tet indices into the template mesh, ascending, weights > 0); empty when
@@ -76,7 +105,8 @@ struct ReducedData {
   Cubature elastic;
   double elastic_test_error = 0;
   /// With the elastic cubature, the exact rest stiffness of the subspace K = Σ_e Φ̂_eᵀ K_e Φ̂_e
-  /// over every elastic tet (3H × 3H, symmetric positive definite, N/m; K_e the tet's elastic
+  /// over every elastic tet (numSoftDofs square: 3H × 3H for handles; symmetric positive
+  /// definite, N/m; K_e the tet's elastic
   /// Hessian at rest, Φ̂_e its nodes' basis rows ⊗ I₃; elasticRestStiffness). The reduced
   /// elastic energy is then split into this quadratic, integrated exactly, and the sample tets'
   /// excess over it (docs/rom.md, "Elastic cubature"):
@@ -103,6 +133,9 @@ struct ReducedData {
   double inertial_rigid_error = 0;
   std::string key;  ///< cache key of this level
   int numHandles() const { return int(handles.size()); }
+  int numModes() const { return int(modes.cols()); }
+  /// Entries of the soft state: 3 per handle, then one per mode.
+  int numSoftDofs() const { return 3 * numHandles() + numModes(); }
 };
 
 /// How the build went; seconds are 0 for stages skipped because the level came from the cache.
@@ -110,6 +143,9 @@ struct ReducedBuildReport {
   bool from_cache = false;
   std::string warnings;  ///< one line per problem (e.g. a corrupted cache file rebuilt)
   double seconds_handles = 0, seconds_basis = 0, seconds_training = 0, seconds_cubature = 0;
+  /// The modal basis' build (kinds with modes, built rather than loaded); its seconds are part
+  /// of seconds_basis.
+  ModalBasisReport modes;
   double seconds_cache_load = 0, seconds_cache_store = 0, seconds_total = 0;
 };
 
@@ -121,6 +157,10 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
                              const ReducedSettings& settings, bool elastic_cubature,
                              bool inertial_cubature, const AvatarCache* cache,
                              ReducedBuildReport* report = nullptr);
+
+/// The same for rom's subspace, whatever its kind (handles, modes or both): numSoftDofs square.
+/// InputError when the basis or the modes do not have a row (block) per node.
+MatX elasticRestStiffness(const VolumetricData& data, const ReducedData& rom);
 
 /// K = Σ_e Φ̂_eᵀ K_e Φ̂_e over the elastic tets (those with a soft node) at rest: the exact
 /// elastic stiffness of the subspace spanned by `basis` (#N × H) at z = 0, 3H × 3H, N/m, exactly

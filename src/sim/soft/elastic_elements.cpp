@@ -49,6 +49,26 @@ ElasticElements elasticElements(const SoftAvatar& avatar) {
   return out;
 }
 
+VecX elementRestFloors(const ReducedData& rom, const ElasticElements& elements) {
+  if (rom.elastic_floors.size() != rom.elastic.elements.size())
+    throw InputError("Simulable: the avatar's reduced data has " +
+                     std::to_string(rom.elastic_floors.size()) +
+                     " rest-split floors, expected one per elastic cubature sample (" +
+                     std::to_string(rom.elastic.elements.size()) + "; SoftAvatar fills them)");
+  const int T = elements.size();
+  VecX floors(T);
+  Eigen::Index k = 0;
+  for (int e = 0; e < T; ++e) {
+    while (k < rom.elastic.elements.size() && rom.elastic.elements[k] != elements.tet[size_t(e)])
+      ++k;
+    if (k == rom.elastic.elements.size())
+      throw InputError("Simulable: elastic element " + std::to_string(e) +
+                       " is not a sample of the avatar's elastic cubature");
+    floors[e] = rom.elastic_floors[k++];
+  }
+  return floors;
+}
+
 void ElasticityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                                       std::vector<FixedHessianBlocks>* blocks, int offset,
                                       bool psd) const {

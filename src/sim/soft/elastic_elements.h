@@ -9,6 +9,7 @@
 #include "flsh/core/hessian_blocks.h"
 #include "flsh/energy/fem_material.h"
 #include "flsh/sim/energy_term.h"
+#include "flsh/volume/reduced_data.h"
 #include "sim/soft/material_chain.h"
 #include "sim/soft/node_term.h"
 #include "sim/soft/shape_chain.h"
@@ -38,6 +39,11 @@ inline TetMaterialCotangent materialCotangent(const FemMaterialDerivative& d) {
 /// The avatar's elastic elements (volume/elastic_tets.h: the tets with a soft-tissue node, at
 /// the avatar's rest nodes X̄(β)), all of them or the ROM's elastic cubature's.
 ElasticElements elasticElements(const SoftAvatar& avatar);
+
+/// The floors of the ROM's rest-stiffness split (ReducedData::elastic_floors) of each element
+/// (a sample of rom's elastic cubature). InputError when rom has no floor per sample or an
+/// element is not a sample.
+VecX elementRestFloors(const ReducedData& rom, const ElasticElements& elements);
 
 /// The elastic energy of a soft skeleton (FEM: fem_elasticity_term.h; ROM:
 /// reduced_elasticity_term.h).
@@ -147,6 +153,21 @@ class ElasticityTerm : public NodeTerm<1> {
   template <class Row>
   void shapeRows(const ShapeChain& shape, Row&& row) const;
   const MaterialChain& chain_;
+};
+
+/// The ROM's elastic terms (handles: reduced_elasticity_term.h; modes: modal_elasticity_term.h)
+/// as SoftTissue's two-thread schedule runs them: elements in ranges, the rest stiffness apart.
+class ReducedElasticity {
+ public:
+  virtual ~ReducedElasticity() = default;
+  virtual int numElements() const = 0;
+  /// Elements [first, last): energy returned, gradient added into gz (the soft state's entries;
+  /// may be null), Hessian blocks summed into `values` (a value list; may be null).
+  virtual double elements(int first, int last, double* gz, Mat3* values, bool psd) const = 0;
+  /// ½ zᵀ K z of the rest-stiffness split (0 without it), its gradient and Hessian blocks.
+  virtual double restStiffness(VecX* g, Mat3* values, int offset) const = 0;
+  /// Sample tets whose rest-split excess is in its bounded branch at the current state.
+  virtual int boundedSamples() const = 0;
 };
 
 }  // namespace flsh::detail

@@ -25,6 +25,20 @@ NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeM
     for (int h = 0; h < H; ++h)
       if (D[size_t(b) * H + h] != 0.0)
         handle_blocks_.push_back({kin_.bzSlot(2 * b + 1, h), b, D[size_t(b) * H + h]});
+  const int r = kin_.numModes();
+  if (r == 0) return;
+  MatX D_modes = MatX::Zero(3 * bones, r);  // rows 3b..3b+2: Σ_j m_j w_jb Ψ_j
+  for (int j : masses_.nodes) {
+    if (!kin_.isSoftNode(j)) continue;
+    for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf)
+      D_modes.middleRows<3>(3 * inf->bone) += (masses_.mass[j] * inf->weight) * kin_.modeRows(j);
+  }
+  for (int b = 0; b < bones; ++b)
+    for (int g = 0; g < r / 3; ++g) {
+      const Mat3 block = D_modes.block<3, 3>(3 * b, 3 * g);
+      if (!block.isZero(0.0))
+        mode_blocks_.push_back({kin_.bzSlot(2 * b + 1, kin_.numHandles() + g), b, block});
+    }
 }
 
 void NodalGravityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -91,6 +105,7 @@ void NodalGravityTerm::reducedHessian(const Vec3& gravity, std::vector<Triplet>&
   Mat3* values = kin_.reducedValues(1);
   const Mat3 G = skew(gravity);
   for (const HandleBlock& hb : handle_blocks_) values[hb.slot] += hb.weight * (G * R[hb.bone]);
+  for (const ModeBlock& mb : mode_blocks_) values[mb.slot] += (G * R[mb.bone]) * mb.D;
 }
 
 // g = Σ_j J_jᵀ f_j with the constant f_j = −m_j g: the rest joint J_b turns only the lever

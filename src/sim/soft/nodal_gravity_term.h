@@ -61,6 +61,13 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
     double weight;
   };
   std::vector<HandleBlock> handle_blocks_;
+  // With modes: the rotation–modal-group blocks [g]× R_b D_bg, D_bg = Σ_j m_j w_jb Ψ_jg (3 × 3,
+  // constant).
+  struct ModeBlock {
+    int slot, bone;
+    Mat3 D;
+  };
+  std::vector<ModeBlock> mode_blocks_;
   std::vector<double> bone_mass_;  // Σ_j m_j w_jb per bone over the mass nodes (constant)
   mutable std::vector<Vec3> forces_;
   mutable std::vector<Mat3> fixed_;

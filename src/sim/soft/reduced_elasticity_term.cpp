@@ -56,22 +56,7 @@ ReducedElasticityTerm::ReducedElasticityTerm(const SoftAvatar& avatar,
                               gradients_.middleCols(begin, count), Mat3X::Zero(3, count), nullptr,
                               &view, false);
     }
-    // The floors of the discretization (ReducedData::elastic_floors), per kept sample.
-    if (rom.elastic_floors.size() != rom.elastic.elements.size())
-      throw InputError("Simulable: the avatar's reduced data has " +
-                       std::to_string(rom.elastic_floors.size()) +
-                       " rest-split floors, expected one per elastic cubature sample (" +
-                       std::to_string(rom.elastic.elements.size()) + "; SoftAvatar fills them)");
-    rest_floors_.resize(T);
-    Eigen::Index k = 0;
-    for (int e = 0; e < T; ++e) {
-      while (k < rom.elastic.elements.size() && rom.elastic.elements[k] != elements_.tet[size_t(e)])
-        ++k;
-      if (k == rom.elastic.elements.size())
-        throw InputError("Simulable: elastic element " + std::to_string(e) +
-                         " is not a sample of the avatar's elastic cubature");
-      rest_floors_[e] = rom.elastic_floors[k++];
-    }
+    rest_floors_ = elementRestFloors(rom, elements_);
   }
 }
 

@@ -16,7 +16,7 @@
 
 namespace flsh::detail {
 
-class ReducedElasticityTerm final : public ElasticityTerm {
+class ReducedElasticityTerm final : public ElasticityTerm, public ReducedElasticity {
  public:
   ReducedElasticityTerm(const SoftAvatar& avatar, const SoftKinematics& kinematics,
                         const MaterialChain& chain, ElasticElements elements);
@@ -29,15 +29,15 @@ class ReducedElasticityTerm final : public ElasticityTerm {
   /// Every handle pair (both orders) an element or the rest stiffness couples, for the
   /// kinematics' buildReducedPattern.
   std::vector<std::pair<int, int>> handlePairs() const;
-  int numElements() const { return elements_.size(); }
+  int numElements() const override { return elements_.size(); }
   /// Elements [first, last): energy returned, gradient added into gz (the handles' 3H entries;
   /// may be null), Hessian blocks summed into `values` (a value list; may be null).
-  double elements(int first, int last, double* gz, Mat3* values, bool psd) const;
+  double elements(int first, int last, double* gz, Mat3* values, bool psd) const override;
   /// Sample tets whose rest-split excess is in its bounded branch at the current state (0
   /// without the split): a diagnostic of the floors (one energy pass over the samples).
-  int boundedSamples() const;
+  int boundedSamples() const override;
   /// ½ zᵀ K z (0 without the elastic cubature), its gradient and Hessian blocks.
-  double restStiffness(VecX* g, Mat3* values, int offset) const;
+  double restStiffness(VecX* g, Mat3* values, int offset) const override;
 
  protected:
   // Material elements: the sample tets (their excess under the split, or their weighted energy

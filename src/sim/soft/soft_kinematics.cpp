@@ -73,6 +73,15 @@ SoftKinematics::SoftKinematics(const SoftAvatar& avatar, const MatX3& joints,
                        std::to_string(rom.basis.rows()) + " × " + std::to_string(rom.basis.cols()) +
                        ", expected #nodes × #handles = " + std::to_string(n) + " × " +
                        std::to_string(num_handles_));
+    num_modes_ = rom.numModes();
+    if (num_modes_ > 0) {
+      if (rom.modes.rows() != 3 * n || num_modes_ % 3 != 0)
+        throw InputError("Simulable: the avatar's modes are " + std::to_string(rom.modes.rows()) +
+                         " × " + std::to_string(num_modes_) + ", expected 3·#nodes (" +
+                         std::to_string(3 * n) + ") × a multiple of 3");
+      modes_ = rom.modes;
+    }
+    num_groups_ = num_handles_ + num_modes_ / 3;
     state_nodes_ = rom.handles;
     state_dof_.assign(n, -1);
     for (int h = 0; h < num_handles_; ++h) state_dof_[rom.handles[h]] = 3 * h;
@@ -132,6 +141,9 @@ SoftKinematics::SoftKinematics(const SoftAvatar& avatar, const MatX3& joints,
     phi_sum_ = VecX::Zero(num_surface_);
     for (int i = 0; i < num_surface_; ++i)
       for (int k = phi_start_[i]; k < phi_start_[i + 1]; ++k) phi_sum_[i] += phi_[k].second;
+    for (int i = 0; i < num_surface_ && num_modes_ > 0; ++i)
+      for (int g = 0; g < num_modes_ / 3; ++g)
+        phi_sum_[i] += modeRows(i).middleCols<3>(3 * g).norm();
   }
 }
 
@@ -178,14 +190,19 @@ void SoftKinematics::buildReducedPattern(const std::vector<std::pair<int, int>>&
   if (!reduced_) return;
   // Every (handle, handle) pair some node couples, plus the terms' (elastic tets, rest
   // stiffness); every (bone row block, handle) pair some node's skinning couples.
-  const int H = num_handles_, rows = 2 * num_bones_;
+  // Groups: the handles, then the modes three by three (every soft node has every modal group).
+  const int H = num_groups_, rows = 2 * num_bones_;
   std::vector<char> zz(size_t(H) * H, 0), bz(size_t(rows) * H, 0);
+  std::vector<int> groups;
   for (int j = 0; j < numNodes(); ++j) {
-    for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) {
-      for (int b = phi_start_[j]; b < phi_start_[j + 1]; ++b)
-        zz[size_t(phi_[a].first) * H + phi_[b].first] = 1;
+    groups.clear();
+    for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) groups.push_back(phi_[a].first);
+    if (node_dof_[j] >= 0)
+      for (int g = num_handles_; g < num_groups_; ++g) groups.push_back(g);
+    for (int a : groups) {
+      for (int b : groups) zz[size_t(a) * H + b] = 1;
       for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k)
-        for (int r = 0; r < 2; ++r) bz[size_t(2 * influences_[k].bone + r) * H + phi_[a].first] = 1;
+        for (int r = 0; r < 2; ++r) bz[size_t(2 * influences_[k].bone + r) * H + a] = 1;
     }
   }
   for (const auto& [a, b] : handle_pairs) zz[size_t(a) * H + b] = 1;
@@ -396,14 +413,17 @@ void SoftKinematics::surface(MatX3* x, MatX3* Y) const {
 
 // ---- the chain rule to the soft state -----------------------------------------------------------
 
-void SoftKinematics::displacementBasis(int j, std::vector<std::pair<int, double>>& out) const {
+void SoftKinematics::displacementBasis(int j, std::vector<std::pair<int, Mat3>>& out) const {
   out.clear();
   if (!reduced_) {
-    if (node_dof_[j] >= 0) out.emplace_back(node_dof_[j], 1.0);
+    if (node_dof_[j] >= 0) out.emplace_back(node_dof_[j], Mat3::Identity());
     return;
   }
   for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
-    out.emplace_back(3 * phi_[k].first, phi_[k].second);
+    out.emplace_back(3 * phi_[k].first, phi_[k].second * Mat3::Identity());
+  if (num_modes_ > 0 && node_dof_[j] >= 0)
+    for (int g = 0; g < num_modes_ / 3; ++g)
+      out.emplace_back(3 * num_handles_ + 3 * g, modeRows(j).middleCols<3>(3 * g));
 }
 
 void SoftKinematics::addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const {
@@ -414,6 +434,8 @@ void SoftKinematics::addSoftGradient(VecX& g, int offset, int j, const Vec3& v) 
   }
   for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
     g.segment<3>(base + 3 * phi_[k].first) += phi_[k].second * v;
+  if (num_modes_ > 0 && node_dof_[j] >= 0)
+    g.segment(base + 3 * num_handles_, num_modes_).noalias() += modeRows(j).transpose() * v;
 }
 
 template <int Rows>
@@ -427,11 +449,18 @@ void SoftKinematics::addBoneSoft(std::vector<Triplet>& H, int offset, int row, i
     return;
   }
   Mat3* values = reduced_values_[size_t(list)].data();
-  const size_t handles = size_t(num_handles_);
+  const size_t groups = size_t(num_groups_);
   for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
     for (int r = 0; r < Rows; r += 3)
-      values[bz_slot_[size_t((row + r) / 3) * handles + size_t(phi_[k].first)]] +=
+      values[bz_slot_[size_t((row + r) / 3) * groups + size_t(phi_[k].first)]] +=
           phi_[k].second * B.template middleRows<3>(r);
+  if (num_modes_ == 0 || node_dof_[j] < 0) return;
+  const auto Psi = modeRows(j);
+  for (int r = 0; r < Rows; r += 3) {
+    const Eigen::Matrix<double, 3, Eigen::Dynamic> BPsi = B.template middleRows<3>(r) * Psi;
+    const int* slots = &bz_slot_[size_t((row + r) / 3) * groups + size_t(num_handles_)];
+    for (int g = 0; g < num_modes_ / 3; ++g) values[slots[g]] += BPsi.middleCols<3>(3 * g);
+  }
 }
 
 void SoftKinematics::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B,
@@ -445,11 +474,28 @@ void SoftKinematics::addSoftSoft(std::vector<Triplet>& H, int offset, int j, con
   // B is symmetric: the upper triangle of handle pairs (φ_ rows are sorted by handle);
   // flushList mirrors it.
   Mat3* values = reduced_values_[size_t(list)].data();
-  const size_t handles = size_t(num_handles_);
+  const size_t groups = size_t(num_groups_);
   for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) {
-    const size_t row = size_t(phi_[a].first) * handles;
+    const size_t row = size_t(phi_[a].first) * groups;
     for (int b = a; b < phi_start_[j + 1]; ++b)
       values[zz_slot_[row + size_t(phi_[b].first)]] += (phi_[a].second * phi_[b].second) * B;
+  }
+  if (num_modes_ == 0 || node_dof_[j] < 0) return;
+  // Handle–mode blocks φ_h B Ψ_jk and the upper mode–mode blocks Ψ_jgᵀ B Ψ_jk (g ≤ k); the
+  // handles come before the modes, so every handle–mode pair is upper.
+  const auto Psi = modeRows(j);
+  const Eigen::Matrix<double, 3, Eigen::Dynamic> BPsi = B * Psi;
+  const int mode_groups = num_modes_ / 3;
+  for (int a = phi_start_[j]; a < phi_start_[j + 1]; ++a) {
+    const int* slots = &zz_slot_[size_t(phi_[a].first) * groups + size_t(num_handles_)];
+    for (int k = 0; k < mode_groups; ++k)
+      values[slots[k]] += phi_[a].second * BPsi.middleCols<3>(3 * k);
+  }
+  for (int g = 0; g < mode_groups; ++g) {
+    const int* slots = &zz_slot_[size_t(num_handles_ + g) * groups + size_t(num_handles_)];
+    const Eigen::Matrix<double, 3, Eigen::Dynamic> row =
+        Psi.middleCols<3>(3 * g).transpose() * BPsi.rightCols(3 * (mode_groups - g));
+    for (int k = g; k < mode_groups; ++k) values[slots[k]] += row.middleCols<3>(3 * (k - g));
   }
 }
 
@@ -513,6 +559,10 @@ void SoftKinematics::fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y,
   }
   for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
     p.soft.emplace_back(bone_dofs_ + 3 * phi_[k].first, phi_[k].second * M);
+  if (num_modes_ == 0) return;
+  const Eigen::Matrix<double, 3, Eigen::Dynamic> MPsi = M * modeRows(j);
+  for (int g = 0; g < num_modes_ / 3; ++g)
+    p.soft.emplace_back(bone_dofs_ + 3 * num_handles_ + 3 * g, MPsi.middleCols<3>(3 * g));
 }
 
 void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces,
@@ -662,7 +712,7 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
 void SoftKinematics::surfaceJacobian(std::vector<Triplet>& triplets) const {
   if (reduced_) skinNodes(surface_nodes_);
   const std::vector<Mat3>& R = *cur_R_;
-  std::vector<std::pair<int, double>> basis;
+  std::vector<std::pair<int, Mat3>> basis;
   for (int i = 0; i < num_surface_; ++i) {
     const Vec3 Y = Y_.row(i).transpose();
     for (int k = influence_start_[i]; k < influence_start_[i + 1]; ++k) {
@@ -675,10 +725,12 @@ void SoftKinematics::surfaceJacobian(std::vector<Triplet>& triplets) const {
       }
     }
     displacementBasis(i, basis);
-    for (const auto& [dof, weight] : basis)
+    for (const auto& [dof, block] : basis) {
+      const Mat3 MB = node_M_[i] * block;
       for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
-          triplets.emplace_back(3 * i + r, bone_dofs_ + dof + c, weight * node_M_[i](r, c));
+          triplets.emplace_back(3 * i + r, bone_dofs_ + dof + c, MB(r, c));
+    }
   }
 }
 

@@ -13,14 +13,17 @@
 // ∂²(f·x_j)/∂δω_b∂δu_j = −w_jb [f]× R_b.
 //
 // Two soft states: the FEM's (u of every soft-tissue node, 3 values each) and the ROM's
-// (SoftAvatar::enableReducedModel: z, 3 per handle, u_j = Σ_h φ_h(j) z_h with the avatar's
-// basis), so every u-derivative maps to z by the chain rule (∂/∂z_h = Σ_j φ_h(j) ∂/∂u_j; Hessian
-// blocks (i, j) go to (h, k) with φ_h(i) φ_k(j)). The FEM's Hessian blocks go out as triplets
-// (or fixed blocks); the ROM's are summed at fixed positions into one of two value lists
-// (0: the dynamic Hessian, 1: the potential one) and handed over by flushList. Only the nodes
-// some term reads are skinned per evaluation: the evaluated nodes (all in the FEM, the mass
-// nodes in the ROM) and the surface nodes contact or output ask for; in the ROM a node's pose
-// blend offset is evaluated when first read.
+// (SoftAvatar::enableReducedModel: z, 3 per handle, then one per mode, u_j = Σ_h φ_h(j) z_h +
+// Ψ_j z_modes with the avatar's basis kind, ReducedBasisKind), so every u-derivative maps to z by
+// the chain rule. The ROM's state comes in groups of three entries: each handle's z_h, then the
+// modal coordinates three by three; node j's displacement is u_j = Σ_g B_jg z_g over the groups g
+// with B_jg = φ_g(j) I for a handle and the 3 × 3 block of Ψ_j's columns of g for modes, so that
+// ∂/∂z_g = Σ_j B_jgᵀ ∂/∂u_j and Hessian blocks (i, j) go to (g, k) as B_igᵀ · B_jk. The FEM's
+// Hessian blocks go out as triplets (or fixed blocks); the ROM's are summed at fixed positions into
+// one of two value lists (0: the dynamic Hessian, 1: the potential one) and handed over by
+// flushList. Only the nodes some term reads are skinned per evaluation: the evaluated nodes (all in
+// the FEM, the mass nodes in the ROM) and the surface nodes contact or output ask for; in the ROM a
+// node's pose blend offset is evaluated when first read.
 #pragma once
 
 #include <utility>
@@ -52,8 +55,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// prepare() and keeps their pose blend rows; the FEM lays out the fixed positions of their
   /// bone–tissue coupling blocks (couplingPositions). Call once, before buildReducedPattern.
   void setMassNodes(const std::vector<int>& nodes);
-  /// ROM: the fixed positions of every Hessian block: z–z pairs some node's basis row couples,
-  /// plus `handle_pairs` (elastic tets, the rest stiffness), and bone–z pairs some node's
+  /// ROM: the fixed positions of every Hessian block: group pairs some node's basis row couples
+  /// (every pair of modal groups, and those with the handles of every soft node), plus
+  /// `handle_pairs` (elastic tets, the rest stiffness: groups), and bone–group pairs some node's
   /// skinning couples. No-op for the FEM.
   void buildReducedPattern(const std::vector<std::pair<int, int>>& handle_pairs);
 
@@ -64,7 +68,10 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   int numSurface() const override { return num_surface_; }
   bool reduced() const { return reduced_; }
   int numHandles() const { return num_handles_; }
-  int numSoftDofs() const override { return 3 * int(state_nodes_.size()); }
+  int numModes() const { return num_modes_; }
+  /// ROM: groups of three soft-state entries: the handles, then the modes three by three.
+  int numGroups() const { return num_groups_; }
+  int numSoftDofs() const override { return 3 * int(state_nodes_.size()) + num_modes_; }
   const VecXi& softNodes() const { return state_nodes_; }
   /// FEM: offset of u_j in the soft state (−1 on bone nodes); ROM: the handle's z offset at a
   /// handle node, −1 elsewhere.
@@ -79,9 +86,15 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
     joints_ = joints;
     version_ = -1;
   }
-  /// ROM: node j's basis row as (handle, φ) pairs, sorted by handle.
+  /// ROM: node j's handle weights as (handle, φ) pairs, sorted by handle (its modal rows:
+  /// modeRows).
   const std::pair<int, double>* basisBegin(int j) const { return phi_.data() + phi_start_[j]; }
   const std::pair<int, double>* basisEnd(int j) const { return phi_.data() + phi_start_[j + 1]; }
+  /// ROM with modes: Ψ_j, node j's 3 × r rows of the modes (zero on bone nodes).
+  Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>> modeRows(
+      int j) const {
+    return {modes_.data() + size_t(3) * size_t(num_modes_) * size_t(j), 3, num_modes_};
+  }
   /// Skinning influences of node j.
   const Influence* influencesBegin(int j) const { return influences_.data() + influence_start_[j]; }
   const Influence* influencesEnd(int j) const {
@@ -89,7 +102,7 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   }
 
   // ---- state (the bones live in Simulable) ----
-  VecX u, u_n, u_nm1;  ///< 3 · #soft nodes (FEM, u, m) or 3 · #handles (ROM, z, m)
+  VecX u, u_n, u_nm1;  ///< 3 · #soft nodes (FEM, u, m) or 3 · #handles + #modes (ROM, z)
 
   /// u_j for a soft state (m, unposed space; zero on bone nodes).
   Vec3 nodeDisplacement(const VecX& state, int j) const {
@@ -97,11 +110,16 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
     Vec3 d = Vec3::Zero();
     for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
       d += phi_[k].second * state.segment<3>(3 * phi_[k].first);
+    if (num_modes_ > 0 && node_dof_[j] >= 0)
+      d.noalias() += modeRows(j) * state.segment(3 * num_handles_, num_modes_);
     return d;
   }
-  /// ∂u_j/∂(soft state) as (state offset, weight) pairs: u_j = Σ weight · state.segment<3>(offset).
-  void displacementBasis(int j, std::vector<std::pair<int, double>>& out) const;
-  /// Σ of node i's basis weights (1 or 0 in the FEM), for the contact broad phase.
+  /// ∂u_j/∂(soft state) as (state offset, 3 × 3 block) pairs: u_j = Σ block ·
+  /// state.segment<3>(offset) (FEM: the identity at u_j's entries; ROM: φ_h(j) I per handle,
+  /// then Ψ_j's blocks of three columns).
+  void displacementBasis(int j, std::vector<std::pair<int, Mat3>>& out) const;
+  /// Σ of node i's basis weights and of its modal blocks' Frobenius norms (1 or 0 in the FEM),
+  /// for the contact broad phase: ‖u_i‖ ≤ displacementWeight(i) · largestSoftState().
   double displacementWeight(int i) const;
   double largestSoftState() const;  ///< max over the 3-blocks of the soft state of ‖·‖, m
   /// Sets the surface nodes each bone dominates (SkinnedSurface::dominated) for contactMargins:
@@ -196,12 +214,12 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
 
   // ---- the ROM's Hessian value lists ----
   /// The summed blocks of value list `list` (0: dynamic, 1: potential), at fixed positions:
-  /// z–z blocks (zzSlot(h, k): the upper ones h ≤ k are summed, the lower mirrored), then
-  /// bone–z blocks (bzSlot(r, h), r = 2b for bone b's t rows, 2b + 1 for its ω rows), then
-  /// their transposes (mirrored).
+  /// z–z blocks of group pairs (zzSlot(g, k): the upper ones g ≤ k are summed, the lower
+  /// mirrored), then bone–z blocks (bzSlot(r, g), r = 2b for bone b's t rows, 2b + 1 for its ω
+  /// rows), then their transposes (mirrored). Groups: numGroups().
   Mat3* reducedValues(int list) const { return reduced_values_[size_t(list)].data(); }
-  int zzSlot(int h, int k) const { return zz_slot_[size_t(h) * size_t(num_handles_) + size_t(k)]; }
-  int bzSlot(int r, int h) const { return bz_slot_[size_t(r) * size_t(num_handles_) + size_t(h)]; }
+  int zzSlot(int h, int k) const { return zz_slot_[size_t(h) * size_t(num_groups_) + size_t(k)]; }
+  int bzSlot(int r, int h) const { return bz_slot_[size_t(r) * size_t(num_groups_) + size_t(h)]; }
   /// Zeroes a list (no-op for the FEM).
   void beginList(int list) const override;
   /// After the terms of one evaluation: appends list `list`'s blocks to H as triplets or, with
@@ -244,7 +262,7 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   VecX blend_bound_;  // #V
   // Per bone: the largest blend_bound_ and displacementWeight of its dominated surface nodes.
   std::vector<double> bone_blend_bound_, bone_weight_bound_;
-  VecX phi_sum_;      // #V (ROM): Σ_h φ_h(i)
+  VecX phi_sum_;  // #V (ROM): Σ_h φ_h(i) + Σ_g ‖Ψ_ig‖_F
   VecXi state_nodes_;
   std::vector<int> node_dof_;  // FEM layout: 3 · (rank among soft nodes), −1 on bone nodes
   // ROM: u_j = Σ φ z_h over phi_[phi_start_[j] .. phi_start_[j + 1]) as (handle, φ); the
@@ -252,7 +270,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   std::vector<int> phi_start_;
   std::vector<std::pair<int, double>> phi_;
   std::vector<int> state_dof_;
-  int num_handles_ = 0;
+  int num_handles_ = 0, num_modes_ = 0, num_groups_ = 0;
+  // ROM with modes: Ψ (3#N × r, row-major: node j's 3 × r block contiguous).
+  RowMatX modes_;
   std::vector<int> influence_start_;
   std::vector<Influence> influences_;
   std::vector<int> eval_nodes_, all_nodes_, surface_nodes_;

@@ -44,7 +44,8 @@ TEST_P(NodalGravityTerm, RestJointProductsMatchFiniteDifferences) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, NodalGravityTerm,
-                         ::testing::Values(SoftModel::Fem, SoftModel::Rom), test::modelName);
+                         ::testing::Values(SoftModel::Fem, SoftModel::Rom, SoftModel::RomModes),
+                         test::modelName);
 
 }  // namespace
 }  // namespace flsh

@@ -67,7 +67,8 @@ TEST_P(NodalInertiaTerm, PreviousStateBlocksMatchTheSimulablesAndTheProducts) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, NodalInertiaTerm,
-                         ::testing::Values(SoftModel::Fem, SoftModel::Rom), test::modelName);
+                         ::testing::Values(SoftModel::Fem, SoftModel::Rom, SoftModel::RomModes),
+                         test::modelName);
 
 }  // namespace
 }  // namespace flsh

@@ -65,7 +65,8 @@ TEST_P(NodeContactTerm, CandidatesGiveTheSameEnergyAsEveryNode) {
   EXPECT_EQ(term.evaluate(sim->termContext(), nullptr, 0), 0.0);
 }
 
-INSTANTIATE_TEST_SUITE_P(Models, NodeContactTerm, ::testing::Values(SoftModel::Fem, SoftModel::Rom),
+INSTANTIATE_TEST_SUITE_P(Models, NodeContactTerm,
+                         ::testing::Values(SoftModel::Fem, SoftModel::Rom, SoftModel::RomModes),
                          test::modelName);
 
 }  // namespace

@@ -55,7 +55,8 @@ TEST_P(PoseBlendDerivatives, TangentMatchesDifferencesAndCotangentIsItsTranspose
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, PoseBlendDerivatives,
-                         ::testing::Values(SoftModel::Fem, SoftModel::Rom), test::modelName);
+                         ::testing::Values(SoftModel::Fem, SoftModel::Rom, SoftModel::RomModes),
+                         test::modelName);
 
 }  // namespace
 }  // namespace flsh

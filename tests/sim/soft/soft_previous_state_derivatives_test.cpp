@@ -137,7 +137,8 @@ TEST_P(SoftPreviousStateDerivatives, SurfaceCotangentsMatchDifferences) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, SoftPreviousStateDerivatives,
-                         ::testing::Values(SoftModel::Fem, SoftModel::Rom), test::modelName);
+                         ::testing::Values(SoftModel::Fem, SoftModel::Rom, SoftModel::RomModes),
+                         test::modelName);
 
 }  // namespace
 }  // namespace flsh

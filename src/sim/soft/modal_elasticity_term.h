@@ -1,0 +1,64 @@
+// The ROM soft skeleton's elastic energy for the bases with modes (ReducedBasisKind::Modes and
+// ModesAndHandles; docs/rom.md): the FEM's energy in the subspace u_j = Σ_h φ_h(j) z_h + Ψ_j z_m,
+// summed over the elastic elements (every tet with a soft node, or the elastic cubature's sample
+// tets with their weights). Per element F = I + mat(D_e z_e) (volume/subspace_tets.h: D_e 9 × m_e
+// on the soft-state entries z_e its nodes move with, every modal coordinate among them), so
+// its gradient is V D_eᵀ vec P and its Hessian V D_eᵀ (∂P/∂F) D_e, summed into the kinematics'
+// value list 1 by groups of three entries. With the elastic cubature's rest-stiffness split the
+// energy is ½ zᵀ K z (K = rom.elastic_rest_stiffness, exact) plus each sample's weighted excess
+// over its own rest quadratic, bounded below (restSplitExcess): both are functions of the 9
+// values of D_e z_e, so the excess is formed there (with the rest quadratic V A₀ on them) and
+// chained through D_e, without an m_e × m_e rest Hessian per sample. The handle basis alone keeps
+// its cheaper form (reduced_elasticity_term.h). Private to Simulable.
+//
+// Not yet: the Material and Shape parameter groups (the adjoint's), which throw InputError.
+#pragma once
+
+#include <utility>
+#include <vector>
+
+#include "sim/soft/elastic_elements.h"
+
+namespace flsh::detail {
+
+class ModalElasticityTerm final : public ElasticityTerm, public ReducedElasticity {
+ public:
+  ModalElasticityTerm(const SoftAvatar& avatar, const SoftKinematics& kinematics,
+                      const MaterialChain& chain, ElasticElements elements);
+  using ElasticityTerm::evaluate;
+  /// The Hessian goes into the kinematics' value list 1 (H and blocks are not used). Energy or
+  /// gradient alone run on two threads (the elements in halves) from 64 elements.
+  double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
+                  FixedHessianBlocks* blocks = nullptr) const override;
+
+  /// Every group pair (both orders) an element or the rest stiffness couples, for the
+  /// kinematics' buildReducedPattern.
+  std::vector<std::pair<int, int>> groupPairs() const;
+  int numElements() const override { return elements_.size(); }
+  double elements(int first, int last, double* gz, Mat3* values, bool psd) const override;
+  int boundedSamples() const override;
+  double restStiffness(VecX* g, Mat3* values, int offset) const override;
+
+ protected:
+  int numMaterialElements() const override;
+  int materialElementTet(int e) const override;
+  void materialElementDofs(int e, std::vector<int>& dofs) const override;
+  FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const override;
+  Eigen::Vector4i materialElementNodes(int e) const override;
+  void materialElementRestCotangent(int e, const Mat3X& Lambda, Mat34& X_bar) const override;
+
+ private:
+  /// Element e's energy (weighted; the excess under the split) at its entries' values z_e, with
+  /// its gradient and Hessian in them when asked (views of its size).
+  double element(int e, const VecX& z_e, Eigen::Ref<VecX>* gradient, Eigen::Ref<MatX>* hessian,
+                 bool psd, bool* bounded = nullptr) const;
+  ElasticElements elements_;
+  std::vector<std::vector<int>> dofs_;  // per element: soft-state entries (ascending)
+  std::vector<MatX> D_;                 // per element: 9 × dofs
+  int max_dofs_ = 0;
+  MatX rest_stiffness_;             // K (numSoftDofs square), empty without the split
+  std::vector<Mat9> rest_tangent_;  // per element with the split: V A₀
+  VecX rest_floors_;                // per element with the split
+};
+
+}  // namespace flsh::detail

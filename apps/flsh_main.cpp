@@ -194,6 +194,9 @@ struct AvatarArgs {
   int elastic_cubature = ReducedSettings().elastic_cubature_points;    ///< 0 = off
   int inertial_cubature = ReducedSettings().inertial_cubature_points;  ///< 0 = off
   bool partition_of_unity = false;  ///< ReducedSettings::surface_partition_of_unity
+  std::string basis = reducedBasisKindName(ReducedSettings().basis_kind);
+  int vibration_modes = ReducedSettings().modes.vibration_modes;
+  int modal_columns = ReducedSettings().modes.columns;  ///< 0 = every column
   bool reduced_options_given = false;
 };
 
@@ -209,9 +212,12 @@ int cmdAvatar(const AvatarArgs& args) {
              "interior node density relative to the default");
   if (args.reduced_options_given && args.soft != "rom")
     throw InputError(
-        "--handles, --elastic-cubature, --inertial-cubature and "
-        "--partition-of-unity are only for --soft rom, got --soft " +
+        "--handles, --elastic-cubature, --inertial-cubature, --partition-of-unity, --basis, "
+        "--vibration-modes and --modal-columns are only for --soft rom, got --soft " +
         args.soft);
+  const ReducedBasisKind basis = parseReducedBasisKind(args.basis, "--basis");
+  checkRange("--vibration-modes", args.vibration_modes, 0, 100000, false, "an integer");
+  checkRange("--modal-columns", args.modal_columns, 0, 100000, false, "an integer, 0 = all");
   checkRange("--handles", args.handles, 1, 100000, false, "an integer");
   checkRange("--elastic-cubature", args.elastic_cubature, 0, 1e7, false, "sample tets, 0 = off");
   checkRange("--inertial-cubature", args.inertial_cubature, 0, 1e7, false, "sample tets, 0 = off");
@@ -257,7 +263,8 @@ int cmdAvatar(const AvatarArgs& args) {
   settings.volumetric.cache_dir = args.cache;
   settings.volumetric.use_cache = !args.no_cache;
   io::setReducedSettings(settings.reduced, args.handles, args.elastic_cubature,
-                         args.inertial_cubature, args.partition_of_unity);
+                         args.inertial_cubature, args.partition_of_unity, basis,
+                         args.vibration_modes, args.modal_columns);
   SoftAvatar avatar(body, betas, settings);
   avatar.enableSoftTissue(args.soft != "none");
   if (args.soft == "rom")
@@ -324,8 +331,10 @@ int cmdAvatar(const AvatarArgs& args) {
       return j;
     };
     nlohmann::ordered_json reduced;
+    reduced["basis"] = reducedBasisKindName(d.basis_kind);
     reduced["handles"] = d.numHandles();
-    reduced["dofs"] = 6 * kNumJoints + 3 * d.numHandles();
+    reduced["modes"] = d.numModes();
+    reduced["dofs"] = 6 * kNumJoints + d.numSoftDofs();
     reduced["basis_nonzeros"] = long(d.basis.nonZeros());
     reduced["surface_partition_of_unity"] = settings.reduced.surface_partition_of_unity;
     reduced["basis_max_bound_violation"] = d.basis_max_bound_violation;
@@ -547,6 +556,20 @@ int main(int argc, char** argv) {
   auto* pou_option =
       avatar->add_flag("--partition-of-unity", avatar_args.partition_of_unity,
                        "--soft rom: basis rescaled to sum to 1 on the soft surface (docs/rom.md)");
+  auto* basis_option = avatar
+                           ->add_option("--basis", avatar_args.basis,
+                                        "--soft rom: handles, modes or modes+handles (docs/rom.md)")
+                           ->capture_default_str();
+  auto* vibration_option =
+      avatar
+          ->add_option("--vibration-modes", avatar_args.vibration_modes,
+                       "--soft rom with modes: fixed-interface vibration modes")
+          ->capture_default_str();
+  auto* columns_option =
+      avatar
+          ->add_option("--modal-columns", avatar_args.modal_columns,
+                       "--soft rom with modes: columns kept by compression (0 = all)")
+          ->capture_default_str();
 
   // CLI11's own exit codes (104, 106, 109, …) for a bad command line become 2, like every
   // other input error; --help exits 0.
@@ -564,7 +587,9 @@ int main(int argc, char** argv) {
     if (command == "demo") return cmdDemo(demo_out, vertices, name, seconds);
     if (command == "avatar") {
       avatar_args.reduced_options_given = handles_option->count() + elastic_option->count() +
-                                              inertial_option->count() + pou_option->count() >
+                                              inertial_option->count() + pou_option->count() +
+                                              basis_option->count() + vibration_option->count() +
+                                              columns_option->count() >
                                           0;
       return cmdAvatar(avatar_args);
     }

@@ -19,6 +19,8 @@
 //        rom_benchmark --galerkin LIST      (linear static sag: Galerkin against best fit)
 //        rom_benchmark --modal-fit LIST [--frames F]   (the FEM's u against modal bases' spans)
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
+//   --modes V[:C]: a basis with modes (static and V vibration modes, compressed to C columns),
+//                  with the --handles appended (--handles 0: the modes alone);
 //   --exact: no cubature (every tet and node integrated);
 //   --surface-pou: ReducedSettings::surface_partition_of_unity (the partition-of-unity basis);
 //   --training-samples: ReducedSettings::training_samples (random samples per cubature);
@@ -51,7 +53,9 @@
 // --models LIST: the ROMs to run instead of the default set, comma-separated, each H (H handles,
 // 500 + 500 cubature tets), H/E/I (0: that cubature off) or Hexact, optionally followed by "pou"
 // (the partition-of-unity basis): e.g. --models 87pou,150pou,300pou or 87/500/0,87/0/500 (the
-// skeleton and the FEM always run).
+// skeleton and the FEM always run). A basis with modes (issue 26) is written mV[:C][+H] in place
+// of H: the static modes and V vibration modes, compressed to C columns, with H handles appended
+// (ReducedBasisKind::ModesAndHandles; without +H: Modes), e.g. m24:72/500/500 or m24+87exact.
 //
 // --galerkin LIST: how far the Galerkin solution in a basis's span is from the FEM as handles are
 // added, without dynamics or cubature: the linear static sag of a standing body (the FEM's
@@ -115,14 +119,23 @@ struct ModelSpec {
   bool pou = false;                                 // ReducedSettings::surface_partition_of_unity
   double basis_drop = -1.0;  // ReducedSettings::basis_drop_below (negative: its default)
   int training_samples = 0;  // ReducedSettings::training_samples (0: its default)
+  // A basis with modes (ReducedBasisKind::Modes, or ModesAndHandles with handles > 0): the
+  // static modes and this many vibration modes (−1: the handle basis), compressed to `columns`
+  // (0: all).
+  int vibration_modes = -1, columns = 0;
   std::string name() const {
     if (kind == Kind::Skeleton) return "skeleton";
     if (kind == Kind::Fem) return "FEM";
+    std::string basis = std::to_string(handles);
+    if (vibration_modes >= 0)
+      basis = "m" + std::to_string(vibration_modes) +
+              (columns > 0 ? ":" + std::to_string(columns) : std::string()) +
+              (handles > 0 ? "+" + std::to_string(handles) : std::string());
     char buf[64];
     if (elastic == 0 && inertial == 0)
-      std::snprintf(buf, sizeof(buf), "ROM %d exact", handles);
+      std::snprintf(buf, sizeof(buf), "ROM %s exact", basis.c_str());
     else
-      std::snprintf(buf, sizeof(buf), "ROM %d/%d/%d", handles, elastic, inertial);
+      std::snprintf(buf, sizeof(buf), "ROM %s/%d/%d", basis.c_str(), elastic, inertial);
     return std::string(buf) + (pou ? " PoU" : "");
   }
 };
@@ -133,6 +146,21 @@ struct ModelSpec {
 ModelSpec parseModel(const std::string& text) {
   std::string rest = text;
   ModelSpec m;
+  if (rest.rfind("m", 0) == 0) {  // mV[:C][+H]…: a basis with modes
+    int consumed = 0;
+    if (std::sscanf(rest.c_str(), "m%d%n", &m.vibration_modes, &consumed) != 1 ||
+        m.vibration_modes < 0)
+      throw std::runtime_error("--models: '" + text + "': expected mV[:C][+H] with V ≥ 0");
+    rest = rest.substr(size_t(consumed));
+    if (!rest.empty() && rest[0] == ':') {
+      m.columns = std::atoi(rest.c_str() + 1);
+      rest = rest.substr(std::min(rest.find_first_not_of("0123456789", 1), rest.size()));
+    }
+    if (!rest.empty() && rest[0] == '+')
+      rest = rest.substr(1);
+    else
+      rest = "0" + rest;  // no handles: the H of the forms below is 0
+  }
   const auto ends = [&](const std::string& tail) {
     if (rest.size() < tail.size() || rest.compare(rest.size() - tail.size(), tail.size(), tail))
       return false;
@@ -150,7 +178,7 @@ ModelSpec parseModel(const std::string& text) {
   if (!(whole && !exact) && !handles_only)
     throw std::runtime_error("--models: '" + text +
                              "' is not H, H/E/I or Hexact (each optionally followed by pou)");
-  if (h < 1 || (whole && (e < 0 || i < 0)))
+  if (h < (m.vibration_modes >= 0 ? 0 : 1) || (whole && (e < 0 || i < 0)))
     throw std::runtime_error("--models: '" + text + "': handles must be ≥ 1, tets ≥ 0");
   m.handles = h;
   if (whole) {
@@ -167,7 +195,13 @@ std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, co
   SoftAvatarSettings settings;
   settings.volumetric.material_file = g_material_file;
   if (m.kind == Kind::Rom) {
-    settings.reduced.num_handles = m.handles;
+    settings.reduced.num_handles = std::max(m.handles, 1);
+    if (m.vibration_modes >= 0) {
+      settings.reduced.basis_kind =
+          m.handles > 0 ? ReducedBasisKind::ModesAndHandles : ReducedBasisKind::Modes;
+      settings.reduced.modes.vibration_modes = m.vibration_modes;
+      settings.reduced.modes.columns = m.columns;
+    }
     settings.reduced.surface_partition_of_unity = m.pou;
     if (m.basis_drop >= 0) settings.reduced.basis_drop_below = m.basis_drop;
     if (m.training_samples > 0) settings.reduced.training_samples = m.training_samples;
@@ -280,12 +314,49 @@ double bestFitResidualRms(const SpMat& basis, const MatX& u) {
 
 // How well the basis can hold the FEM's displacements at all: per frame, the best fit's residual
 // relative to ‖u_FEM‖, averaged over the frames the error counts (RMS ‖u_FEM‖ ≥ 0.5 mm).
+// An orthonormal basis (3V × kept) of the span of the columns of P (dependent directions
+// dropped).
+MatX orthonormalSpan(const MatX& P) {
+  const Eigen::SelfAdjointEigenSolver<MatX> gram(P.transpose() * P);
+  const VecX& w = gram.eigenvalues();
+  Eigen::Index kept = 0;
+  while (kept < w.size() && w[w.size() - 1 - kept] > 1e-10 * w.maxCoeff()) ++kept;
+  return P * gram.eigenvectors().rightCols(kept) *
+         w.tail(kept).cwiseSqrt().cwiseInverse().asDiagonal();
+}
+
+// The RMS over the vertices of ‖u − Q Qᵀ u‖ for an orthonormal Q (3V × k; u #V × 3), m.
+double projectionResidualRms(const MatX& Q, const MatX& u) {
+  const RowMatX ur = u;
+  const Eigen::Map<const VecX> flat(ur.data(), ur.size());
+  const VecX residual = flat - Q * (Q.transpose() * flat);
+  return std::sqrt(residual.squaredNorm() / double(u.rows()));
+}
+
+// The surface rows (3V × numSoftDofs) of a reduced basis with modes: each handle's φ ⊗ I₃, then
+// the modes' rows.
+MatX surfaceColumns(const ReducedData& rom, Eigen::Index V) {
+  MatX P = MatX::Zero(3 * V, rom.numSoftDofs());
+  for (int h = 0; h < rom.numHandles(); ++h)
+    for (SpMat::InnerIterator it(rom.basis, h); it; ++it)
+      if (it.row() < V)
+        for (int a = 0; a < 3; ++a) P(3 * it.row() + a, 3 * h + a) = it.value();
+  P.rightCols(rom.numModes()) = rom.modes.topRows(3 * V);
+  return P;
+}
+
 double basisBestFit(const SoftAvatar& avatar, const Trajectory& fem) {
+  const ReducedData& rom = avatar.reducedData();
+  const MatX Q = rom.numModes() > 0 && !fem.u.empty()
+                     ? orthonormalSpan(surfaceColumns(rom, fem.u[0].rows()))
+                     : MatX();
   double sum = 0.0;
   int counted = 0;
   for (size_t f = 0; f < fem.u.size(); ++f) {
     if (fem.displacement[f] < 5e-4) continue;
-    sum += bestFitResidualRms(avatar.reducedData().basis, fem.u[f]) / fem.displacement[f];
+    sum += (Q.size() > 0 ? projectionResidualRms(Q, fem.u[f])
+                         : bestFitResidualRms(rom.basis, fem.u[f])) /
+           fem.displacement[f];
     ++counted;
   }
   return counted ? sum / counted : 0.0;
@@ -322,13 +393,7 @@ int modalFit(int frames, const std::string& list) {
       P.swap(both);
       name += " + " + std::to_string(H) + " handles";
     }
-    // An orthonormal basis of the surface rows' span (dependent directions dropped).
-    const Eigen::SelfAdjointEigenSolver<MatX> gram(P.transpose() * P);
-    const VecX& w = gram.eigenvalues();
-    Eigen::Index kept = 0;
-    while (kept < w.size() && w[w.size() - 1 - kept] > 1e-10 * w.maxCoeff()) ++kept;
-    bases.emplace_back(name, P * gram.eigenvectors().rightCols(kept) *
-                                 w.tail(kept).cwiseSqrt().cwiseInverse().asDiagonal());
+    bases.emplace_back(name, orthonormalSpan(P));
   }
   std::printf(
       "best fit of the FEM's surface u in each basis' span, relative to RMS ‖u_FEM‖, mean "
@@ -343,10 +408,7 @@ int modalFit(int frames, const std::string& list) {
       int counted = 0;
       for (size_t f = 0; f < t.u.size(); ++f) {
         if (t.displacement[f] < 5e-4) continue;
-        const MatX rows = t.u[f].transpose();  // 3 × V: entry 3i + a is vertex i's a
-        const Eigen::Map<const VecX> target(rows.data(), 3 * V);
-        const VecX fit = Q * (Q.transpose() * target) - target;
-        const double e = std::sqrt(fit.squaredNorm() / double(V)) / t.displacement[f];
+        const double e = projectionResidualRms(Q, t.u[f]) / t.displacement[f];
         sum += e;
         largest = std::max(largest, e);
         ++counted;
@@ -788,7 +850,12 @@ int main(int argc, char** argv) {
       m.elastic = m.inertial = 0;
     else if (a == "--surface-pou")
       m.pou = true;
-    else if (a == "--basis-drop" && i + 1 < argc)
+    else if (a == "--modes" && i + 1 < argc) {  // V[:C]: a basis with modes (--handles 0: alone)
+      const std::string v = argv[++i];
+      m.vibration_modes = std::atoi(v.c_str());
+      const size_t colon = v.find(':');
+      if (colon != std::string::npos) m.columns = std::atoi(v.c_str() + colon + 1);
+    } else if (a == "--basis-drop" && i + 1 < argc)
       m.basis_drop = std::atof(argv[++i]);
     else if (a == "--training-samples" && i + 1 < argc)
       m.training_samples = std::atoi(argv[++i]);

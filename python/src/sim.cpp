@@ -338,12 +338,20 @@ void bind_sim(py::module_& m) {
           "own, else −1: bone nodes, every vertex of the skeleton model, and in the ROM every "
           "node but the handles (see nodeDisplacementBasis); ValueError for j outside the nodes.");
   alias("nodeSoftDof", "node_soft_dof");
-  sim.def("nodeDisplacementBasis", &S::nodeDisplacementBasis, py::arg("j"),
-          "u_j (m) as a combination of state entries: list of (index, B) pairs, B a (3, 3) "
-          "float64 array, with u_j = Σ B @ state[index : index + 3]. FEM: [(nodeSoftDof(j), I)]; "
-          "ROM: (index of z_h, φ_h(j) I) for the handles whose φ reaches j, then with modes one "
-          "pair per three modal coordinates (the block of Ψ_j's three columns); [] for bone nodes "
-          "and the skeleton model. ValueError for j outside the nodes.");
+  sim.def(
+      "nodeDisplacementBasis",
+      [](const S& s, int j) {
+        py::list out;
+        for (const auto& [index, block] : s.nodeDisplacementBasis(j))
+          out.append(py::make_tuple(index, to_numpy(RowMatX(block))));
+        return out;
+      },
+      py::arg("j"),
+      "u_j (m) as a combination of state entries: list of (index, B) pairs, B a (3, 3) "
+      "float64 array, with u_j = Σ B @ state[index : index + 3]. FEM: [(nodeSoftDof(j), I)]; "
+      "ROM: (index of z_h, φ_h(j) I) for the handles whose φ reaches j, then with modes one "
+      "pair per three modal coordinates (the block of Ψ_j's three columns); [] for bone nodes "
+      "and the skeleton model. ValueError for j outside the nodes.");
   alias("nodeDisplacementBasis", "node_displacement_basis");
   sim.def(
       "getSoftTissueDisplacements",

@@ -277,6 +277,19 @@ void bind_volume(py::module_& m) {
       "with their held-out errors (docs/rom.md).")
       .def_property_readonly("num_handles", &ReducedData::numHandles, "H")
       .def_property_readonly(
+          "basis_kind",
+          [](const ReducedData& d) { return std::string(reducedBasisKindName(d.basis_kind)); },
+          "'handles', 'modes' or 'modes+handles'")
+      .def_property_readonly("num_modes", &ReducedData::numModes, "r (0 without modes)")
+      .def_property_readonly(
+          "modes",
+          [](const ReducedData& d) {
+            return take_numpy(RowMatX(d.modes), {py::ssize_t(d.modes.rows() / 3), py::ssize_t(3),
+                                                 py::ssize_t(d.modes.cols())});
+          },
+          "(N, 3, r) float64 modal columns Ψ (u_j = Ψ[j] @ z_modes; mass-orthonormal, zero on "
+          "bone nodes; (N, 3, 0) without modes)")
+      .def_property_readonly(
           "handles", [](const ReducedData& d) { return indices_numpy(d.handles); },
           "(H,) int32 tet-node (= surface vertex) indices, farthest-point order")
       .def_property_readonly(
@@ -303,7 +316,7 @@ void bind_volume(py::module_& m) {
       .def_property_readonly(
           "elastic_rest_stiffness",
           [](const ReducedData& d) { return to_numpy(RowMatX(d.elastic_rest_stiffness)); },
-          "(3H, 3H) exact rest stiffness of the subspace, N/m: the quadratic "
+          "(m, m) exact rest stiffness of the subspace (m = 3H + r), N/m: the quadratic "
           "the elastic cubature's sample tets add their excess to (docs/rom.md; "
           "empty when the elastic cubature is off)")
       .def_property_readonly(
@@ -319,7 +332,9 @@ void bind_volume(py::module_& m) {
       .def_property_readonly(
           "key", [](const ReducedData& d) { return d.key; }, "cache key of this level")
       .def("__repr__", [](const ReducedData& d) {
-        return "ReducedData(handles=" + std::to_string(d.numHandles()) +
+        return "ReducedData(basis='" + std::string(reducedBasisKindName(d.basis_kind)) +
+               "', handles=" + std::to_string(d.numHandles()) +
+               ", modes=" + std::to_string(d.numModes()) +
                ", elastic_tets=" + std::to_string(d.elastic.elements.size()) +
                ", inertial_tets=" + std::to_string(d.inertial.elements.size()) + ")";
       });
@@ -375,7 +390,8 @@ void bind_volume(py::module_& m) {
                       int elastic_cubature_points, int inertial_cubature_points,
                       int cubature_training_samples, double cubature_training_amplitude,
                       std::uint64_t cubature_seed, double basis_drop_below,
-                      bool surface_partition_of_unity) {
+                      bool surface_partition_of_unity, const std::string& basis,
+                      int vibration_modes, int modal_columns) {
             if (!body) throw py::value_error("body: expected a BodyModel, got None");
             const VecX b = betas.is_none() ? VecX(VecX::Zero(body->numBetas()))
                                            : to_vector(betas, "betas", -1, "(K,)");
@@ -410,6 +426,15 @@ void bind_volume(py::module_& m) {
                                     std::to_string(basis_drop_below));
             r.basis_drop_below = basis_drop_below;
             r.surface_partition_of_unity = surface_partition_of_unity;
+            r.basis_kind = parseReducedBasisKind(basis, "SoftAvatar: basis");
+            if (vibration_modes < 0)
+              throw py::value_error("vibration_modes: expected ≥ 0, got " +
+                                    std::to_string(vibration_modes));
+            if (modal_columns < 0)
+              throw py::value_error("modal_columns: expected ≥ 0 (0: every column), got " +
+                                    std::to_string(modal_columns));
+            r.modes.vibration_modes = vibration_modes;
+            r.modes.columns = modal_columns;
             return std::make_shared<SoftAvatar>(std::move(body), b, settings);
           }),
           py::arg("body"), py::arg("betas") = py::none(), py::kw_only(),
@@ -423,6 +448,9 @@ void bind_volume(py::module_& m) {
           py::arg("cubature_training_amplitude") = rd.training_amplitude,
           py::arg("cubature_seed") = rd.seed, py::arg("basis_drop_below") = rd.basis_drop_below,
           py::arg("surface_partition_of_unity") = rd.surface_partition_of_unity,
+          py::arg("basis") = std::string(reducedBasisKindName(rd.basis_kind)),
+          py::arg("vibration_modes") = rd.modes.vibration_modes,
+          py::arg("modal_columns") = rd.modes.columns,
           "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³ and voxel_size "
           "m (the skeleton's bone inertias). Soft tissue: resolution (interior node density of the "
           "tet mesh, 1 ≈ 10 000 nodes for SMPL), material_file (JSON, '' = built-in defaults), "
@@ -433,7 +461,10 @@ void bind_volume(py::module_& m) {
           "cubature_training_amplitude (largest handle displacement of a training sample, m), "
           "cubature_seed, basis_drop_below (basis weights below it are dropped, in [0, 0.01]), "
           "surface_partition_of_unity (the basis rescaled to sum to 1 on the soft surface: about "
-          "half the error against the FEM, slower; docs/rom.md).")
+          "half the error against the FEM, slower; docs/rom.md). basis: 'handles', 'modes' (the "
+          "avatar's static-correction and vibration modes) or 'modes+handles'; with modes, "
+          "vibration_modes (≥ 0) and modal_columns (compressed to this many, 0 = all; cut to a "
+          "multiple of 3).")
       .def(
           "init_volumetric_data",
           [](SoftAvatar& a) {

@@ -101,8 +101,11 @@ void reportReducedData(const std::string& name, const SoftAvatar& avatar, bool u
                             : report.from_cache
                                 ? format("hit (%.2f s)", report.seconds_total)
                                 : format("miss (built and stored in %.1f s)", report.seconds_total);
-  log("avatar '" + name + "' (rom): " + std::to_string(data.numHandles()) + " handles, basis " +
-      std::to_string(long(data.basis.nonZeros())) + " nonzeros; elastic cubature " +
+  const std::string modes =
+      data.numModes() > 0 ? std::to_string(data.numModes()) + " modes, " : std::string();
+  log("avatar '" + name + "' (rom): " + modes + std::to_string(data.numHandles()) +
+      " handles, basis " + std::to_string(long(data.basis.nonZeros())) +
+      " nonzeros; elastic cubature " +
       cubatureSummary(data.elastic, data.elastic_test_error, avatar.elasticCubatureEnabled()) +
       "; inertial cubature " +
       cubatureSummary(data.inertial, data.inertial_test_error, avatar.inertialCubatureEnabled(),
@@ -185,7 +188,8 @@ std::vector<SceneAvatar> buildSceneAvatars(const SceneSpec& scene, const SceneBu
     }
     if (run.rom)
       setReducedSettings(settings.reduced, spec.handles, spec.elastic_cubature,
-                         spec.inertial_cubature, spec.surface_partition_of_unity);
+                         spec.inertial_cubature, spec.surface_partition_of_unity, spec.basis,
+                         spec.vibration_modes, spec.modal_columns);
     run.avatar = std::make_shared<SoftAvatar>(body, betas, settings);
     if (run.soft) {
       log(std::string("building the volumetric body") + (run.rom ? " and the reduced basis" : "") +
@@ -239,8 +243,12 @@ SceneOptions sceneOptionsOf(const SceneSpec& scene) {
 }
 
 void setReducedSettings(ReducedSettings& reduced, int handles, int elastic, int inertial,
-                        bool partition_of_unity) {
+                        bool partition_of_unity, ReducedBasisKind basis, int vibration_modes,
+                        int modal_columns) {
   reduced.num_handles = handles;
+  reduced.basis_kind = basis;
+  reduced.modes.vibration_modes = vibration_modes;
+  reduced.modes.columns = modal_columns;
   if (elastic > 0) reduced.elastic_cubature_points = elastic;
   if (inertial > 0) reduced.inertial_cubature_points = inertial;
   reduced.surface_partition_of_unity = partition_of_unity;

@@ -401,9 +401,26 @@ class SceneReader {
                         const SceneSpec& scene) const {
     requireObject(node, path);
     checkKeys(node, path,
-              {"name", "model", "vertices", "betas", "simulation", "resolution", "materials",
-               "handles", "elastic_cubature", "inertial_cubature", "surface_partition_of_unity",
-               "motion", "motion_seconds", "up", "offset", "yaw_degrees", "options"});
+              {"name",
+               "model",
+               "vertices",
+               "betas",
+               "simulation",
+               "resolution",
+               "materials",
+               "handles",
+               "elastic_cubature",
+               "inertial_cubature",
+               "surface_partition_of_unity",
+               "basis",
+               "vibration_modes",
+               "modal_columns",
+               "motion",
+               "motion_seconds",
+               "up",
+               "offset",
+               "yaw_degrees",
+               "options"});
     AvatarSpec avatar;
     avatar.name = node.contains("name") ? toName(node["name"], child(path, "name"))
                                         : "avatar" + std::to_string(index);
@@ -478,6 +495,26 @@ class SceneReader {
       const std::string p = child(path, "surface_partition_of_unity");
       if (avatar.simulation != "rom") fail(p, only_rom);
       avatar.surface_partition_of_unity = toBool(node["surface_partition_of_unity"], p);
+    }
+    if (node.contains("basis")) {
+      const std::string p = child(path, "basis");
+      if (avatar.simulation != "rom") fail(p, only_rom);
+      const std::string kind = toString(node["basis"], p);
+      try {
+        avatar.basis = parseReducedBasisKind(kind, p);
+      } catch (const InputError&) {
+        fail(p, "expected \"handles\", \"modes\" or \"modes+handles\", got \"" + kind + "\"");
+      }
+    }
+    for (const char* key : {"vibration_modes", "modal_columns"}) {
+      if (!node.contains(key)) continue;
+      const std::string p = child(path, key);
+      if (avatar.simulation != "rom" || avatar.basis == ReducedBasisKind::Handles)
+        fail(p,
+             "only for \"simulation\": \"rom\" with \"basis\": \"modes\" or "
+             "\"modes+handles\"");
+      (std::string(key) == "vibration_modes" ? avatar.vibration_modes : avatar.modal_columns) =
+          toIntRange(node[key], p, 0, 100000);
     }
     bool builtin_motion = false;
     if (node.contains("motion")) {

@@ -125,6 +125,36 @@ assert s["cache"]["shape"] == "hit" and s["cache"]["reduced"] == "miss", s["cach
 assert s["seconds"]["reduced_total"] > 0, s["seconds"]
 assert r["surface_partition_of_unity"] is False, r
 PY
+# A basis with modes: the scene keys and `flsh avatar --basis`.
+sed 's/"handles": 12,/"basis": "modes", "vibration_modes": 3, "modal_columns": 12,/' rom.json > modes.json
+grep -q '"basis": "modes"' modes.json || fail "modes.json: the substitution did not apply"
+"$flsh" simulate modes.json --cache cache --out out_modes >modes.log 2>modes.err ||
+  { cat modes.err; fail "scene with a modal basis"; }
+grep -Eq "avatar 'soft' \(rom\): 12 modes, 0 handles" modes.err ||
+  { cat modes.err; fail "stderr should report the 12 modes"; }
+grep -q "0 unconverged" modes.log || { cat modes.log; fail "modes: every step should converge"; }
+$py - <<'PY'
+import numpy as np
+d = np.load("out_modes/states.npz")
+assert d["soft_states"].shape == (4, 144 + 12), d["soft_states"].shape  # bones, then the modes
+assert d["soft_max_displacement_mm"].max() > 0
+PY
+"$flsh" avatar --model synthetic:600 --soft rom --resolution 0.3 --basis modes+handles \
+  --handles 6 --vibration-modes 3 --modal-columns 12 --elastic-cubature 40 \
+  --inertial-cubature 30 --cache cache >avatar_modes.json 2>avatar_modes.err ||
+  { cat avatar_modes.err; fail "flsh avatar --basis modes+handles"; }
+$py - <<'PY'
+import json
+r = json.load(open("avatar_modes.json"))["reduced"]
+assert r["basis"] == "modes+handles" and r["handles"] == 6 and r["modes"] == 12, r
+assert r["dofs"] == 144 + 18 + 12, r
+PY
+if "$flsh" avatar --model synthetic:600 --soft rom --basis mode >/dev/null 2>bad.err; then
+  fail "--basis mode accepted"
+fi
+grep -q "basis kind 'mode', expected one of 'handles', 'modes', 'modes+handles'" bad.err ||
+  { cat bad.err; fail "--basis mode: message"; }
+
 # --partition-of-unity: another basis (its own cache entry) of the same size.
 "$flsh" avatar --model synthetic:600 --soft rom --resolution 0.3 --handles 12 \
   --elastic-cubature 40 --inertial-cubature 30 --partition-of-unity --cache cache \

@@ -310,7 +310,8 @@ TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
     "newton": {"soft_tissue_gradient_tolerance": 2e-4, "reduced_gradient_tolerance": 3e-6},
     "avatars": [{"name": "r", "vertices": 600, "simulation": "rom", "resolution": 0.3,
                  "materials": "soft.json", "handles": 12, "elastic_cubature": 40,
-                 "inertial_cubature": 0, "surface_partition_of_unity": true},
+                 "inertial_cubature": 0, "surface_partition_of_unity": true,
+                 "basis": "modes+handles", "vibration_modes": 12, "modal_columns": 48},
                 {"name": "f", "simulation": "fem", "resolution": 0.5}]})",
                                 dir);
   ASSERT_EQ(scene.avatars.size(), 2u);
@@ -322,6 +323,10 @@ TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
   EXPECT_EQ(r.elastic_cubature, 40);
   EXPECT_EQ(r.inertial_cubature, 0);  // off
   EXPECT_TRUE(r.surface_partition_of_unity);
+  EXPECT_EQ(r.basis, ReducedBasisKind::ModesAndHandles);
+  EXPECT_EQ(r.vibration_modes, 12);
+  EXPECT_EQ(r.modal_columns, 48);
+  EXPECT_EQ(scene.avatars[1].basis, ReducedBasisKind::Handles);  // the default
   EXPECT_DOUBLE_EQ(scene.reduced_gradient_tolerance, 3e-6);
   EXPECT_DOUBLE_EQ(scene.soft_tissue_gradient_tolerance, 2e-4);
   // Absent lagged-factor keys: each solver's defaults.
@@ -391,6 +396,15 @@ TEST(SceneFile, BadRomSettingsAreNamedWithTheirPath) {
        "avatars[0].surface_partition_of_unity: only for \"simulation\": \"rom\""},
       {R"({"avatars": [{"simulation": "rom", "surface_partition_of_unity": 1}]})",
        "avatars[0].surface_partition_of_unity: expected true or false, got number 1"},
+      {R"({"avatars": [{"simulation": "fem", "basis": "modes"}]})",
+       "avatars[0].basis: only for \"simulation\": \"rom\""},
+      {R"({"avatars": [{"simulation": "rom", "basis": "mode"}]})",
+       "avatars[0].basis: expected \"handles\", \"modes\" or \"modes+handles\", got \"mode\""},
+      {R"({"avatars": [{"simulation": "rom", "vibration_modes": 10}]})",
+       "avatars[0].vibration_modes: only for \"simulation\": \"rom\" with \"basis\": "
+       "\"modes\" or \"modes+handles\""},
+      {R"({"avatars": [{"simulation": "rom", "basis": "modes", "modal_columns": -3}]})",
+       "avatars[0].modal_columns: expected an integer in [0, 100000], got -3"},
       // Volumetric keys are for both soft-tissue models, not the skeleton.
       {R"({"avatars": [{"resolution": 0.5}]})",
        "avatars[0].resolution: only for \"simulation\": \"fem\" or \"rom\" (the skeleton "

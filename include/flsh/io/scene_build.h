@@ -68,10 +68,13 @@ std::vector<std::string> startWarnings(const std::vector<SceneAvatar>& avatars,
 SceneOptions sceneOptionsOf(const SceneSpec& scene);
 
 /// The ROM's settings as the scene keys handles / elastic_cubature / inertial_cubature /
-/// surface_partition_of_unity and the `flsh avatar` flags give them: 0 sample tets switches
-/// that cubature off (exact integration), and its count then keeps the (unused) default.
+/// surface_partition_of_unity / basis / vibration_modes / modal_columns and the `flsh avatar`
+/// flags give them: 0 sample tets switches that cubature off (exact integration), and its count
+/// then keeps the (unused) default.
 void setReducedSettings(ReducedSettings& reduced, int handles, int elastic, int inertial,
-                        bool partition_of_unity);
+                        bool partition_of_unity, ReducedBasisKind basis = ReducedBasisKind::Handles,
+                        int vibration_modes = ReducedSettings().modes.vibration_modes,
+                        int modal_columns = 0);
 
 /// Soft tissue, the reduced model and the cubatures that are on (as setReducedSettings).
 void enableReducedModel(SoftAvatar& avatar, int elastic, int inertial);

@@ -24,11 +24,11 @@ constexpr long kMaxSceneSteps = 10'000'000;
 constexpr const char* kGenderPlaceholder = "{gender}";
 
 struct AvatarSpec {
-  std::string name;                     ///< for outputs; default "avatar<i>"
+  std::string name;  ///< for outputs; default "avatar<i>"
   /// SMPL or SMPL-H .npz path (resolved; may hold kGenderPlaceholder), or "synthetic".
   std::string model = "synthetic";
-  int synthetic_vertices = 6890;        ///< for model = "synthetic"
-  VecX betas;                           ///< shape; empty = zeros (or the motion's)
+  int synthetic_vertices = 6890;  ///< for model = "synthetic"
+  VecX betas;                     ///< shape; empty = zeros (or the motion's)
   /// "skeleton" (articulated rigid bones), "fem" (FEM soft skeleton: the avatar is built with
   /// enableSoftTissue() and its volumetric body) or "rom" (ROM soft skeleton: also
   /// enableReducedModel(), the reduced basis and the cubatures below; docs/rom.md).
@@ -47,24 +47,30 @@ struct AvatarSpec {
   /// "rom" only: ReducedSettings::surface_partition_of_unity (the basis rescaled to sum to 1 on
   /// the soft surface; about half the error against the FEM, docs/rom.md).
   bool surface_partition_of_unity = ReducedSettings().surface_partition_of_unity;
-  std::string motion;                   ///< AMASS .npz path or builtin:NAME; empty = none
-  double motion_seconds = 0.0;          ///< length of a built-in motion, s; 0 = the duration
+  /// "rom" only: what spans the soft tissue (ReducedSettings::basis_kind, the key "basis":
+  /// "handles", "modes" or "modes+handles") and, with modes, the vibration modes and the
+  /// compressed column count (ModalBasisSettings::vibration_modes / columns; 0 = every column).
+  ReducedBasisKind basis = ReducedSettings().basis_kind;
+  int vibration_modes = ReducedSettings().modes.vibration_modes;
+  int modal_columns = ReducedSettings().modes.columns;
+  std::string motion;           ///< AMASS .npz path or builtin:NAME; empty = none
+  double motion_seconds = 0.0;  ///< length of a built-in motion, s; 0 = the duration
   /// Up axis the motion file was recorded in, "y" or "z"; empty = the file's own `up` key,
   /// else "z" (AMASS). loadMotion turns the clip into flsh's y-up world.
   std::string up;
-  Vec3 offset = Vec3::Zero();           ///< added to the motion's root translation, m
-  double yaw = 0.0;                     ///< rotation of the motion about +y, rad
+  Vec3 offset = Vec3::Zero();  ///< added to the motion's root translation, m
+  double yaw = 0.0;            ///< rotation of the motion about +y, rad
   SimulableOptions options;
 };
 
 struct OutputSpec {
   std::string dir = "out/simulate";
-  bool ply = true;       ///< per-frame PLY meshes (one folder per avatar)
-  bool npz = true;       ///< states.npz: states, vertices, joints per frame per avatar
-  bool gltf = true;      ///< animation.glb: skinned mesh + per-frame bone transforms per avatar
-  bool png = true;       ///< sheet.png with a few frames
+  bool ply = true;   ///< per-frame PLY meshes (one folder per avatar)
+  bool npz = true;   ///< states.npz: states, vertices, joints per frame per avatar
+  bool gltf = true;  ///< animation.glb: skinned mesh + per-frame bone transforms per avatar
+  bool png = true;   ///< sheet.png with a few frames
   int png_frames = 5;
-  int every = 1;         ///< write every n-th frame
+  int every = 1;  ///< write every n-th frame
 };
 
 /// "ground": a plane with normal +y named "ground", at a given height or under the avatars.
@@ -78,7 +84,7 @@ struct GroundSpec {
 };
 
 struct SceneSpec {
-  std::string source;    ///< file path or "builtin default scene"
+  std::string source;  ///< file path or "builtin default scene"
   std::vector<AvatarSpec> avatars;
   std::vector<Collider> colliders;
   GroundSpec ground;  ///< the "ground" key; added to the colliders by io::sceneColliders

@@ -70,7 +70,7 @@ class SceneRecorder {
   std::vector<Collider> colliders_;
   double time_step_;
   int frames_, recorded_ = 0;
-  std::vector<int> shown_;  ///< the sheet's frames, increasing
+  std::vector<int> shown_;           ///< the sheet's frames, increasing
   std::vector<double> shown_times_;  ///< their times, s (labels)
   std::vector<double> times_;
   std::vector<std::vector<Vec3>> collider_offsets_;  ///< per collider, per kept frame

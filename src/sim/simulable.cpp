@@ -57,7 +57,6 @@ BoneStates bonesFromPose(const Eigen::Ref<const VecX>& pose, const Vec3& trans, 
   return s;
 }
 
-
 std::string motionName(const Motion& m) {
   return m.source.empty() ? std::string("mocap") : "mocap '" + m.source + "'";
 }
@@ -509,7 +508,7 @@ SimulableStep Simulable::saveStep() const {
     s.u = m.soft->u;
     s.u_n = m.soft->u_n;
     s.u_nm1 = m.soft->u_nm1;
-    s.pose_blend = m.soft->poseBlend();
+    if (!m.soft->poseBlendHeldFrom(m.q_n.R)) s.pose_blend = m.soft->poseBlend();
   }
   return s;
 }

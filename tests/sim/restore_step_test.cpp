@@ -124,5 +124,39 @@ TEST(SimulableRestoreStep, NonFiniteSoftTissueValuesAreRefused) {
   EXPECT_EQ(sim.getState(), q_before);
 }
 
+// The ROM's snapshot leaves the held pose blend to R_n when it is R_n's (no #N × 3 offsets per
+// step): restored after the body moved on, every node is where it was; offsets set one by one
+// are kept.
+TEST(SimulableRestoreStep, RomSnapshotsHoldThePoseBlendOfTheirPose) {
+  auto avatar = std::make_shared<SoftAvatar>(
+      test::smallScene(800).body, VecX(),
+      test::smallSoftAvatarSettings(test::freshTempDir("restore_step_rom_cache")));
+  avatar->enableSoftTissue();
+  avatar->enableReducedModel();
+  avatar->initVolumetricData();
+  Simulable sim(avatar, shared().walk);
+  sim.initialize();
+  sim.preUpdate();
+  sim.updateState(test::randomVector(sim.numDofs(), 0.01, 4));
+  const SimulableStep good = sim.saveStep();
+  EXPECT_EQ(good.pose_blend.rows(), 0);
+  const MatX3 nodes = sim.getVolumeNodes();
+  for (int k = 0; k < 3; ++k) {  // walk on: other poses, other held blends
+    sim.postUpdate();
+    sim.preUpdate();
+    sim.updateState(test::randomVector(sim.numDofs(), 0.01, 10 + k));
+  }
+  ASSERT_NE(sim.getVolumeNodes(), nodes);
+  sim.restoreStep(good);
+  EXPECT_EQ(sim.getVolumeNodes(), nodes);
+  // Offsets of one's own are saved as they are.
+  SimulableStep own = good;
+  own.pose_blend = MatX3::Constant(avatar->volumetricData().numNodes(), 3, 0.001);
+  sim.restoreStep(own);
+  const SimulableStep saved = sim.saveStep();
+  ASSERT_EQ(saved.pose_blend.rows(), own.pose_blend.rows());
+  EXPECT_EQ(saved.pose_blend, own.pose_blend);
+}
+
 }  // namespace
 }  // namespace flsh

@@ -59,7 +59,9 @@ struct SimulableStep {
   bool is_static = false;
   /// Soft tissue only (empty otherwise): displacements of q, q_n, q_{n−1} (3 per soft node, m)
   /// and the held pose blend offsets (#N × 3, m). restoreStep with an empty pose_blend (0 rows)
-  /// holds it from R_n, as preUpdate does (e.g. after changing q_n in a snapshot).
+  /// holds it from R_n, as preUpdate does (e.g. after changing q_n in a snapshot); the ROM's
+  /// saveStep leaves it empty when the held blend is R_n's (as after preUpdate), which keeps its
+  /// snapshots small and its steps from evaluating every node's offsets.
   VecX u, u_n, u_nm1;
   MatX3 pose_blend;
 };

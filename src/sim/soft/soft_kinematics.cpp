@@ -239,14 +239,19 @@ void SoftKinematics::buildReducedPattern(const std::vector<std::pair<int, int>>&
 
 // ---- positions ----------------------------------------------------------------------------
 
-void SoftKinematics::setPoseBlend(const std::vector<Mat3>& R) {
+void SoftKinematics::featureOf(const std::vector<Mat3>& R, VecX& feature) const {
   for (int b = 1; b < num_bones_; ++b) {
     const Mat3 local = R[parents_[b]].transpose() * R[b];
     for (int r = 0; r < 3; ++r)
-      for (int c = 0; c < 3; ++c) feature_[9 * (b - 1) + 3 * r + c] = local(r, c) - (r == c);
+      for (int c = 0; c < 3; ++c) feature[9 * (b - 1) + 3 * r + c] = local(r, c) - (r == c);
   }
+}
+
+void SoftKinematics::setPoseBlend(const std::vector<Mat3>& R) {
+  featureOf(R, feature_);
   if (reduced_) {
     ++pose_stamp_;
+    from_feature_ = true;
     return;
   }
   const VecX offsets = (*posedirs_) * feature_;  // row 3j + c
@@ -309,6 +314,14 @@ const MatX3& SoftKinematics::poseBlend() const {
 void SoftKinematics::setPoseBlendOffsets(const MatX3& offsets) {
   blend_ = offsets;
   if (reduced_) std::fill(blend_stamp_.begin(), blend_stamp_.end(), pose_stamp_);
+  from_feature_ = false;
+}
+
+bool SoftKinematics::poseBlendHeldFrom(const std::vector<Mat3>& R) const {
+  if (!reduced_ || !from_feature_) return false;
+  VecX feature(feature_.size());
+  featureOf(R, feature);
+  return feature == feature_;
 }
 
 double SoftKinematics::displacementWeight(int i) const {

@@ -136,6 +136,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   void setPoseBlend(const std::vector<Mat3>& R);
   const MatX3& poseBlend() const;  ///< every node's (evaluates the missing ones)
   void setPoseBlendOffsets(const MatX3& offsets);
+  /// ROM: whether the held pose blend is the one setPoseBlend(R) gives (set by it, not by
+  /// setPoseBlendOffsets, from rotations with the same feature). Always false for the FEM.
+  bool poseBlendHeldFrom(const std::vector<Mat3>& R) const;
   /// Derivatives of the pose blend offsets P_j = posedirs_j · feature(R) in the rotations R it
   /// was set from (the increment chart R_b ← exp([δω_b]×) R_b; feature: R_pᵀ R_b − I per bone
   /// b ≥ 1), for the adjoint (the held pose blend is a function of q_n). Tangent: δP_j of
@@ -254,6 +257,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   // from posedirs_T_ (each node's 207 × 3 block contiguous, for the nodes with a slot: the
   // surface and the mass nodes), else from posedirs.
   VecX feature_;
+  bool from_feature_ = true;  // ROM: blend_ follows feature_ (not setPoseBlendOffsets')
+  /// The pose feature of rotations R (9 per bone but the root: R_pᵀ R_b − I).
+  void featureOf(const std::vector<Mat3>& R, VecX& feature) const;
   mutable MatX3 blend_;  // #N × 3
   int pose_stamp_ = 0;
   mutable std::vector<int> blend_stamp_;

@@ -11,6 +11,7 @@
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/tet_mesh.h"
 #include "flsh/volume/volumetric_data.h"
+#include "sim/soft/on_two_threads.h"
 
 namespace flsh::detail {
 
@@ -47,6 +48,28 @@ ElasticElements elasticElements(const SoftAvatar& avatar) {
   out.rest = std::move(tets.rest);
   out.materials = std::move(tets.materials);
   return out;
+}
+
+double ReducedElasticity::evaluateElements(const SoftKinematics& kin, VecX* g, bool hessian,
+                                           int offset, bool psd, int split_from) const {
+  Mat3* values = hessian ? kin.reducedValues(1) : nullptr;
+  const int T = numElements();
+  const int base = offset + kin.boneDofs();
+  double E = 0.0;
+  const int threads = std::min(2, omp_get_max_threads());
+  if (hessian || T < split_from || threads < 2 || omp_in_parallel()) {
+    E = elements(0, T, g ? g->data() + base : nullptr, values, psd);
+  } else {
+    VecX second = g ? VecX::Zero(kin.numSoftDofs()) : VecX();
+    double energies[2] = {0.0, 0.0};
+    onTwoThreads([&](int part) {
+      energies[part] = part == 0 ? elements(0, T / 2, g ? g->data() + base : nullptr, nullptr, psd)
+                                 : elements(T / 2, T, g ? second.data() : nullptr, nullptr, psd);
+    });
+    E = energies[0] + energies[1];
+    if (g) g->segment(base, second.size()) += second;
+  }
+  return E + restStiffness(g, values, offset);
 }
 
 VecX elementRestFloors(const ReducedData& rom, const ElasticElements& elements) {

@@ -168,6 +168,16 @@ class ReducedElasticity {
   virtual double restStiffness(VecX* g, Mat3* values, int offset) const = 0;
   /// Sample tets whose rest-split excess is in its bounded branch at the current state.
   virtual int boundedSamples() const = 0;
+
+ protected:
+  /// The term at the prepared state as both evaluate it: the elements' energy, their gradient
+  /// ADDED into g (the soft entries, from offset + kin's bone DoFs) and, with `hessian`, their
+  /// blocks into kin's value list 1, then the rest stiffness. Energy or gradient alone from
+  /// `split_from` elements: the elements in two halves on two threads, the second half's
+  /// gradient apart (the Hessian's block sums stay on one thread: Simulable runs them beside
+  /// inertia's).
+  double evaluateElements(const SoftKinematics& kin, VecX* g, bool hessian, int offset, bool psd,
+                          int split_from) const;
 };
 
 }  // namespace flsh::detail

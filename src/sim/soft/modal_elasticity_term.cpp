@@ -1,14 +1,11 @@
 #include "sim/soft/modal_elasticity_term.h"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <string>
 
 #include "flsh/core/error.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
-#include "sim/soft/on_two_threads.h"
 #include "volume/subspace_tets.h"
 
 namespace flsh::detail {
@@ -133,24 +130,7 @@ double ModalElasticityTerm::restStiffness(VecX* g, Mat3* values, int offset) con
 
 double ModalElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                                      FixedHessianBlocks*) const {
-  Mat3* values = H ? kin_.reducedValues(1) : nullptr;
-  const int T = elements_.size();
-  const int base = offset + kin_.boneDofs();
-  double E = 0.0;
-  const int threads = std::min(2, omp_get_max_threads());
-  if (values || T < 64 || threads < 2 || omp_in_parallel()) {
-    E = elements(0, T, g ? g->data() + base : nullptr, values, psd);
-  } else {
-    VecX second = g ? VecX::Zero(kin_.numSoftDofs()) : VecX();
-    double energies[2] = {0.0, 0.0};
-    onTwoThreads([&](int part) {
-      energies[part] = part == 0 ? elements(0, T / 2, g ? g->data() + base : nullptr, nullptr, psd)
-                                 : elements(T / 2, T, g ? second.data() : nullptr, nullptr, psd);
-    });
-    E = energies[0] + energies[1];
-    if (g) g->segment(base, second.size()) += second;
-  }
-  return E + restStiffness(g, values, offset);
+  return evaluateElements(kin_, g, H != nullptr, offset, psd, 64);
 }
 
 int ModalElasticityTerm::boundedSamples() const {

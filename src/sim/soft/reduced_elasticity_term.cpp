@@ -10,7 +10,6 @@
 #include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
-#include "sim/soft/on_two_threads.h"
 
 namespace flsh::detail {
 
@@ -211,27 +210,7 @@ double ReducedElasticityTerm::restStiffness(VecX* g, Mat3* values, int offset) c
 
 double ReducedElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                                        FixedHessianBlocks*) const {
-  Mat3* values = H ? kin_.reducedValues(1) : nullptr;
-  const int T = int(elements_.tets.rows());
-  const int base = offset + kin_.boneDofs();
-  const bool hessian = values != nullptr;
-  double E = 0.0;
-  const int threads = std::min(2, omp_get_max_threads());
-  if (hessian || T < 256 || threads < 2 || omp_in_parallel()) {
-    // The Hessian's block sums stay on one thread (Simulable runs them beside inertia's).
-    E = elements(0, T, g ? g->data() + base : nullptr, values, psd);
-  } else {
-    // Energy or gradient alone: the tets in two halves, the second half's gradient apart.
-    VecX second = g ? VecX::Zero(3 * kin_.numHandles()) : VecX();
-    double energies[2] = {0.0, 0.0};
-    onTwoThreads([&](int part) {
-      energies[part] = part == 0 ? elements(0, T / 2, g ? g->data() + base : nullptr, nullptr, psd)
-                                 : elements(T / 2, T, g ? second.data() : nullptr, nullptr, psd);
-    });
-    E = energies[0] + energies[1];
-    if (g) g->segment(base, second.size()) += second;
-  }
-  return E + restStiffness(g, values, offset);
+  return evaluateElements(kin_, g, H != nullptr, offset, psd, 256);
 }
 
 int ReducedElasticityTerm::boundedSamples() const {

@@ -324,13 +324,6 @@ MatX subspaceRestStiffness(const VolumetricData& data, const SpMat& basis,
   return 0.5 * (C + C.transpose());  // symmetric up to rounding: make it exactly so
 }
 
-// Node displacements (#N × 3) of the modes for modal coordinates z (r).
-MatX modeDisplacements(const MatX& modes, const VecX& z) {
-  const VecX u = modes * z;  // entry 3j + c
-  return Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(
-      u.data(), u.size() / 3, 3);
-}
-
 // The subspace's columns on the soft DoFs of `ops` (3S × numSoftDofs): each handle's φ ⊗ I₃,
 // then the modes' rows.
 MatX softDofBasis(const SoftTissueRestOperators& ops, const ReducedData& d) {
@@ -373,7 +366,11 @@ MatX elasticSamples(const VolumetricData& data, const ReducedData& d, const Elas
   const double smallest = std::min(kSmallestTrainingAmplitude, amplitude);
   SampleRandom random(seed);
   std::vector<MatX> handle_displacements{size_t(samples)};  // each H × 3, m (or empty)
-  std::vector<VecX> mode_coordinates{size_t(samples)};      // each r (or empty)
+  // The modal samples' directions, then (one product for all: Ψ read once, not per sample) their
+  // node displacements U (3#N × modal samples, column k: entry 3j + c), scaled in place.
+  std::vector<int> modal_column(size_t(samples), -1);
+  std::vector<double> modal_amplitude;
+  MatX Z(r, samples);
   for (int s = 0; s < samples; ++s) {
     const double a = smallest * std::exp(random.uniform() * std::log(amplitude / smallest));
     const bool modal = r > 0 && (H == 0 || s % 2 == 0);
@@ -384,21 +381,26 @@ MatX elasticSamples(const VolumetricData& data, const ReducedData& d, const Elas
         z.row(h) = (std::min(a, handle_reach[h]) * random.uniform()) * random.unitDirection();
       continue;
     }
-    VecX z(r);
-    for (int k = 0; k < r; ++k) z[k] = random.normal();
-    const MatX u = modeDisplacements(d.modes, z);
-    const VecX norms = u.rowwise().norm();
-    double scale = norms.maxCoeff() > 0 ? a / norms.maxCoeff() : 0.0;
+    modal_column[size_t(s)] = int(modal_amplitude.size());
+    for (int k = 0; k < r; ++k) Z(k, Eigen::Index(modal_amplitude.size())) = random.normal();
+    modal_amplitude.push_back(a);
+  }
+  using NodeRows = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+  const Eigen::Index N = data.numNodes(), M = Eigen::Index(modal_amplitude.size());
+  MatX U = M > 0 ? MatX(d.modes * Z.leftCols(M)) : MatX();
+  for (Eigen::Index k = 0; k < M; ++k) {
+    const VecX norms = Eigen::Map<const NodeRows>(U.col(k).data(), N, 3).rowwise().norm();
+    double scale = norms.maxCoeff() > 0 ? modal_amplitude[size_t(k)] / norms.maxCoeff() : 0.0;
     for (Eigen::Index i = 0; i < vertex_reach.size(); ++i)
       if (norms[i] * scale > vertex_reach[i]) scale = vertex_reach[i] / norms[i];
-    mode_coordinates[size_t(s)] = scale * z;
+    U.col(k) *= scale;
   }
   const MatX4i& tets = data.templ->mesh.tets;
   MatX A(samples, E);
   parallelFor(samples, [&](int s) {
-    const MatX u = mode_coordinates[size_t(s)].size() > 0
-                       ? modeDisplacements(d.modes, mode_coordinates[size_t(s)])
-                       : MatX(d.basis * handle_displacements[size_t(s)]);  // #N × 3
+    const int k = modal_column[size_t(s)];
+    const MatX u = k >= 0 ? MatX(Eigen::Map<const NodeRows>(U.col(k).data(), N, 3))
+                          : MatX(d.basis * handle_displacements[size_t(s)]);  // #N × 3
     for (int c = 0; c < E; ++c) {
       const int t = elements.tets[size_t(c)];
       Mat34 ue;
@@ -470,11 +472,16 @@ MatX inertialSamples(const VolumetricData& data, const ReducedData& rom, const V
     d.modes.resize(r);
     for (int k = 0; k < r; ++k) d.modes[k] = s_mode * random.normal();
   }
+  // Every sample's modal node velocities in one product (Ψ read once, not per sample).
+  MatX Zdot(r, r > 0 ? samples : 0);
+  for (int s = 0; s < samples && r > 0; ++s) Zdot.col(s) = draws[size_t(s)].modes;
+  const MatX mode_velocities = r > 0 ? MatX(rom.modes * Zdot) : MatX();
+  using NodeRows = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
   MatX A(samples, T);
   parallelFor(samples, [&](int s) {
     const Velocities& d = draws[size_t(s)];
     MatX extra = H > 0 ? MatX(basis * d.handles) : MatX::Zero(data.numNodes(), 3);
-    if (r > 0) extra += modeDisplacements(rom.modes, d.modes);
+    if (r > 0) extra += Eigen::Map<const NodeRows>(mode_velocities.col(s).data(), extra.rows(), 3);
     const MatX v = skinnedBoneVelocities(W, data.rest_nodes, data.rest_joints, d.bone_linear,
                                          d.bone_angular, extra);
     tetKineticEnergies(v.rowwise().squaredNorm(), tets, tet_masses, A, s);

@@ -75,8 +75,10 @@ double ModalElasticityTerm::element(int e, const VecX& z_e, Eigen::Ref<VecX>* gr
   Mat9 A;
   const double psi =
       V * fungEnergyDensity(F, material, derivatives ? &P : nullptr, hessian ? &A : nullptr, psd);
-  VecX g9 = derivatives ? VecX(V * Eigen::Map<const Vec9>(P.data())) : VecX();
-  MatX H9 = hessian ? MatX(V * A) : MatX();
+  Vec9 g9 = Vec9::Zero();
+  Mat9 H9 = Mat9::Zero();
+  if (derivatives) g9 = V * Eigen::Map<const Vec9>(P.data());
+  if (hessian) H9 = V * A;
   Eigen::Ref<VecX> g9_view = g9;
   Eigen::Ref<MatX> H9_view = H9;
   const double excess =

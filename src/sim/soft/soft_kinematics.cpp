@@ -506,9 +506,9 @@ void SoftKinematics::addSoftSoft(std::vector<Triplet>& H, int offset, int j, con
   }
   for (int g = 0; g < mode_groups; ++g) {
     const int* slots = &zz_slot_[size_t(num_handles_ + g) * groups + size_t(num_handles_)];
-    const Eigen::Matrix<double, 3, Eigen::Dynamic> row =
-        Psi.middleCols<3>(3 * g).transpose() * BPsi.rightCols(3 * (mode_groups - g));
-    for (int k = g; k < mode_groups; ++k) values[slots[k]] += row.middleCols<3>(3 * (k - g));
+    const Mat3 Psi_g_t = Psi.middleCols<3>(3 * g).transpose();
+    for (int k = g; k < mode_groups; ++k)
+      values[slots[k]].noalias() += Psi_g_t * BPsi.middleCols<3>(3 * k);
   }
 }
 

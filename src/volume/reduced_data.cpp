@@ -2,8 +2,6 @@
 // on-disk cache (reduced_data.h).
 #include "flsh/volume/reduced_data.h"
 
-#include <omp.h>
-
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/SparseCholesky>
@@ -17,7 +15,6 @@
 #include <string>
 #include <vector>
 
-#include "core/first_failure.h"
 #include "core/seconds_since.h"
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
@@ -25,6 +22,7 @@
 #include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/volume_fields.h"
 #include "volume/reduced_data_file.h"
+#include "volume/subspace_tets.h"
 
 namespace flsh {
 
@@ -283,74 +281,6 @@ MatX surfacePartitionOfUnity(const VolumetricData& data, const MatX& weights) {
     if (sum > 1e-9) out.row(j) = (f[j] / sum) * weights.row(j);
   }
   return out;
-}
-
-// Σ_e Φ̂_eᵀ K_e Φ̂_e over the elastic elements, K_e the element's elastic Hessian at rest
-// (12 × 12) and Φ̂_e its nodes' basis rows (3H × 3H, N/m), exactly symmetric.
-MatX subspaceRestStiffness(const VolumetricData& data, const SpMat& basis,
-                           const ElasticTets& elements) {
-  const int H = int(basis.cols()), E = int(elements.tets.size());
-  const MatX4i& tets = data.templ->mesh.tets;
-  const SpMat rows = basis.transpose();  // column j = node j's weights
-  int threads = 1;
-#ifdef _OPENMP
-  threads = omp_get_max_threads();
-#endif
-  std::vector<MatX> partial(size_t(threads), MatX::Zero(3 * H, 3 * H));
-  detail::FirstFailure failure;
-#pragma omp parallel for schedule(static)
-  for (int c = 0; c < E; ++c) {
-    failure.run([&] {
-      int thread = 0;
-#ifdef _OPENMP
-      thread = omp_get_thread_num();
-#endif
-      const int t = elements.tets[size_t(c)];
-      Mat12 K;
-      tetElasticEnergy(elements.rest[size_t(c)], elements.materials[size_t(c)],
-                       Eigen::Matrix<double, 3, 4>::Zero(), nullptr, &K, false);
-      MatX& C = partial[size_t(thread)];
-      for (int a = 0; a < 4; ++a)
-        for (SpMat::InnerIterator ia(rows, tets(t, a)); ia; ++ia)
-          for (int b = 0; b < 4; ++b)
-            for (SpMat::InnerIterator ib(rows, tets(t, b)); ib; ++ib)
-              C.block<3, 3>(3 * ia.row(), 3 * ib.row()) +=
-                  (ia.value() * ib.value()) * K.block<3, 3>(3 * a, 3 * b);
-    });
-  }
-  failure.rethrow();
-  MatX C = MatX::Zero(3 * H, 3 * H);
-  for (const MatX& p : partial) C += p;
-  return 0.5 * (C + C.transpose());  // symmetric up to rounding: make it exactly so
-}
-
-// The subspace's columns on the soft DoFs of `ops` (3S × numSoftDofs): each handle's φ ⊗ I₃,
-// then the modes' rows.
-MatX softDofBasis(const SoftTissueRestOperators& ops, const ReducedData& d) {
-  const int S = ops.numSoftNodes(), H = d.numHandles();
-  MatX B = MatX::Zero(3 * S, d.numSoftDofs());
-  for (int h = 0; h < H; ++h)
-    for (SpMat::InnerIterator it(d.basis, h); it; ++it) {
-      const int dof = ops.dof_of_node[it.row()];
-      if (dof < 0) continue;
-      for (int c = 0; c < 3; ++c) B(dof + c, 3 * h + c) = it.value();
-    }
-  for (int i = 0; i < S; ++i)
-    B.block(3 * i, 3 * H, 3, d.numModes()) = d.modes.middleRows<3>(3 * ops.soft_nodes[i]);
-  return B;
-}
-
-// The exact rest stiffness of d's subspace over every elastic tet: for handles alone per tet
-// (subspaceRestStiffness, sparse blocks), with modes through the assembled K_uu (Bᵀ K_uu B, B
-// dense: one sparse product instead of a dense 9r² sum per tet).
-MatX restStiffnessOf(const VolumetricData& data, const ReducedData& d,
-                     const ElasticTets& elements) {
-  if (d.numModes() == 0) return subspaceRestStiffness(data, d.basis, elements);
-  const SoftTissueRestOperators ops = softTissueRestOperators(data);
-  const MatX B = softDofBasis(ops, d);
-  const MatX KB = ops.stiffness * B;
-  const MatX K = B.transpose() * KB;
-  return 0.5 * (K + K.transpose());
 }
 
 // samples × #elastic elements: the elastic energy (J) of each tet under random displacements of
@@ -647,7 +577,7 @@ void finishReducedData(const VolumetricData& data, const BodyModel& body,
         settings.elastic_cubature_points, kElasticTrainingTolerance, settings.seed, elements.tets,
         &d.elastic_test_error, &r.seconds_training, &r.seconds_cubature);
     t0 = Clock::now();
-    d.elastic_rest_stiffness = restStiffnessOf(data, d, elements);
+    d.elastic_rest_stiffness = detail::subspaceRestStiffness(data, d, elements);
     r.seconds_cubature += secondsSince(t0);
   }
   if (inertial_cubature) {
@@ -776,22 +706,6 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
   finishReducedData(data, body, settings, elastic_cubature, inertial_cubature, cache, d, r);
   r.seconds_total = secondsSince(start);
   return d;
-}
-
-MatX elasticRestStiffness(const VolumetricData& data, const ReducedData& rom) {
-  if (rom.basis.rows() != data.numNodes() ||
-      (rom.numModes() > 0 && rom.modes.rows() != 3 * data.numNodes()))
-    throw InputError("elasticRestStiffness: the basis has " + std::to_string(rom.basis.rows()) +
-                     " rows and the modes " + std::to_string(rom.modes.rows()) +
-                     ", expected #nodes (" + std::to_string(data.numNodes()) + ") and 3·#nodes");
-  return restStiffnessOf(data, rom, deformableTets(data));
-}
-
-MatX elasticRestStiffness(const VolumetricData& data, const SpMat& basis) {
-  if (basis.rows() != data.numNodes())
-    throw InputError("elasticRestStiffness: the basis has " + std::to_string(basis.rows()) +
-                     " rows, expected one per node (" + std::to_string(data.numNodes()) + ")");
-  return subspaceRestStiffness(data, basis, deformableTets(data));
 }
 
 VecX inertialNodeMasses(const VolumetricData& data, const Cubature& inertial) {

@@ -36,6 +36,19 @@ void storeCubature(io::NpzWriter& w, const std::string& name, const Cubature& c,
 
 }  // namespace
 
+void checkModes(const VolumetricData& data, const MatX& modes, const std::string& where) {
+  const int n = data.numNodes();
+  if (modes.rows() != 3 * n || modes.cols() < 3 || modes.cols() % 3 != 0 || !modes.allFinite())
+    throw InputError(where + " is " + std::to_string(modes.rows()) + " × " +
+                     std::to_string(modes.cols()) + (modes.allFinite() ? "" : " with NaN or Inf") +
+                     ", expected 3·#nodes × r = " + std::to_string(3 * n) +
+                     " × r, finite, r a positive multiple of 3");
+  for (int j = 0; j < n; ++j)
+    if (data.bone_of_node[j] >= 0 && !modes.middleRows<3>(3 * j).isZero(0.0))
+      throw InputError(where + ": rows of bone node " + std::to_string(j) +
+                       " are not zero, expected zero (bone nodes do not move)");
+}
+
 io::NpzWriter reducedDataArrays(const ReducedData& d) {
   io::NpzWriter w;
   if (d.basis_kind != ReducedBasisKind::Handles) {
@@ -119,14 +132,7 @@ ReducedData readReducedData(const io::NpzFile& f, const VolumetricData& data, co
                        std::to_string(int(settings.basis_kind)) + " (" +
                        reducedBasisKindName(settings.basis_kind) + ")");
     d.modes = f.matrix("modes", 3L * N, -1);
-    if (d.modes.cols() % 3 != 0 || d.modes.cols() == 0 || !d.modes.allFinite())
-      throw InputError(f.path() + ": key 'modes': " + std::to_string(d.modes.rows()) + " × " +
-                       std::to_string(d.modes.cols()) +
-                       ", expected 3·#nodes × r finite with r a positive multiple of 3");
-    for (int j = 0; j < N; ++j)
-      if (data.bone_of_node[j] >= 0 && !d.modes.middleRows<3>(3 * j).isZero(0.0))
-        throw InputError(f.path() + ": key 'modes': nonzero rows at bone node " +
-                         std::to_string(j) + ", expected zero (bone nodes do not move)");
+    checkModes(data, d.modes, f.path() + ": key 'modes'");
   } else if (f.has("modes")) {
     throw InputError(f.path() + ": key 'modes' in data of the handle basis kind");
   }

@@ -4,6 +4,8 @@
 // Private to volume/.
 #pragma once
 
+#include <string>
+
 #include "flsh/body/body_model.h"
 #include "flsh/format/npz.h"
 #include "flsh/volume/reduced_data.h"
@@ -13,6 +15,11 @@ namespace flsh::detail {
 /// Basis entries below this are dropped (they only cost memory and time in the simulation); a
 /// stored basis has none.
 constexpr double kBasisDropThreshold = 1e-12;
+
+/// Modal columns as ReducedData::modes holds them: 3·#nodes × r, finite, r a positive multiple of
+/// 3, zero rows on bone nodes. InputError starting with `where` otherwise (the cache reader's
+/// file and key, or SoftAvatar::setReducedData's field).
+void checkModes(const VolumetricData& data, const MatX& modes, const std::string& where);
 
 /// The arrays of `d` for its cache entry.
 io::NpzWriter reducedDataArrays(const ReducedData& d);

@@ -21,6 +21,7 @@
 #include "flsh/core/error.h"
 #include "flsh/core/sha256.h"
 #include "flsh/volume/tet_material_map.h"
+#include "volume/reduced_data_file.h"
 
 namespace flsh {
 
@@ -183,19 +184,10 @@ void SoftAvatar::setReducedData(std::shared_ptr<const ReducedData> data) {
     throw InputError(fn + "handles has " + std::to_string(H) +
                      " entries for the basis kind 'modes', expected none");
   const MatX& Psi = data->modes;
-  if (modes && (Psi.rows() != 3 * n || Psi.cols() < 3 || Psi.cols() % 3 != 0 || !Psi.allFinite()))
-    throw InputError(fn + "modes is " + std::to_string(Psi.rows()) + " × " +
-                     std::to_string(Psi.cols()) + (Psi.allFinite() ? "" : " with NaN or Inf") +
-                     ", expected 3·#nodes × r = " + std::to_string(3 * n) +
-                     " × r, finite, r a positive multiple of 3");
+  if (modes) detail::checkModes(vol, Psi, fn + "modes");
   if (!modes && Psi.size() > 0)
     throw InputError(fn + "modes is " + std::to_string(Psi.rows()) + " × " +
                      std::to_string(Psi.cols()) + " for the basis kind 'handles', expected empty");
-  if (modes)
-    for (int j = 0; j < n; ++j)
-      if (vol.bone_of_node[j] >= 0 && !Psi.middleRows<3>(3 * j).isZero(0.0))
-        throw InputError(fn + "modes: rows of bone node " + std::to_string(j) +
-                         " are not zero, expected zero (bone nodes do not move)");
   if (data->basis.rows() != n || data->basis.cols() != H)
     throw InputError(fn + "basis is " + std::to_string(data->basis.rows()) + " × " +
                      std::to_string(data->basis.cols()) + ", expected #nodes × #handles = " +

@@ -10,13 +10,15 @@
 // quadratic: K̃_e = V Dᵀ A₀ D with A₀ the law's tangent at F = I. Used where the ROM's
 // precomputation (rest stiffness, floors) and its modal elastic term (sim/) need one form for
 // every kind; the handle-only term keeps its own Z G̃ᵀ form (reducedTetElasticEnergy), which
-// is cheaper.
+// is cheaper. Summed over every elastic tet, the rest quadratics are the subspace's exact rest
+// stiffness K (subspaceRestStiffness, and elasticRestStiffness of reduced_data.h here too).
 #pragma once
 
 #include <vector>
 
 #include "flsh/core/types.h"
 #include "flsh/energy/fem_material.h"
+#include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
 
@@ -43,5 +45,13 @@ double subspaceTetElasticEnergy(double volume, const FemMaterialPoint& material,
 /// The law's tangent at rest, ∂P/∂F at F = I (9 × 9, symmetric PSD): a tet's rest Hessian in the
 /// subspace is volume · Dᵀ restTangent D.
 Mat9 restTangent(const FemMaterialPoint& material);
+
+/// The exact rest stiffness of rom's subspace, Σ over `elements` of their rest Hessians in it
+/// (numSoftDofs square, exactly symmetric, N/m): for handles alone per tet in sparse 3 × 3
+/// blocks, with modes as Bᵀ K_uu B through the assembled K_uu (softTissueRestOperators; B the
+/// subspace's columns on the soft DoFs) — one sparse product instead of a dense 9 m² sum per tet.
+/// The modes' form assumes `elements` are every elastic tet (K_uu sums them all).
+MatX subspaceRestStiffness(const VolumetricData& data, const ReducedData& rom,
+                           const ElasticTets& elements);
 
 }  // namespace flsh::detail

@@ -508,7 +508,10 @@ SimulableStep Simulable::saveStep() const {
     s.u = m.soft->u;
     s.u_n = m.soft->u_n;
     s.u_nm1 = m.soft->u_nm1;
-    if (!m.soft->poseBlendHeldFrom(m.q_n.R)) s.pose_blend = m.soft->poseBlend();
+    if (const std::vector<Mat3>* held = m.soft->heldPoseRotations())
+      s.pose_blend_R = *held;
+    else
+      s.pose_blend = m.soft->poseBlend();
   }
   return s;
 }
@@ -575,6 +578,11 @@ void Simulable::restoreStep(const SimulableStep& s) {
     requireFinite("u_n", s.u_n);
     requireFinite("u_nm1", s.u_nm1);
     requireFinite("pose_blend", s.pose_blend);
+    if (!s.pose_blend_R.empty() && s.pose_blend_R.size() != n)
+      throw InputError("Simulable::restoreStep: the snapshot has " +
+                       std::to_string(s.pose_blend_R.size()) + " pose blend rotations, expected " +
+                       std::to_string(n) + " bones (or none)");
+    requireFiniteRotations("pose_blend_R", s.pose_blend_R);
   }
   m.q.R = s.R;
   m.q.t = s.t;
@@ -593,6 +601,8 @@ void Simulable::restoreStep(const SimulableStep& s) {
     m.soft->u_nm1 = s.u_nm1;
     if (s.pose_blend.rows())
       m.soft->setPoseBlendOffsets(s.pose_blend);
+    else if (!s.pose_blend_R.empty())
+      m.soft->setPoseBlend(s.pose_blend_R);
     else
       m.soft->setPoseBlend(m.q_n.R);  // held from q_n, as preUpdate holds it
     m.setSoftPrediction();

@@ -77,8 +77,8 @@ class SoftTissue final : public TwoThreadSchedule {
   void setPoseBlend(const std::vector<Mat3>& R) { kin_.setPoseBlend(R); }
   const MatX3& poseBlend() const { return kin_.poseBlend(); }
   void setPoseBlendOffsets(const MatX3& offsets) { kin_.setPoseBlendOffsets(offsets); }
-  /// ROM: whether the held pose blend is the one setPoseBlend(R) gives (FEM: false).
-  bool poseBlendHeldFrom(const std::vector<Mat3>& R) const { return kin_.poseBlendHeldFrom(R); }
+  /// ROM: the rotations the held pose blend was set from (null for the FEM and after offsets).
+  const std::vector<Mat3>* heldPoseRotations() const { return kin_.heldPoseRotations(); }
   void positions(const BoneFrames& bones, const VecX& state, MatX3& x) const {
     kin_.positions(bones, state, x);
   }

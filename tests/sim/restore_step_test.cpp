@@ -124,9 +124,10 @@ TEST(SimulableRestoreStep, NonFiniteSoftTissueValuesAreRefused) {
   EXPECT_EQ(sim.getState(), q_before);
 }
 
-// The ROM's snapshot leaves the held pose blend to R_n when it is R_n's (no #N × 3 offsets per
-// step): restored after the body moved on, every node is where it was; offsets set one by one
-// are kept.
+// The ROM's snapshot keeps the rotations its held pose blend comes from (no #N × 3 offsets per
+// step): restored after the body moved on, every node is where it was, also when the snapshot
+// was taken after postUpdate (as Scene::step takes it), where the held blend is not R_n's;
+// offsets set one by one are kept.
 TEST(SimulableRestoreStep, RomSnapshotsHoldThePoseBlendOfTheirPose) {
   auto avatar = std::make_shared<SoftAvatar>(
       test::smallScene(800).body, VecX(),
@@ -140,6 +141,7 @@ TEST(SimulableRestoreStep, RomSnapshotsHoldThePoseBlendOfTheirPose) {
   sim.updateState(test::randomVector(sim.numDofs(), 0.01, 4));
   const SimulableStep good = sim.saveStep();
   EXPECT_EQ(good.pose_blend.rows(), 0);
+  EXPECT_EQ(good.pose_blend_R.size(), size_t(24));
   const MatX3 nodes = sim.getVolumeNodes();
   for (int k = 0; k < 3; ++k) {  // walk on: other poses, other held blends
     sim.postUpdate();
@@ -149,6 +151,27 @@ TEST(SimulableRestoreStep, RomSnapshotsHoldThePoseBlendOfTheirPose) {
   ASSERT_NE(sim.getVolumeNodes(), nodes);
   sim.restoreStep(good);
   EXPECT_EQ(sim.getVolumeNodes(), nodes);
+  // After postUpdate: q_n is the new state, the blend still the previous q_n's.
+  sim.postUpdate();
+  const SimulableStep after_post = sim.saveStep();
+  EXPECT_EQ(after_post.pose_blend.rows(), 0);
+  EXPECT_NE(after_post.pose_blend_R, after_post.R_n);
+  const MatX3 nodes_after_post = sim.getVolumeNodes();
+  sim.preUpdate();
+  sim.updateState(test::randomVector(sim.numDofs(), 0.01, 20));
+  ASSERT_NE(sim.getVolumeNodes(), nodes_after_post);
+  sim.restoreStep(after_post);
+  EXPECT_EQ(sim.getVolumeNodes(), nodes_after_post);
+  // Bad rotations are refused by name, nothing restored.
+  SimulableStep short_R = after_post;
+  short_R.pose_blend_R.pop_back();
+  EXPECT_THAT(messageOf<InputError>([&] { sim.restoreStep(short_R); }),
+              HasSubstr("23 pose blend rotations, expected 24 bones"));
+  SimulableStep nan_R = after_post;
+  nan_R.pose_blend_R[3](1, 2) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THAT(messageOf<InputError>([&] { sim.restoreStep(nan_R); }),
+              HasSubstr("the snapshot's pose_blend_R[3](1, 2) is "));
+  EXPECT_EQ(sim.getVolumeNodes(), nodes_after_post);
   // Offsets of one's own are saved as they are.
   SimulableStep own = good;
   own.pose_blend = MatX3::Constant(avatar->volumetricData().numNodes(), 3, 0.001);

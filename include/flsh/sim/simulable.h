@@ -58,12 +58,14 @@ struct SimulableStep {
   std::vector<Collider> colliders;  ///< with their paths
   bool is_static = false;
   /// Soft tissue only (empty otherwise): displacements of q, q_n, q_{n−1} (3 per soft node, m)
-  /// and the held pose blend offsets (#N × 3, m). restoreStep with an empty pose_blend (0 rows)
-  /// holds it from R_n, as preUpdate does (e.g. after changing q_n in a snapshot); the ROM's
-  /// saveStep leaves it empty when the held blend is R_n's (as after preUpdate), which keeps its
-  /// snapshots small and its steps from evaluating every node's offsets.
+  /// and the held pose blend: either its offsets (pose_blend, #N × 3, m) or, for the ROM, the 24
+  /// rotations it comes from (pose_blend_R; the ROM evaluates a node's offset when first read, so
+  /// its snapshots stay small and its steps never evaluate every node's). restoreStep uses
+  /// pose_blend when it has rows, else pose_blend_R when given, else holds the blend from R_n as
+  /// preUpdate does (e.g. after changing q_n in a snapshot).
   VecX u, u_n, u_nm1;
   MatX3 pose_blend;
+  std::vector<Mat3> pose_blend_R;
 };
 
 /// Diagnostics of the last energy evaluation.

@@ -174,6 +174,7 @@ void SoftKinematics::setMassNodes(const std::vector<int>& mass_nodes) {
   // contiguous for blendOf.
   eval_nodes_ = mass_nodes;
   blend_stamp_.assign(n, 0);  // pose_stamp_ 0: the zero feature, whose offsets are zero
+  held_R_.assign(size_t(num_bones_), Mat3::Identity());  // the rest pose's: the zero feature
   std::vector<int> blend_slot(n, -1);
   int slots = 0;
   for (int j = 0; j < num_surface_; ++j) blend_slot[j] = slots++;
@@ -252,6 +253,7 @@ void SoftKinematics::setPoseBlend(const std::vector<Mat3>& R) {
   if (reduced_) {
     ++pose_stamp_;
     from_feature_ = true;
+    held_R_ = R;
     return;
   }
   const VecX offsets = (*posedirs_) * feature_;  // row 3j + c
@@ -315,13 +317,6 @@ void SoftKinematics::setPoseBlendOffsets(const MatX3& offsets) {
   blend_ = offsets;
   if (reduced_) std::fill(blend_stamp_.begin(), blend_stamp_.end(), pose_stamp_);
   from_feature_ = false;
-}
-
-bool SoftKinematics::poseBlendHeldFrom(const std::vector<Mat3>& R) const {
-  if (!reduced_ || !from_feature_) return false;
-  VecX feature(feature_.size());
-  featureOf(R, feature);
-  return feature == feature_;
 }
 
 double SoftKinematics::displacementWeight(int i) const {

@@ -136,9 +136,11 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   void setPoseBlend(const std::vector<Mat3>& R);
   const MatX3& poseBlend() const;  ///< every node's (evaluates the missing ones)
   void setPoseBlendOffsets(const MatX3& offsets);
-  /// ROM: whether the held pose blend is the one setPoseBlend(R) gives (set by it, not by
-  /// setPoseBlendOffsets, from rotations with the same feature). Always false for the FEM.
-  bool poseBlendHeldFrom(const std::vector<Mat3>& R) const;
+  /// ROM: the rotations the held pose blend was set from by setPoseBlend (null after
+  /// setPoseBlendOffsets, and always for the FEM, which holds every node's offsets).
+  const std::vector<Mat3>* heldPoseRotations() const {
+    return reduced_ && from_feature_ ? &held_R_ : nullptr;
+  }
   /// Derivatives of the pose blend offsets P_j = posedirs_j · feature(R) in the rotations R it
   /// was set from (the increment chart R_b ← exp([δω_b]×) R_b; feature: R_pᵀ R_b − I per bone
   /// b ≥ 1), for the adjoint (the held pose blend is a function of q_n). Tangent: δP_j of
@@ -258,6 +260,7 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   // surface and the mass nodes), else from posedirs.
   VecX feature_;
   bool from_feature_ = true;  // ROM: blend_ follows feature_ (not setPoseBlendOffsets')
+  std::vector<Mat3> held_R_;  // ROM: the rotations feature_ comes from
   /// The pose feature of rotations R (9 per bone but the root: R_pᵀ R_b − I).
   void featureOf(const std::vector<Mat3>& R, VecX& feature) const;
   mutable MatX3 blend_;  // #N × 3

@@ -27,7 +27,8 @@ SimulableStep movedHistory(const SimulableStep& base, int which, const VecX& d) 
     R[b] = rodrigues(Vec3(d.segment<3>(6 * Eigen::Index(b) + 3))) * R[b];
   }
   u += d.tail(u.size());
-  s.pose_blend.resize(0, 3);
+  s.pose_blend.resize(0, 3);  // held again from the moved R_n
+  s.pose_blend_R.clear();
   return s;
 }
 

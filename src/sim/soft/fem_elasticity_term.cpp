@@ -1,5 +1,7 @@
 #include "sim/soft/fem_elasticity_term.h"
 
+#include <omp.h>
+
 #include <algorithm>
 
 #include "core/first_failure.h"
@@ -36,30 +38,93 @@ FemElasticityTerm::FemElasticityTerm(const SoftKinematics& kinematics, const Mat
                       bone_dofs + kin_.nodeDof(pairs[k].first)};
 }
 
+void FemElasticityTerm::planScatter(int threads) const {
+  const int T = elements_.size();
+  ScatterPlan& plan = plan_;
+  plan.threads = 0;  // set when complete
+  // OpenMP's static schedule (libgomp): the first T % threads threads take one element more.
+  plan.first.resize(size_t(threads) + 1);
+  const int q = T / threads, r = T % threads;
+  for (int t = 0; t <= threads; ++t) plan.first[size_t(t)] = q * t + std::min(t, r);
+  std::vector<int> owner(block_dofs_.size(), -1);
+  std::vector<std::pair<int, int>> deferred;  // (block, local block), in increasing element
+  plan.action.assign(tet_block_.size(), -1);
+  for (int t = 0; t < threads; ++t)
+    for (int e = plan.first[size_t(t)]; e < plan.first[size_t(t) + 1]; ++e)
+      for (int l = 16 * e; l < 16 * e + 16; ++l) {
+        const int k = tet_block_[size_t(l)];
+        if (k < 0) continue;
+        if (owner[size_t(k)] < 0) {
+          owner[size_t(k)] = t;
+          plan.action[size_t(l)] = 2 * k + 1;
+        } else if (owner[size_t(k)] == t) {
+          plan.action[size_t(l)] = 2 * k;
+        } else {
+          deferred.emplace_back(k, l);
+        }
+      }
+  std::stable_sort(deferred.begin(), deferred.end(),
+                   [](const auto& x, const auto& y) { return x.first < y.first; });
+  plan.deferred_block.resize(deferred.size());
+  for (size_t d = 0; d < deferred.size(); ++d) {
+    plan.deferred_block[d] = deferred[d].first;
+    plan.action[size_t(deferred[d].second)] = -2 - int(d);
+  }
+  deferred_.resize(deferred.size());
+  plan.threads = threads;
+}
+
 double FemElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                                    FixedHessianBlocks* blocks) const {
   const MatX4i& tets = elements_.tets;
   const int T = elements_.size();
   if (g) element_gradients_.resize(T);
-  if (H) element_hessians_.resize(T);
+  if (H) blocks_.resize(block_dofs_.size());
   double E = 0.0;
   FirstFailure failure;
-#pragma omp parallel for schedule(static) reduction(+ : E) if (T > 2000)
-  for (int e = 0; e < T; ++e) {
-    double tet = 0.0;  // the reduction's E stays outside the lambda
+  // The elements in contiguous ranges, one per thread (as `omp for schedule(static)`); each
+  // element's Hessian goes straight into the blocks (see ScatterPlan).
+#pragma omp parallel reduction(+ : E) if (T > 2000)
+  {
+    const int threads = omp_get_num_threads(), t = omp_get_thread_num();
+#pragma omp single
     failure.run([&] {
-      Eigen::Matrix<double, 3, 4> U;
-      for (int a = 0; a < 4; ++a) U.col(a) = kin_.nodeDisplacement(kin_.u, tets(e, a));
-      const double w = elements_.weights[e];
-      tet = w * tetElasticEnergy(elements_.rest[e], elements_.materials[e], U,
-                                 g ? &element_gradients_[e] : nullptr,
-                                 H ? &element_hessians_[e] : nullptr, psd);
-      if (w != 1.0) {
-        if (g) element_gradients_[e] *= w;
-        if (H) element_hessians_[e] *= w;
-      }
+      if (H && plan_.threads != threads) planScatter(threads);
     });
-    E += tet;
+    // After the single's barrier the plan is ready (or failed: nothing to do).
+    const bool planned = !H || plan_.threads == threads;
+    const int begin = (T / threads) * t + std::min(t, T % threads);
+    const int end = begin + T / threads + (t < T % threads ? 1 : 0);
+    for (int e = begin; planned && e < end; ++e) {
+      double tet = 0.0;  // the reduction's E stays outside the lambda
+      failure.run([&] {
+        Eigen::Matrix<double, 3, 4> U;
+        for (int a = 0; a < 4; ++a) U.col(a) = kin_.nodeDisplacement(kin_.u, tets(e, a));
+        const double w = elements_.weights[e];
+        Mat12 He;
+        tet = w * tetElasticEnergy(elements_.rest[e], elements_.materials[e], U,
+                                   g ? &element_gradients_[e] : nullptr, H ? &He : nullptr, psd);
+        if (w != 1.0) {
+          if (g) element_gradients_[e] *= w;
+          if (H) He *= w;
+        }
+        if (!H) return;
+        const int* action = &plan_.action[16 * size_t(e)];
+        for (int b = 0; b < 4; ++b)
+          for (int a = 0; a < 4; ++a) {
+            const int act = action[4 * a + b];
+            if (act == -1) continue;
+            const auto local = He.block<3, 3>(3 * a, 3 * b);
+            if (act < 0)
+              deferred_[size_t(-2 - act)] = local;
+            else if (act & 1)
+              blocks_[size_t(act >> 1)] = Mat3::Zero() + local;
+            else
+              blocks_[size_t(act >> 1)] += local;
+          }
+      });
+      E += tet;
+    }
   }
   failure.rethrow();
   if (g) {
@@ -68,14 +133,8 @@ double FemElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset,
         kin_.addSoftGradient(*g, offset, tets(e, a), element_gradients_[e].segment<3>(3 * a));
   }
   if (H) {
-    blocks_.assign(block_dofs_.size(), Mat3::Zero());
-    for (int e = 0; e < T; ++e) {
-      const int* slots = &tet_block_[16 * size_t(e)];
-      for (int a = 0; a < 4; ++a)
-        for (int b = 0; b < 4; ++b)
-          if (slots[4 * a + b] >= 0)
-            blocks_[slots[4 * a + b]] += element_hessians_[e].block<3, 3>(3 * a, 3 * b);
-    }
+    for (size_t d = 0; d < deferred_.size(); ++d)
+      blocks_[size_t(plan_.deferred_block[d])] += deferred_[d];
     if (blocks) {
       *blocks = {&block_dofs_, &blocks_, offset};
     } else {

@@ -41,8 +41,22 @@ class FemElasticityTerm final : public ElasticityTerm {
   // block (a, b) adds into block tet_block_[16 e + 4 a + b] (−1: a bone node).
   std::vector<int> tet_block_;
   std::vector<std::pair<int, int>> block_dofs_;
+  // How the elements' loop sums its local blocks into blocks_ on `threads` threads, each taking
+  // a contiguous range of elements (OpenMP's static schedule): a block is summed by the thread of
+  // its first element; a local block of a later thread's element goes to deferred_ (in the
+  // order of (block, element)) and is added after the loop. Every block then gets the sums of
+  // one pass over the elements, bit for bit, without the elements' 12 × 12 Hessians stored.
+  struct ScatterPlan {
+    int threads = 0;
+    std::vector<int> first;           // per thread, its first element (and T at the end)
+    std::vector<int> action;          // per local block: 2 k + 1 (first: assign), 2 k (add), −1
+                                      // (a bone node), −2 − d (into deferred_[d])
+    std::vector<int> deferred_block;  // per deferred local block, its block
+  };
+  void planScatter(int threads) const;
+  mutable ScatterPlan plan_;
+  mutable std::vector<Mat3> deferred_;
   mutable std::vector<Vec12> element_gradients_;
-  mutable std::vector<Mat12> element_hessians_;
   mutable std::vector<Mat3> blocks_;
 };
 

@@ -32,6 +32,9 @@
 //   --reference: also run the scene at tolerance T_REF in lockstep (untimed) and print the
 //                largest surface vertex distance from it (the cost of the tolerance);
 //   --no-lag: factor every Newton iteration (no lagged-factor PCG) for comparison;
+//   --no-approximation: no directions from the constant soft–soft block (NewtonOptions::
+//                       approximate_hessian off); --approximate-ratio R: its
+//                       approximate_max_ratio;
 //   --materials: the soft models' material file (docs/materials.md; default: the built-in one);
 //   --inertia-floor: SimulableOptions::tracking_inertia_floor (kg·m²; 0 = the former model), for
 //                    every model of the run (--compare too).
@@ -589,6 +592,10 @@ int compare(int frames, const std::string& png, const std::string& csv,
   return 0;
 }
 
+// --no-approximation and --approximate-ratio (for every run of the process).
+bool g_no_approximation = false;
+double g_approximate_ratio = 0.0;
+
 // ---- steps/s of one ROM
 // --------------------------------------------------------------------------
 
@@ -613,6 +620,9 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   if (tolerance > 0) scene_options.reduced_newton.gradient_tolerance = tolerance;
   if (hessian >= 0) scene_options.reduced_newton.exact_hessian = hessian == 1;
   if (!lag) scene_options.reduced_newton.lagged.enabled = false;
+  if (g_no_approximation) scene_options.reduced_newton.approximate_hessian = false;
+  if (g_approximate_ratio > 0)
+    scene_options.reduced_newton.approximate_max_ratio = g_approximate_ratio;
   if (max_iterations_option > 0)
     scene_options.reduced_newton.max_iterations = max_iterations_option;
   Scenario sc{motion_name, std::make_shared<Motion>(makeBuiltinMotion(motion_name, 60.0, 30.0)),
@@ -658,10 +668,10 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   std::printf("steps: %d in %.3f s -> %.1f steps/s (%d not converged)\n", steps, total,
               steps / total, unconverged);
   std::printf(
-      "per step: %.2f Newton iterations, %.2f Hessian assemblies (%.2f reused), %.2f "
-      "factorizations, %.1f PCG iterations\n",
-      sum.iterations / n, sum.hessian_evaluations / n, sum.hessian_reuses / n,
-      sum.factorizations / n, sum.cg_iterations / n);
+      "per step: %.2f Newton iterations, %.2f approximate directions, %.2f Hessian assemblies "
+      "(%.2f reused), %.2f factorizations, %.1f PCG iterations\n",
+      sum.iterations / n, sum.approximate_directions / n, sum.hessian_evaluations / n,
+      sum.hessian_reuses / n, sum.factorizations / n, sum.cg_iterations / n);
   std::printf(
       "per step ms: energy %.3f, gradient %.3f, Hessian %.3f, factorization %.3f, "
       "solves %.3f, other %.3f\n",
@@ -873,6 +883,10 @@ int main(int argc, char** argv) {
       hessian = 0;
     else if (a == "--no-lag")
       lag = false;
+    else if (a == "--no-approximation")
+      g_no_approximation = true;
+    else if (a == "--approximate-ratio" && i + 1 < argc)
+      g_approximate_ratio = std::atof(argv[++i]);
     else if (a == "--reference" && i + 1 < argc)
       reference = std::atof(argv[++i]);
     else if (a == "--threads" && i + 1 < argc)
@@ -905,7 +919,7 @@ int main(int argc, char** argv) {
       std::fprintf(stderr,
                    "usage: rom_benchmark [STEPS] [--handles H] [--elastic N] [--inertial N] "
                    "[--exact] [--surface-pou] [--tolerance T] [--exact-hessian | --psd-hessian] "
-                   "[--no-lag] [--motion NAME] "
+                   "[--no-lag] [--no-approximation] [--approximate-ratio R] [--motion NAME] "
                    "[--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I] "
                    "[--basis-drop T] [--max-iterations N]\n"
                    "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] "

@@ -88,7 +88,8 @@ void bind_solve(py::module_& m) {
       .def(py::init([](int max_iterations, double gradient_tolerance, double step_tolerance,
                        int max_line_search_steps, double armijo, double initial_regularization,
                        LinearSolverType linear_solver, bool exact_hessian,
-                       const py::object& lagged) {
+                       const py::object& lagged, bool approximate_hessian,
+                       double approximate_max_ratio) {
              NewtonOptions o;
              if (!lagged.is_none()) o.lagged = lagged.cast<LaggedFactorOptions>();
              o.max_iterations = max_iterations;
@@ -99,6 +100,8 @@ void bind_solve(py::module_& m) {
              o.initial_regularization = initial_regularization;
              o.linear_solver = linear_solver;
              o.exact_hessian = exact_hessian;
+             o.approximate_hessian = approximate_hessian;
+             o.approximate_max_ratio = approximate_max_ratio;
              return o;
            }),
            py::kw_only(), py::arg("max_iterations") = nd.max_iterations,
@@ -109,6 +112,8 @@ void bind_solve(py::module_& m) {
            py::arg("initial_regularization") = nd.initial_regularization,
            py::arg("linear_solver") = nd.linear_solver,
            py::arg("exact_hessian") = nd.exact_hessian, py::arg("lagged") = py::none(),
+           py::arg("approximate_hessian") = nd.approximate_hessian,
+           py::arg("approximate_max_ratio") = nd.approximate_max_ratio,
            "Keyword arguments (lagged: LaggedFactorOptions, or None: off); values are checked "
            "when a solve starts (ValueError).")
       .def_readwrite("max_iterations", &NewtonOptions::max_iterations)
@@ -123,6 +128,12 @@ void bind_solve(py::module_& m) {
       .def_readwrite("linear_solver", &NewtonOptions::linear_solver)
       .def_readwrite("exact_hessian", &NewtonOptions::exact_hessian,
                      "try the exact Hessian first (falls back to the PSD form if not PD)")
+      .def_readwrite("approximate_hessian", &NewtonOptions::approximate_hessian,
+                     "directions from the objective's approximate Hessian (the ROM with modes: "
+                     "a constant soft–soft block) while they shrink ‖g‖ fast, then the exact "
+                     "ones (default False; SceneOptions.reduced_newton: True)")
+      .def_readwrite("approximate_max_ratio", &NewtonOptions::approximate_max_ratio,
+                     "largest ‖g_{k+1}‖₂ / ‖g_k‖₂ in (0, 1) that keeps the approximation")
       .def_readwrite("lagged", &NewtonOptions::lagged,
                      "LaggedFactorOptions (edit in place: options.lagged.enabled = False)")
       .def("__repr__", [](const NewtonOptions& o) {
@@ -145,6 +156,9 @@ void bind_solve(py::module_& m) {
                     "asked (not positive definite, or a refresh of the lagged factor)")
       .def_readonly("hessian_evaluations", &NewtonResult::hessian_evaluations,
                     "Hessian assemblies (either form)")
+      .def_readonly("approximate_directions", &NewtonResult::approximate_directions,
+                    "iterations whose direction came from the approximate Hessian "
+                    "(NewtonOptions.approximate_hessian)")
       .def_readonly("hessian_reuses", &NewtonResult::hessian_reuses,
                     "iterations whose PCG ran on the previous iterate's Hessian "
                     "(LaggedFactorOptions.reuse_hessian_below)")
@@ -190,7 +204,7 @@ void bind_solve(py::module_& m) {
                      "NewtonOptions of scenes whose soft-tissue simulables all use the reduced "
                      "model (a copy on read; default: exact Hessian with PSD fallback, lagged "
                      "factor, gradient_tolerance 1e-6, linear_solver Auto = dense up to 1500 "
-                     "DoFs, CHOLMOD above)")
+                     "DoFs, CHOLMOD above, approximate_hessian True)")
       .def_readwrite("avatar_contact", &SceneOptions::avatar_contact)
       .def_readwrite("lower_energy_start", &SceneOptions::lower_energy_start,
                      "With soft tissue: start each step's Newton from the lower-energy of the "

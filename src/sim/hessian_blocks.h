@@ -12,7 +12,8 @@ namespace flsh::detail {
 /// Appends a dense block as triplets at (row0, col0). One resize, then plain stores:
 /// emplace_back per entry was not inlined (a call each).
 template <class Derived>
-void addBlock(std::vector<Triplet>& H, int row0, int col0, const Eigen::MatrixBase<Derived>& block) {
+void addBlock(std::vector<Triplet>& H, int row0, int col0,
+              const Eigen::MatrixBase<Derived>& block) {
   const size_t start = H.size();
   H.resize(start + size_t(block.rows() * block.cols()));
   Triplet* out = H.data() + start;

@@ -155,12 +155,43 @@ size_t Simulable::getHessianTripletVector(std::vector<Triplet>& H,
   dynamic.clear();
   potential.clear();
   m.schedule->hessians(m.context(), dynamic, potential, offset, psd);
+  return appendScheduledHessian(H, blocks, offset, psd);
+}
+
+size_t Simulable::appendScheduledHessian(std::vector<Triplet>& H,
+                                         std::vector<FixedHessianBlocks>& blocks, int offset,
+                                         bool psd) const {
+  const Impl& m = *impl_;
+  const std::vector<Triplet>& dynamic = m.hessian_scratch[0];
+  const std::vector<Triplet>& potential = m.hessian_scratch[1];
   H.insert(H.end(), dynamic.begin(), dynamic.end());
   m.value_lists->flushList(0, H, offset, &blocks);
   const size_t potential_start = H.size();
   potentialHessian(H, &blocks, offset, psd, true);
   H.insert(H.end(), potential.begin(), potential.end());
   return potential_start;
+}
+
+bool Simulable::hasApproximateHessian() const {
+  const Impl& m = *impl_;
+  // The schedule's form on one thread too (onTwoThreads runs both parts there).
+  return m.schedule && !m.is_static && m.schedule->hasApproximateHessians();
+}
+
+bool Simulable::getApproximateHessianTripletVector(std::vector<Triplet>& H,
+                                                   std::vector<FixedHessianBlocks>& blocks,
+                                                   int offset, size_t* potential_start) const {
+  const Impl& m = *impl_;
+  if (!hasApproximateHessian()) return false;
+  m.ensureContact();
+  std::vector<Triplet>& dynamic = m.hessian_scratch[0];
+  std::vector<Triplet>& potential = m.hessian_scratch[1];
+  dynamic.clear();
+  potential.clear();
+  if (!m.schedule->approximateHessians(m.context(), dynamic, potential, offset)) return false;
+  const size_t start = appendScheduledHessian(H, blocks, offset, false);
+  if (potential_start) *potential_start = start;
+  return true;
 }
 
 void Simulable::fixVectorKinematic(VecX& g, int offset) const {

@@ -7,8 +7,8 @@
 #include "flsh/contact/contact_energy.h"
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
-#include "flsh/sim/simulable.h"
 #include "flsh/energy/skeleton_energies.h"
+#include "flsh/sim/simulable.h"
 #include "sim/simulable_impl.h"
 
 namespace flsh {

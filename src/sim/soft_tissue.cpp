@@ -161,6 +161,22 @@ void SoftTissue::hessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
   });
 }
 
+bool SoftTissue::approximateHessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
+                                     std::vector<Triplet>& H_potential, int offset) const {
+  if (!hasApproximateHessians() || c.is_static) return false;
+  const bool contact = !c.colliders.empty() && !c.contact.candidates.empty();
+  if (contact) kin_.skinNodes(c.contact.candidates);
+  reducedHessians(
+      c.options.gravity, H_dynamic, H_potential, offset, false,
+      [&] {
+        if (contact)
+          contact_->evaluate(c.colliders, c.time, c.options.contact, nullptr, &H_potential, offset,
+                             false, nullptr, &c.contact.candidates, false);
+      },
+      true);
+  return true;
+}
+
 double SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
                                    const std::function<void(VecX&)>& potential_first) const {
   if (!reduced_elastic_) throw Error("SoftTissue::reducedGradient: the ROM only");
@@ -198,9 +214,17 @@ double SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
   return energies[0] + energies[1];
 }
 
+void SoftTissue::addConstantSoftBlock(const MatX& C, Mat3* values) const {
+  const int groups = kin_.numGroups();
+  for (int b = 0; b < groups; ++b)
+    for (int a = 0; a <= b; ++a)
+      if (kin_.zzSlot(a, b) >= 0) values[kin_.zzSlot(a, b)] += C.block<3, 3>(3 * a, 3 * b);
+}
+
 void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dynamic,
                                  std::vector<Triplet>& H_potential, int offset, bool psd,
-                                 const std::function<void()>& potential_first) const {
+                                 const std::function<void()>& potential_first,
+                                 bool approximate) const {
   if (!reduced_elastic_) throw Error("SoftTissue::reducedHessians: the ROM only");
   const ReducedElasticity& elastic = *reduced_elastic_;
   const int T = elastic.numElements();
@@ -208,14 +232,15 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
   onTwoThreads([&](int part) {
     kin_.beginList(part);
     if (part == 0) {
-      inertia_->hessianPart(0, H_dynamic, offset, psd);
+      inertia_->hessianPart(0, H_dynamic, offset, psd, approximate);
+      if (approximate) addConstantSoftBlock(inertia_->constantSoftBlock(), kin_.reducedValues(0));
     } else {
       if (potential_first) potential_first();
       Mat3* values = kin_.reducedValues(1);
       gravity_->reducedHessian(gravity, H_potential, offset, psd);
-      elastic.elements(0, T, nullptr, values, psd);
+      if (!approximate) elastic.elements(0, T, nullptr, values, psd);
       elastic.restStiffness(nullptr, values, 0);
-      inertia_->hessianPart(1, H_potential, offset, psd);
+      inertia_->hessianPart(1, H_potential, offset, psd, approximate);
     }
   });
   onTwoThreads([&](int list) { kin_.mirrorReduced(list, 0, 1); });

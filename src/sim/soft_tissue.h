@@ -99,6 +99,18 @@ class SoftTissue final : public TwoThreadSchedule {
   double gradient(const TermContext& c, VecX& g, int offset) const override;
   void hessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
                 std::vector<Triplet>& H_potential, int offset, bool psd) const override;
+  /// ROM with modes and the rest-stiffness split: hessians' exact form with a constant soft–soft
+  /// block K_r + C (the split's exact rest stiffness and NodalInertiaTerm::constantSoftBlock) in
+  /// place of the elastic tets' and inertia's soft–soft blocks; contact, gravity, the bones and
+  /// their coupling to the soft state stay exact. False (nothing evaluated) without the split.
+  bool approximateHessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
+                           std::vector<Triplet>& H_potential, int offset) const override;
+  /// Bases with modes only: the handle basis' exact Hessian is cheap (sparse φ), and factoring
+  /// its 405 DoFs at every iteration cost more than the PCG iterations on the lagged factor
+  /// (rom_benchmark 300, walk: 39–57 against 83–109 steps/s).
+  bool hasApproximateHessians() const override {
+    return reduced_elastic_ && reduced_elastic_->hasRestSplit() && kin_.numModes() > 0;
+  }
   /// ROM: inertia's, gravity's and the elastic term's gradients, and `potential_first`'s
   /// (e.g. contact, on nodes skinned before, with skin = false), added into g on two threads:
   /// inertia and gravity (one mapping of their summed node forces) with the first elastic tets
@@ -114,9 +126,13 @@ class SoftTissue final : public TwoThreadSchedule {
   /// into H_potential); a share of inertia's mass nodes is mapped on the second thread too
   /// (into list 1 and H_potential), to balance the two. Both lists come back mirrored
   /// (flushList then only hands them over).
+  /// Adds the upper group blocks of a soft–soft matrix (numSoftDofs²) into a value list.
+  void addConstantSoftBlock(const MatX& C, Mat3* values) const;
+  /// `approximate`: approximateHessians' form (exact, psd false, with the constant block).
   void reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dynamic,
                        std::vector<Triplet>& H_potential, int offset, bool psd,
-                       const std::function<void()>& potential_first) const;
+                       const std::function<void()>& potential_first,
+                       bool approximate = false) const;
 
   // ---- the held pose blend's share of the previous-state derivatives (the adjoint) ----
   // P = P(R_n) moves every node term's gradient through Y (node_offset_derivatives.h: inertia,

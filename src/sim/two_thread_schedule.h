@@ -21,6 +21,15 @@ class TwoThreadSchedule {
   /// 1 (mirrored: a flushList then only hands them over).
   virtual void hessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
                         std::vector<Triplet>& H_potential, int offset, bool psd) const = 0;
+  /// A cheaper positive-definite-in-the-soft-state approximation of hessians' exact form, in the
+  /// same layout (Simulable::getApproximateHessianTripletVector). False: the model has none
+  /// (nothing evaluated).
+  virtual bool approximateHessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
+                                   std::vector<Triplet>& H_potential, int offset) const {
+    return false;
+  }
+  /// Whether approximateHessians gives one (when not static).
+  virtual bool hasApproximateHessians() const { return false; }
 };
 
 }  // namespace flsh::detail

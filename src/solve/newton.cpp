@@ -50,6 +50,8 @@ void validate(const NewtonOptions& o) {
     bad("lagged.refactor_after_cg_iterations", "≥ 0", lag.refactor_after_cg_iterations);
   if (!(lag.reuse_hessian_below >= 0.0) || !std::isfinite(lag.reuse_hessian_below))
     bad("lagged.reuse_hessian_below", "finite and ≥ 0", lag.reuse_hessian_below);
+  if (!(o.approximate_max_ratio > 0.0 && o.approximate_max_ratio < 1.0))
+    bad("approximate_max_ratio", "in (0, 1)", o.approximate_max_ratio);
 }
 
 using Clock = std::chrono::steady_clock;
@@ -182,6 +184,7 @@ void NewtonResult::addCounts(const NewtonResult& other) {
   regularizations += other.regularizations;
   psd_fallbacks += other.psd_fallbacks;
   hessian_evaluations += other.hessian_evaluations;
+  approximate_directions += other.approximate_directions;
   hessian_reuses += other.hessian_reuses;
   factorizations += other.factorizations;
   cg_iterations += other.cg_iterations;
@@ -239,6 +242,9 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
   // factors the matrix it already assembled.
   int assembled_form = -1;
   bool reused_hessian = false;  // this iteration's PCG ran on the previous iterate's Hessian
+  // Directions from the objective's approximate Hessian while they converge fast.
+  bool use_approximation = options.approximate_hessian;
+  bool last_from_approximation = false;  // the accepted step of the previous iteration
 
   const auto evaluateHessian = [&](bool psd) {
     {
@@ -284,7 +290,11 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
       result.message = format("gradient tolerance reached (|g|inf = %.3g)", gradient_norm);
       break;
     }
-    if (iteration > 0 && last_step_norm <= options.step_tolerance) {
+    // A small step of the approximation's linear rate says little about the gradient: the
+    // exact directions decide.
+    if (iteration > 0 && last_step_norm <= options.step_tolerance && last_from_approximation)
+      use_approximation = false;
+    else if (iteration > 0 && last_step_norm <= options.step_tolerance) {
       result.converged = true;
       result.message = format("step tolerance reached (|step|inf = %.3g, |g|inf = %.3g)",
                               last_step_norm, gradient_norm);
@@ -296,12 +306,17 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
       break;
     }
     const double gradient_norm2 = g.norm();
+    if (last_from_approximation &&
+        gradient_norm2 > options.approximate_max_ratio * previous_gradient_norm2)
+      use_approximation = false;  // converging too slowly: the exact directions from here
+    last_from_approximation = false;
     // The state moved: H, if any, is of the previous iterate (its form, −1: none or shifted).
     const int previous_form = assembled_form;
     assembled_form = -1;
     // Near convergence PCG may run on that previous Hessian (a chord step), once in a row.
-    const bool may_reuse = lag.reuse_hessian_below > 0.0 && !reused_hessian && iteration > 0 &&
-                           gradient_norm <= lag.reuse_hessian_below * std::max(1.0, initial_gradient_norm);
+    const bool may_reuse =
+        lag.reuse_hessian_below > 0.0 && !reused_hessian && iteration > 0 &&
+        gradient_norm <= lag.reuse_hessian_below * std::max(1.0, initial_gradient_norm);
     reused_hessian = false;
     // An iteration that uses the PSD form although the exact one was asked counts once.
     bool counted_psd_fallback = false;
@@ -321,6 +336,7 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     for (int attempt = 0; attempt < 2 && !accepted; ++attempt) {
       bool have_direction = false;
       bool direction_from_cg = false;
+      bool direction_from_approximation = false;
       double diagonal_scale = 1.0;
       const auto scaleOfDiagonal = [&]() {
         diagonal_scale = 0.0;
@@ -329,9 +345,37 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
         if (!(diagonal_scale > 0.0) || !std::isfinite(diagonal_scale)) diagonal_scale = 1.0;
       };
 
+      // ---- The objective's approximate Hessian, factored and solved directly.
+      if (attempt == 0 && use_approximation) {
+        bool have_approximation = false;
+        {
+          ScopedSeconds timer(result.seconds_hessian);
+          have_approximation = objective.approximateHessian(H);
+          if (have_approximation) objective.fixKinematic(g, &H);
+        }
+        use_approximation = false;  // unless this direction works out
+        if (have_approximation) {
+          if (H.rows() != n || H.cols() != n)
+            throw Error("newtonSolve: Objective::approximateHessian returned " +
+                        shapeString({long(H.rows()), long(H.cols())}) + ", expected (" +
+                        std::to_string(n) + ", " + std::to_string(n) + ")");
+          ++result.approximate_directions;
+          diagonalPointers(H, diagonal);
+          assembled_form = -1;  // neither exact form
+          scaleOfDiagonal();
+          if (factorize()) {
+            solver->setFactorStale(false);
+            ScopedSeconds timer(result.seconds_solve);
+            dq = -g;
+            solver->solveInPlace(dq);
+            have_direction = direction_from_approximation = dq.allFinite() && g.dot(dq) < 0.0;
+          }
+        }
+      }
+
       // ---- Lagged factor: PCG on the current Hessian, preconditioned by an earlier factor.
-      if (attempt == 0 && lag.enabled && !solver->factorStale() && solver->hasFactor() &&
-          solver->factorRows() == n) {
+      if (!have_direction && attempt == 0 && lag.enabled && !solver->factorStale() &&
+          solver->hasFactor() && solver->factorRows() == n) {
         double forcing = lag.cg_relative_tolerance;
         if (lag.adaptive_forcing && iteration > 0)
           forcing = std::min(forcing, gradient_norm2 / previous_gradient_norm2);
@@ -444,6 +488,12 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
         if (trial >= options.max_line_search_steps) break;
         alpha *= 0.5;
         ++result.line_search_steps;
+      }
+      if (direction_from_approximation) {
+        // Kept while its full steps are accepted; a rejected one gets a second attempt.
+        use_approximation = accepted && alpha == 1.0;
+        last_from_approximation = accepted;
+        continue;
       }
       if (!direction_from_cg) break;  // a factored direction gets no second attempt
     }

@@ -42,6 +42,7 @@ NewtonOptions reducedNewtonDefaults() {
   // 4.07 instead of 4.04 Newton iterations, the same 0.0017 mm from a 1e-9 solve; 1e-3: 4.13
   // iterations, 3.53 assemblies.
   options.lagged.reuse_hessian_below = 1e-4;
+  options.approximate_hessian = true;  // the constant soft–soft block (Scene::approximateHessian)
   return options;
 }
 
@@ -231,6 +232,36 @@ void Scene::hessian(SpMat& H, bool psd) {
     rebuildHessianPattern();
     if (!fillHessian(H)) throw Error("Scene::hessian: the Hessian pattern misses an entry");
   }
+}
+
+bool Scene::approximateHessian(SpMat& H) {
+  if (!usesGeneralPattern()) return false;  // the skeleton's Hessian is cheap already
+  if (std::none_of(simulables_.begin(), simulables_.end(),
+                   [](const auto& s) { return s->hasApproximateHessian(); }))
+    return false;
+  triplets_.clear();
+  segment_end_.clear();
+  fixed_blocks_.clear();
+  bool any = false;
+  for (size_t i = 0; i < simulables_.size(); ++i) {
+    // Same segments as hessian(): the approximate form has the exact form's triplet layout.
+    size_t potential_start = 0;
+    if (simulables_[i]->getApproximateHessianTripletVector(triplets_, fixed_blocks_, offsets_[i],
+                                                           &potential_start)) {
+      any = true;
+    } else {
+      potential_start =
+          simulables_[i]->getHessianTripletVector(triplets_, fixed_blocks_, offsets_[i], false);
+    }
+    segment_end_.push_back(potential_start);
+    segment_end_.push_back(triplets_.size());
+  }
+  if (!any) return false;
+  if (avatarContactActive()) avatarContactEnergy(nullptr, &triplets_, false);
+  segment_end_.push_back(triplets_.size());
+  if (!general_) setUpGeneralPattern();
+  general_->assemble(triplets_, segment_end_, fixed_blocks_, num_dofs_, H);
+  return true;
 }
 
 // Writes the triplets into H with the fixed pattern (H takes the pattern if it has another

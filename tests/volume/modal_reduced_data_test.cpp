@@ -74,7 +74,9 @@ TEST(ModalReducedData, ModesAreWholeGroupsZeroOnBoneNodesAndMassOrthonormal) {
     const VecX nodes = inertialNodeMasses(volume(), exactCubature(volume().numTets()));
     for (int j = 0; j < volume().numNodes(); ++j) {
       masses.segment<3>(3 * j).setConstant(nodes[j]);
-      if (volume().bone_of_node[j] >= 0) EXPECT_TRUE(d.modes.middleRows<3>(3 * j).isZero(0.0));
+      if (volume().bone_of_node[j] >= 0) {
+        EXPECT_TRUE(d.modes.middleRows<3>(3 * j).isZero(0.0));
+      }
     }
     const MatX gram = d.modes.transpose() * masses.asDiagonal() * d.modes;
     EXPECT_LT((gram - MatX::Identity(24, 24)).cwiseAbs().maxCoeff(), 1e-8);

@@ -257,6 +257,18 @@ class Simulable {
   /// triplets and list, in another order) while their sum is the same up to round-off.
   size_t getHessianTripletVector(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>& blocks,
                                  int offset, bool psd) const;
+  /// A cheaper approximation of getHessianTripletVector's exact form in the same layout, for
+  /// Newton's directions (Objective::approximateHessian): the ROM with the rest-stiffness split
+  /// takes its soft–soft block as the constant K_r + Σ_j (m_j / h²) B_jᵀ B_j (the subspace's
+  /// exact rest stiffness and the mass-node Gram of the basis: exact where M_jᵀ M_j = I, i.e.
+  /// for the nodes one bone moves, and at rest) instead of the elastic tets' and inertia's
+  /// soft–soft blocks; the bones, their coupling to the soft state, gravity and contact stay
+  /// exact. Returns false (nothing appended) for models without one (skeleton, FEM, a ROM
+  /// without the split, a static simulable); else the index where the potential part starts.
+  bool hasApproximateHessian() const;
+  bool getApproximateHessianTripletVector(std::vector<Triplet>& H,
+                                          std::vector<FixedHessianBlocks>& blocks, int offset,
+                                          size_t* potential_start = nullptr) const;
   /// Makes kinematic rows/columns of the assembled H identity (drops their triplets and adds
   /// unit diagonals): call on the full triplet list before assembly.
   void fixMatrixKinematic(std::vector<Triplet>& H, int offset = 0) const;
@@ -365,6 +377,10 @@ class Simulable {
   /// (the ROM's value list; their bone triplets are the caller's to append).
   void potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
                         int offset, bool psd, bool soft_done = false) const;
+  /// ROM: appends the two-thread schedule's Hessian (in the scratch lists and value lists) and
+  /// the bones' springs; returns where the potential part starts.
+  size_t appendScheduledHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>& blocks,
+                                int offset, bool psd) const;
   /// The bones' springs (and, without soft tissue, the bones' gravity): gradient added, energy
   /// returned.
   double boneSpringGradient(VecX& g, int offset) const;

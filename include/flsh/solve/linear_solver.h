@@ -12,7 +12,7 @@
 namespace flsh {
 
 enum class LinearSolverType {
-  Auto,     ///< dense below `dense_threshold` unknowns, CHOLMOD above
+  Auto,  ///< dense below `dense_threshold` unknowns, CHOLMOD above
   /// Dense Cholesky (positive definite only): the factor in single precision with exact solves
   /// refined to double accuracy, or in double where single precision does not suffice.
   Dense,

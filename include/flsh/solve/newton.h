@@ -28,6 +28,11 @@ class Objective {
   /// (per-term projection / Gauss–Newton contact); false = exact. Newton asks for the exact one
   /// first (NewtonOptions::exact_hessian) and for the PSD one when that is not positive definite.
   virtual void hessian(SpMat& H, bool psd) = 0;
+  /// A cheaper approximation of the Hessian (full storage, positive definite where the model
+  /// is; e.g. the ROM's constant soft–soft block), for Newton's directions while they converge
+  /// fast (NewtonOptions::approximate_hessian). Returns false when the objective has none (the
+  /// default; H untouched).
+  virtual bool approximateHessian(SpMat& H) { return false; }
   virtual void step(const VecX& dq) = 0;
   virtual void push() = 0;
   virtual void pop() = 0;
@@ -121,6 +126,19 @@ struct NewtonOptions {
   /// quadratically: ~3.2 instead of ~4.2 iterations per walking step at the same tolerance, and
   /// 5 instead of 18 for a 1e-13 solve. false: always the PSD form.
   bool exact_hessian = true;
+  /// Directions from Objective::approximateHessian while they converge fast: each iteration
+  /// factors the approximation and solves with it directly (the energy and gradient stay exact,
+  /// so the step converges to the same minimum, at a linear rate). The rest of the solve takes
+  /// the directions above (exact form, lagged factor) from the first iteration where the
+  /// approximation's step was cut by the line search, its factorization failed, or ‖g‖₂ shrank
+  /// by less than approximate_max_ratio; with the lag its factor then preconditions PCG. A step
+  /// of the approximation below step_tolerance does not end the solve (its rate is linear): the
+  /// exact directions follow. Off by
+  /// default; SceneOptions::reduced_newton turns it on (the ROM's constant soft–soft block).
+  bool approximate_hessian = false;
+  /// Largest ‖g_{k+1}‖₂ / ‖g_k‖₂ (in (0, 1)) after an approximate direction that keeps using
+  /// the approximation.
+  double approximate_max_ratio = 0.5;
   /// Lagged factor + PCG (off by default: every iteration factors).
   LaggedFactorOptions lagged;
 };
@@ -137,6 +155,9 @@ struct NewtonResult {
   /// factor, which is then always of the PSD form.
   int psd_fallbacks = 0;
   int hessian_evaluations = 0;  ///< Objective::hessian calls (either form)
+  /// Iterations whose direction came from Objective::approximateHessian (its calls count here,
+  /// not in hessian_evaluations; their time in seconds_hessian).
+  int approximate_directions = 0;
   /// Iterations whose PCG ran on the previous iterate's Hessian (lagged.reuse_hessian_below).
   int hessian_reuses = 0;
   /// Numeric factorizations in this call (regularization retries included).

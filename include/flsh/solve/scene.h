@@ -56,6 +56,9 @@ struct SceneOptions {
   /// ends 1.2 mm (10 % of the displacement) from a 1e-9 solve at the same speed where this ends
   /// 0.025 mm from it (docs/benchmarks.md). lagged.reuse_hessian_below = 1e-4: 12 % fewer
   /// Hessian assemblies on the walk for 1 % more iterations, the same distance from a 1e-9 solve.
+  /// approximate_hessian = true: directions from the ROM's constant soft–soft block
+  /// (Simulable::getApproximateHessianTripletVector) while they shrink the gradient fast, the
+  /// exact form after (docs/rom.md "The approximate Hessian").
   NewtonOptions reduced_newton = reducedNewtonDefaults();
   /// Assemble the Hessian on the general pattern (HessianAssembler) even when no simulable has
   /// soft tissue. The skeleton then gets bitwise the same Hessians and states (its general
@@ -135,6 +138,10 @@ class Scene : public Objective {
   /// Both in one pass per simulable (Simulable::getEnergyAndGradientVector).
   bool energyAndGradient(double& energy, VecX& g) override;
   void hessian(SpMat& H, bool psd) override;
+  /// The exact form with each simulable's approximation where it has one
+  /// (Simulable::getApproximateHessianTripletVector: the ROM's constant soft–soft block); false
+  /// (H untouched) when none has.
+  bool approximateHessian(SpMat& H) override;
   void step(const VecX& dq) override;
   void push() override;
   void pop() override;
@@ -169,8 +176,8 @@ class Scene : public Objective {
   int num_dofs_ = 0;
   int last_solver_dofs_ = -1;
   LinearSolverType solver_type_ = LinearSolverType::Auto;  // of solver_ (resolved)
-  int stack_depth_ = 0;            // push() levels not yet popped
-  std::vector<Triplet> triplets_;  // Hessian assembly buffer, reused
+  int stack_depth_ = 0;                                    // push() levels not yet popped
+  std::vector<Triplet> triplets_;                          // Hessian assembly buffer, reused
   std::vector<FixedHessianBlocks> fixed_blocks_;  // the simulables' block lists, with triplets_
   // Fixed Hessian pattern of whole 6 × 6 bone blocks, a superset of every evaluation's
   // (all bone pairs that share a vertex, so collider contacts never change it): assembly

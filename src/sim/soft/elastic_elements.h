@@ -166,6 +166,8 @@ class ReducedElasticity {
   virtual double elements(int first, int last, double* gz, Mat3* values, bool psd) const = 0;
   /// ½ zᵀ K z of the rest-stiffness split (0 without it), its gradient and Hessian blocks.
   virtual double restStiffness(VecX* g, Mat3* values, int offset) const = 0;
+  /// Whether the term has the rest-stiffness split (K the exact rest stiffness of the subspace).
+  virtual bool hasRestSplit() const = 0;
   /// Sample tets whose rest-split excess is in its bounded branch at the current state.
   virtual int boundedSamples() const = 0;
 

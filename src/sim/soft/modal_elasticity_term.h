@@ -38,6 +38,7 @@ class ModalElasticityTerm final : public ElasticityTerm, public ReducedElasticit
   double elements(int first, int last, double* gz, Mat3* values, bool psd) const override;
   int boundedSamples() const override;
   double restStiffness(VecX* g, Mat3* values, int offset) const override;
+  bool hasRestSplit() const override { return rest_stiffness_.size() > 0; }
 
  protected:
   int numMaterialElements() const override;

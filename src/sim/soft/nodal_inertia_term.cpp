@@ -63,7 +63,8 @@ double NodalInertiaTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, 
   return E;
 }
 
-void NodalInertiaTerm::hessianPart(int part, std::vector<Triplet>& H, int offset, bool psd) const {
+void NodalInertiaTerm::hessianPart(int part, std::vector<Triplet>& H, int offset, bool psd,
+                                   bool approximate) const {
   const double k = 1.0 / (h_ * h_);
   const std::vector<int>& nodes = parts_[part];
   const MatX3& x = kin_.x();
@@ -76,7 +77,33 @@ void NodalInertiaTerm::hessianPart(int part, std::vector<Triplet>& H, int offset
     kappa[idx] = k * masses_.mass[j];
     if (!psd) forces[idx] = kappa[idx] * (x.row(j) - x_hat_.row(j)).transpose();
   }
-  kin_.mapHessian(nodes, nullptr, psd ? nullptr : &forces, H, offset, psd, part, nullptr, &kappa);
+  kin_.mapHessian(nodes, nullptr, psd ? nullptr : &forces, H, offset, psd, part, nullptr, &kappa,
+                  !approximate);
+}
+
+const MatX& NodalInertiaTerm::constantSoftBlock() const {
+  const std::vector<int>& nodes = masses_.nodes;
+  bool current = constant_of_.size() == nodes.size();
+  for (size_t idx = 0; current && idx < nodes.size(); ++idx)
+    current = constant_of_[idx] == masses_.mass[nodes[idx]];
+  if (current) return constant_soft_;
+  const int m = kin_.numSoftDofs();
+  const double k = 1.0 / (h_ * h_);
+  constant_soft_.setZero(m, m);
+  constant_of_.resize(nodes.size());
+  std::vector<std::pair<int, Mat3>> basis;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> B_t(m, 3);  // B_jᵀ
+  for (size_t idx = 0; idx < nodes.size(); ++idx) {
+    const int j = nodes[idx];
+    constant_of_[idx] = masses_.mass[j];
+    kin_.displacementBasis(j, basis);
+    if (basis.empty()) continue;
+    B_t.setZero();
+    for (const auto& [offset, block] : basis) B_t.middleRows<3>(offset) += block.transpose();
+    constant_soft_.selfadjointView<Eigen::Upper>().rankUpdate(B_t, k * masses_.mass[j]);
+  }
+  constant_soft_.triangularView<Eigen::StrictlyLower>() = constant_soft_.transpose();
+  return constant_soft_;
 }
 
 // g = Σ_j J_jᵀ f_j, f_j = κ_j (x_j − x̂_j), κ_j = m_j / h². The rest joint J_b moves x_j by

@@ -67,8 +67,15 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                   FixedHessianBlocks* blocks = nullptr) const;
   /// ROM: the Hessian of one share of the mass nodes (see kShareBesidePotential) into value list
-  /// `part` (bone triplets into H).
-  void hessianPart(int part, std::vector<Triplet>& H, int offset, bool psd) const;
+  /// `part` (bone triplets into H). `approximate`: the exact form without the soft–soft blocks
+  /// κ_j B_jᵀ M_jᵀ M_j B_j, which part 0 replaces by constantSoftBlock() (see there).
+  void hessianPart(int part, std::vector<Triplet>& H, int offset, bool psd,
+                   bool approximate = false) const;
+  /// ROM: C = Σ_j κ_j B_jᵀ B_j over the mass nodes (numSoftDofs² dense, B_j node j's row of the
+  /// basis, κ_j = m_j / h²): the soft–soft block of the Hessian where M_jᵀ M_j = I, exact for
+  /// the nodes one bone moves and a constant. Computed on first use and again when the masses
+  /// change (a material).
+  const MatX& constantSoftBlock() const;
 
  private:
   /// visit(j, κ_j, f_j, point) for every mass node j: κ_j = m_j / h², its force
@@ -87,6 +94,8 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   mutable std::vector<Mat3> fixed_;
   mutable std::vector<double> part_scalars_[2];
   mutable std::vector<Vec3> part_forces_[2];
+  mutable MatX constant_soft_;               // constantSoftBlock()
+  mutable std::vector<double> constant_of_;  // the mass nodes' masses it was computed with
 };
 
 }  // namespace flsh::detail

@@ -38,6 +38,7 @@ class ReducedElasticityTerm final : public ElasticityTerm, public ReducedElastic
   int boundedSamples() const override;
   /// ½ zᵀ K z (0 without the elastic cubature), its gradient and Hessian blocks.
   double restStiffness(VecX* g, Mat3* values, int offset) const override;
+  bool hasRestSplit() const override { return rest_stiffness_.size() > 0; }
 
  protected:
   // Material elements: the sample tets (their excess under the split, or their weighted energy

@@ -141,9 +141,9 @@ SoftKinematics::SoftKinematics(const SoftAvatar& avatar, const MatX3& joints,
     phi_sum_ = VecX::Zero(num_surface_);
     for (int i = 0; i < num_surface_; ++i)
       for (int k = phi_start_[i]; k < phi_start_[i + 1]; ++k) phi_sum_[i] += phi_[k].second;
+    mode_norm_ = VecX::Zero(num_surface_);
     for (int i = 0; i < num_surface_ && num_modes_ > 0; ++i)
-      for (int g = 0; g < num_modes_ / 3; ++g)
-        phi_sum_[i] += modeRows(i).middleCols<3>(3 * g).norm();
+      if (node_dof_[i] >= 0) mode_norm_[i] = modeRows(i).norm();
   }
 }
 
@@ -324,28 +324,36 @@ double SoftKinematics::displacementWeight(int i) const {
   return phi_sum_[i];
 }
 
+double SoftKinematics::modeNorm(int i) const {
+  return reduced_ && num_modes_ > 0 ? mode_norm_[i] : 0.0;
+}
+
 double SoftKinematics::largestSoftState() const {
   double largest = 0.0;
-  for (Eigen::Index k = 0; k + 2 < u.size(); k += 3)
-    largest = std::max(largest, u.segment<3>(k).norm());
+  const Eigen::Index end = reduced_ ? 3 * num_handles_ : u.size();
+  for (Eigen::Index k = 0; k + 2 < end; k += 3) largest = std::max(largest, u.segment<3>(k).norm());
   return largest;
 }
 
 void SoftKinematics::setContactBones(const std::vector<std::vector<int>>& dominated) {
   bone_blend_bound_.assign(size_t(num_bones_), 0.0);
   bone_weight_bound_.assign(size_t(num_bones_), 0.0);
+  bone_mode_bound_.assign(size_t(num_bones_), 0.0);
   for (int b = 0; b < num_bones_ && b < int(dominated.size()); ++b)
     for (int i : dominated[size_t(b)]) {
       bone_blend_bound_[size_t(b)] = std::max(bone_blend_bound_[size_t(b)], blendBound(i));
       bone_weight_bound_[size_t(b)] =
           std::max(bone_weight_bound_[size_t(b)], displacementWeight(i));
+      bone_mode_bound_[size_t(b)] = std::max(bone_mode_bound_[size_t(b)], modeNorm(i));
     }
 }
 
 void SoftKinematics::contactMargins(double* margin) const {
   const double feature = poseFeatureNorm(), largest = largestSoftState();
+  const double modes = num_modes_ > 0 ? u.tail(num_modes_).norm() : 0.0;
   for (int b = 0; b < num_bones_; ++b)
-    margin[b] = bone_blend_bound_[size_t(b)] * feature + bone_weight_bound_[size_t(b)] * largest;
+    margin[b] = bone_blend_bound_[size_t(b)] * feature + bone_weight_bound_[size_t(b)] * largest +
+                bone_mode_bound_[size_t(b)] * modes;
 }
 
 void SoftKinematics::boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const {
@@ -442,8 +450,13 @@ void SoftKinematics::addSoftGradient(VecX& g, int offset, int j, const Vec3& v) 
   }
   for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
     g.segment<3>(base + 3 * phi_[k].first) += phi_[k].second * v;
-  if (num_modes_ > 0 && node_dof_[j] >= 0)
-    g.segment(base + 3 * num_handles_, num_modes_).noalias() += modeRows(j).transpose() * v;
+  if (num_modes_ > 0 && node_dof_[j] >= 0) {
+    // Ψ_jᵀ v as three axpys of Ψ_j's contiguous rows.
+    const double* row = modes_.data() + size_t(3) * size_t(num_modes_) * size_t(j);
+    Eigen::Map<VecX> out(g.data() + base + 3 * num_handles_, num_modes_);
+    for (int c = 0; c < 3; ++c)
+      out += v[c] * Eigen::Map<const VecX>(row + c * num_modes_, num_modes_);
+  }
 }
 
 template <int Rows>
@@ -463,11 +476,15 @@ void SoftKinematics::addBoneSoft(std::vector<Triplet>& H, int offset, int row, i
       values[bz_slot_[size_t((row + r) / 3) * groups + size_t(phi_[k].first)]] +=
           phi_[k].second * B.template middleRows<3>(r);
   if (num_modes_ == 0 || node_dof_[j] < 0) return;
+  // Fixed-size 3 × 3 products per group (no 3 × r temporary per node and row block).
   const auto Psi = modeRows(j);
   for (int r = 0; r < Rows; r += 3) {
-    const Eigen::Matrix<double, 3, Eigen::Dynamic> BPsi = B.template middleRows<3>(r) * Psi;
+    const Mat3 Br = B.template middleRows<3>(r);
     const int* slots = &bz_slot_[size_t((row + r) / 3) * groups + size_t(num_handles_)];
-    for (int g = 0; g < num_modes_ / 3; ++g) values[slots[g]] += BPsi.middleCols<3>(3 * g);
+    for (int g = 0; g < num_modes_ / 3; ++g) {
+      const Mat3 Psi_g = Psi.middleCols<3>(3 * g);
+      values[slots[g]].noalias() += Br * Psi_g;
+    }
   }
 }
 
@@ -601,7 +618,7 @@ void SoftKinematics::surfaceForces(const MatX3& forces, VecX& g) const {
 void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                                 const std::vector<Vec3>* forces, std::vector<Triplet>& H,
                                 int offset, bool psd, int list, std::vector<Mat3>* fixed,
-                                const std::vector<double>* K_scalar) const {
+                                const std::vector<double>* K_scalar, bool soft_soft) const {
   if (fixed) fixed->assign(coupling_dofs_.size(), Mat3::Zero());
   const std::vector<Mat3>& R = *cur_R_;
   BonePairBlocks& pair_blocks = pair_blocks_[size_t(list)];
@@ -653,11 +670,13 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
           coupling[a].topRows<3>() += ka * M;
           coupling[a].bottomRows<3>().noalias() += ka * (skew(lever[a]) * M);
         }
-        const Mat3 MtKM = kappa * (M.transpose() * M);
-        if (fixed)
-          (*fixed)[size_t(coupling_start_[idx + 1]) - 1] = MtKM;
-        else
-          addSoftSoft(H, offset, j, MtKM, list);
+        if (soft_soft) {
+          const Mat3 MtKM = kappa * (M.transpose() * M);
+          if (fixed)
+            (*fixed)[size_t(coupling_start_[idx + 1]) - 1] = MtKM;
+          else
+            addSoftSoft(H, offset, j, MtKM, list);
+        }
       }
     } else if (K) {
       const Mat3& Kj = (*K)[idx];
@@ -670,7 +689,7 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
         for (int a = 0; a < count; ++a) coupling[a].noalias() += Jb[a].transpose() * KM;
         if (fixed)
           (*fixed)[size_t(coupling_start_[idx + 1]) - 1].noalias() = node_M_[j].transpose() * KM;
-        else
+        else if (soft_soft)
           addSoftSoft(H, offset, j, node_M_[j].transpose() * KM, list);
       }
     }

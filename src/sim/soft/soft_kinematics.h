@@ -110,23 +110,35 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
     Vec3 d = Vec3::Zero();
     for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
       d += phi_[k].second * state.segment<3>(3 * phi_[k].first);
-    if (num_modes_ > 0 && node_dof_[j] >= 0)
-      d.noalias() += modeRows(j) * state.segment(3 * num_handles_, num_modes_);
+    if (num_modes_ > 0 && node_dof_[j] >= 0) d += modalDisplacement(state, j);
     return d;
+  }
+  /// Ψ_j z_modes (ROM with modes): three dot products of Ψ_j's contiguous rows.
+  Vec3 modalDisplacement(const VecX& state, int j) const {
+    const double* row = modes_.data() + size_t(3) * size_t(num_modes_) * size_t(j);
+    const Eigen::Map<const VecX> z(state.data() + 3 * num_handles_, num_modes_);
+    return {Eigen::Map<const VecX>(row, num_modes_).dot(z),
+            Eigen::Map<const VecX>(row + num_modes_, num_modes_).dot(z),
+            Eigen::Map<const VecX>(row + 2 * num_modes_, num_modes_).dot(z)};
   }
   /// ∂u_j/∂(soft state) as (state offset, 3 × 3 block) pairs: u_j = Σ block ·
   /// state.segment<3>(offset) (FEM: the identity at u_j's entries; ROM: φ_h(j) I per handle,
   /// then Ψ_j's blocks of three columns).
   void displacementBasis(int j, std::vector<std::pair<int, Mat3>>& out) const;
-  /// Σ of node i's basis weights and of its modal blocks' Frobenius norms (1 or 0 in the FEM),
-  /// for the contact broad phase: ‖u_i‖ ≤ displacementWeight(i) · largestSoftState().
+  /// Σ of node i's handle weights φ_h(i) (1 or 0 in the FEM),
+  /// for the contact broad phase: ‖u_i‖ ≤ displacementWeight(i) · largestSoftState() +
+  /// modeNorm(i) · ‖z_modes‖₂.
   double displacementWeight(int i) const;
-  double largestSoftState() const;  ///< max over the 3-blocks of the soft state of ‖·‖, m
+  /// ‖Ψ_i‖_F (ROM with modes; 0 otherwise): ‖Ψ_i z_modes‖ ≤ modeNorm(i) ‖z_modes‖₂.
+  double modeNorm(int i) const;
+  /// max over the 3-blocks of the soft state of ‖·‖ (ROM: the handles' blocks), m
+  double largestSoftState() const;
   /// Sets the surface nodes each bone dominates (SkinnedSurface::dominated) for contactMargins:
   /// per bone the largest blendBound and displacementWeight of its nodes.
   void setContactBones(const std::vector<std::vector<int>>& dominated);
   /// Per bone: max blendBound · poseFeatureNorm() + max displacementWeight ·
-  /// largestSoftState() over the surface nodes it dominates (≥ ‖Y_i − X̄_i‖ there).
+  /// largestSoftState() + max modeNorm · ‖z_modes‖₂ over the surface nodes it dominates
+  /// (≥ ‖Y_i − X̄_i‖ there).
   void contactMargins(double* margin) const override;
 
   // ---- pose blend ----
@@ -204,10 +216,12 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// node-diagonal blocks go into it, laid out as couplingPositions(), instead of into H.
   /// `list`: the ROM value list and the scratch to use (0: inertia, 1: the potential terms).
   /// `K_scalar` (instead of K, which is then null): K_j = K_scalar[idx] · I (inertia).
+  /// `soft_soft` false leaves out the soft–soft blocks M_jᵀ K_j M_j (a caller that adds a
+  /// constant in their place: NodalInertiaTerm's approximate form).
   void mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                   const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset, bool psd,
                   int list, std::vector<Mat3>* fixed = nullptr,
-                  const std::vector<double>* K_scalar = nullptr) const;
+                  const std::vector<double>* K_scalar = nullptr, bool soft_soft = true) const;
   /// g(u_j) += v (FEM: into u_j's entries; ROM: through φ into z).
   void addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const;
   /// H(u_j, u_j) += B (symmetric). FEM: a triplet block; ROM: into value list `list`.
@@ -270,8 +284,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   std::vector<int> blend_slot_;
   VecX blend_bound_;  // #V
   // Per bone: the largest blend_bound_ and displacementWeight of its dominated surface nodes.
-  std::vector<double> bone_blend_bound_, bone_weight_bound_;
-  VecX phi_sum_;  // #V (ROM): Σ_h φ_h(i) + Σ_g ‖Ψ_ig‖_F
+  std::vector<double> bone_blend_bound_, bone_weight_bound_, bone_mode_bound_;
+  VecX phi_sum_;    // #V (ROM): Σ_h φ_h(i)
+  VecX mode_norm_;  // #V (ROM with modes): ‖Ψ_i‖_F
   VecXi state_nodes_;
   std::vector<int> node_dof_;  // FEM layout: 3 · (rank among soft nodes), −1 on bone nodes
   // ROM: u_j = Σ φ z_h over phi_[phi_start_[j] .. phi_start_[j + 1]) as (handle, φ); the

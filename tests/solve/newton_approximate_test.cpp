@@ -1,0 +1,174 @@
+// Newton with directions from Objective::approximateHessian (NewtonOptions::approximate_hessian):
+// a stiffening convex objective whose approximation is its constant quadratic part converges to
+// the exact minimum; a poor or indefinite approximation hands over to the exact directions; an
+// objective without one is solved exactly as with the option off.
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "flsh/core/error.h"
+#include "flsh/solve/newton.h"
+#include "support/test_support.h"
+
+namespace flsh {
+namespace {
+
+/// E(x) = ½ xᵀ A x − bᵀ x + c Σ x_i⁴ (convex, stiffening away from 0); the approximate Hessian
+/// is `scale` · A (A: the exact Hessian at x = 0), when `has_approximation`.
+class Stiffening : public Objective {
+ public:
+  Stiffening(int n, double c, unsigned seed) : c_(c) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<double> gauss(0.0, 1.0);
+    MatX B(n, n);
+    b_.resize(n);
+    for (int i = 0; i < n; ++i) {
+      b_[i] = 3.0 * gauss(rng);
+      for (int j = 0; j < n; ++j) B(i, j) = gauss(rng);
+    }
+    A_ = B.transpose() * B / n + MatX::Identity(n, n);
+    x = VecX::Zero(n);
+  }
+
+  int numDofs() const override { return int(x.size()); }
+  double energy() override { return 0.5 * x.dot(A_ * x) - b_.dot(x) + c_ * x.array().pow(4).sum(); }
+  void gradient(VecX& g) override { g = A_ * x - b_ + VecX(4.0 * c_ * x.array().pow(3)); }
+  void hessian(SpMat& H, bool) override {
+    ++exact_hessians;
+    H = (A_ + MatX(VecX(12.0 * c_ * x.array().square()).asDiagonal())).sparseView();
+  }
+  bool approximateHessian(SpMat& H) override {
+    if (!has_approximation) return false;
+    ++approximations;
+    H = (scale * A_).sparseView();
+    return true;
+  }
+  void step(const VecX& dq) override { x += dq; }
+  void push() override { stack_.push_back(x); }
+  void pop() override {
+    x = stack_.back();
+    stack_.pop_back();
+  }
+
+  VecX x;
+  bool has_approximation = true;
+  double scale = 1.0;
+  int exact_hessians = 0, approximations = 0;
+
+ private:
+  MatX A_;
+  VecX b_;
+  double c_;
+  std::vector<VecX> stack_;
+};
+
+NewtonOptions tight(bool approximate) {
+  NewtonOptions o;
+  o.gradient_tolerance = 1e-11;
+  o.max_iterations = 200;
+  o.approximate_hessian = approximate;
+  return o;
+}
+
+// The reference: plain Newton on the exact Hessian.
+VecX exactMinimum(double c) {
+  Stiffening f(20, c, 7);
+  f.has_approximation = false;
+  const NewtonResult r = newtonSolve(f, tight(false));
+  EXPECT_TRUE(r.converged) << r.message;
+  return f.x;
+}
+
+TEST(NewtonApproximate, ConvergesToTheExactMinimumOnTheApproximation) {
+  const double c = 1e-3;  // mild stiffening: the constant part is a good approximation
+  const VecX expected = exactMinimum(c);
+  Stiffening f(20, c, 7);
+  const NewtonResult r = newtonSolve(f, tight(true));
+  ASSERT_TRUE(r.converged) << r.message;
+  EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-9);
+  EXPECT_GT(r.approximate_directions, 2);
+  EXPECT_EQ(r.approximate_directions, f.approximations);
+  EXPECT_EQ(r.hessian_evaluations, f.exact_hessians);
+  // While the approximation converges fast enough, no exact Hessian is assembled.
+  EXPECT_LT(f.exact_hessians, r.iterations);
+}
+
+TEST(NewtonApproximate, APoorApproximationHandsOverToTheExactDirections) {
+  const double c = 0.01;
+  const VecX expected = exactMinimum(c);
+  // 50× too stiff: its full steps are accepted but shrink the gradient by ~2 % only.
+  Stiffening f(20, c, 7);
+  f.scale = 50.0;
+  const NewtonResult r = newtonSolve(f, tight(true));
+  ASSERT_TRUE(r.converged) << r.message;
+  EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-9);
+  EXPECT_EQ(r.approximate_directions, 1);  // one slow step, then the exact ones
+  EXPECT_GT(f.exact_hessians, 0);
+}
+
+TEST(NewtonApproximate, ASmallApproximateStepDoesNotEndTheSolve) {
+  // 1e8× too stiff: the first step is ~1e-8 of the distance, below step_tolerance, which ends a
+  // solve of exact directions but not of the approximation's linear rate.
+  const double c = 0.01;
+  const VecX expected = exactMinimum(c);
+  Stiffening f(20, c, 7);
+  f.scale = 1e8;
+  NewtonOptions o = tight(true);
+  o.step_tolerance = 1e-6;
+  const NewtonResult r = newtonSolve(f, o);
+  ASSERT_TRUE(r.converged) << r.message;
+  EXPECT_LE(r.gradient_norm, o.gradient_tolerance * 10.0) << r.message;
+  EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-6);
+  EXPECT_EQ(r.approximate_directions, 1);
+}
+
+TEST(NewtonApproximate, AnIndefiniteApproximationHandsOverToTheExactDirections) {
+  const double c = 0.01;
+  const VecX expected = exactMinimum(c);
+  Stiffening f(20, c, 7);
+  f.scale = -1.0;  // its factorization fails
+  const NewtonResult r = newtonSolve(f, tight(true));
+  ASSERT_TRUE(r.converged) << r.message;
+  EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-9);
+  EXPECT_EQ(r.approximate_directions, 1);
+  EXPECT_GT(f.exact_hessians, 0);
+}
+
+TEST(NewtonApproximate, StrongStiffeningStillConverges) {
+  // The quartic dominates: the approximation's steps overshoot, the line search cuts them and
+  // the exact directions take over.
+  const double c = 10.0;
+  const VecX expected = exactMinimum(c);
+  Stiffening f(20, c, 7);
+  const NewtonResult r = newtonSolve(f, tight(true));
+  ASSERT_TRUE(r.converged) << r.message;
+  EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-9);
+  EXPECT_GE(r.approximate_directions, 1);
+  EXPECT_GT(f.exact_hessians, 0);
+}
+
+TEST(NewtonApproximate, WithoutAnApproximationTheOptionChangesNothing) {
+  Stiffening on(20, 0.5, 9), off(20, 0.5, 9);
+  on.has_approximation = off.has_approximation = false;
+  const NewtonResult a = newtonSolve(on, tight(true));
+  const NewtonResult b = newtonSolve(off, tight(false));
+  ASSERT_TRUE(a.converged) << a.message;
+  EXPECT_EQ(a.approximate_directions, 0);
+  EXPECT_EQ(a.iterations, b.iterations);
+  EXPECT_EQ(on.x, off.x);
+}
+
+TEST(NewtonApproximate, RefusesARatioOutsideZeroOne) {
+  Stiffening f(4, 0.1, 3);
+  for (double ratio : {0.0, 1.0, -0.5, std::nan("")}) {
+    NewtonOptions o = tight(true);
+    o.approximate_max_ratio = ratio;
+    EXPECT_THROW(newtonSolve(f, o), InputError) << ratio;
+  }
+}
+
+}  // namespace
+}  // namespace flsh

@@ -96,58 +96,52 @@ TEST(NewtonApproximate, ConvergesToTheExactMinimumOnTheApproximation) {
   EXPECT_LT(f.exact_hessians, r.iterations);
 }
 
-TEST(NewtonApproximate, APoorApproximationHandsOverToTheExactDirections) {
-  const double c = 0.01;
+// Solves the objective (stiffening c, approximation `scale` · A) with the approximation on and
+// checks that it reaches the exact minimum; returns the result and the exact Hessians assembled.
+struct HandOver {
+  NewtonResult result;
+  int exact_hessians = 0;
+};
+HandOver solveWithApproximation(double c, double scale, double step_tolerance = 1e-9) {
   const VecX expected = exactMinimum(c);
-  // 50× too stiff: its full steps are accepted but shrink the gradient by ~2 % only.
   Stiffening f(20, c, 7);
-  f.scale = 50.0;
-  const NewtonResult r = newtonSolve(f, tight(true));
-  ASSERT_TRUE(r.converged) << r.message;
+  f.scale = scale;
+  NewtonOptions o = tight(true);
+  o.step_tolerance = step_tolerance;
+  HandOver h{newtonSolve(f, o), 0};
+  h.exact_hessians = f.exact_hessians;
+  EXPECT_TRUE(h.result.converged) << h.result.message;
+  EXPECT_LE(h.result.gradient_norm, 10.0 * o.gradient_tolerance) << h.result.message;
   EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-9);
-  EXPECT_EQ(r.approximate_directions, 1);  // one slow step, then the exact ones
-  EXPECT_GT(f.exact_hessians, 0);
+  return h;
+}
+
+TEST(NewtonApproximate, APoorApproximationHandsOverToTheExactDirections) {
+  // 50× too stiff: its full steps are accepted but shrink the gradient by ~2 % only.
+  const HandOver h = solveWithApproximation(0.01, 50.0);
+  EXPECT_EQ(h.result.approximate_directions, 1);  // one slow step, then the exact ones
+  EXPECT_GT(h.exact_hessians, 0);
 }
 
 TEST(NewtonApproximate, ASmallApproximateStepDoesNotEndTheSolve) {
   // 1e8× too stiff: the first step is ~1e-8 of the distance, below step_tolerance, which ends a
   // solve of exact directions but not of the approximation's linear rate.
-  const double c = 0.01;
-  const VecX expected = exactMinimum(c);
-  Stiffening f(20, c, 7);
-  f.scale = 1e8;
-  NewtonOptions o = tight(true);
-  o.step_tolerance = 1e-6;
-  const NewtonResult r = newtonSolve(f, o);
-  ASSERT_TRUE(r.converged) << r.message;
-  EXPECT_LE(r.gradient_norm, o.gradient_tolerance * 10.0) << r.message;
-  EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-6);
-  EXPECT_EQ(r.approximate_directions, 1);
+  const HandOver h = solveWithApproximation(0.01, 1e8, 1e-6);
+  EXPECT_EQ(h.result.approximate_directions, 1);
 }
 
 TEST(NewtonApproximate, AnIndefiniteApproximationHandsOverToTheExactDirections) {
-  const double c = 0.01;
-  const VecX expected = exactMinimum(c);
-  Stiffening f(20, c, 7);
-  f.scale = -1.0;  // its factorization fails
-  const NewtonResult r = newtonSolve(f, tight(true));
-  ASSERT_TRUE(r.converged) << r.message;
-  EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-9);
-  EXPECT_EQ(r.approximate_directions, 1);
-  EXPECT_GT(f.exact_hessians, 0);
+  const HandOver h = solveWithApproximation(0.01, -1.0);  // its factorization fails
+  EXPECT_EQ(h.result.approximate_directions, 1);
+  EXPECT_GT(h.exact_hessians, 0);
 }
 
 TEST(NewtonApproximate, StrongStiffeningStillConverges) {
   // The quartic dominates: the approximation's steps overshoot, the line search cuts them and
   // the exact directions take over.
-  const double c = 10.0;
-  const VecX expected = exactMinimum(c);
-  Stiffening f(20, c, 7);
-  const NewtonResult r = newtonSolve(f, tight(true));
-  ASSERT_TRUE(r.converged) << r.message;
-  EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-9);
-  EXPECT_GE(r.approximate_directions, 1);
-  EXPECT_GT(f.exact_hessians, 0);
+  const HandOver h = solveWithApproximation(10.0, 1.0);
+  EXPECT_GE(h.result.approximate_directions, 1);
+  EXPECT_GT(h.exact_hessians, 0);
 }
 
 TEST(NewtonApproximate, WithoutAnApproximationTheOptionChangesNothing) {

@@ -34,7 +34,7 @@
 //   --no-lag: factor every Newton iteration (no lagged-factor PCG) for comparison;
 //   --no-approximation: no directions from the constant soft–soft block (NewtonOptions::
 //                       approximate_hessian off); --approximate-ratio R: its
-//                       approximate_max_ratio;
+//                       approximate_max_ratio; --no-reuse: approximate_reuse off;
 //   --materials: the soft models' material file (docs/materials.md; default: the built-in one);
 //   --inertia-floor: SimulableOptions::tracking_inertia_floor (kg·m²; 0 = the former model), for
 //                    every model of the run (--compare too).
@@ -594,6 +594,7 @@ int compare(int frames, const std::string& png, const std::string& csv,
 
 // --no-approximation and --approximate-ratio (for every run of the process).
 bool g_no_approximation = false;
+bool g_no_reuse = false;  // --no-reuse: NewtonOptions::approximate_reuse off
 double g_approximate_ratio = 0.0;
 
 // ---- steps/s of one ROM
@@ -621,6 +622,7 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   if (hessian >= 0) scene_options.reduced_newton.exact_hessian = hessian == 1;
   if (!lag) scene_options.reduced_newton.lagged.enabled = false;
   if (g_no_approximation) scene_options.reduced_newton.approximate_hessian = false;
+  if (g_no_reuse) scene_options.reduced_newton.approximate_reuse = false;
   if (g_approximate_ratio > 0)
     scene_options.reduced_newton.approximate_max_ratio = g_approximate_ratio;
   if (max_iterations_option > 0)
@@ -668,10 +670,11 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   std::printf("steps: %d in %.3f s -> %.1f steps/s (%d not converged)\n", steps, total,
               steps / total, unconverged);
   std::printf(
-      "per step: %.2f Newton iterations, %.2f approximate directions, %.2f Hessian assemblies "
-      "(%.2f reused), %.2f factorizations, %.1f PCG iterations\n",
-      sum.iterations / n, sum.approximate_directions / n, sum.hessian_evaluations / n,
-      sum.hessian_reuses / n, sum.factorizations / n, sum.cg_iterations / n);
+      "per step: %.2f Newton iterations, %.2f approximate directions (%.2f on a reused factor), "
+      "%.2f Hessian assemblies (%.2f reused), %.2f factorizations, %.1f PCG iterations\n",
+      sum.iterations / n, sum.approximate_directions / n, sum.approximate_reuses / n,
+      sum.hessian_evaluations / n, sum.hessian_reuses / n, sum.factorizations / n,
+      sum.cg_iterations / n);
   std::printf(
       "per step ms: energy %.3f, gradient %.3f, Hessian %.3f, factorization %.3f, "
       "solves %.3f, other %.3f\n",
@@ -885,6 +888,8 @@ int main(int argc, char** argv) {
       lag = false;
     else if (a == "--no-approximation")
       g_no_approximation = true;
+    else if (a == "--no-reuse")
+      g_no_reuse = true;
     else if (a == "--approximate-ratio" && i + 1 < argc)
       g_approximate_ratio = std::atof(argv[++i]);
     else if (a == "--reference" && i + 1 < argc)

@@ -15,10 +15,14 @@ namespace {
 
 const char* solver_name(LinearSolverType t) {
   switch (t) {
-    case LinearSolverType::Auto: return "Auto";
-    case LinearSolverType::Dense: return "Dense";
-    case LinearSolverType::Cholmod: return "Cholmod";
-    case LinearSolverType::SparseLLT: return "SparseLLT";
+    case LinearSolverType::Auto:
+      return "Auto";
+    case LinearSolverType::Dense:
+      return "Dense";
+    case LinearSolverType::Cholmod:
+      return "Cholmod";
+    case LinearSolverType::SparseLLT:
+      return "SparseLLT";
   }
   return "unknown";
 }
@@ -27,8 +31,9 @@ const char* solver_name(LinearSolverType t) {
 
 void bind_solve(py::module_& m) {
   py::enum_<LinearSolverType>(m, "LinearSolverType", "Linear solver of Newton's steps.")
-      .value("Auto", LinearSolverType::Auto,
-             "scenes: simplicial sparse Cholesky; elsewhere dense up to 600 unknowns, CHOLMOD above")
+      .value(
+          "Auto", LinearSolverType::Auto,
+          "scenes: simplicial sparse Cholesky; elsewhere dense up to 600 unknowns, CHOLMOD above")
       .value("Dense", LinearSolverType::Dense, "Eigen's dense Cholesky")
       .value("Cholmod", LinearSolverType::Cholmod, "CHOLMOD supernodal Cholesky")
       .value("SparseLLT", LinearSolverType::SparseLLT,
@@ -87,9 +92,8 @@ void bind_solve(py::module_& m) {
   py::class_<NewtonOptions>(m, "NewtonOptions", "Newton's method with backtracking line search.")
       .def(py::init([](int max_iterations, double gradient_tolerance, double step_tolerance,
                        int max_line_search_steps, double armijo, double initial_regularization,
-                       LinearSolverType linear_solver, bool exact_hessian,
-                       const py::object& lagged, bool approximate_hessian,
-                       double approximate_max_ratio) {
+                       LinearSolverType linear_solver, bool exact_hessian, const py::object& lagged,
+                       bool approximate_hessian, double approximate_max_ratio) {
              NewtonOptions o;
              if (!lagged.is_none()) o.lagged = lagged.cast<LaggedFactorOptions>();
              o.max_iterations = max_iterations;
@@ -110,9 +114,8 @@ void bind_solve(py::module_& m) {
            py::arg("max_line_search_steps") = nd.max_line_search_steps,
            py::arg("armijo") = nd.armijo,
            py::arg("initial_regularization") = nd.initial_regularization,
-           py::arg("linear_solver") = nd.linear_solver,
-           py::arg("exact_hessian") = nd.exact_hessian, py::arg("lagged") = py::none(),
-           py::arg("approximate_hessian") = nd.approximate_hessian,
+           py::arg("linear_solver") = nd.linear_solver, py::arg("exact_hessian") = nd.exact_hessian,
+           py::arg("lagged") = py::none(), py::arg("approximate_hessian") = nd.approximate_hessian,
            py::arg("approximate_max_ratio") = nd.approximate_max_ratio,
            "Keyword arguments (lagged: LaggedFactorOptions, or None: off); values are checked "
            "when a solve starts (ValueError).")
@@ -134,6 +137,9 @@ void bind_solve(py::module_& m) {
                      "ones (default False; SceneOptions.reduced_newton: True)")
       .def_readwrite("approximate_max_ratio", &NewtonOptions::approximate_max_ratio,
                      "largest ‖g_{k+1}‖₂ / ‖g_k‖₂ in (0, 1) that keeps the approximation")
+      .def_readwrite("approximate_reuse", &NewtonOptions::approximate_reuse,
+                     "solve with an earlier iteration's factor of the approximation while it "
+                     "works (default True)")
       .def_readwrite("lagged", &NewtonOptions::lagged,
                      "LaggedFactorOptions (edit in place: options.lagged.enabled = False)")
       .def("__repr__", [](const NewtonOptions& o) {
@@ -159,6 +165,8 @@ void bind_solve(py::module_& m) {
       .def_readonly("approximate_directions", &NewtonResult::approximate_directions,
                     "iterations whose direction came from the approximate Hessian "
                     "(NewtonOptions.approximate_hessian)")
+      .def_readonly("approximate_reuses", &NewtonResult::approximate_reuses,
+                    "of those, the ones solved with an earlier iteration's factor")
       .def_readonly("hessian_reuses", &NewtonResult::hessian_reuses,
                     "iterations whose PCG ran on the previous iterate's Hessian "
                     "(LaggedFactorOptions.reuse_hessian_below)")
@@ -245,84 +253,88 @@ void bind_solve(py::module_& m) {
            "True when some simulable has soft-tissue DoFs (FEM or ROM).")
       .def("has_fem_soft_tissue", &Scene::hasFemSoftTissue,
            "True when some simulable has FEM soft tissue (not the reduced model).")
-      .def_property_readonly("newton_options",
-                             [](const Scene& s) { return NewtonOptions(s.newtonOptions()); },
-                             "The NewtonOptions step() uses (a copy): options.newton for "
-                             "skeletons only, else soft_tissue_newton with FEM soft tissue, else "
-                             "reduced_newton.")
+      .def_property_readonly(
+          "newton_options", [](const Scene& s) { return NewtonOptions(s.newtonOptions()); },
+          "The NewtonOptions step() uses (a copy): options.newton for "
+          "skeletons only, else soft_tissue_newton with FEM soft tissue, else "
+          "reduced_newton.")
       .def("set_static", &Scene::setStatic, py::arg("on") = true,
            "True: drops the dynamic terms (static equilibrium).")
       .def_property_readonly("simulables", &Scene::simulables, "list of Simulable")
       .def_property_readonly("colliders", &Scene::colliders, "list of Collider (copies)")
-      .def("offset",
-           [](const Scene& s, int i) {
-             if (i < 0 || i >= int(s.simulables().size()))
-               throw py::index_error("offset: simulable index " + std::to_string(i) +
-                                     " out of range [0, " + std::to_string(s.simulables().size()) +
-                                     ")");
-             return s.offset(i);
-           },
-           py::arg("i"), "Index of simulable i's first DoF in the merged vector.")
+      .def(
+          "offset",
+          [](const Scene& s, int i) {
+            if (i < 0 || i >= int(s.simulables().size()))
+              throw py::index_error("offset: simulable index " + std::to_string(i) +
+                                    " out of range [0, " + std::to_string(s.simulables().size()) +
+                                    ")");
+            return s.offset(i);
+          },
+          py::arg("i"), "Index of simulable i's first DoF in the merged vector.")
       .def_property_readonly("num_dofs", &Scene::numDofs, "Merged number of DoFs.")
       .def_property_readonly("options", &Scene::options, "SceneOptions (a copy).")
       .def("energy", &Scene::energy, "Merged backward-Euler energy at the current states, J.")
-      .def("gradient",
-           [](Scene& s) {
-             VecX g;
-             s.gradient(g);
-             return to_numpy(g);
-           },
-           "(num_dofs,) merged gradient (kinematic DoFs not zeroed).")
-      .def("hessian",
-           [](Scene& s, bool psd) {
-             SpMat H;
-             {
-               py::gil_scoped_release release;
-               s.hessian(H, psd);
-             }
-             return to_scipy_csc(H);
-           },
-           py::arg("psd") = true,
-           "Merged Hessian as scipy.sparse.csc_matrix (num_dofs, num_dofs); psd=False: exact.")
-      .def("apply_increment",
-           [](Scene& s, const py::object& dq) {
-             s.step(to_vector(dq, "dq", s.numDofs()));
-           },
-           py::arg("dq"), "Applies a merged increment dq (num_dofs,) to every simulable.")
+      .def(
+          "gradient",
+          [](Scene& s) {
+            VecX g;
+            s.gradient(g);
+            return to_numpy(g);
+          },
+          "(num_dofs,) merged gradient (kinematic DoFs not zeroed).")
+      .def(
+          "hessian",
+          [](Scene& s, bool psd) {
+            SpMat H;
+            {
+              py::gil_scoped_release release;
+              s.hessian(H, psd);
+            }
+            return to_scipy_csc(H);
+          },
+          py::arg("psd") = true,
+          "Merged Hessian as scipy.sparse.csc_matrix (num_dofs, num_dofs); psd=False: exact.")
+      .def(
+          "apply_increment",
+          [](Scene& s, const py::object& dq) { s.step(to_vector(dq, "dq", s.numDofs())); },
+          py::arg("dq"), "Applies a merged increment dq (num_dofs,) to every simulable.")
       .def("push", &Scene::push, "Saves every simulable's state.")
       .def("pop", &Scene::pop, "Restores the last pushed states (RuntimeError if none).")
-      .def("fix_kinematic",
-           [](Scene& s, const py::object& g, const py::object& H) -> py::object {
-             VecX v = to_vector(g, "g", s.numDofs());
-             if (H.is_none()) {
-               s.fixKinematic(v, nullptr);
-               return to_numpy(v);
-             }
-             const std::vector<Triplet> t = to_triplets(H, "H", s.numDofs(), s.numDofs());
-             SpMat A(s.numDofs(), s.numDofs());
-             A.setFromTriplets(t.begin(), t.end());
-             s.fixKinematic(v, &A);
-             return py::make_tuple(to_numpy(v), to_scipy_csc(A));
-           },
-           py::arg("g"), py::arg("H") = py::none(),
-           "g (num_dofs,) with kinematic DoFs zeroed; with H also H with their rows/columns "
-           "made identity: returns g or (g, H as csc_matrix).")
+      .def(
+          "fix_kinematic",
+          [](Scene& s, const py::object& g, const py::object& H) -> py::object {
+            VecX v = to_vector(g, "g", s.numDofs());
+            if (H.is_none()) {
+              s.fixKinematic(v, nullptr);
+              return to_numpy(v);
+            }
+            const std::vector<Triplet> t = to_triplets(H, "H", s.numDofs(), s.numDofs());
+            SpMat A(s.numDofs(), s.numDofs());
+            A.setFromTriplets(t.begin(), t.end());
+            s.fixKinematic(v, &A);
+            return py::make_tuple(to_numpy(v), to_scipy_csc(A));
+          },
+          py::arg("g"), py::arg("H") = py::none(),
+          "g (num_dofs,) with kinematic DoFs zeroed; with H also H with their rows/columns "
+          "made identity: returns g or (g, H as csc_matrix).")
       .def("__repr__", [](const Scene& s) {
         return "Scene(simulables=" + std::to_string(s.simulables().size()) +
                ", colliders=" + std::to_string(s.colliders().size()) +
                ", dofs=" + std::to_string(s.numDofs()) + ")";
       });
 
-  m.def("newton_solve",
-        [](Scene& scene, const py::object& options) {
-          const NewtonOptions o =
-              options.is_none() ? scene.options().newton : options.cast<NewtonOptions>();
-          py::gil_scoped_release release;
-          return newtonSolve(scene, o);  // own solver: the scene's may be sized for other DoFs
-        },
-        py::arg("scene"), py::arg("options") = py::none(),
-        "Minimizes the scene's merged energy from its current states (no preUpdate / "
-        "postUpdate); options: NewtonOptions or None (the scene's). Releases the GIL.");
+  m.def(
+      "newton_solve",
+      [](Scene& scene, const py::object& options) {
+        const NewtonOptions o =
+            options.is_none() ? scene.options().newton : options.cast<NewtonOptions>();
+        py::gil_scoped_release release;
+        return newtonSolve(scene, o);  // own solver: the scene's may be sized for other DoFs
+      },
+      py::arg("scene"), py::arg("options") = py::none(),
+      "Minimizes the scene's merged energy from its current states (no preUpdate / "
+      "postUpdate); options: NewtonOptions or None (the scene's). Releases the GIL.");
 }
 
 }  // namespace flsh::python

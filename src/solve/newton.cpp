@@ -185,6 +185,7 @@ void NewtonResult::addCounts(const NewtonResult& other) {
   psd_fallbacks += other.psd_fallbacks;
   hessian_evaluations += other.hessian_evaluations;
   approximate_directions += other.approximate_directions;
+  approximate_reuses += other.approximate_reuses;
   hessian_reuses += other.hessian_reuses;
   factorizations += other.factorizations;
   cg_iterations += other.cg_iterations;
@@ -245,6 +246,10 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
   // Directions from the objective's approximate Hessian while they converge fast.
   bool use_approximation = options.approximate_hessian;
   bool last_from_approximation = false;  // the accepted step of the previous iteration
+  // The solver holds the approximation's factor from an earlier iteration of this solve, whose
+  // directions were accepted in full (approximate_reuse: solve with it again).
+  bool held_approximation = false;
+  bool last_was_reuse = false;  // the previous iteration's approximate direction reused it
 
   const auto evaluateHessian = [&](bool psd) {
     {
@@ -292,9 +297,10 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     }
     // A small step of the approximation's linear rate says little about the gradient: the
     // exact directions decide.
-    if (iteration > 0 && last_step_norm <= options.step_tolerance && last_from_approximation)
+    if (iteration > 0 && last_step_norm <= options.step_tolerance && last_from_approximation) {
       use_approximation = false;
-    else if (iteration > 0 && last_step_norm <= options.step_tolerance) {
+      held_approximation = false;
+    } else if (iteration > 0 && last_step_norm <= options.step_tolerance) {
       result.converged = true;
       result.message = format("step tolerance reached (|step|inf = %.3g, |g|inf = %.3g)",
                               last_step_norm, gradient_norm);
@@ -307,8 +313,12 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     }
     const double gradient_norm2 = g.norm();
     if (last_from_approximation &&
-        gradient_norm2 > options.approximate_max_ratio * previous_gradient_norm2)
-      use_approximation = false;  // converging too slowly: the exact directions from here
+        gradient_norm2 > options.approximate_max_ratio * previous_gradient_norm2) {
+      // Converging too slowly: a reused factor is refreshed, a fresh one hands over to the
+      // exact directions for the rest of the solve.
+      if (!last_was_reuse) use_approximation = false;
+      held_approximation = false;
+    }
     last_from_approximation = false;
     // The state moved: H, if any, is of the previous iterate (its form, −1: none or shifted).
     const int previous_form = assembled_form;
@@ -333,7 +343,9 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     // lagged factor.
     bool accepted = false;
     double alpha = 1.0;
-    for (int attempt = 0; attempt < 2 && !accepted; ++attempt) {
+    // A rejected reused approximation gets a fresh one, then the exact directions: 3 attempts.
+    int attempts = 2;
+    for (int attempt = 0; attempt < attempts && !accepted; ++attempt) {
       bool have_direction = false;
       bool direction_from_cg = false;
       bool direction_from_approximation = false;
@@ -345,26 +357,35 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
         if (!(diagonal_scale > 0.0) || !std::isfinite(diagonal_scale)) diagonal_scale = 1.0;
       };
 
-      // ---- The objective's approximate Hessian, factored and solved directly.
-      if (attempt == 0 && use_approximation) {
-        bool have_approximation = false;
-        {
+      // ---- The objective's approximate Hessian, factored and solved directly (or its factor
+      // from an earlier iteration, solved with again).
+      bool reused = false;
+      if ((attempt == 0 || attempts == 3) && use_approximation) {
+        reused = options.approximate_reuse && held_approximation && attempt == 0;
+        bool have_approximation = reused;
+        if (!reused) {
           ScopedSeconds timer(result.seconds_hessian);
           have_approximation = objective.approximateHessian(H);
           if (have_approximation) objective.fixKinematic(g, &H);
         }
         use_approximation = false;  // unless this direction works out
+        held_approximation = false;
         if (have_approximation) {
           if (H.rows() != n || H.cols() != n)
             throw Error("newtonSolve: Objective::approximateHessian returned " +
                         shapeString({long(H.rows()), long(H.cols())}) + ", expected (" +
                         std::to_string(n) + ", " + std::to_string(n) + ")");
           ++result.approximate_directions;
-          diagonalPointers(H, diagonal);
-          assembled_form = -1;  // neither exact form
+          if (reused) ++result.approximate_reuses;
+          bool factored = reused;  // H still holds the approximation the solver factored
+          if (!reused) {
+            diagonalPointers(H, diagonal);
+            assembled_form = -1;  // neither exact form
+            factored = factorize();
+            if (factored) solver->setFactorStale(false);
+          }
           scaleOfDiagonal();
-          if (factorize()) {
-            solver->setFactorStale(false);
+          if (factored) {
             ScopedSeconds timer(result.seconds_solve);
             dq = -g;
             solver->solveInPlace(dq);
@@ -490,9 +511,15 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
         ++result.line_search_steps;
       }
       if (direction_from_approximation) {
-        // Kept while its full steps are accepted; a rejected one gets a second attempt.
-        use_approximation = accepted && alpha == 1.0;
+        // Kept while its full steps are accepted; a cut or rejected reused one is refreshed (a
+        // rejected one in this iteration's next attempt); a rejected fresh one gets the exact
+        // directions in the next attempt.
+        const bool full = accepted && alpha == 1.0;
+        use_approximation = full || reused;
+        held_approximation = full;
         last_from_approximation = accepted;
+        last_was_reuse = reused;
+        if (!accepted && reused) attempts = 3;
         continue;
       }
       if (!direction_from_cg) break;  // a factored direction gets no second attempt

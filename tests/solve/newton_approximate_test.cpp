@@ -85,15 +85,25 @@ VecX exactMinimum(double c) {
 TEST(NewtonApproximate, ConvergesToTheExactMinimumOnTheApproximation) {
   const double c = 1e-3;  // mild stiffening: the constant part is a good approximation
   const VecX expected = exactMinimum(c);
-  Stiffening f(20, c, 7);
-  const NewtonResult r = newtonSolve(f, tight(true));
-  ASSERT_TRUE(r.converged) << r.message;
-  EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-9);
-  EXPECT_GT(r.approximate_directions, 2);
-  EXPECT_EQ(r.approximate_directions, f.approximations);
-  EXPECT_EQ(r.hessian_evaluations, f.exact_hessians);
-  // While the approximation converges fast enough, no exact Hessian is assembled.
-  EXPECT_LT(f.exact_hessians, r.iterations);
+  for (bool reuse : {false, true}) {
+    SCOPED_TRACE(reuse ? "reusing its factor" : "assembled every iteration");
+    Stiffening f(20, c, 7);
+    NewtonOptions o = tight(true);
+    o.approximate_reuse = reuse;
+    const NewtonResult r = newtonSolve(f, o);
+    ASSERT_TRUE(r.converged) << r.message;
+    EXPECT_LT((f.x - expected).lpNorm<Eigen::Infinity>(), 1e-9);
+    EXPECT_GT(r.approximate_directions, 2);
+    // Each direction either assembled the approximation or reused the last factor of it.
+    EXPECT_EQ(r.approximate_directions - r.approximate_reuses, f.approximations);
+    if (reuse)
+      EXPECT_GT(r.approximate_reuses, 0);
+    else
+      EXPECT_EQ(r.approximate_reuses, 0);
+    EXPECT_EQ(r.hessian_evaluations, f.exact_hessians);
+    // While the approximation converges fast enough, no exact Hessian is assembled.
+    EXPECT_LT(f.exact_hessians, r.iterations);
+  }
 }
 
 // Solves the objective (stiffening c, approximation `scale` · A) with the approximation on and

@@ -358,6 +358,7 @@ TEST(Newton, AddCountsSumsCountersAndTimingsOnly) {
   r.psd_fallbacks = 4;
   r.hessian_evaluations = 5;
   r.approximate_directions = 9;
+  r.approximate_reuses = 11;
   r.factorizations = 6;
   r.cg_iterations = 7;
   r.seconds_energy = 0.5;
@@ -373,6 +374,7 @@ TEST(Newton, AddCountsSumsCountersAndTimingsOnly) {
   EXPECT_EQ(total.psd_fallbacks, 8);
   EXPECT_EQ(total.hessian_evaluations, 10);
   EXPECT_EQ(total.approximate_directions, 18);
+  EXPECT_EQ(total.approximate_reuses, 22);
   EXPECT_EQ(total.factorizations, 12);
   EXPECT_EQ(total.cg_iterations, 14);
   EXPECT_EQ(total.seconds_energy, 1.0);

@@ -139,6 +139,11 @@ struct NewtonOptions {
   /// Largest ‖g_{k+1}‖₂ / ‖g_k‖₂ (in (0, 1)) after an approximate direction that keeps using
   /// the approximation.
   double approximate_max_ratio = 0.5;
+  /// Solve with the approximation's factor of an earlier iteration of the same solve while its
+  /// full steps are accepted and shrink ‖g‖₂ by approximate_max_ratio (a chord method: no
+  /// assembly, no factorization); a reused factor that does not is refreshed once before the
+  /// exact directions take over.
+  bool approximate_reuse = true;
   /// Lagged factor + PCG (off by default: every iteration factors).
   LaggedFactorOptions lagged;
 };
@@ -158,6 +163,8 @@ struct NewtonResult {
   /// Iterations whose direction came from Objective::approximateHessian (its calls count here,
   /// not in hessian_evaluations; their time in seconds_hessian).
   int approximate_directions = 0;
+  /// Of those, the ones solved with an earlier iteration's factor (approximate_reuse).
+  int approximate_reuses = 0;
   /// Iterations whose PCG ran on the previous iterate's Hessian (lagged.reuse_hessian_below).
   int hessian_reuses = 0;
   /// Numeric factorizations in this call (regularization retries included).

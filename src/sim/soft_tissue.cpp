@@ -152,28 +152,28 @@ double SoftTissue::gradient(const TermContext& c, VecX& g, int offset) const {
 
 void SoftTissue::hessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
                           std::vector<Triplet>& H_potential, int offset, bool psd) const {
+  scheduledHessians(c, H_dynamic, H_potential, offset, psd, false);
+}
+
+void SoftTissue::scheduledHessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
+                                   std::vector<Triplet>& H_potential, int offset, bool psd,
+                                   bool approximate) const {
   const bool contact = !c.colliders.empty() && !c.contact.candidates.empty();
   if (contact && kin_.reduced()) kin_.skinNodes(c.contact.candidates);
-  reducedHessians(c.options.gravity, H_dynamic, H_potential, offset, psd, [&] {
-    if (contact)
-      contact_->evaluate(c.colliders, c.time, c.options.contact, nullptr, &H_potential, offset, psd,
-                         nullptr, &c.contact.candidates, false);
-  });
+  reducedHessians(
+      c.options.gravity, H_dynamic, H_potential, offset, psd,
+      [&] {
+        if (contact)
+          contact_->evaluate(c.colliders, c.time, c.options.contact, nullptr, &H_potential, offset,
+                             psd, nullptr, &c.contact.candidates, false);
+      },
+      approximate);
 }
 
 bool SoftTissue::approximateHessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
                                      std::vector<Triplet>& H_potential, int offset) const {
   if (!hasApproximateHessians() || c.is_static) return false;
-  const bool contact = !c.colliders.empty() && !c.contact.candidates.empty();
-  if (contact) kin_.skinNodes(c.contact.candidates);
-  reducedHessians(
-      c.options.gravity, H_dynamic, H_potential, offset, false,
-      [&] {
-        if (contact)
-          contact_->evaluate(c.colliders, c.time, c.options.contact, nullptr, &H_potential, offset,
-                             false, nullptr, &c.contact.candidates, false);
-      },
-      true);
+  scheduledHessians(c, H_dynamic, H_potential, offset, false, true);
   return true;
 }
 

@@ -126,6 +126,11 @@ class SoftTissue final : public TwoThreadSchedule {
   /// into H_potential); a share of inertia's mass nodes is mapped on the second thread too
   /// (into list 1 and H_potential), to balance the two. Both lists come back mirrored
   /// (flushList then only hands them over).
+  /// hessians (approximate false) and approximateHessians: contact's candidates skinned, then
+  /// reducedHessians with contact beside inertia.
+  void scheduledHessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
+                         std::vector<Triplet>& H_potential, int offset, bool psd,
+                         bool approximate) const;
   /// Adds the upper group blocks of a soft–soft matrix (numSoftDofs²) into a value list.
   void addConstantSoftBlock(const MatX& C, Mat3* values) const;
   /// `approximate`: approximateHessians' form (exact, psd false, with the constant block).

@@ -203,25 +203,11 @@ bool Scene::energyAndGradient(double& energy, VecX& g) {
 }
 
 void Scene::hessian(SpMat& H, bool psd) {
-  triplets_.clear();
   if (usesGeneralPattern()) {
-    // One cached segment per energy kind, so a term whose triplet count changes (contacts)
-    // does not move the others' value slots.
-    segment_end_.clear();
-    fixed_blocks_.clear();
-    for (size_t i = 0; i < simulables_.size(); ++i) {
-      // The FEM's elastic node pairs and its bone–tissue coupling come as fixed blocks (the
-      // same lists in the same order every call): no 9 triplets per block.
-      segment_end_.push_back(
-          simulables_[i]->getHessianTripletVector(triplets_, fixed_blocks_, offsets_[i], psd));
-      segment_end_.push_back(triplets_.size());
-    }
-    if (avatarContactActive()) avatarContactEnergy(nullptr, &triplets_, psd);
-    segment_end_.push_back(triplets_.size());
-    if (!general_) setUpGeneralPattern();
-    general_->assemble(triplets_, segment_end_, fixed_blocks_, num_dofs_, H);
+    assembleGeneral(H, psd, false);
     return;
   }
+  triplets_.clear();
   for (size_t i = 0; i < simulables_.size(); ++i) {
     simulables_[i]->getDynamicHessianTripletVector(triplets_, offsets_[i], psd);
     simulables_[i]->getPotentialHessianTripletVector(triplets_, offsets_[i], psd);
@@ -239,29 +225,31 @@ bool Scene::approximateHessian(SpMat& H) {
   if (std::none_of(simulables_.begin(), simulables_.end(),
                    [](const auto& s) { return s->hasApproximateHessian(); }))
     return false;
+  assembleGeneral(H, false, true);
+  return true;
+}
+
+void Scene::assembleGeneral(SpMat& H, bool psd, bool approximate) {
+  // One cached segment per energy kind, so a term whose triplet count changes (contacts) does
+  // not move the others' value slots; the approximate form has the exact form's layout.
   triplets_.clear();
   segment_end_.clear();
   fixed_blocks_.clear();
-  bool any = false;
   for (size_t i = 0; i < simulables_.size(); ++i) {
-    // Same segments as hessian(): the approximate form has the exact form's triplet layout.
+    // The FEM's elastic node pairs and its bone–tissue coupling come as fixed blocks (the
+    // same lists in the same order every call): no 9 triplets per block.
     size_t potential_start = 0;
-    if (simulables_[i]->getApproximateHessianTripletVector(triplets_, fixed_blocks_, offsets_[i],
-                                                           &potential_start)) {
-      any = true;
-    } else {
+    if (!approximate || !simulables_[i]->getApproximateHessianTripletVector(
+                            triplets_, fixed_blocks_, offsets_[i], &potential_start))
       potential_start =
-          simulables_[i]->getHessianTripletVector(triplets_, fixed_blocks_, offsets_[i], false);
-    }
+          simulables_[i]->getHessianTripletVector(triplets_, fixed_blocks_, offsets_[i], psd);
     segment_end_.push_back(potential_start);
     segment_end_.push_back(triplets_.size());
   }
-  if (!any) return false;
-  if (avatarContactActive()) avatarContactEnergy(nullptr, &triplets_, false);
+  if (avatarContactActive()) avatarContactEnergy(nullptr, &triplets_, psd);
   segment_end_.push_back(triplets_.size());
   if (!general_) setUpGeneralPattern();
   general_->assemble(triplets_, segment_end_, fixed_blocks_, num_dofs_, H);
-  return true;
 }
 
 // Writes the triplets into H with the fixed pattern (H takes the pattern if it has another

@@ -190,6 +190,10 @@ class Scene : public Objective {
   mutable std::vector<long long> fill_key_;
   mutable std::vector<int> fill_index_;
   void rebuildHessianPattern();
+  /// hessian() and approximateHessian() on the general pattern (HessianAssembler): every
+  /// simulable's triplets and fixed blocks (its approximate form where `approximate` and it has
+  /// one, else its exact or PSD form), then avatar–avatar contact.
+  void assembleGeneral(SpMat& H, bool psd, bool approximate);
   bool fillHessian(SpMat& H) const;
   // General pattern (soft tissue, or SceneOptions::general_hessian_pattern): DoF groups of 6
   // per bone and 3 per soft-tissue node, and the couplings known in advance (as for the block

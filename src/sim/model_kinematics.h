@@ -6,6 +6,7 @@
 // answers; the terms use their own model's kinematics directly.
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include "flsh/core/types.h"
@@ -33,6 +34,13 @@ class ModelKinematics {
   /// beyond what the bones' motion explains (pose blend and soft displacement; 0 for the
   /// skeleton).
   virtual void contactMargins(double* margin) const = 0;
+  /// After the broad phase, at the prepared state: drops from `candidates` (surface nodes, order
+  /// kept) those that provably touch nothing, from a cheap position x̃_i and a bound s_i ≥
+  /// ‖x_i − x̃_i‖: node i stays when distance(x̃_i) < s_i (`distance`: the smallest signed
+  /// distance to any collider, 1-Lipschitz, so a dropped node has no contact energy). The
+  /// default keeps every candidate (its nodes cost no more to skin than to bound).
+  virtual void pruneCandidates(const std::function<double(const Vec3&)>& distance,
+                               std::vector<int>& candidates) const {}
   /// Surface nodes (the mesh's vertices, in its order).
   virtual int numSurface() const = 0;
   /// World positions and unposed nodes of every surface node (#V × 3) at the prepared state

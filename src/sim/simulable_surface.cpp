@@ -2,6 +2,7 @@
 // that keeps TermContext::contact up to date.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/contact/contact_energy.h"
@@ -78,6 +79,15 @@ void Simulable::Impl::ensureContact() const {
   double margin[kNumJoints];
   kinematics->contactMargins(margin);
   broadPhase(margin, cc.candidates);
+  if (!cc.candidates.empty())
+    kinematics->pruneCandidates(
+        [&](const Vec3& x) {
+          double d = std::numeric_limits<double>::infinity();
+          for (const Collider& collider : colliders)
+            d = std::min(d, collider.signedDistance(x, time));
+          return d;
+        },
+        cc.candidates);
   model_contact->refresh(context(), cc);
   cc.version = state_version;
 }

@@ -53,29 +53,6 @@ SubspaceTet subspaceTet(const VolumetricData& data, const ReducedData& rom, cons
   return out;
 }
 
-double subspaceTetElasticEnergy(double volume, const FemMaterialPoint& material,
-                                const Eigen::Ref<const MatX>& D, const Eigen::Ref<const VecX>& z,
-                                Eigen::Ref<VecX>* gradient, Eigen::Ref<MatX>* hessian, bool psd) {
-  const Eigen::Index m = D.cols();
-  if (D.rows() != 9 || z.size() != m || (gradient && gradient->size() != m) ||
-      (hessian && (hessian->rows() != m || hessian->cols() != m)))
-    throw InputError("subspaceTetElasticEnergy: D is " + std::to_string(D.rows()) + " × " +
-                     std::to_string(m) + ", z has " + std::to_string(z.size()) +
-                     " entries, expected 9 × m and m (and views of m)");
-  const Vec9 f = D * z;
-  const Mat3 F = Mat3::Identity() + Eigen::Map<const Mat3>(f.data());
-  Mat3 P;
-  Mat9 A;
-  const double psi = volume * fungEnergyDensity(F, material, (gradient || hessian) ? &P : nullptr,
-                                                hessian ? &A : nullptr, psd);
-  if (gradient) gradient->noalias() = volume * (D.transpose() * Eigen::Map<const Vec9>(P.data()));
-  if (hessian) {
-    const MatX AD = volume * (A * D);
-    hessian->noalias() = D.transpose() * AD;
-  }
-  return psi;
-}
-
 Mat9 restTangent(const FemMaterialPoint& material) {
   Mat3 P;
   Mat9 A;

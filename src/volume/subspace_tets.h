@@ -6,7 +6,7 @@
 //   D = Σ_a (g_a ⊗ I₃) ∂u_a/∂z_e,
 // so a handle's three columns are G̃_h ⊗ I₃ (G̃_h = Σ_a φ_h(a) g_a, reducedShapeGradients) and
 // the modes' columns Σ_a g_a Ψ_a row by row. The elastic energy, its gradient and Hessian are
-// then those of the law at F chained through D (subspaceTetElasticEnergy), and so is its rest
+// then those of the law at F chained through D (sim/soft/modal_elasticity_term), and so is its rest
 // quadratic: K̃_e = V Dᵀ A₀ D with A₀ the law's tangent at F = I. Used where the ROM's
 // precomputation (rest stiffness, floors) and its modal elastic term (sim/) need one form for
 // every kind; the handle-only term keeps its own Z G̃ᵀ form (reducedTetElasticEnergy), which
@@ -33,14 +33,6 @@ struct SubspaceTet {
 /// for the modes; bone nodes do not move). No dofs when no node of t moves.
 SubspaceTet subspaceTet(const VolumetricData& data, const ReducedData& rom, const SpMat& basis_rows,
                         const TetElementRest& rest, int t);
-
-/// volume · Ψ(I + mat(D z)) (J) and, when not null, its gradient volume · Dᵀ vec(P) and Hessian
-/// volume · Dᵀ (∂P/∂F) D (exact, or the law's PSD tangent with psd), written into the views
-/// (sized D.cols()). InputError on sizes that do not match or a non-finite state.
-double subspaceTetElasticEnergy(double volume, const FemMaterialPoint& material,
-                                const Eigen::Ref<const MatX>& D, const Eigen::Ref<const VecX>& z,
-                                Eigen::Ref<VecX>* gradient = nullptr,
-                                Eigen::Ref<MatX>* hessian = nullptr, bool psd = false);
 
 /// The law's tangent at rest, ∂P/∂F at F = I (9 × 9, symmetric PSD): a tet's rest Hessian in the
 /// subspace is volume · Dᵀ restTangent D.

@@ -4,12 +4,14 @@
 // tets with their weights). Per element F = I + mat(D_e z_e) (volume/subspace_tets.h: D_e 9 × m_e
 // on the soft-state entries z_e its nodes move with, every modal coordinate among them), so
 // its gradient is V D_eᵀ vec P and its Hessian V D_eᵀ (∂P/∂F) D_e, summed into the kinematics'
-// value list 1 by groups of three entries. With the elastic cubature's rest-stiffness split the
-// energy is ½ zᵀ K z (K = rom.elastic_rest_stiffness, exact) plus each sample's weighted excess
-// over its own rest quadratic, bounded below (restSplitExcess): both are functions of the 9
-// values of D_e z_e, so the excess is formed there (with the rest quadratic V A₀ on them) and
-// chained through D_e, without an m_e × m_e rest Hessian per sample. The handle basis alone keeps
-// its cheaper form (reduced_elasticity_term.h). Private to Simulable.
+// value list 1 by groups of three entries. D_e's modal columns (9 × r, dense) are stacked for
+// every element, so a range of elements' f and gradient chain are one matrix–vector product each.
+// With the elastic cubature's rest-stiffness split the energy is ½ zᵀ K z (K =
+// rom.elastic_rest_stiffness, exact) plus each sample's weighted excess over its own rest
+// quadratic, bounded below (restSplitExcess): both are functions of the 9 values of D_e z_e, so the
+// excess is formed there (with the rest quadratic V A₀ on them) and chained through D_e, without an
+// m_e × m_e rest Hessian per sample. The handle basis alone keeps its cheaper form
+// (reduced_elasticity_term.h). Private to Simulable.
 //
 // Not yet: the Material and Shape parameter groups (the adjoint's), which throw InputError.
 #pragma once
@@ -49,13 +51,20 @@ class ModalElasticityTerm final : public ElasticityTerm, public ReducedElasticit
   void materialElementRestCotangent(int e, const Mat3X& Lambda, Mat34& X_bar) const override;
 
  private:
-  /// Element e's energy (weighted; the excess under the split) at its entries' values z_e, with
-  /// its gradient and Hessian in them when asked (views of its size).
-  double element(int e, const VecX& z_e, Eigen::Ref<VecX>* gradient, Eigen::Ref<MatX>* hessian,
-                 bool psd, bool* bounded = nullptr) const;
+  /// Element e's weighted energy (the excess under the split) at f = vec(F − I), with its
+  /// gradient and Hessian in f when asked (restSplitExcess needs the gradient for the Hessian).
+  double law(int e, const Vec9& f, Vec9* g9, Mat9* H9, bool psd, bool* bounded = nullptr) const;
+  /// The handles' part of element e's f: handle_D_[e] times its entries of the soft state.
+  Vec9 handleStrain(int e) const;
+  /// Element e's soft-state entries (ascending): its handles', then every mode's.
+  void elementDofs(int e, std::vector<int>& dofs) const;
+  using RowMatX = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   ElasticElements elements_;
-  std::vector<std::vector<int>> dofs_;  // per element: soft-state entries (ascending)
-  std::vector<MatX> D_;                 // per element: 9 × dofs
+  int num_modes_ = 0, modal_base_ = 0;         // r, and the modes' first soft-state entry (3H)
+  std::vector<char> moves_;                    // per element: a node of it is soft
+  std::vector<std::vector<int>> handle_dofs_;  // per element: its handles' entries (ascending)
+  std::vector<MatX> handle_D_;                 // per element: 9 × its handles' entries
+  RowMatX modal_D_;                            // 9 rows per element: the modes' 9 × r block
   int max_dofs_ = 0;
   MatX rest_stiffness_;             // K (numSoftDofs square), empty without the split
   std::vector<Mat9> rest_tangent_;  // per element with the split: V A₀

@@ -356,6 +356,28 @@ void SoftKinematics::contactMargins(double* margin) const {
                 bone_mode_bound_[size_t(b)] * modes;
 }
 
+void SoftKinematics::pruneCandidates(const std::function<double(const Vec3&)>& distance,
+                                     std::vector<int>& candidates) const {
+  if (!reduced_ || num_modes_ == 0) return;
+  const double modes = u.tail(num_modes_).norm();
+  const std::vector<Mat3>& R = *cur_R_;
+  Vec3 shift[kNumJoints];
+  boneShifts(R, *cur_t_, shift);
+  size_t kept = 0;
+  for (const int j : candidates) {
+    const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + handleDisplacement(u, j);
+    Vec3 x = Vec3::Zero();
+    double weights = 0.0;  // ‖M_i‖₂ ≤ Σ |w|
+    for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
+      const Influence& inf = influences_[k];
+      x += inf.weight * (R[inf.bone] * Y + shift[inf.bone]);
+      weights += std::abs(inf.weight);
+    }
+    if (distance(x) < weights * mode_norm_[j] * modes) candidates[kept++] = j;
+  }
+  candidates.resize(kept);
+}
+
 void SoftKinematics::boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const {
   for (int b = 0; b < num_bones_; ++b)
     shift[b] = t.row(b).transpose() - R[b] * joints_.row(b).transpose();

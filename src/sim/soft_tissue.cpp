@@ -243,7 +243,7 @@ void SoftTissue::reducedHessians(const Vec3& gravity, std::vector<Triplet>& H_dy
       inertia_->hessianPart(1, H_potential, offset, psd, approximate);
     }
   });
-  onTwoThreads([&](int list) { kin_.mirrorReduced(list, 0, 1); });
+  onTwoThreads([&](int list) { kin_.mirrorReduced(list); });
   kin_.setMirrored(true);
 }
 

@@ -236,6 +236,8 @@ void SoftKinematics::buildReducedPattern(const std::vector<std::pair<int, int>>&
     reduced_positions_.emplace_back(col, row);
   }
   for (auto& values : reduced_values_) values.assign(reduced_positions_.size(), Mat3::Zero());
+  for (RowMatX& acc : bone_modes_) acc.setZero(6 * num_bones_, num_modes_);
+  for (auto& touched : bone_modes_touched_) touched.assign(size_t(num_bones_), 0);
 }
 
 // ---- positions ----------------------------------------------------------------------------
@@ -359,21 +361,30 @@ void SoftKinematics::contactMargins(double* margin) const {
 void SoftKinematics::pruneCandidates(const std::function<double(const Vec3&)>& distance,
                                      std::vector<int>& candidates) const {
   if (!reduced_ || num_modes_ == 0) return;
-  const double modes = u.tail(num_modes_).norm();
+  const double modes = u.tail(num_modes_).norm(), feature = poseFeatureNorm();
   const std::vector<Mat3>& R = *cur_R_;
   Vec3 shift[kNumJoints];
   boneShifts(R, *cur_t_, shift);
-  size_t kept = 0;
-  for (const int j : candidates) {
-    const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + handleDisplacement(u, j);
+  auto skin = [&](int j, const Vec3& Y, double* weights) {
     Vec3 x = Vec3::Zero();
-    double weights = 0.0;  // ‖M_i‖₂ ≤ Σ |w|
+    *weights = 0.0;  // ‖M_j‖₂ ≤ Σ |w|
     for (int k = influence_start_[j]; k < influence_start_[j + 1]; ++k) {
       const Influence& inf = influences_[k];
       x += inf.weight * (R[inf.bone] * Y + shift[inf.bone]);
-      weights += std::abs(inf.weight);
+      *weights += std::abs(inf.weight);
     }
-    if (distance(x) < weights * mode_norm_[j] * modes) candidates[kept++] = j;
+    return x;
+  };
+  size_t kept = 0;
+  for (const int j : candidates) {
+    // First without the pose blend (‖P_j‖ ≤ blendBound(j) ‖feature‖), whose first evaluation in
+    // a step reads 3 × 207 values; then with it.
+    const Vec3 Y = rest_.row(j).transpose() + handleDisplacement(u, j);
+    double weights = 0.0;
+    const Vec3 x = skin(j, Y, &weights);
+    const double modal = mode_norm_[j] * modes;
+    if (distance(x) >= weights * (modal + blend_bound_[j] * feature)) continue;
+    if (distance(skin(j, Y + blendOf(j), &weights)) < weights * modal) candidates[kept++] = j;
   }
   candidates.resize(kept);
 }
@@ -498,16 +509,10 @@ void SoftKinematics::addBoneSoft(std::vector<Triplet>& H, int offset, int row, i
       values[bz_slot_[size_t((row + r) / 3) * groups + size_t(phi_[k].first)]] +=
           phi_[k].second * B.template middleRows<3>(r);
   if (num_modes_ == 0 || node_dof_[j] < 0) return;
-  // Fixed-size 3 × 3 products per group (no 3 × r temporary per node and row block).
-  const auto Psi = modeRows(j);
-  for (int r = 0; r < Rows; r += 3) {
-    const Mat3 Br = B.template middleRows<3>(r);
-    const int* slots = &bz_slot_[size_t((row + r) / 3) * groups + size_t(num_handles_)];
-    for (int g = 0; g < num_modes_ / 3; ++g) {
-      const Mat3 Psi_g = Psi.middleCols<3>(3 * g);
-      values[slots[g]].noalias() += Br * Psi_g;
-    }
-  }
+  // B Ψ_j into the bone's dense rows (rows of r contiguous values; mirrorReduced folds them into
+  // the bone–z slots).
+  bone_modes_[size_t(list)].middleRows<Rows>(row).noalias() += B * modeRows(j);
+  bone_modes_touched_[size_t(list)][size_t(row / 6)] = 1;
 }
 
 void SoftKinematics::addSoftSoft(std::vector<Triplet>& H, int offset, int j, const Mat3& B,
@@ -551,14 +556,31 @@ void SoftKinematics::beginList(int list) const {
   // The summed slots only (z–z and bone–z; the z–bone ones are written by the mirroring).
   zeroBlocks(reduced_values_[size_t(list)].data(), num_zz_ + num_bz_);
   mirrored_[size_t(list)] = false;
+  if (num_modes_ == 0) return;
+  RowMatX& acc = bone_modes_[size_t(list)];  // sized by buildReducedPattern
+  std::vector<char>& touched = bone_modes_touched_[size_t(list)];
+  for (int b = 0; b < num_bones_; ++b)
+    if (touched[size_t(b)]) acc.middleRows<6>(6 * b).setZero();
+  std::fill(touched.begin(), touched.end(), 0);
 }
 
-void SoftKinematics::mirrorReduced(int list, int part, int parts) const {
+void SoftKinematics::mirrorReduced(int list) const {
   std::vector<Mat3>& values = reduced_values_[size_t(list)];
-  const size_t mirrors = zz_mirror_.size();
-  for (size_t k = part * mirrors / parts; k < (part + 1) * mirrors / parts; ++k)
-    values[size_t(zz_mirror_[k].first)] = values[size_t(zz_mirror_[k].second)].transpose();
-  for (int k = part * num_bz_ / parts; k < (part + 1) * num_bz_ / parts; ++k)
+  if (num_modes_ > 0) {  // the bones' dense rows (addBoneSoft) into their bone–z slots
+    const RowMatX& acc = bone_modes_[size_t(list)];
+    const size_t groups = size_t(num_groups_);
+    for (int b = 0; b < num_bones_; ++b) {
+      if (!bone_modes_touched_[size_t(list)][size_t(b)]) continue;
+      for (int r = 0; r < 2; ++r) {
+        const int* slots = &bz_slot_[size_t(2 * b + r) * groups + size_t(num_handles_)];
+        for (int g = 0; g < num_modes_ / 3; ++g)
+          values[size_t(slots[g])] += acc.block<3, 3>(6 * b + 3 * r, 3 * g);
+      }
+    }
+  }
+  for (const auto& [lower, upper] : zz_mirror_)
+    values[size_t(lower)] = values[size_t(upper)].transpose();
+  for (int k = 0; k < num_bz_; ++k)
     values[size_t(num_zz_ + num_bz_ + k)] = values[size_t(num_zz_ + k)].transpose();
 }
 
@@ -566,7 +588,7 @@ void SoftKinematics::flushList(int list, std::vector<Triplet>& H, int offset,
                                std::vector<FixedHessianBlocks>* blocks) const {
   if (!reduced_) return;
   std::vector<Mat3>& values = reduced_values_[size_t(list)];
-  if (!mirrored_[size_t(list)]) mirrorReduced(list, 0, 1);
+  if (!mirrored_[size_t(list)]) mirrorReduced(list);
   if (blocks) {
     blocks->push_back({&reduced_positions_, &values, offset});
     return;

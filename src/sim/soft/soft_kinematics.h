@@ -256,8 +256,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// No-op for the FEM.
   void flushList(int list, std::vector<Triplet>& H, int offset,
                  std::vector<FixedHessianBlocks>* blocks) const override;
-  /// Lower z–z and z–bone blocks of a list from the summed ones (the part-th of parts ranges).
-  void mirrorReduced(int list, int part, int parts) const;
+  /// Completes a list after its terms: the bones' dense mode rows into their bone–z slots,
+  /// then the lower z–z and z–bone blocks from the summed ones.
+  void mirrorReduced(int list) const;
   /// Marks both lists mirrored (reducedHessians mirrors them on two threads).
   void setMirrored(bool on) const { mirrored_[0] = mirrored_[1] = on; }
 
@@ -338,6 +339,10 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   std::vector<std::pair<int, int>> reduced_positions_;
   mutable std::vector<Mat3> reduced_values_[2];
   mutable bool mirrored_[2] = {false, false};  // the lower blocks are current
+  // ROM with modes, per list: Σ B Ψ_j of addBoneSoft per bone (6 rows per bone: t, then ω), and
+  // which bones have any; mirrorReduced folds them into the bone–z slots.
+  mutable RowMatX bone_modes_[2];
+  mutable std::vector<char> bone_modes_touched_[2];
 };
 
 }  // namespace flsh::detail

@@ -126,13 +126,16 @@ void requireFinite(const Mat3& F, const char* who) {
 }  // namespace
 
 Mat6 orthotropicStiffness(const Vec3& young, const Vec3& poisson, const Vec3& shear) {
-  const std::string args = "orthotropicStiffness: young (E1, E2, E3) = " + vecText(young) +
-                           " Pa, poisson (ν12, ν13, ν23) = " + vecText(poisson) +
-                           ", shear (G12, G13, G23) = " + vecText(shear) + " Pa";
+  // Formatted only for an error (every tet's material point comes through here).
+  const auto args = [&] {
+    return "orthotropicStiffness: young (E1, E2, E3) = " + vecText(young) +
+           " Pa, poisson (ν12, ν13, ν23) = " + vecText(poisson) +
+           ", shear (G12, G13, G23) = " + vecText(shear) + " Pa";
+  };
   if (!young.allFinite() || !poisson.allFinite() || !shear.allFinite())
-    throw InputError(args + ": expected finite values");
+    throw InputError(args() + ": expected finite values");
   if ((young.array() <= 0).any() || (shear.array() <= 0).any())
-    throw InputError(args + ": expected positive moduli");
+    throw InputError(args() + ": expected positive moduli");
   Mat3 normal_compliance;
   normal_compliance << 1 / young[0], -poisson[0] / young[0], -poisson[1] / young[0],  //
       -poisson[0] / young[0], 1 / young[1], -poisson[2] / young[1],                   //
@@ -141,7 +144,7 @@ Mat6 orthotropicStiffness(const Vec3& young, const Vec3& poisson, const Vec3& sh
   const Mat3 scaled = normal_compliance * (young.sum() / 3.0);
   const Eigen::LLT<Mat3> llt(scaled);
   if (llt.info() != Eigen::Success || !(llt.matrixLLT().diagonal().minCoeff() > 1e-8))
-    throw InputError(args +
+    throw InputError(args() +
                      ": orthotropic compliance is not positive definite, expected ν12² < E1/E2, "
                      "ν13² < E1/E3, ν23² < E2/E3 and a positive determinant");
   Mat6 C = Mat6::Zero();

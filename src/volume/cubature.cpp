@@ -163,6 +163,10 @@ Cubature exactCubature(int elements) {
   return every;
 }
 
+namespace {
+constexpr int kCorrelationBlock = 1024;  // columns per task of selectCubature's correlation
+}  // namespace
+
 Cubature selectCubature(const MatX& A, const CubatureOptions& options) {
   const char* who = "selectCubature";
   checkMatrix(A, who);
@@ -194,8 +198,16 @@ Cubature selectCubature(const MatX& A, const CubatureOptions& options) {
   const int max_rounds = 4 * count + 10;
   while (int(selected.size()) < count && out.training_error > options.tolerance &&
          out.rounds < max_rounds) {
-    // Correlation of every unselected element with the residual (normalized columns).
-    const VecX correlation = A.transpose() * residual;
+    // Correlation of every unselected element with the residual (normalized columns): the
+    // round's main cost (A is read whole), on every thread in fixed blocks of columns (the same
+    // values for any thread count).
+    VecX correlation(E);
+    const int blocks = (E + kCorrelationBlock - 1) / kCorrelationBlock;
+#pragma omp parallel for schedule(static)
+    for (int k = 0; k < blocks; ++k) {
+      const int first = k * kCorrelationBlock, n = std::min(kCorrelationBlock, E - first);
+      correlation.segment(first, n).noalias() = A.middleCols(first, n).transpose() * residual;
+    }
     std::vector<int> candidates;
     for (int e = 0; e < E; ++e)
       if (!is_selected[e] && column_norms[e] > 0 &&

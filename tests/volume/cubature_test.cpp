@@ -2,6 +2,7 @@
 #include "flsh/volume/cubature.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <Eigen/QR>
 #include <limits>
@@ -61,6 +62,26 @@ TEST(Cubature, SelectionWithEnoughElementsReachesExactIntegration) {
   EXPECT_LE(cubature.elements.size(), 40);
   EXPECT_NEAR(cubatureRelativeError(A, cubature.elements, cubature.weights),
               cubature.training_error, 1e-12);
+}
+
+// The correlation of every element with the residual runs on the threads in fixed blocks of
+// columns: the selection is the same, bit for bit, on one thread and on several (a matrix wider
+// than one block).
+TEST(Cubature, SelectionIsTheSameOnAnyNumberOfThreads) {
+  const MatX A = syntheticTraining(20, 2500, 5);
+  CubatureOptions options;
+  options.count = 60;
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const Cubature one = selectCubature(A, options);
+  omp_set_num_threads(3);
+  const Cubature three = selectCubature(A, options);
+  omp_set_num_threads(threads);
+  ASSERT_GE(one.elements.size(), 5);
+  EXPECT_EQ(one.elements, three.elements);
+  EXPECT_EQ(one.weights, three.weights);
+  EXPECT_EQ(one.training_error, three.training_error);
+  EXPECT_EQ(one.rounds, three.rounds);
 }
 
 TEST(Cubature, ErrorNeverIncreasesWithCountAndGeneralizes) {

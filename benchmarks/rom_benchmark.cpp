@@ -59,6 +59,9 @@
 // skeleton and the FEM always run). A basis with modes (issue 26) is written mV[:C][+H] in place
 // of H: the static modes and V vibration modes, compressed to C columns, with H handles appended
 // (ReducedBasisKind::ModesAndHandles; without +H: Modes), e.g. m24:72/500/500 or m24+87exact.
+// A last sN trains both cubatures on N samples (default 400, which caps a cubature at about
+// 400 tets: the selection stops when more no longer lower the training error), e.g.
+// m24:96/1000/1000s2000.
 //
 // --galerkin LIST: how far the Galerkin solution in a basis's span is from the FEM as handles are
 // added, without dynamics or cubature: the linear static sag of a standing body (the FEM's
@@ -139,13 +142,15 @@ struct ModelSpec {
       std::snprintf(buf, sizeof(buf), "ROM %s exact", basis.c_str());
     else
       std::snprintf(buf, sizeof(buf), "ROM %s/%d/%d", basis.c_str(), elastic, inertial);
-    return std::string(buf) + (pou ? " PoU" : "");
+    return std::string(buf) + (pou ? " PoU" : "") +
+           (training_samples > 0 ? " s" + std::to_string(training_samples) : std::string());
   }
 };
 
 // One --models entry: H (87/500/500), H/E/I (0 tets: that cubature off, its energy integrated
 // exactly), Hexact, with a trailing "pou" for the partition-of-unity basis: "150", "87/250/250",
-// "87/500/0", "87exact", "300pou", "150/500/500pou".
+// "87/500/0", "87exact", "300pou", "150/500/500pou"; a last "sN" sets the cubatures' training
+// samples (ReducedSettings::training_samples), e.g. "m24:96/1000/1000s2000".
 ModelSpec parseModel(const std::string& text) {
   std::string rest = text;
   ModelSpec m;
@@ -170,6 +175,14 @@ ModelSpec parseModel(const std::string& text) {
     rest.resize(rest.size() - tail.size());
     return true;
   };
+  const size_t s = rest.find_last_of('s');
+  if (s != std::string::npos && s + 1 < rest.size() &&
+      rest.find_first_not_of("0123456789", s + 1) == std::string::npos) {
+    m.training_samples = std::atoi(rest.c_str() + s + 1);
+    if (m.training_samples < 1)
+      throw std::runtime_error("--models: '" + text + "': training samples sN need N ≥ 1");
+    rest.resize(s);
+  }
   m.pou = ends("pou");
   const bool exact = ends("exact");
   int h = 0, e = 0, i = 0, consumed = 0;

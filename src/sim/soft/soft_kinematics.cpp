@@ -566,16 +566,19 @@ void SoftKinematics::beginList(int list) const {
 
 void SoftKinematics::mirrorReduced(int list) const {
   std::vector<Mat3>& values = reduced_values_[size_t(list)];
-  if (num_modes_ > 0) {  // the bones' dense rows (addBoneSoft) into their bone–z slots
-    const RowMatX& acc = bone_modes_[size_t(list)];
+  if (num_modes_ > 0) {  // the bones' dense rows (addBoneSoft) into their bone–z slots, once
+    RowMatX& acc = bone_modes_[size_t(list)];
+    std::vector<char>& touched = bone_modes_touched_[size_t(list)];
     const size_t groups = size_t(num_groups_);
     for (int b = 0; b < num_bones_; ++b) {
-      if (!bone_modes_touched_[size_t(list)][size_t(b)]) continue;
+      if (!touched[size_t(b)]) continue;
       for (int r = 0; r < 2; ++r) {
         const int* slots = &bz_slot_[size_t(2 * b + r) * groups + size_t(num_handles_)];
         for (int g = 0; g < num_modes_ / 3; ++g)
           values[size_t(slots[g])] += acc.block<3, 3>(6 * b + 3 * r, 3 * g);
       }
+      acc.middleRows<6>(6 * b).setZero();
+      touched[size_t(b)] = 0;
     }
   }
   for (const auto& [lower, upper] : zz_mirror_)

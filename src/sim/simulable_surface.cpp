@@ -24,6 +24,18 @@ void Simulable::Impl::buildSkinning() {
 
 // ---- contact -----------------------------------------------------------------------------
 
+namespace {
+
+// The smallest signed distance from x to any collider at time t (∞ without colliders):
+// 1-Lipschitz, as each collider's is.
+double nearestColliderDistance(const std::vector<Collider>& colliders, const Vec3& x, double t) {
+  double d = std::numeric_limits<double>::infinity();
+  for (const Collider& collider : colliders) d = std::min(d, collider.signedDistance(x, t));
+  return d;
+}
+
+}  // namespace
+
 // Broad phase, then the contact energy and its node gradient at the current state. A vertex i
 // dominated by bone b is x_i = x_ib + Σ_{c≠b} w_ic (x_ic − x_ib) with x_ib its rigid position
 // on b, and x_ic − x_ib = (R_c − R_b)(X_i − J_b) + (R_c(J_b − J_c) + t_c − t_b), so
@@ -51,19 +63,12 @@ void Simulable::Impl::broadPhase(const double* extra_margin, std::vector<int>& c
     }
     const Vec3 centre = q.R[b] * bound.center + q.t.row(b).transpose();
     const double radius = bound.radius + margin;
-    bool near = false;
-    for (const Collider& collider : colliders)
-      near = near || collider.signedDistance(centre, time) < radius;
-    if (!near) continue;
+    if (nearestColliderDistance(colliders, centre, time) >= radius) continue;
     // The same bound per vertex cluster: |x_i − cluster centre| ≤ cluster radius + margin.
     for (int k = surface.bone_clusters[b]; k < surface.bone_clusters[b + 1]; ++k) {
       const SkinnedSurface::Cluster& cluster = surface.clusters[k];
       const Vec3 cluster_centre = q.R[b] * cluster.bound.center + q.t.row(b).transpose();
-      bool cluster_near = false;
-      for (const Collider& collider : colliders)
-        cluster_near = cluster_near || collider.signedDistance(cluster_centre, time) <
-                                           cluster.bound.radius + margin;
-      if (cluster_near)
+      if (nearestColliderDistance(colliders, cluster_centre, time) < cluster.bound.radius + margin)
         candidates.insert(candidates.end(), dominated.begin() + cluster.begin,
                           dominated.begin() + cluster.end);
     }
@@ -81,13 +86,7 @@ void Simulable::Impl::ensureContact() const {
   broadPhase(margin, cc.candidates);
   if (!cc.candidates.empty())
     kinematics->pruneCandidates(
-        [&](const Vec3& x) {
-          double d = std::numeric_limits<double>::infinity();
-          for (const Collider& collider : colliders)
-            d = std::min(d, collider.signedDistance(x, time));
-          return d;
-        },
-        cc.candidates);
+        [&](const Vec3& x) { return nearestColliderDistance(colliders, x, time); }, cc.candidates);
   model_contact->refresh(context(), cc);
   cc.version = state_version;
 }

@@ -269,6 +269,10 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
                  SkinnedPoint& p) const;
   /// t_b − R_b J_b per bone: x_j = Σ_b w_jb (R_b Y_j + shift_b).
   void boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const;
+  /// x_j = Σ_b w_jb (R_b Y + shift_b) for node j's unposed position Y (shift: boneShifts'), and
+  /// M_j = Σ_b w_jb R_b when M is not null.
+  Vec3 skin(int j, const std::vector<Mat3>& R, const Vec3* shift, const Vec3& Y,
+            Mat3* M = nullptr) const;
   template <int Rows>
   void addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
                    const Eigen::Matrix<double, Rows, 3>& B, int list) const;

@@ -46,7 +46,8 @@ void bind_solve(py::module_& m) {
       "Hessian, refactoring only when that stops paying off (NewtonOptions.lagged).")
       .def(py::init([](bool enabled, double cg_relative_tolerance, bool adaptive_forcing,
                        int max_cg_iterations, int refactor_after_cg_iterations,
-                       bool fast_preconditioner, double reuse_hessian_below) {
+                       bool fast_preconditioner, double reuse_hessian_below,
+                       bool coarse_correction) {
              LaggedFactorOptions o;
              o.enabled = enabled;
              o.cg_relative_tolerance = cg_relative_tolerance;
@@ -55,6 +56,7 @@ void bind_solve(py::module_& m) {
              o.refactor_after_cg_iterations = refactor_after_cg_iterations;
              o.fast_preconditioner = fast_preconditioner;
              o.reuse_hessian_below = reuse_hessian_below;
+             o.coarse_correction = coarse_correction;
              return o;
            }),
            py::kw_only(), py::arg("enabled") = ld.enabled,
@@ -64,6 +66,7 @@ void bind_solve(py::module_& m) {
            py::arg("refactor_after_cg_iterations") = ld.refactor_after_cg_iterations,
            py::arg("fast_preconditioner") = ld.fast_preconditioner,
            py::arg("reuse_hessian_below") = ld.reuse_hessian_below,
+           py::arg("coarse_correction") = ld.coarse_correction,
            "Keyword arguments; values are checked when a solve starts (ValueError).")
       .def_readwrite("enabled", &LaggedFactorOptions::enabled,
                      "False: every Newton iteration factors its Hessian")
@@ -81,6 +84,10 @@ void bind_solve(py::module_& m) {
       .def_readwrite("reuse_hessian_below", &LaggedFactorOptions::reuse_hessian_below,
                      "≥ 0: once ‖g‖∞ ≤ this · max(1, ‖g₀‖∞), PCG may run on the previous "
                      "iterate's Hessian (a chord step, at most one in a row); 0: never")
+      .def_readwrite("coarse_correction", &LaggedFactorOptions::coarse_correction,
+                     "PCG's preconditioner gets an exact solve on every avatar's bone DoFs with "
+                     "their block of the current Hessian (a two-level preconditioner; on in the "
+                     "soft-tissue and ROM defaults)")
       .def("__repr__", [](const LaggedFactorOptions& o) {
         return "LaggedFactorOptions(enabled=" + std::string(o.enabled ? "True" : "False") +
                ", cg_relative_tolerance=" +

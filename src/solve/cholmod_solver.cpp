@@ -20,6 +20,25 @@ namespace {
 
 using detail::PreconditionerSplit;
 
+/// Runs CHOLMOD's own OpenMP loops on the calling thread while alive. Debian's CHOLMOD asks
+/// for 4 threads (num_threads(CHOLMOD_OMP_NUM_THREADS), whatever OMP_NUM_THREADS says) in
+/// loops that copy and clear each supernode's few hundred entries: a thread wake-up per
+/// supernode. On the 2-core machine the FEM walk's 26 k-DoF factorization took 0.22–0.30 s
+/// with them and 0.13–0.15 s without (1742 supernodes, 1.16 GFlop; docs/benchmarks.md). The
+/// BLAS calls, where the flops are, keep OpenBLAS's own threads. The ICV is process-wide in
+/// libgomp, so it is restored at once; factorizations run on the thread that drives Newton,
+/// outside any parallel region of the library.
+class SerialOpenMp {
+ public:
+  SerialOpenMp() : levels_(omp_get_max_active_levels()) { omp_set_max_active_levels(0); }
+  ~SerialOpenMp() { omp_set_max_active_levels(levels_); }
+  SerialOpenMp(const SerialOpenMp&) = delete;
+  SerialOpenMp& operator=(const SerialOpenMp&) = delete;
+
+ private:
+  int levels_;
+};
+
 class CholmodSolver final : public LinearSolver {
  public:
   CholmodSolver() {
@@ -72,7 +91,11 @@ class CholmodSolver final : public LinearSolver {
       ++analyses_;
       rememberPattern(*A);
     }
-    const int ok = cholmod_factorize(&view, factor_, &common_);
+    int ok = 0;
+    {
+      SerialOpenMp serial;
+      ok = cholmod_factorize(&view, factor_, &common_);
+    }
     if (!ok || common_.status == CHOLMOD_NOT_POSDEF || factor_->minor < factor_->n) return false;
     if (common_.status < CHOLMOD_OK)
       throw Error("CholmodSolver::factorize: cholmod_factorize failed (status " +

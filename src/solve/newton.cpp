@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "flsh/core/error.h"
+#include "solve/coarse_correction.h"
 
 namespace flsh {
 
@@ -77,18 +78,26 @@ struct CgWorkspace {
 };
 
 /// Preconditioned conjugate gradients on H x = b from x = 0 with M⁻¹ = preconditioner's held
-/// factor (`fast`: through preconditionInPlace, else the exact solveInPlace); stops when
+/// factor (`fast`: through preconditionInPlace, else the exact solveInPlace), with the coarse
+/// level on top when `coarse` is active (built from this H); stops when
 /// ‖b − H x‖₂ ≤ residual_tolerance. H is symmetric in full storage and need not be positive
 /// definite: a direction with pᵀHp ≤ 0 stops it (NonPositiveCurvature). Every iterate is a
 /// descent direction of ½xᵀHx − bᵀx as long as the curvatures met were positive.
 CgOutcome preconditionedCg(const SpMat& H, const VecX& b, double residual_tolerance,
                            int max_iterations, const LinearSolver& preconditioner, bool fast,
-                           VecX& x, CgWorkspace& w, int& iterations) {
-  auto precondition = [&](VecX& v) {
+                           const detail::CoarseCorrection* coarse, VecX& x, CgWorkspace& w,
+                           int& iterations) {
+  auto factorSolve = [&](VecX& v) {
     if (fast)
       preconditioner.preconditionInPlace(v);
     else
       preconditioner.solveInPlace(v);
+  };
+  auto precondition = [&](VecX& v) {
+    if (coarse && coarse->active())
+      coarse->apply(v, factorSolve);
+    else
+      factorSolve(v);
   };
   x.setZero(b.size());
   w.product.resize(b.size());
@@ -236,6 +245,11 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
   std::vector<double*> diagonal;
   VecX diagonal_values;
   CgWorkspace cg;
+  // The lagged PCG's coarse level (LaggedFactorOptions::coarse_correction), rebuilt from each
+  // Hessian PCG runs on.
+  std::vector<int> coarse_dofs;
+  if (lag.enabled && lag.coarse_correction) objective.coarseDofs(coarse_dofs);
+  detail::CoarseCorrection coarse;
   double initial_gradient_norm = 0.0;
   double previous_gradient_norm2 = 0.0;
   double last_step_norm = std::numeric_limits<double>::infinity();
@@ -417,8 +431,9 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
           CgOutcome outcome;
           {
             ScopedSeconds timer(result.seconds_solve);
+            if (!coarse_dofs.empty()) coarse.build(H, coarse_dofs);  // from this H
             outcome = preconditionedCg(H, rhs, residual_tolerance, lag.max_cg_iterations, *solver,
-                                       lag.fast_preconditioner, dq, cg, iterations);
+                                       lag.fast_preconditioner, &coarse, dq, cg, iterations);
           }
           result.cg_iterations += iterations;
           if (iterations > lag.refactor_after_cg_iterations) solver->setFactorStale(true);

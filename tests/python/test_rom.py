@@ -328,6 +328,7 @@ def test_lagged_factor_options_reach_the_solver(avatar):
 
     (iterations, factorizations, cg), q_lag = run(flsh.LaggedFactorOptions(enabled=True))
     assert cg > 0 and factorizations < iterations  # PCG on an earlier factor
+    cg_lag = cg
     off = flsh.NewtonOptions().lagged
     off.enabled = False  # edited in place
     assert off.enabled is False
@@ -347,6 +348,13 @@ def test_lagged_factor_options_reach_the_solver(avatar):
     assert flsh.LaggedFactorOptions().reuse_hessian_below == 0.0
     with pytest.raises(ValueError, match="reuse_hessian_below"):
         run(flsh.LaggedFactorOptions(enabled=True, reuse_hessian_below=-1.0))
+    # The bones as PCG's coarse level: on in the scene defaults, the same states with fewer
+    # PCG iterations.
+    assert defaults.coarse_correction and flsh.SceneOptions().soft_tissue_newton.lagged.coarse_correction
+    assert flsh.LaggedFactorOptions().coarse_correction is False
+    (_, _, cg_coarse), q_coarse = run(flsh.LaggedFactorOptions(enabled=True, coarse_correction=True))
+    assert 0 < cg_coarse < cg_lag
+    assert np.abs(q_coarse - q_lag).max() < 1e-4
     motion = flsh.make_builtin_motion("jumping_jacks", seconds=0.5, fps=30.0)
     sim = flsh.Simulable(avatar, motion, flsh.SimulableOptions(time_step=1.0 / 30.0))
     scene = flsh.Scene()

@@ -4,6 +4,7 @@
 #include "flsh/solve/linear_solver.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <Eigen/Dense>
 #include <algorithm>
@@ -222,6 +223,21 @@ INSTANTIATE_TEST_SUITE_P(Backends, SparseSolverTest,
                          [](const auto& info) {
                            return info.param == LinearSolverType::Cholmod ? "Cholmod" : "SparseLLT";
                          });
+
+// CHOLMOD's factorization runs its own OpenMP loops on the calling thread (cholmod_solver.cpp:
+// they asked for 4 threads per supernode) and leaves the OpenMP settings as it found them.
+TEST(CholmodSolver, FactorsWithItsOpenMpLoopsSerialAndRestoresTheSettings) {
+  const SpMat A = randomSpd(3000, 4, 11);
+  auto solver = makeLinearSolver(LinearSolverType::Cholmod, int(A.rows()));
+  for (int levels : {1, 3}) {
+    omp_set_max_active_levels(levels);
+    ASSERT_TRUE(solver->factorize(A));
+    EXPECT_EQ(omp_get_max_active_levels(), levels);
+    const VecX b = randomVector(int(A.rows()), 12);
+    EXPECT_LE(relativeError(A * solver->solve(b), b), 1e-10);
+  }
+  omp_set_max_active_levels(1);
+}
 
 TEST(LinearSolverFactory, AutoPicksDenseForSmallAndCholmodForLargeSystems) {
   EXPECT_EQ(makeLinearSolver(LinearSolverType::Auto, 144)->name(), "dense-llt");

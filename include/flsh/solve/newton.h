@@ -4,6 +4,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "flsh/core/types.h"
 #include "flsh/solve/linear_solver.h"
@@ -42,6 +43,10 @@ class Objective {
   virtual bool discardPushed() { return false; }
   /// Zeroes kinematic (prescribed) DoFs in g and makes their rows/cols identity in H.
   virtual void fixKinematic(VecX& g, SpMat* H) {}
+  /// The DoFs of the lagged-factor PCG's coarse level (LaggedFactorOptions::coarse_correction),
+  /// sorted and distinct: a few (up to a few hundred) where the Hessian changes most between
+  /// factorizations, e.g. an avatar's bones. Default: none.
+  virtual void coarseDofs(std::vector<int>& dofs) const { dofs.clear(); }
 };
 
 /// Newton directions from conjugate gradients preconditioned with the Cholesky factor of an
@@ -104,6 +109,15 @@ struct LaggedFactorOptions {
   /// ‖g‖∞ ≤ reuse_hessian_below · max(1, ‖g₀‖∞) (dimensionless, ≥ 0; 0: never). If that PCG
   /// fails or its step is rejected, the iteration assembles its own Hessian as usual.
   double reuse_hessian_below = 0.0;
+  /// PCG's preconditioner gets a coarse level: an exact solve on the objective's coarse DoFs
+  /// (Objective::coarseDofs; a scene's: every avatar's bones) with their block of the current
+  /// Hessian, combined with the lagged factor as a balancing two-level preconditioner
+  /// (src/solve/coarse_correction.h). The lagged factor goes stale mostly in the bones' rows,
+  /// which rotate with the pose and carry nearly all of the gradient. FEM walk, 30 steps:
+  /// 23.2 → 5.6 PCG iterations and 0.40 → 0 factorizations per step, the same Newton
+  /// iterations (docs/benchmarks.md). Off when the objective names no coarse DoFs or their
+  /// block is not positive definite (then PCG on the factor alone).
+  bool coarse_correction = false;
 };
 
 struct NewtonOptions {

@@ -147,6 +147,8 @@ class Scene : public Objective {
   void pop() override;
   bool discardPushed() override;
   void fixKinematic(VecX& g, SpMat* H) override;
+  /// Every simulable's bone DoFs (6 per bone): the coarse level of the lagged-factor PCG.
+  void coarseDofs(std::vector<int>& dofs) const override;
 
   /// Avatar–avatar contact energy at the current states; adds gradient/Hessian when asked.
   /// For every ordered pair (A, B) of different simulables, A's surface vertices x_i (areas

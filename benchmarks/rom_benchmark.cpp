@@ -95,6 +95,7 @@
 #include <string>
 #include <vector>
 
+#include "belly_ball.h"
 #include "flsh/body/motion.h"
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/body/synthetic_body.h"
@@ -270,19 +271,7 @@ Run makeRun(std::shared_ptr<SoftAvatar> avatar, const Scenario& sc, const SceneO
   if (ground)
     r.scene->addCollider(
         Collider::plane(Vec3(0, r.sim->getNodes().col(1).minCoeff() - 0.002, 0), Vec3::UnitY()));
-  if (sc.ball) {
-    // Starts 2 cm in front of the belly, presses 4 cm past its rest surface at 0.3 m/s and goes
-    // back. (At 3 m/s the FEM's Newton fails to converge on the impact step and the FEM
-    // reference blows up a few steps later: see docs/benchmarks.md.)
-    const double radius = 0.12, speed = 0.3, travel = 0.06;
-    const Vec3 belly(0.0, 0.05, 0.11);
-    const Vec3 start = belly + Vec3(0.0, 0.0, radius + 0.02);
-    const double turn = travel / speed;
-    Collider ball = Collider::sphere(start, radius);
-    ball.path =
-        ColliderPath{{0.0, turn, 2 * turn}, {Vec3::Zero(), Vec3(0.0, 0.0, -travel), Vec3::Zero()}};
-    r.scene->addCollider(ball);
-  }
+  if (sc.ball) r.scene->addCollider(bench::bellyBall());  // belly_ball.h
   return r;
 }
 

@@ -14,7 +14,17 @@ NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeM
   for (int j : masses_.nodes)
     for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf)
       bone_mass_[size_t(inf->bone)] += masses_.mass[j] * inf->weight;
-  if (!kin_.reduced()) return;
+  if (!kin_.reduced()) {
+    for (int j : masses_.nodes) {
+      if (!kin_.isSoftNode(j)) continue;
+      const int u = kin_.boneDofs() + kin_.nodeDof(j);
+      for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf) {
+        coupling_positions_.emplace_back(6 * inf->bone + 3, u);
+        coupling_positions_.emplace_back(u, 6 * inf->bone + 3);
+      }
+    }
+    return;
+  }
   const int bones = kin_.numBones(), H = kin_.numHandles();
   std::vector<double> D(size_t(bones) * H, 0.0);
   for (int j : masses_.nodes)
@@ -44,11 +54,38 @@ NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeM
 void NodalGravityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                                         std::vector<FixedHessianBlocks>* blocks, int offset,
                                         bool psd) const {
-  // The ROM's blocks need no node forces (reducedHessian); the FEM maps them.
+  // Neither model needs the node forces' pass for the Hessian alone.
   if (kin_.reduced()) return reducedHessian(c.options.gravity, H, offset, psd);
-  collectFixedBlocks(blocks, [&](FixedHessianBlocks* fixed) {
-    evaluate(c.options.gravity, nullptr, &H, offset, psd, fixed);
-  });
+  femHessian(c.options.gravity, H, blocks, offset, psd);
+}
+
+void NodalGravityTerm::femHessian(const Vec3& gravity, std::vector<Triplet>& H,
+                                  std::vector<FixedHessianBlocks>* blocks, int offset,
+                                  bool psd) const {
+  boneCurvature(gravity, H, offset, psd);
+  if (psd) {
+    if (blocks) blocks->push_back({&no_positions_, &no_values_, offset});
+    return;
+  }
+  const std::vector<Mat3>& R = kin_.R();
+  Mat3 G[kNumJoints];  // [g]× R_b
+  for (int b = 0; b < kin_.numBones(); ++b) G[b] = skew(gravity) * R[size_t(b)];
+  fixed_.resize(coupling_positions_.size());
+  size_t k = 0;
+  for (int j : masses_.nodes) {
+    if (!kin_.isSoftNode(j)) continue;
+    for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf, k += 2) {
+      fixed_[k] = (masses_.mass[j] * inf->weight) * G[inf->bone];
+      fixed_[k + 1] = fixed_[k].transpose();
+    }
+  }
+  if (blocks) {
+    blocks->push_back({&coupling_positions_, &fixed_, offset});
+    return;
+  }
+  for (size_t b = 0; b < coupling_positions_.size(); ++b)
+    addBlock(H, offset + coupling_positions_[b].first, offset + coupling_positions_[b].second,
+             fixed_[b]);
 }
 
 double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
@@ -66,18 +103,30 @@ double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Trip
   if (H && kin_.reduced()) {
     reducedHessian(gravity, *H, offset, psd);
   } else if (H) {
-    kin_.mapHessian(nodes, nullptr, &forces_, *H, offset, psd, 1, blocks ? &fixed_ : nullptr);
-    if (blocks) *blocks = {&kin_.couplingPositions(), &fixed_, offset};
+    std::vector<FixedHessianBlocks> lists;
+    femHessian(gravity, *H, blocks ? &lists : nullptr, offset, psd);
+    if (blocks) *blocks = lists.front();
   }
   return E;
 }
 
 void NodalGravityTerm::reducedHessian(const Vec3& gravity, std::vector<Triplet>& H, int offset,
                                       bool psd) const {
+  // The rotation–handle blocks Σ_j −w_jb φ_jh [f_j]× R_b = D_bh [g]× R_b (D_bh constant).
+  boneCurvature(gravity, H, offset, psd);
+  if (psd) return;
+  const std::vector<Mat3>& R = kin_.R();
+  Mat3* values = kin_.reducedValues(1);
+  const Mat3 G = skew(gravity);
+  for (const HandleBlock& hb : handle_blocks_) values[hb.slot] += hb.weight * (G * R[hb.bone]);
+  for (const ModeBlock& mb : mode_blocks_) values[mb.slot] += (G * R[mb.bone]) * mb.D;
+}
+
+void NodalGravityTerm::boneCurvature(const Vec3& gravity, std::vector<Triplet>& H, int offset,
+                                     bool psd) const {
   // The node forces f_j = −m_j g are constant, so mapHessian's per-node sums collapse to per-bone
   // ones: the rotation curvature Σ_j w_jb C(f_j, R_b (Y_j − J_b)) = C(−g, R_b v_b) with v_b =
-  // Σ_j m_j w_jb (Y_j − J_b) (C is bilinear), and, in the exact form, the rotation–handle blocks
-  // Σ_j −w_jb φ_jh [f_j]× R_b = D_bh [g]× R_b (D_bh constant).
+  // Σ_j m_j w_jb (Y_j − J_b) (C is bilinear).
   const std::vector<Mat3>& R = kin_.R();
   const MatX3& Y = kin_.Y();
   const int bones = kin_.numBones();
@@ -101,11 +150,6 @@ void NodalGravityTerm::reducedHessian(const Vec3& gravity, std::vector<Triplet>&
     const Mat3 C = rotationCurvature(-gravity, lever);
     addBlock(H, offset + 6 * b + 3, offset + 6 * b + 3, psd ? projectToPSD<3>(C) : C);
   }
-  if (psd) return;
-  Mat3* values = kin_.reducedValues(1);
-  const Mat3 G = skew(gravity);
-  for (const HandleBlock& hb : handle_blocks_) values[hb.slot] += hb.weight * (G * R[hb.bone]);
-  for (const ModeBlock& mb : mode_blocks_) values[mb.slot] += (G * R[mb.bone]) * mb.D;
 }
 
 // g = Σ_j J_jᵀ f_j with the constant f_j = −m_j g: the rest joint J_b turns only the lever

@@ -35,10 +35,9 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
                         std::vector<FixedHessianBlocks>* blocks, int offset,
                         bool psd) const override;
 
-  /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM: triplets
-  /// appended to H, or with `blocks` returned at the kinematics' coupling positions — all zero
-  /// in the PSD form, so that the positions stay the same in both; ROM: bone triplets into H,
-  /// rotation–handle blocks into value list 1).
+  /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM:
+  /// femHessian's, with `blocks` its fixed-block list; ROM: bone triplets into H, rotation–handle
+  /// blocks into value list 1).
   double evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                   FixedHessianBlocks* blocks = nullptr) const;
   /// ∂g/∂p as local blocks (term_blocks.h).
@@ -49,6 +48,13 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
   void nodeOffsetBlocks(const TermContext& c, Sink& sink) const;
   /// ROM: the Hessian alone (the node loop of the energy is not needed).
   void reducedHessian(const Vec3& gravity, std::vector<Triplet>& H, int offset, bool psd) const;
+  /// FEM: the Hessian alone. The rotation curvature per bone (boneCurvature) and, in the exact
+  /// form, the rotation–displacement blocks w_jb m_j [g]× R_b of every mass node with a DoF and
+  /// its bones (the only nonzero blocks: x is linear in u and f_j = −m_j g is constant): as
+  /// fixed blocks at coupling_positions_ with `blocks` (an empty list in the PSD form, which
+  /// keeps the lists' order), else as triplets.
+  void femHessian(const Vec3& gravity, std::vector<Triplet>& H,
+                  std::vector<FixedHessianBlocks>* blocks, int offset, bool psd) const;
 
  private:
   const NodeMasses& masses_;
@@ -68,7 +74,14 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
     Mat3 D;
   };
   std::vector<ModeBlock> mode_blocks_;
+  /// Σ_b C(−g, R_b Σ_j m_j w_jb (Y_j − J_b)) into the bones' rotation blocks (the node sum of
+  /// each bone's rotation curvature against the constant node forces, C bilinear).
+  void boneCurvature(const Vec3& gravity, std::vector<Triplet>& H, int offset, bool psd) const;
+
   std::vector<double> bone_mass_;  // Σ_j m_j w_jb per bone over the mass nodes (constant)
+  // FEM: (6b + 3, u) and (u, 6b + 3) per mass node with a DoF and influence, in node order.
+  std::vector<std::pair<int, int>> coupling_positions_, no_positions_;
+  const std::vector<Mat3> no_values_;
   mutable std::vector<Vec3> forces_;
   mutable std::vector<Mat3> fixed_;
 };

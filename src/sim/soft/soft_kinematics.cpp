@@ -12,6 +12,7 @@
 #include "flsh/core/rotation.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
+#include "sim/soft/on_two_threads.h"
 #include "sim/terms/term_blocks.h"
 
 namespace flsh::detail {
@@ -125,6 +126,7 @@ SoftKinematics::SoftKinematics(const SoftAvatar& avatar, const MatX3& joints,
   for (BonePairBlocks& blocks : pair_blocks_) blocks.resize(num_bones_);
   for (auto& moments : pair_moments_)
     moments.resize(size_t(num_bones_) * num_bones_, PairMoments{});
+  pair_moments_second_.resize(size_t(num_bones_) * num_bones_, PairMoments{});
   all_nodes_.resize(n);
   for (int j = 0; j < n; ++j) all_nodes_[j] = j;
   surface_nodes_.assign(all_nodes_.begin(), all_nodes_.begin() + num_surface_);
@@ -519,101 +521,144 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
   // K_j = κ_j I: J_aᵀ J_c = w_a w_c [I, −[r_c]×; [r_a]×, (r_a·r_c) I − r_c r_aᵀ] is summed over
   // the nodes as moments per bone pair (κ w w, its r_c- and r_a-weighted sums and Σ κ w w r_c
   // r_aᵀ), 16 products per pair and node instead of a 6 × 3 × 6 product; blocks at the end.
-  TouchedValues<PairMoments>& moments = pair_moments_[size_t(list)];
-  Mat3 curvature[kNumJoints];
-  bool has_curvature[kNumJoints] = {};
-  Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
-  Vec3 lever[kNumJoints];
-  int bones[kNumJoints];
-  for (size_t idx = 0; idx < nodes.size(); ++idx) {
-    const int j = nodes[idx];
-    const int dof = node_dof_[j];
-    const Vec3 Y = Y_.row(j).transpose();
-    const int count = influence_start_[j + 1] - influence_start_[j];
-    for (int a = 0; a < count; ++a) {
-      const Influence& inf = influences_[influence_start_[j] + a];
-      bones[a] = inf.bone;
-      lever[a] = R[inf.bone] * (Y - joints_.row(inf.bone).transpose());
-      Jb[a].leftCols<3>() = inf.weight * Mat3::Identity();
-      Jb[a].rightCols<3>() = -inf.weight * skew(lever[a]);
-    }
-    // Bone–soft coupling per influence, one 6 × 3 block: Jbᵀ K M from K and, in the exact
-    // form, ∂²(f·x)/∂δω_b∂δu_j = −w [f]× R_b from the force (rows 3..5).
-    const bool force = forces && !(*forces)[idx].isZero(0.0);
-    const bool k_coupling = (K || K_scalar) && dof >= 0, f_coupling = force && !psd && dof >= 0;
-    Eigen::Matrix<double, 6, 3> coupling[kNumJoints];
-    for (int a = 0; a < count && (k_coupling || f_coupling); ++a) coupling[a].setZero();
-    if (K_scalar) {
-      const double kappa = (*K_scalar)[idx];
+  // Per-bone sums of the rotation curvature against the forces.
+  struct Sums {
+    TouchedValues<PairMoments>* moments;
+    Mat3 curvature[kNumJoints];
+    bool has_curvature[kNumJoints] = {};
+  };
+  // The nodes [begin, end) into `sums`; the blocks of a node go to its own fixed slots, or
+  // (without `fixed`) into H, the pair blocks or the value lists.
+  const auto mapNodes = [&](size_t begin, size_t end, Sums& sums) {
+    TouchedValues<PairMoments>& moments = *sums.moments;
+    Eigen::Matrix<double, 3, 6> Jb[kNumJoints];
+    Vec3 lever[kNumJoints];
+    int bones[kNumJoints];
+    for (size_t idx = begin; idx < end; ++idx) {
+      const int j = nodes[idx];
+      const int dof = node_dof_[j];
+      const Vec3 Y = Y_.row(j).transpose();
+      const int count = influence_start_[j + 1] - influence_start_[j];
       for (int a = 0; a < count; ++a) {
-        const double ka = kappa * influences_[influence_start_[j] + a].weight;
-        for (int c = 0; c < count; ++c) {
-          const double s = ka * influences_[influence_start_[j] + c].weight;
-          PairMoments& m = moments.at(bones[a] * num_bones_ + bones[c]);
-          m.s += s;
-          m.p += s * lever[c];
-          m.q += s * lever[a];
-          m.W.noalias() += (s * lever[c]) * lever[a].transpose();
-        }
+        const Influence& inf = influences_[influence_start_[j] + a];
+        bones[a] = inf.bone;
+        lever[a] = R[inf.bone] * (Y - joints_.row(inf.bone).transpose());
+        Jb[a].leftCols<3>() = inf.weight * Mat3::Identity();
+        Jb[a].rightCols<3>() = -inf.weight * skew(lever[a]);
       }
-      if (dof >= 0) {
-        const Mat3& M = node_M_[j];
+      // Bone–soft coupling per influence, one 6 × 3 block: Jbᵀ K M from K and, in the exact
+      // form, ∂²(f·x)/∂δω_b∂δu_j = −w [f]× R_b from the force (rows 3..5).
+      const bool force = forces && !(*forces)[idx].isZero(0.0);
+      const bool k_coupling = (K || K_scalar) && dof >= 0, f_coupling = force && !psd && dof >= 0;
+      Eigen::Matrix<double, 6, 3> coupling[kNumJoints];
+      for (int a = 0; a < count && (k_coupling || f_coupling); ++a) coupling[a].setZero();
+      if (K_scalar) {
+        const double kappa = (*K_scalar)[idx];
         for (int a = 0; a < count; ++a) {
           const double ka = kappa * influences_[influence_start_[j] + a].weight;
-          coupling[a].topRows<3>() += ka * M;
-          coupling[a].bottomRows<3>().noalias() += ka * (skew(lever[a]) * M);
+          for (int c = 0; c < count; ++c) {
+            const double s = ka * influences_[influence_start_[j] + c].weight;
+            PairMoments& m = moments.at(bones[a] * num_bones_ + bones[c]);
+            m.s += s;
+            m.p += s * lever[c];
+            m.q += s * lever[a];
+            m.W.noalias() += (s * lever[c]) * lever[a].transpose();
+          }
         }
-        if (soft_soft) {
-          const Mat3 MtKM = kappa * (M.transpose() * M);
+        if (dof >= 0) {
+          const Mat3& M = node_M_[j];
+          for (int a = 0; a < count; ++a) {
+            const double ka = kappa * influences_[influence_start_[j] + a].weight;
+            coupling[a].topRows<3>() += ka * M;
+            coupling[a].bottomRows<3>().noalias() += ka * (skew(lever[a]) * M);
+          }
+          if (soft_soft) {
+            const Mat3 MtKM = kappa * (M.transpose() * M);
+            if (fixed)
+              (*fixed)[size_t(coupling_start_[idx + 1]) - 1] = MtKM;
+            else
+              addSoftSoft(H, offset, j, MtKM, list);
+          }
+        }
+      } else if (K) {
+        const Mat3& Kj = (*K)[idx];
+        for (int a = 0; a < count; ++a) {
+          const Eigen::Matrix<double, 6, 3> JaT_K = Jb[a].transpose() * Kj;
+          for (int c = 0; c < count; ++c) block(bones[a], bones[c]).noalias() += JaT_K * Jb[c];
+        }
+        if (k_coupling) {
+          const Mat3 KM = Kj * node_M_[j];
+          for (int a = 0; a < count; ++a) coupling[a].noalias() += Jb[a].transpose() * KM;
           if (fixed)
-            (*fixed)[size_t(coupling_start_[idx + 1]) - 1] = MtKM;
-          else
-            addSoftSoft(H, offset, j, MtKM, list);
+            (*fixed)[size_t(coupling_start_[idx + 1]) - 1].noalias() = node_M_[j].transpose() * KM;
+          else if (soft_soft)
+            addSoftSoft(H, offset, j, node_M_[j].transpose() * KM, list);
         }
       }
-    } else if (K) {
-      const Mat3& Kj = (*K)[idx];
-      for (int a = 0; a < count; ++a) {
-        const Eigen::Matrix<double, 6, 3> JaT_K = Jb[a].transpose() * Kj;
-        for (int c = 0; c < count; ++c) block(bones[a], bones[c]).noalias() += JaT_K * Jb[c];
+      if (force) {
+        const Vec3& f = (*forces)[idx];
+        for (int a = 0; a < count; ++a) {
+          const int b = bones[a];
+          const double w = influences_[influence_start_[j] + a].weight;
+          if (!sums.has_curvature[b]) sums.curvature[b].setZero();
+          sums.has_curvature[b] = true;
+          sums.curvature[b] += w * rotationCurvature(f, lever[a]);
+          if (f_coupling) coupling[a].bottomRows<3>() -= w * skew(f) * R[b];
+        }
       }
-      if (k_coupling) {
-        const Mat3 KM = Kj * node_M_[j];
-        for (int a = 0; a < count; ++a) coupling[a].noalias() += Jb[a].transpose() * KM;
-        if (fixed)
-          (*fixed)[size_t(coupling_start_[idx + 1]) - 1].noalias() = node_M_[j].transpose() * KM;
-        else if (soft_soft)
-          addSoftSoft(H, offset, j, node_M_[j].transpose() * KM, list);
+      if (fixed && (k_coupling || f_coupling)) {
+        Mat3* out = fixed->data() + coupling_start_[idx];
+        for (int a = 0; a < count; ++a, out += 4) {
+          out[0] = coupling[a].topRows<3>();
+          out[1] = coupling[a].bottomRows<3>();
+          out[2] = out[0].transpose();
+          out[3] = out[1].transpose();
+        }
+        continue;
+      }
+      for (int a = 0; a < count; ++a) {  // without K only the rotation rows are nonzero
+        if (k_coupling)
+          addBoneSoft<6>(H, offset, 6 * bones[a], j, coupling[a], list);
+        else if (f_coupling)
+          addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval(), list);
       }
     }
-    if (force) {
-      const Vec3& f = (*forces)[idx];
-      for (int a = 0; a < count; ++a) {
-        const int b = bones[a];
-        const double w = influences_[influence_start_[j] + a].weight;
-        if (!has_curvature[b]) curvature[b].setZero();
-        has_curvature[b] = true;
-        curvature[b] += w * rotationCurvature(f, lever[a]);
-        if (f_coupling) coupling[a].bottomRows<3>() -= w * skew(f) * R[b];
-      }
+  };
+  Sums sums;
+  sums.moments = &pair_moments_[size_t(list)];
+  // FEM (the blocks of each node into its own fixed slots, no pair blocks from K): two halves of
+  // the nodes on two threads, the second's sums added to the first's after; always two halves,
+  // so the sums are the same on any number of threads (the inertia of ~9 k nodes: ~8 → ~4 ms).
+  const bool halves = fixed && !K;
+  if (halves) {
+    Sums second;
+    second.moments = &pair_moments_second_;
+    const size_t mid = nodes.size() / 2;
+    onTwoThreads([&](int part) {
+      if (part == 0)
+        mapNodes(0, mid, sums);
+      else
+        mapNodes(mid, nodes.size(), second);
+    });
+    for (int key : second.moments->touched()) {
+      const PairMoments& from = second.moments->at(key);
+      PairMoments& to = sums.moments->at(key);
+      to.s += from.s;
+      to.p += from.p;
+      to.q += from.q;
+      to.W += from.W;
     }
-    if (fixed && (k_coupling || f_coupling)) {
-      Mat3* out = fixed->data() + coupling_start_[idx];
-      for (int a = 0; a < count; ++a, out += 4) {
-        out[0] = coupling[a].topRows<3>();
-        out[1] = coupling[a].bottomRows<3>();
-        out[2] = out[0].transpose();
-        out[3] = out[1].transpose();
-      }
-      continue;
+    second.moments->forget();
+    for (int b = 0; b < num_bones_; ++b) {
+      if (!second.has_curvature[b]) continue;
+      if (!sums.has_curvature[b]) sums.curvature[b].setZero();
+      sums.has_curvature[b] = true;
+      sums.curvature[b] += second.curvature[b];
     }
-    for (int a = 0; a < count; ++a) {  // without K only the rotation rows are nonzero
-      if (k_coupling)
-        addBoneSoft<6>(H, offset, 6 * bones[a], j, coupling[a], list);
-      else if (f_coupling)
-        addBoneSoft<3>(H, offset, 6 * bones[a] + 3, j, coupling[a].bottomRows<3>().eval(), list);
-    }
+  } else {
+    mapNodes(0, nodes.size(), sums);
   }
+  TouchedValues<PairMoments>& moments = *sums.moments;
   for (int key : moments.touched()) {
     const PairMoments& m = moments.at(key);
     Mat6& B = block(key / num_bones_, key % num_bones_);
@@ -624,8 +669,9 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
   }
   moments.forget();
   for (int b = 0; b < num_bones_; ++b)
-    if (has_curvature[b])
-      block(b, b).bottomRightCorner<3, 3>() += psd ? projectToPSD<3>(curvature[b]) : curvature[b];
+    if (sums.has_curvature[b])
+      block(b, b).bottomRightCorner<3, 3>() +=
+          psd ? projectToPSD<3>(sums.curvature[b]) : sums.curvature[b];
   pair_blocks.emit(H, offset);
 }
 

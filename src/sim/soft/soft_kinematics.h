@@ -334,6 +334,7 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
     Mat3 W = Mat3::Zero();
   };
   mutable TouchedValues<PairMoments> pair_moments_[2];
+  mutable TouchedValues<PairMoments> pair_moments_second_;  // mapHessian's second half (FEM)
   // ROM Hessian blocks at fixed positions (buildReducedPattern): z–z blocks (zz_slot_[h · H +
   // k], H handles), bone–z blocks (bz_slot_[r · H + h]), then the bone–z blocks' transposes;
   // positions relative to the first DoF. Two value lists: 0 (inertia), 1 (the potential terms).

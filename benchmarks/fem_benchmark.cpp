@@ -8,7 +8,7 @@
 //                      [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME]
 //                      [--no-ground] [--contact-stiffness K] [--psd-hessian]
 //                      [--exact-preconditioner] [--inertia-floor I] [--materials FILE]
-//                      [--hessian-parts N]
+//                      [--hessian-parts N] [--reuse-below X] [--no-coarse]
 //   --tolerance: Newton's relative gradient tolerance (default: the scene default);
 //   --no-lag:    factor every Newton iteration (plain Newton on CHOLMOD) for comparison;
 //   --psd-hessian: the PSD Hessian form only (exact_hessian = false), for comparison;
@@ -21,6 +21,9 @@
 //                after this many CG iterations, CG iteration limit;
 //   --motion:    a built-in motion instead of "walk" (e.g. jumping_jacks, jump), or "ball": a
 //                standing body whose belly a ball presses (belly_ball.h, as rom_benchmark's).
+//   --reuse-below X: lagged.reuse_hessian_below (chord steps near convergence; default 1e-4);
+//   --no-coarse: PCG on the lagged factor alone (lagged.coarse_correction = false), for
+//                comparison;
 //   --inertia-floor: SimulableOptions::tracking_inertia_floor (kg·m²; 0 = the former model).
 //   --materials: a material file (docs/materials.md) instead of the built-in defaults, e.g. a
 //                version-1 file for the body without regions (issue 29).
@@ -127,6 +130,8 @@ int main(int argc, char** argv) {
   double contact_stiffness = -1.0;
   double inertia_floor = -1.0;
   std::string motion_name = "walk";
+  double reuse_below = -1.0;
+  bool coarse = true;
   std::string materials;
   double reference = -1.0;
   double cg_tolerance = -1.0;
@@ -148,6 +153,10 @@ int main(int argc, char** argv) {
       exact_preconditioner = true;
     else if (a == "--contact-stiffness" && i + 1 < argc)
       contact_stiffness = std::atof(argv[++i]);
+    else if (a == "--reuse-below" && i + 1 < argc)
+      reuse_below = std::atof(argv[++i]);
+    else if (a == "--no-coarse")
+      coarse = false;
     else if (a == "--motion" && i + 1 < argc)
       motion_name = argv[++i];
     else if (a == "--inertia-floor" && i + 1 < argc)
@@ -172,7 +181,8 @@ int main(int argc, char** argv) {
           "usage: fem_benchmark [STEPS] [--resolution R] [--tolerance T] [--no-lag] "
           "[--threads N] [--reference T_REF] [--cg ETA REFACTOR_AFTER MAX_CG] [--motion NAME] "
           "[--no-ground] [--contact-stiffness K] [--psd-hessian] [--inertia-floor I] "
-          "[--exact-preconditioner] [--materials FILE] [--hessian-parts N]\n");
+          "[--exact-preconditioner] [--materials FILE] [--hessian-parts N] [--reuse-below X] "
+          "[--no-coarse]\n");
       return 2;
     }
   }
@@ -203,6 +213,8 @@ int main(int argc, char** argv) {
     if (tolerance > 0) scene_options.soft_tissue_newton.gradient_tolerance = tolerance;
     if (!lag) scene_options.soft_tissue_newton.lagged.enabled = false;
     if (psd_only) scene_options.soft_tissue_newton.exact_hessian = false;
+    if (reuse_below >= 0) scene_options.soft_tissue_newton.lagged.reuse_hessian_below = reuse_below;
+    scene_options.soft_tissue_newton.lagged.coarse_correction = coarse;
     if (exact_preconditioner) scene_options.soft_tissue_newton.lagged.fast_preconditioner = false;
     if (cg_tolerance > 0) {
       scene_options.soft_tissue_newton.lagged.cg_relative_tolerance = cg_tolerance;

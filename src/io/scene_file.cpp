@@ -369,7 +369,8 @@ class SceneReader {
     requireObject(node, path);
     checkKeys(node, path,
               {"enabled", "cg_relative_tolerance", "adaptive_forcing", "max_cg_iterations",
-               "refactor_after_cg_iterations", "fast_preconditioner", "reuse_hessian_below"});
+               "refactor_after_cg_iterations", "fast_preconditioner", "reuse_hessian_below",
+               "coarse_correction"});
     if (node.contains("enabled")) lagged.enabled = toBool(node["enabled"], child(path, "enabled"));
     if (node.contains("cg_relative_tolerance")) {
       const std::string p = child(path, "cg_relative_tolerance");
@@ -395,6 +396,9 @@ class SceneReader {
       if (!(below >= 0.0)) fail(p, "expected a value ≥ 0 (0: never), got " + number(below));
       lagged.reuse_hessian_below = below;
     }
+    if (node.contains("coarse_correction"))
+      lagged.coarse_correction =
+          toBool(node["coarse_correction"], child(path, "coarse_correction"));
   }
 
   AvatarSpec readAvatar(const json& node, const std::string& path, size_t index,

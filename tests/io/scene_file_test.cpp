@@ -346,7 +346,7 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
                                       "refactor_after_cg_iterations": 15,
                                       "fast_preconditioner": false},
                "reduced_lagged": {"enabled": false, "adaptive_forcing": false,
-                                  "reuse_hessian_below": 0}},
+                                  "reuse_hessian_below": 0, "coarse_correction": false}},
     "avatars": [{}]})");
   const LaggedFactorOptions& fem = scene.soft_tissue_lagged;
   EXPECT_DOUBLE_EQ(fem.cg_relative_tolerance, 0.02);
@@ -361,6 +361,8 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
   EXPECT_FALSE(rom.enabled);
   EXPECT_FALSE(rom.adaptive_forcing);
   EXPECT_EQ(rom.reuse_hessian_below, 0.0);
+  EXPECT_FALSE(rom.coarse_correction);
+  EXPECT_TRUE(fem.coarse_correction);  // not given: the FEM solver's default
   EXPECT_DOUBLE_EQ(rom.cg_relative_tolerance, reducedNewtonDefaults().lagged.cg_relative_tolerance);
   EXPECT_EQ(rom.max_cg_iterations, reducedNewtonDefaults().lagged.max_cg_iterations);
 
@@ -373,6 +375,8 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
        "newton.reduced_lagged.reuse_hessian_below: expected a value ≥ 0 (0: never), got -0.0001"},
       {R"({"newton": {"reduced_lagged": {"enabled": 1}}, "avatars": [{}]})",
        "newton.reduced_lagged.enabled: expected true or false, got number 1"},
+      {R"({"newton": {"soft_tissue_lagged": {"coarse_correction": "yes"}}, "avatars": [{}]})",
+       "newton.soft_tissue_lagged.coarse_correction: expected true or false, got string \"yes\""},
       {R"({"newton": {"soft_tissue_lagged": {"refactor_after": 3}}, "avatars": [{}]})",
        "newton.soft_tissue_lagged.refactor_after: unknown key (known: "},
       {R"({"newton": {"soft_tissue_lagged": 0.05}, "avatars": [{}]})",

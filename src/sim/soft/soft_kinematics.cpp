@@ -523,6 +523,9 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
   // r_aᵀ), 16 products per pair and node instead of a 6 × 3 × 6 product; blocks at the end.
   // Per-bone sums of the rotation curvature against the forces.
   struct Sums {
+    explicit Sums(TouchedValues<PairMoments>& m) : moments(&m) {
+      for (Mat3& c : curvature) c.setZero();
+    }
     TouchedValues<PairMoments>* moments;
     Mat3 curvature[kNumJoints];
     bool has_curvature[kNumJoints] = {};
@@ -600,7 +603,6 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
         for (int a = 0; a < count; ++a) {
           const int b = bones[a];
           const double w = influences_[influence_start_[j] + a].weight;
-          if (!sums.has_curvature[b]) sums.curvature[b].setZero();
           sums.has_curvature[b] = true;
           sums.curvature[b] += w * rotationCurvature(f, lever[a]);
           if (f_coupling) coupling[a].bottomRows<3>() -= w * skew(f) * R[b];
@@ -624,15 +626,13 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
       }
     }
   };
-  Sums sums;
-  sums.moments = &pair_moments_[size_t(list)];
+  Sums sums(pair_moments_[size_t(list)]);
   // FEM (the blocks of each node into its own fixed slots, no pair blocks from K): two halves of
   // the nodes on two threads, the second's sums added to the first's after; always two halves,
   // so the sums are the same on any number of threads (the inertia of ~9 k nodes: ~8 → ~4 ms).
   const bool halves = fixed && !K;
   if (halves) {
-    Sums second;
-    second.moments = &pair_moments_second_;
+    Sums second(pair_moments_second_);
     const size_t mid = nodes.size() / 2;
     onTwoThreads([&](int part) {
       if (part == 0)
@@ -640,19 +640,10 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
       else
         mapNodes(mid, nodes.size(), second);
     });
-    for (int key : second.moments->touched()) {
-      const PairMoments& from = second.moments->at(key);
-      PairMoments& to = sums.moments->at(key);
-      to.s += from.s;
-      to.p += from.p;
-      to.q += from.q;
-      to.W += from.W;
-    }
+    for (int key : second.moments->touched()) sums.moments->at(key) += second.moments->at(key);
     second.moments->forget();
     for (int b = 0; b < num_bones_; ++b) {
-      if (!second.has_curvature[b]) continue;
-      if (!sums.has_curvature[b]) sums.curvature[b].setZero();
-      sums.has_curvature[b] = true;
+      sums.has_curvature[b] = sums.has_curvature[b] || second.has_curvature[b];
       sums.curvature[b] += second.curvature[b];
     }
   } else {

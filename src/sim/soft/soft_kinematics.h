@@ -332,6 +332,13 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
     double s = 0.0;
     Vec3 p = Vec3::Zero(), q = Vec3::Zero();
     Mat3 W = Mat3::Zero();
+    PairMoments& operator+=(const PairMoments& o) {
+      s += o.s;
+      p += o.p;
+      q += o.q;
+      W += o.W;
+      return *this;
+    }
   };
   mutable TouchedValues<PairMoments> pair_moments_[2];
   mutable TouchedValues<PairMoments> pair_moments_second_;  // mapHessian's second half (FEM)

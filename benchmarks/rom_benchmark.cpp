@@ -35,6 +35,8 @@
 //   --no-approximation: no directions from the constant soft–soft block (NewtonOptions::
 //                       approximate_hessian off); --approximate-ratio R: its
 //                       approximate_max_ratio; --no-reuse: approximate_reuse off;
+//   --presolve N: coarse_presolve.max_iterations (Newton iterations on the bones alone first;
+//                 0: none), for comparison;
 //   --materials: the soft models' material file (docs/materials.md; default: the built-in one);
 //   --inertia-floor: SimulableOptions::tracking_inertia_floor (kg·m²; 0 = the former model), for
 //                    every model of the run (--compare too).
@@ -598,6 +600,7 @@ int compare(int frames, const std::string& png, const std::string& csv,
 bool g_no_approximation = false;
 bool g_no_reuse = false;  // --no-reuse: NewtonOptions::approximate_reuse off
 double g_approximate_ratio = 0.0;
+int g_presolve = -1;  // --presolve: NewtonOptions::coarse_presolve.max_iterations
 
 // ---- steps/s of one ROM
 // --------------------------------------------------------------------------
@@ -625,6 +628,7 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   if (!lag) scene_options.reduced_newton.lagged.enabled = false;
   if (g_no_approximation) scene_options.reduced_newton.approximate_hessian = false;
   if (g_no_reuse) scene_options.reduced_newton.approximate_reuse = false;
+  if (g_presolve >= 0) scene_options.reduced_newton.coarse_presolve.max_iterations = g_presolve;
   if (g_approximate_ratio > 0)
     scene_options.reduced_newton.approximate_max_ratio = g_approximate_ratio;
   if (max_iterations_option > 0)
@@ -892,6 +896,8 @@ int main(int argc, char** argv) {
       g_no_approximation = true;
     else if (a == "--no-reuse")
       g_no_reuse = true;
+    else if (a == "--presolve" && i + 1 < argc)
+      g_presolve = std::atoi(argv[++i]);
     else if (a == "--approximate-ratio" && i + 1 < argc)
       g_approximate_ratio = std::atof(argv[++i]);
     else if (a == "--reference" && i + 1 < argc)
@@ -928,7 +934,7 @@ int main(int argc, char** argv) {
                    "[--exact] [--surface-pou] [--tolerance T] [--exact-hessian | --psd-hessian] "
                    "[--no-lag] [--no-approximation] [--approximate-ratio R] [--motion NAME] "
                    "[--no-ground] [--threads N] [--reference T_REF] [--inertia-floor I] "
-                   "[--basis-drop T] [--max-iterations N]\n"
+                   "[--basis-drop T] [--max-iterations N] [--presolve N]\n"
                    "       rom_benchmark --compare [--frames F] [--png PATH] [--csv PATH] "
                    "[--models LIST]\n"
                    "       rom_benchmark --sag [--frames F]\n"

@@ -95,6 +95,30 @@ void bind_solve(py::module_& m) {
                ", max_cg_iterations=" + std::to_string(o.max_cg_iterations) + ")";
       });
 
+  const CoarsePresolveOptions pd;
+  py::class_<CoarsePresolveOptions>(
+      m, "CoarsePresolveOptions",
+      "Newton iterations on the coarse DoFs alone (a scene's: every avatar's bones, the soft "
+      "tissue held) before those on every DoF (NewtonOptions.coarse_presolve).")
+      .def(py::init([](int max_iterations, double relative_tolerance) {
+             CoarsePresolveOptions o;
+             o.max_iterations = max_iterations;
+             o.relative_tolerance = relative_tolerance;
+             return o;
+           }),
+           py::kw_only(), py::arg("max_iterations") = pd.max_iterations,
+           py::arg("relative_tolerance") = pd.relative_tolerance,
+           "Keyword arguments; values are checked when a solve starts (ValueError).")
+      .def_readwrite("max_iterations", &CoarsePresolveOptions::max_iterations,
+                     "at most this many (≥ 0; 0: none; the soft-tissue and ROM defaults: 8)")
+      .def_readwrite("relative_tolerance", &CoarsePresolveOptions::relative_tolerance,
+                     "they stop at ‖g_c‖∞ ≤ this · max(1, ‖g_c,0‖∞), in (0, 1)")
+      .def("__repr__", [](const CoarsePresolveOptions& o) {
+        return "CoarsePresolveOptions(max_iterations=" + std::to_string(o.max_iterations) +
+               ", relative_tolerance=" +
+               py::repr(py::float_(o.relative_tolerance)).cast<std::string>() + ")";
+      });
+
   const NewtonOptions nd;
   py::class_<NewtonOptions>(m, "NewtonOptions", "Newton's method with backtracking line search.")
       .def(py::init([](int max_iterations, double gradient_tolerance, double step_tolerance,
@@ -149,6 +173,8 @@ void bind_solve(py::module_& m) {
                      "works (default True)")
       .def_readwrite("lagged", &NewtonOptions::lagged,
                      "LaggedFactorOptions (edit in place: options.lagged.enabled = False)")
+      .def_readwrite("coarse_presolve", &NewtonOptions::coarse_presolve,
+                     "CoarsePresolveOptions: iterations on the bones first (edit in place)")
       .def("__repr__", [](const NewtonOptions& o) {
         return "NewtonOptions(max_iterations=" + std::to_string(o.max_iterations) +
                ", gradient_tolerance=" +
@@ -181,6 +207,9 @@ void bind_solve(py::module_& m) {
                     "numeric factorizations (regularization retries included)")
       .def_readonly("cg_iterations", &NewtonResult::cg_iterations,
                     "preconditioned CG iterations (lagged factor only)")
+      .def_readonly("coarse_iterations", &NewtonResult::coarse_iterations,
+                    "iterations on the coarse DoFs alone (NewtonOptions.coarse_presolve; not in "
+                    "iterations)")
       .def_readonly("message", &NewtonResult::message)
       .def("__repr__", [](const NewtonResult& r) {
         return "NewtonResult(converged=" + std::string(r.converged ? "True" : "False") +

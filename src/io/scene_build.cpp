@@ -238,6 +238,8 @@ SceneOptions sceneOptionsOf(const SceneSpec& scene) {
     options.reduced_newton.gradient_tolerance = scene.reduced_gradient_tolerance;
   options.soft_tissue_newton.lagged = scene.soft_tissue_lagged;
   options.reduced_newton.lagged = scene.reduced_lagged;
+  options.soft_tissue_newton.coarse_presolve = scene.soft_tissue_presolve;
+  options.reduced_newton.coarse_presolve = scene.reduced_presolve;
   options.avatar_contact = scene.avatar_contact;
   return options;
 }

@@ -273,6 +273,12 @@ class SceneReader {
                    scene.soft_tissue_lagged);
       if (root["newton"].contains("reduced_lagged"))
         readLagged(root["newton"]["reduced_lagged"], "newton.reduced_lagged", scene.reduced_lagged);
+      if (root["newton"].contains("soft_tissue_presolve"))
+        readPresolve(root["newton"]["soft_tissue_presolve"], "newton.soft_tissue_presolve",
+                     scene.soft_tissue_presolve);
+      if (root["newton"].contains("reduced_presolve"))
+        readPresolve(root["newton"]["reduced_presolve"], "newton.reduced_presolve",
+                     scene.reduced_presolve);
     }
 
     if (!root.contains("avatars")) fail("avatars", "missing (a scene needs at least one avatar)");
@@ -338,7 +344,7 @@ class SceneReader {
     checkKeys(node, path,
               {"max_iterations", "gradient_tolerance", "step_tolerance", "linear_solver",
                "soft_tissue_gradient_tolerance", "reduced_gradient_tolerance", "soft_tissue_lagged",
-               "reduced_lagged"});
+               "reduced_lagged", "soft_tissue_presolve", "reduced_presolve"});
     NewtonOptions newton;
     if (node.contains("max_iterations"))
       newton.max_iterations =
@@ -399,6 +405,23 @@ class SceneReader {
     if (node.contains("coarse_correction"))
       lagged.coarse_correction =
           toBool(node["coarse_correction"], child(path, "coarse_correction"));
+  }
+
+  /// The keys given override `presolve` (CoarsePresolveOptions, flsh/solve/newton.h).
+  void readPresolve(const json& node, const std::string& path,
+                    CoarsePresolveOptions& presolve) const {
+    requireObject(node, path);
+    checkKeys(node, path, {"max_iterations", "relative_tolerance"});
+    if (node.contains("max_iterations"))
+      presolve.max_iterations =
+          toIntRange(node["max_iterations"], child(path, "max_iterations"), 0, 1000);
+    if (node.contains("relative_tolerance")) {
+      const std::string p = child(path, "relative_tolerance");
+      const double tolerance = toDouble(node["relative_tolerance"], p);
+      if (!(tolerance > 0.0 && tolerance < 1.0))
+        fail(p, "expected 0 < value < 1, got " + number(tolerance));
+      presolve.relative_tolerance = tolerance;
+    }
   }
 
   AvatarSpec readAvatar(const json& node, const std::string& path, size_t index,

@@ -26,9 +26,10 @@ using detail::kDofsPerBone;
 namespace {
 
 double sumEnergies(const std::vector<detail::TermEntry>& terms, const TermContext& c, VecX* g,
-                   int offset) {
+                   int offset, bool bones_only = false) {
   double E = 0.0;
-  for (const detail::TermEntry& entry : terms) E += entry.term->evaluate(c, g, offset);
+  for (const detail::TermEntry& entry : terms)
+    if (!bones_only || entry.term->dependsOnBones()) E += entry.term->evaluate(c, g, offset);
   return E;
 }
 
@@ -60,13 +61,15 @@ void Simulable::getDynamicHessianTripletVector(std::vector<Triplet>& H,
 }
 
 void Simulable::dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
-                               int offset, bool psd) const {
+                               int offset, bool psd, bool bones_only) const {
   const Impl& m = *impl_;
   if (m.is_static) return;
-  const TermContext c = m.context();
+  TermContext c = m.context();
+  c.bone_block_only = bones_only;
   if (m.value_lists) m.value_lists->beginList(0);
   for (const detail::TermEntry& entry : m.dynamic_terms)
-    detail::addTermHessian(entry, c, H, blocks, offset, psd);
+    if (!bones_only || entry.term->dependsOnBones())
+      detail::addTermHessian(entry, c, H, blocks, offset, psd);
   if (m.value_lists) m.value_lists->flushList(0, H, offset, blocks);
 }
 
@@ -108,6 +111,21 @@ double Simulable::getEnergyAndGradientVector(VecX& g, int offset) const {
   return E + boneSpringGradient(g, offset);
 }
 
+double Simulable::getBoneEnergyAndGradientVector(VecX& g, int offset) const {
+  const Impl& m = *impl_;
+  m.ensureContact();
+  const TermContext c = m.context();
+  const double dynamic = m.is_static ? 0.0 : sumEnergies(m.dynamic_terms, c, &g, offset, true);
+  return dynamic + sumEnergies(m.potential_terms, c, &g, offset, true);
+}
+
+void Simulable::getBoneHessianTripletVector(std::vector<Triplet>& H,
+                                            std::vector<FixedHessianBlocks>& blocks, int offset,
+                                            bool psd) const {
+  dynamicHessian(H, &blocks, offset, psd, true);
+  potentialHessian(H, &blocks, offset, psd, false, true);
+}
+
 void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H, int offset,
                                                  bool psd) const {
   potentialHessian(H, nullptr, offset, psd);
@@ -120,10 +138,11 @@ void Simulable::getPotentialHessianTripletVector(std::vector<Triplet>& H,
 }
 
 void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
-                                 int offset, bool psd, bool soft_done) const {
+                                 int offset, bool psd, bool soft_done, bool bones_only) const {
   const Impl& m = *impl_;
   m.ensureContact();
-  const TermContext c = m.context();
+  TermContext c = m.context();
+  c.bone_block_only = bones_only;
   if (soft_done) {
     // The two-thread schedule summed the node terms (value list 1, their bone triplets in its
     // scratch): the bones' springs remain.
@@ -131,7 +150,8 @@ void Simulable::potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessi
   } else {
     if (m.value_lists) m.value_lists->beginList(1);
     for (const detail::TermEntry& entry : m.potential_terms)
-      detail::addTermHessian(entry, c, H, blocks, offset, psd);
+      if (!bones_only || entry.term->dependsOnBones())
+        detail::addTermHessian(entry, c, H, blocks, offset, psd);
   }
   if (m.value_lists) m.value_lists->flushList(1, H, offset, blocks);
 }

@@ -11,6 +11,7 @@
 
 #include "flsh/core/error.h"
 #include "solve/coarse_correction.h"
+#include "solve/coarse_presolve.h"
 
 namespace flsh {
 
@@ -53,6 +54,11 @@ void validate(const NewtonOptions& o) {
     bad("lagged.reuse_hessian_below", "finite and ≥ 0", lag.reuse_hessian_below);
   if (!(o.approximate_max_ratio > 0.0 && o.approximate_max_ratio < 1.0))
     bad("approximate_max_ratio", "in (0, 1)", o.approximate_max_ratio);
+  if (o.coarse_presolve.max_iterations < 0)
+    bad("coarse_presolve.max_iterations", "≥ 0", o.coarse_presolve.max_iterations);
+  const double presolve_tolerance = o.coarse_presolve.relative_tolerance;
+  if (!(presolve_tolerance > 0.0 && presolve_tolerance < 1.0))
+    bad("coarse_presolve.relative_tolerance", "in (0, 1)", presolve_tolerance);
 }
 
 using Clock = std::chrono::steady_clock;
@@ -198,6 +204,7 @@ void NewtonResult::addCounts(const NewtonResult& other) {
   hessian_reuses += other.hessian_reuses;
   factorizations += other.factorizations;
   cg_iterations += other.cg_iterations;
+  coarse_iterations += other.coarse_iterations;
   seconds_energy += other.seconds_energy;
   seconds_gradient += other.seconds_gradient;
   seconds_hessian += other.seconds_hessian;
@@ -215,6 +222,10 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     solver = own_solver.get();
   }
   const LaggedFactorOptions& lag = options.lagged;
+
+  // The coarse presolve moves the state first; the tolerance stays relative to the step's
+  // start (its coarse gradient there).
+  const double presolve_gradient_norm = detail::coarsePresolve(objective, options, result);
 
   VecX g(n), trial_gradient;
   double energy = 0.0;
@@ -301,7 +312,7 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
     }
     const double gradient_norm = g.lpNorm<Eigen::Infinity>();
     result.gradient_norm = gradient_norm;
-    if (iteration == 0) initial_gradient_norm = gradient_norm;
+    if (iteration == 0) initial_gradient_norm = std::max(gradient_norm, presolve_gradient_norm);
     const double gradient_target =
         options.gradient_tolerance * std::max(1.0, initial_gradient_norm);
     if (gradient_norm <= gradient_target) {

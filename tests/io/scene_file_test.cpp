@@ -12,6 +12,7 @@
 #include "flsh/body/motion.h"
 #include "flsh/body/synthetic_body.h"
 #include "flsh/core/error.h"
+#include "flsh/io/scene_build.h"
 #include "flsh/solve/scene.h"
 #include "support/test_support.h"
 
@@ -365,6 +366,10 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
   EXPECT_TRUE(fem.coarse_correction);  // not given: the FEM solver's default
   EXPECT_DOUBLE_EQ(rom.cg_relative_tolerance, reducedNewtonDefaults().lagged.cg_relative_tolerance);
   EXPECT_EQ(rom.max_cg_iterations, reducedNewtonDefaults().lagged.max_cg_iterations);
+  // No presolve keys: each solver's defaults (on for both).
+  EXPECT_EQ(scene.soft_tissue_presolve.max_iterations,
+            softTissueNewtonDefaults().coarse_presolve.max_iterations);
+  EXPECT_GT(scene.reduced_presolve.max_iterations, 0);
 
   expectInputErrors({
       {R"({"newton": {"soft_tissue_lagged": {"cg_relative_tolerance": 1}}, "avatars": [{}]})",
@@ -381,6 +386,33 @@ TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
        "newton.soft_tissue_lagged.refactor_after: unknown key (known: "},
       {R"({"newton": {"soft_tissue_lagged": 0.05}, "avatars": [{}]})",
        "newton.soft_tissue_lagged: expected a JSON object, got number 0.05"},
+  });
+}
+
+TEST(SceneFile, ReadsTheBonesFirstSettingsOfBothSoftSolvers) {
+  const SceneSpec scene = parse(R"({
+    "newton": {"soft_tissue_presolve": {"max_iterations": 3},
+               "reduced_presolve": {"max_iterations": 0, "relative_tolerance": 0.01}},
+    "avatars": [{}]})");
+  EXPECT_EQ(scene.soft_tissue_presolve.max_iterations, 3);
+  EXPECT_DOUBLE_EQ(scene.soft_tissue_presolve.relative_tolerance,
+                   softTissueNewtonDefaults().coarse_presolve.relative_tolerance);
+  EXPECT_EQ(scene.reduced_presolve.max_iterations, 0);
+  EXPECT_DOUBLE_EQ(scene.reduced_presolve.relative_tolerance, 0.01);
+  const SceneOptions options = io::sceneOptionsOf(scene);
+  EXPECT_EQ(options.soft_tissue_newton.coarse_presolve.max_iterations, 3);
+  EXPECT_EQ(options.reduced_newton.coarse_presolve.max_iterations, 0);
+  EXPECT_DOUBLE_EQ(options.reduced_newton.coarse_presolve.relative_tolerance, 0.01);
+
+  expectInputErrors({
+      {R"({"newton": {"soft_tissue_presolve": {"max_iterations": -1}}, "avatars": [{}]})",
+       "newton.soft_tissue_presolve.max_iterations: expected an integer in [0, 1000], got -1"},
+      {R"({"newton": {"reduced_presolve": {"relative_tolerance": 1}}, "avatars": [{}]})",
+       "newton.reduced_presolve.relative_tolerance: expected 0 < value < 1, got 1"},
+      {R"({"newton": {"reduced_presolve": {"iterations": 2}}, "avatars": [{}]})",
+       "newton.reduced_presolve.iterations: unknown key (known: "},
+      {R"({"newton": {"soft_tissue_presolve": 8}, "avatars": [{}]})",
+       "newton.soft_tissue_presolve: expected a JSON object, got number 8"},
   });
 }
 

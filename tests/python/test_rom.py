@@ -367,6 +367,45 @@ def test_lagged_factor_options_reach_the_solver(avatar):
         n.iterations for n in steps)
 
 
+def test_bones_first_options_reach_the_solver(avatar):
+    # Newton's iterations on the bones alone before those on every DoF: on in both soft solvers'
+    # defaults, off in plain Newton; the same states with fewer iterations on every DoF.
+    defaults = flsh.SceneOptions()
+    for newton in (defaults.reduced_newton, defaults.soft_tissue_newton):
+        assert newton.coarse_presolve.max_iterations == 8
+        assert 0 < newton.coarse_presolve.relative_tolerance < 1e-3
+    assert flsh.NewtonOptions().coarse_presolve.max_iterations == 0
+
+    def run(presolve):
+        motion = flsh.make_builtin_motion("jumping_jacks", seconds=0.5, fps=30.0)
+        sim = flsh.Simulable(avatar, motion, flsh.SimulableOptions(time_step=1.0 / 30.0))
+        options = flsh.SceneOptions()
+        options.reduced_newton.coarse_presolve = presolve
+        options.reduced_newton.gradient_tolerance = 1e-9
+        scene = flsh.Scene(options)
+        scene.add_simulable(sim)
+        scene.initialize()
+        whole = coarse = 0
+        for _ in range(4):
+            n = scene.step().newton
+            assert n.converged, n.message
+            whole += n.iterations
+            coarse += n.coarse_iterations
+        return whole, coarse, sim.get_state()
+
+    whole_on, coarse_on, q_on = run(flsh.CoarsePresolveOptions(max_iterations=8))
+    off = flsh.SceneOptions().reduced_newton.coarse_presolve
+    off.max_iterations = 0  # edited in place
+    whole_off, coarse_off, q_off = run(off)
+    assert coarse_on > 0 and coarse_off == 0
+    assert whole_on < whole_off
+    assert np.abs(q_on - q_off).max() < 1e-6
+    with pytest.raises(ValueError, match="coarse_presolve.relative_tolerance"):
+        run(flsh.CoarsePresolveOptions(max_iterations=2, relative_tolerance=0.0))
+    assert "CoarsePresolveOptions(max_iterations=3" in repr(
+        flsh.CoarsePresolveOptions(max_iterations=3))
+
+
 def test_errors(small_body, avatar, rom, tmp_path):
     # The reduced model is a soft-tissue model.
     alone = flsh.SoftAvatar(small_body, use_cache=False)

@@ -102,6 +102,11 @@ struct SceneSpec {
   /// keys absent from the file keep those solvers' defaults.
   LaggedFactorOptions soft_tissue_lagged = softTissueNewtonDefaults().lagged;
   LaggedFactorOptions reduced_lagged = reducedNewtonDefaults().lagged;
+  /// "newton.soft_tissue_presolve" / "newton.reduced_presolve": the bones-first iterations of
+  /// the FEM's and the ROM's solvers (SceneOptions::soft_tissue_newton.coarse_presolve /
+  /// reduced_newton.coarse_presolve); keys absent keep those solvers' defaults.
+  CoarsePresolveOptions soft_tissue_presolve = softTissueNewtonDefaults().coarse_presolve;
+  CoarsePresolveOptions reduced_presolve = reducedNewtonDefaults().coarse_presolve;
   bool avatar_contact = true;
   OutputSpec outputs;
   /// Avatar cache of the "fem" / "rom" avatars' volumetric bodies and reduced data: folder

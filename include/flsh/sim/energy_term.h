@@ -66,6 +66,10 @@ struct TermContext {
   const SparseSkinWeights& skin;
   /// Up to date (the simulable runs its broad phase before contact terms are called).
   const SurfaceContactState& contact;
+  /// Hessians: only the bones' block is asked for (Simulable::getBoneHessianTripletVector, for
+  /// Newton's coarse presolve); a term may leave out its other blocks (the soft tissue's node
+  /// terms do). Terms that ignore it stay correct.
+  bool bone_block_only = false;
 };
 
 /// One block per parameter group, empty (0 rows) where the group is not asked for; terms ADD
@@ -109,6 +113,10 @@ class EnergyTerm {
   /// (∂g/∂q_{n−1})ᵀ λ into a_nm1 (either may be null), the tangent ∂g/∂q_n dq_n +
   /// ∂g/∂q_{n−1} dq_{n−1} into out, and the dense blocks into D (which = 1: q_n, 2: q_{n−1}).
   virtual bool dependsOnPreviousStates() const { return false; }
+  /// False for a term that reads the soft state alone (the soft tissue's elasticity): with the
+  /// soft state held it is constant, and the bones' presolve (Simulable::
+  /// getBoneEnergyAndGradientVector) leaves it out.
+  virtual bool dependsOnBones() const { return true; }
   virtual void addPreviousStatesProducts(const TermContext& c, const VecX& lambda, VecX* a_n,
                                          VecX* a_nm1) const {}
   virtual void addPreviousStatesTangent(const TermContext& c, const VecX& dq_n, const VecX& dq_nm1,

@@ -257,6 +257,16 @@ class Simulable {
   /// triplets and list, in another order) while their sum is the same up to round-off.
   size_t getHessianTripletVector(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>& blocks,
                                  int offset, bool psd) const;
+  /// The energy and gradient of the terms that move with the bones: every term but the soft
+  /// tissue's elasticity (EnergyTerm::dependsOnBones), which reads the soft state alone. With the
+  /// soft state held they are the bones' objective up to a constant, for Newton's coarse
+  /// presolve (Scene::coarseEnergyAndGradient). The gradient is ADDED into g (numDofs at
+  /// offset); its bone entries equal getGradientVector's. Without soft tissue: every term.
+  double getBoneEnergyAndGradientVector(VecX& g, int offset = 0) const;
+  /// Those terms' Hessian, appended as getHessianTripletVector appends (triplets, then lists):
+  /// its bone–bone block equals the whole Hessian's.
+  void getBoneHessianTripletVector(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>& blocks,
+                                   int offset, bool psd) const;
   /// A cheaper approximation of getHessianTripletVector's exact form in the same layout, for
   /// Newton's directions (Objective::approximateHessian): the ROM with the rest-stiffness split
   /// takes its soft–soft block as the constant K_r + Σ_j (m_j / h²) B_jᵀ B_j (the subspace's
@@ -371,12 +381,14 @@ class Simulable {
  private:
   /// Both overloads of getDynamicHessianTripletVector / getPotentialHessianTripletVector
   /// (blocks null: every term as triplets).
+  /// bones_only: the terms that depend on the bones alone (getBoneHessianTripletVector).
   void dynamicHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks, int offset,
-                      bool psd) const;
+                      bool psd, bool bones_only = false) const;
   /// soft_done (ROM): gravity's, the elastic term's and contact's Hessians are already summed
   /// (the ROM's value list; their bone triplets are the caller's to append).
   void potentialHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>* blocks,
-                        int offset, bool psd, bool soft_done = false) const;
+                        int offset, bool psd, bool soft_done = false,
+                        bool bones_only = false) const;
   /// ROM: appends the two-thread schedule's Hessian (in the scratch lists and value lists) and
   /// the bones' springs; returns where the potential part starts.
   size_t appendScheduledHessian(std::vector<Triplet>& H, std::vector<FixedHessianBlocks>& blocks,

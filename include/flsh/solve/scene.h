@@ -147,8 +147,16 @@ class Scene : public Objective {
   void pop() override;
   bool discardPushed() override;
   void fixKinematic(VecX& g, SpMat* H) override;
-  /// Every simulable's bone DoFs (6 per bone): the coarse level of the lagged-factor PCG.
+  /// Every simulable's bone DoFs (6 per bone): the coarse level of the lagged-factor PCG and
+  /// of Newton's coarse presolve.
   void coarseDofs(std::vector<int>& dofs) const override;
+  /// Scenes with soft tissue: the bones' objective with the soft states held
+  /// (Simulable::getBoneEnergyAndGradientVector, plus avatar–avatar contact), over coarseDofs();
+  /// false for skeleton-only scenes (their whole objective is the bones'). In scene_bones.cpp.
+  bool coarseEnergyAndGradient(double& energy, VecX& g) override;
+  /// The bones' block of the Hessian (Simulable::getBoneHessianTripletVector and avatar–avatar
+  /// contact), dense.
+  void coarseHessian(MatX& H, bool psd) override;
 
   /// Avatar–avatar contact energy at the current states; adds gradient/Hessian when asked.
   /// For every ordered pair (A, B) of different simulables, A's surface vertices x_i (areas
@@ -181,6 +189,13 @@ class Scene : public Objective {
   int stack_depth_ = 0;                                    // push() levels not yet popped
   std::vector<Triplet> triplets_;                          // Hessian assembly buffer, reused
   std::vector<FixedHessianBlocks> fixed_blocks_;  // the simulables' block lists, with triplets_
+  // The bones' objective (scene_bones.cpp): the whole gradient's buffer, each DoF's coarse
+  // index (−1: not a bone DoF), and the Hessian's triplets and lists.
+  VecX bone_gradient_;
+  std::vector<int> coarse_index_;
+  std::vector<Triplet> bone_triplets_;
+  std::vector<FixedHessianBlocks> bone_blocks_;
+  void markKinematicBones(std::vector<char>& kinematic) const;
   // Fixed Hessian pattern of whole 6 × 6 bone blocks, a superset of every evaluation's
   // (all bone pairs that share a vertex, so collider contacts never change it): assembly
   // writes values in place and the solver keeps its analysis. block_rank_ (bones² entries):

@@ -59,6 +59,8 @@ VecX elementRestFloors(const ReducedData& rom, const ElasticElements& elements);
 class ElasticityTerm : public NodeTerm<1> {
  public:
   const char* name() const override { return "elasticity"; }
+  /// The tissue's deformation in the unposed frame: u (FEM) or z (ROM) alone.
+  bool dependsOnBones() const override { return false; }
   double evaluate(const TermContext&, VecX* g, int offset) const override {
     return evaluate(g, nullptr, offset, true);
   }

@@ -54,7 +54,9 @@ NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeM
 void NodalGravityTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                                         std::vector<FixedHessianBlocks>* blocks, int offset,
                                         bool psd) const {
-  // Neither model needs the node forces' pass for the Hessian alone.
+  // Neither model needs the node forces' pass for the Hessian alone. The bones' block alone:
+  // their rotation curvature.
+  if (c.bone_block_only) return boneCurvature(c.options.gravity, H, offset, psd);
   if (kin_.reduced()) return reducedHessian(c.options.gravity, H, offset, psd);
   femHessian(c.options.gravity, H, blocks, offset, psd);
 }

@@ -32,12 +32,16 @@ void NodalInertiaTerm::setPrediction(const BoneFrames& bones_n, const BoneFrames
 void NodalInertiaTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                                         std::vector<FixedHessianBlocks>* blocks, int offset,
                                         bool psd) const {
+  if (c.bone_block_only) {
+    evaluate(nullptr, &H, offset, psd, nullptr, true);
+    return;
+  }
   collectFixedBlocks(blocks,
                      [&](FixedHessianBlocks* fixed) { evaluate(nullptr, &H, offset, psd, fixed); });
 }
 
 double NodalInertiaTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                                  FixedHessianBlocks* blocks) const {
+                                  FixedHessianBlocks* blocks, bool bone_block_only) const {
   const double k = 1.0 / (h_ * h_);
   const std::vector<int>& nodes = masses_.nodes;
   const MatX3& x = kin_.x();
@@ -55,9 +59,9 @@ double NodalInertiaTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, 
     scalars_.resize(count);
     for (size_t idx = 0; idx < count; ++idx) scalars_[idx] = k * masses_.mass[nodes[idx]];
     // psd: Gauss–Newton Σ m JᵀJ; exact: plus the curvature of the rotating nodes.
-    const bool fixed = blocks && !kin_.reduced();
+    const bool fixed = blocks && !kin_.reduced() && !bone_block_only;
     kin_.mapHessian(nodes, nullptr, psd ? nullptr : &forces_, *H, offset, psd, 0,
-                    fixed ? &fixed_ : nullptr, &scalars_);
+                    fixed ? &fixed_ : nullptr, &scalars_, true, bone_block_only);
     if (fixed) *blocks = {&kin_.couplingPositions(), &fixed_, offset};
   }
   return E;

@@ -63,9 +63,10 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
 
   /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM: triplets
   /// appended to H, or with `blocks` the bone–tissue coupling and node-diagonal blocks returned
-  /// at the kinematics' coupling positions; ROM: into value list 0).
+  /// at the kinematics' coupling positions; ROM: into value list 0). `bone_block_only`: the
+  /// Hessian's bone–bone blocks alone, as triplets (TermContext::bone_block_only).
   double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                  FixedHessianBlocks* blocks = nullptr) const;
+                  FixedHessianBlocks* blocks = nullptr, bool bone_block_only = false) const;
   /// ROM: the Hessian of one share of the mass nodes (see kShareBesidePotential) into value list
   /// `part` (bone triplets into H). `approximate`: the exact form without the soft–soft blocks
   /// κ_j B_jᵀ M_jᵀ M_j B_j, which part 0 replaces by constantSoftBlock() (see there).

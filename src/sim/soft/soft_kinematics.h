@@ -227,11 +227,13 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// `list`: the ROM value list and the scratch to use (0: inertia, 1: the potential terms).
   /// `K_scalar` (instead of K, which is then null): K_j = K_scalar[idx] · I (inertia).
   /// `soft_soft` false leaves out the soft–soft blocks M_jᵀ K_j M_j (a caller that adds a
-  /// constant in their place: NodalInertiaTerm's approximate form).
+  /// constant in their place: NodalInertiaTerm's approximate form). `bone_block_only`: the
+  /// bone–bone blocks alone (TermContext::bone_block_only; `fixed` must be null).
   void mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                   const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset, bool psd,
                   int list, std::vector<Mat3>* fixed = nullptr,
-                  const std::vector<double>* K_scalar = nullptr, bool soft_soft = true) const;
+                  const std::vector<double>* K_scalar = nullptr, bool soft_soft = true,
+                  bool bone_block_only = false) const;
   /// g(u_j) += v (FEM: into u_j's entries; ROM: through φ into z).
   void addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const;
   /// H(u_j, u_j) += B (symmetric). FEM: a triplet block; ROM: into value list `list`.

@@ -1,0 +1,99 @@
+#include "solve/coarse_presolve.h"
+
+#include <string>
+#include <vector>
+
+#include "flsh/core/error.h"
+
+namespace flsh::detail {
+
+namespace {
+
+/// The objective seen on its coarse DoFs: steps are zero on every other DoF.
+class CoarseView final : public Objective {
+ public:
+  /// `energy`, `g`: the coarse energy and gradient at the current state, which the first
+  /// evaluation returns without asking again.
+  CoarseView(Objective& whole, std::vector<int> dofs, double energy, VecX g)
+      : whole_(whole), dofs_(std::move(dofs)), held_energy_(energy), held_gradient_(std::move(g)) {}
+  int numDofs() const override { return int(dofs_.size()); }
+  double energy() override {
+    double E = 0.0;
+    energyAndGradient(E, scratch_);
+    return E;
+  }
+  void gradient(VecX& g) override {
+    double E = 0.0;
+    energyAndGradient(E, g);
+  }
+  bool energyAndGradient(double& energy, VecX& g) override {
+    if (held_) {
+      held_ = false;
+      energy = held_energy_;
+      g = held_gradient_;
+      return true;
+    }
+    if (!whole_.coarseEnergyAndGradient(energy, g) || g.size() != numDofs())
+      throw Error("newtonSolve: Objective::coarseEnergyAndGradient stopped answering or gave " +
+                  std::to_string(g.size()) + " entries, expected " + std::to_string(numDofs()));
+    return true;
+  }
+  void hessian(SpMat& H, bool psd) override {
+    whole_.coarseHessian(dense_, psd);
+    if (dense_.rows() != numDofs() || dense_.cols() != numDofs())
+      throw Error("newtonSolve: Objective::coarseHessian gave " + std::to_string(dense_.rows()) +
+                  " × " + std::to_string(dense_.cols()) + ", expected " +
+                  std::to_string(numDofs()) + " square");
+    H = dense_.sparseView(0.0, 0.0);
+  }
+  void step(const VecX& dq) override {
+    held_ = false;
+    step_.setZero(whole_.numDofs());
+    for (size_t k = 0; k < dofs_.size(); ++k) step_[dofs_[k]] = dq[Eigen::Index(k)];
+    whole_.step(step_);
+  }
+  void push() override { whole_.push(); }
+  void pop() override { whole_.pop(); }
+  bool discardPushed() override { return whole_.discardPushed(); }
+
+ private:
+  Objective& whole_;
+  std::vector<int> dofs_;
+  VecX step_, scratch_;
+  MatX dense_;
+  bool held_ = true;
+  double held_energy_;
+  VecX held_gradient_;
+};
+
+}  // namespace
+
+double coarsePresolve(Objective& objective, const NewtonOptions& options, NewtonResult& result) {
+  const CoarsePresolveOptions& presolve = options.coarse_presolve;
+  if (presolve.max_iterations <= 0) return 0.0;
+  std::vector<int> dofs;
+  objective.coarseDofs(dofs);
+  if (dofs.empty()) return 0.0;
+  double energy = 0.0;
+  VecX g;
+  if (!objective.coarseEnergyAndGradient(energy, g)) return 0.0;
+  const double start_norm = g.size() > 0 ? g.lpNorm<Eigen::Infinity>() : 0.0;
+  NewtonOptions inner = options;
+  inner.max_iterations = presolve.max_iterations;
+  inner.gradient_tolerance = presolve.relative_tolerance;
+  inner.linear_solver = LinearSolverType::Dense;
+  inner.lagged = LaggedFactorOptions{};  // a few hundred dense DoFs: factor every iteration
+  inner.approximate_hessian = false;
+  inner.coarse_presolve = CoarsePresolveOptions{};
+  CoarseView view(objective, std::move(dofs), energy, std::move(g));
+  const NewtonResult r = newtonSolve(view, inner);
+  result.coarse_iterations += r.iterations;
+  result.seconds_energy += r.seconds_energy;
+  result.seconds_gradient += r.seconds_gradient;
+  result.seconds_hessian += r.seconds_hessian;
+  result.seconds_factorization += r.seconds_factorization;
+  result.seconds_solve += r.seconds_solve;
+  return start_norm;
+}
+
+}  // namespace flsh::detail

@@ -17,15 +17,6 @@ namespace {
 
 using test::SoftModel;
 
-/// Moves every bone of `sim` by `shift` (m), previous states too.
-void translate(Simulable& sim, const Vec3& shift) {
-  VecX d = VecX::Zero(sim.numDofs());
-  for (int b = 0; b < sim.numBoneDofs() / 6; ++b) d.segment<3>(6 * b) = shift;
-  sim.updateState(d);
-  sim.postUpdate();
-  sim.postUpdate();
-}
-
 /// A walking soft avatar on the ground (5 mm into it) and a skeleton avatar 3 cm into it:
 /// every kind of contact the bones' objective has.
 std::unique_ptr<Scene> sceneOf(SoftModel model, const SceneOptions& options = {},
@@ -39,15 +30,7 @@ std::unique_ptr<Scene> sceneOf(SoftModel model, const SceneOptions& options = {}
   for (const auto& sim : scene->simulables())
     lowest = std::min(lowest, sim->getNodes().col(1).minCoeff());
   scene->addCollider(Collider::plane(Vec3(0, lowest + 0.005, 0), Vec3::UnitY()));
-  if (!second_avatar) return scene;
-  Simulable& b = *scene->simulables()[1];
-  translate(b, Vec3(0, 0, -0.05));
-  int active = 1;
-  for (double moved = 0.0; active > 0 && moved < 2.0; moved += 0.01) {
-    translate(b, Vec3(0, 0, 0.01));
-    scene->avatarContactEnergy(nullptr, nullptr, true, &active);
-  }
-  translate(b, Vec3(0, 0, -0.03));
+  if (second_avatar) test::touchAlongZ(*scene, 1, 0.03);
   return scene;
 }
 

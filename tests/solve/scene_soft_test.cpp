@@ -291,14 +291,7 @@ TEST(HessianAssembler, RejectsBadInput) {
 
 // ---- scenes ------------------------------------------------------------------------------------
 
-/// Moves every bone of `sim` by `shift` (m), previous states too (at rest there).
-void translate(Simulable& sim, const Vec3& shift) {
-  VecX d = VecX::Zero(sim.numDofs());
-  for (int b = 0; b < sim.numBoneDofs() / 6; ++b) d.segment<3>(6 * b) = shift;
-  sim.updateState(d);
-  sim.postUpdate();
-  sim.postUpdate();
-}
+using test::translateBones;
 
 /// A (walking when `walk`) and B (at rest) in one scene, B moved along z until the avatars just
 /// stop touching, then `overlap` metres back into A.
@@ -309,14 +302,7 @@ std::unique_ptr<Scene> twoInContact(std::shared_ptr<const SoftAvatar> avatar_a,
   scene->addSimulable(std::make_shared<Simulable>(avatar_a, walk ? shared().walk : nullptr));
   scene->addSimulable(std::make_shared<Simulable>(avatar_b));
   scene->initialize();
-  Simulable& b = *scene->simulables()[1];
-  translate(b, Vec3(0, 0, -0.05));
-  int active = 1;
-  for (double moved = 0.0; active > 0 && moved < 2.0; moved += 0.01) {
-    translate(b, Vec3(0, 0, 0.01));
-    scene->avatarContactEnergy(nullptr, nullptr, true, &active);
-  }
-  translate(b, Vec3(0, 0, -overlap));
+  test::touchAlongZ(*scene, 1, overlap);
   return scene;
 }
 
@@ -613,7 +599,7 @@ TEST(SceneSoft, CoarseLevelIsTheBonesAndSavesPcgIterations) {
     auto other = std::make_shared<Simulable>(shared().avatar);
     scene->addSimulable(other);
     scene->initialize();
-    translate(*other, Vec3(2.0, 0.0, 0.0));
+    translateBones(*other, Vec3(2.0, 0.0, 0.0));
     scene->addCollider(
         Collider::plane(Vec3(0, lowestNodeHeight(*scene) - 0.002, 0), Vec3::UnitY()));
     std::vector<int> dofs;

@@ -33,15 +33,7 @@ MatX dense(const std::vector<Triplet>& H, int n) {
   return D;
 }
 
-/// Moves every bone of `sim` by `shift` (m), at rest there: the previous states move too
-/// (preUpdate starts from the prediction of q_n and q_{n−1}).
-void translate(Simulable& sim, const Vec3& shift) {
-  VecX d = VecX::Zero(sim.numDofs());
-  for (int b = 0; b < sim.numDofs() / 6; ++b) d.segment<3>(6 * b) = shift;
-  sim.updateState(d);
-  sim.postUpdate();
-  sim.postUpdate();
-}
+using test::translateBones;
 
 double lowestNodeHeight(const Simulable& sim) { return sim.getNodes().col(1).minCoeff(); }
 
@@ -75,15 +67,15 @@ TwoAvatars twoAvatarsInContact(double overlap, const SimulableOptions& options =
   // Back B off along z until no vertex of either touches the other's capsules, then move it
   // `overlap` closer again.
   const double step = 0.01;
-  translate(*out.b, Vec3(0, 0, -0.05));
+  translateBones(*out.b, Vec3(0, 0, -0.05));
   int active = 1;
   double moved = 0.0;
   while (active > 0 && moved < 2.0) {
-    translate(*out.b, Vec3(0, 0, step));
+    translateBones(*out.b, Vec3(0, 0, step));
     moved += step;
     out.scene->avatarContactEnergy(nullptr, nullptr, true, &active);
   }
-  translate(*out.b, Vec3(0, 0, -overlap));
+  translateBones(*out.b, Vec3(0, 0, -overlap));
   return out;
 }
 

@@ -32,13 +32,13 @@ MatX finiteDifferenceJacobian(const std::function<VecX(const VecX&)>& f, const V
     double eps) {
   const double amax = analytic.size() ? analytic.cwiseAbs().maxCoeff() : 0.0;
   if (!(amax > 1e-12))
-    return ::testing::AssertionFailure() << "analytic derivative is zero (max |A| = " << amax
-                                         << "): the check would be vacuous";
+    return ::testing::AssertionFailure()
+           << "analytic derivative is zero (max |A| = " << amax << "): the check would be vacuous";
   const MatX fd = finiteDifferenceJacobian(f, x, eps);
   if (fd.rows() != analytic.rows() || fd.cols() != analytic.cols())
-    return ::testing::AssertionFailure() << "shape mismatch: analytic " << analytic.rows() << "x"
-                                         << analytic.cols() << ", finite differences "
-                                         << fd.rows() << "x" << fd.cols();
+    return ::testing::AssertionFailure()
+           << "shape mismatch: analytic " << analytic.rows() << "x" << analytic.cols()
+           << ", finite differences " << fd.rows() << "x" << fd.cols();
   const double scale = std::max(1.0, fd.cwiseAbs().maxCoeff());
   Eigen::Index r = 0, c = 0;
   const double err = (analytic - fd).cwiseAbs().maxCoeff(&r, &c);
@@ -202,6 +202,25 @@ BodyModel smplhFrom(const BodyModel& smpl) {
   h.J_regressor = regressor.sparseView(1.0, 0.0);
   h.source = "smplh-from-synthetic";
   return h;
+}
+
+void translateBones(Simulable& sim, const Vec3& shift) {
+  VecX d = VecX::Zero(sim.numDofs());
+  for (int b = 0; b < sim.numBoneDofs() / 6; ++b) d.segment<3>(6 * b) = shift;
+  sim.updateState(d);
+  sim.postUpdate();
+  sim.postUpdate();
+}
+
+void touchAlongZ(Scene& scene, int moving, double overlap) {
+  Simulable& b = *scene.simulables()[size_t(moving)];
+  translateBones(b, Vec3(0, 0, -0.05));
+  int active = 1;
+  for (double moved = 0.0; active > 0 && moved < 2.0; moved += 0.01) {
+    translateBones(b, Vec3(0, 0, 0.01));
+    scene.avatarContactEnergy(nullptr, nullptr, true, &active);
+  }
+  translateBones(b, Vec3(0, 0, -overlap));
 }
 
 }  // namespace flsh::test

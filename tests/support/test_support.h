@@ -12,6 +12,7 @@
 #include "flsh/body/motion.h"
 #include "flsh/core/types.h"
 #include "flsh/sim/simulable.h"
+#include "flsh/solve/scene.h"
 #include "flsh/volume/soft_avatar.h"
 
 namespace flsh::test {
@@ -46,6 +47,14 @@ auto atMovedState(Sim& sim, const VecX& d, F&& f) {
   sim.popState();
   return result;
 }
+
+/// Moves every bone of `sim` by `shift` (m), at rest there: the previous states move too
+/// (preUpdate then starts from the prediction of q_n and q_{n−1}).
+void translateBones(Simulable& sim, const Vec3& shift);
+
+/// Simulable `moving` of `scene` moved along z (5 cm back first) until the scene's avatars just
+/// stop touching (avatar–avatar contact, at most 2 m), then `overlap` metres back into them.
+void touchAlongZ(Scene& scene, int moving, double overlap);
 
 /// A fresh empty directory under $FLSH_TEST_TMP (or the system temp dir), unique to the running
 /// test and `name`.

@@ -87,7 +87,9 @@ struct FungState {
   Mat3 S;  ///< second Piola–Kirchhoff stress d1 · σ_s as a tensor (Pa)
 };
 
-FungState fungState(const Mat3& F, const FemMaterialPoint& material) {
+/// Any material with C_world, modulus and gamma (FemMaterialPoint, PackedTet).
+template <class Material>
+FungState fungState(const Mat3& F, const Material& material) {
   const Vec6 eps = voigtGreenStrain(F);
   FungState state;
   state.sigma_s.noalias() = material.C_world * eps;
@@ -98,7 +100,8 @@ FungState fungState(const Mat3& F, const FemMaterialPoint& material) {
 }
 
 /// Ψ_εε = f′ C_world + f″ σσᵀ: positive definite (C ≻ 0, f′ ≥ 1, f″ ≥ 0).
-Mat6 strainHessian(const FungState& state, const FemMaterialPoint& material) {
+template <class Material>
+Mat6 strainHessian(const FungState& state, const Material& material) {
   return state.map.d1 * material.C_world + state.map.d2 * state.sigma_s * state.sigma_s.transpose();
 }
 
@@ -222,7 +225,8 @@ struct InversionGuard {
   double energy() const { return active() ? 0.5 * kappa * depth * depth : 0.0; }
 };
 
-InversionGuard inversionGuard(const Mat3& F, const FemMaterialPoint& material) {
+template <class Material>
+InversionGuard inversionGuard(const Mat3& F, const Material& material) {
   return {kInversionStiffness * material.modulus, kInversionOnset - F.determinant()};
 }
 
@@ -448,9 +452,9 @@ namespace {
 /// (n = 4, g_a the shape-function gradients) and the reduced form (g̃_s = Σ_a Φ(a, s) g_a).
 /// Gradient (3n) and Hessian (3n × 3n) node-major; sizes from G's type (fixed, bounded or
 /// dynamic), so the fixed and bounded forms never allocate.
-template <class GType, class Gradient, class Hessian>
-double gradientFormEnergy(double volume, const FemMaterialPoint& material, const Mat3& F,
-                          const GType& G, Gradient* gradient, Hessian* hessian, bool psd) {
+template <class GType, class Gradient, class Hessian, class Material>
+double gradientFormEnergy(double volume, const Material& material, const Mat3& F, const GType& G,
+                          Gradient* gradient, Hessian* hessian, bool psd) {
   constexpr int N = GType::ColsAtCompileTime, MaxN = GType::MaxColsAtCompileTime;
   constexpr int C = N == Eigen::Dynamic ? Eigen::Dynamic : 3 * N;
   constexpr int MaxC = MaxN == Eigen::Dynamic ? Eigen::Dynamic : 3 * MaxN;
@@ -462,13 +466,18 @@ double gradientFormEnergy(double volume, const FemMaterialPoint& material, const
   const InversionGuard guard = inversionGuard(F, material);
   const double psi = state.map.psi + guard.energy();
   if (!gradient && !hessian) return volume * psi;
-  // ∂ε/∂v (6 × 3n): column 3s + k is the strain of δF = e_k g_sᵀ.
-  StrainMap B(6, 3 * n);
-  for (int s = 0; s < n; ++s)
-    for (int k = 0; k < 3; ++k)
-      B.col(3 * s + k) = symmetricProductStrain(F.row(k).transpose(), G.col(s));
-  if (gradient) gradient->noalias() = (volume * state.map.d1) * (B.transpose() * state.sigma_s);
+  if (gradient) {
+    // ∂(VΨ)/∂v_s = V P g_s with P = F S the first Piola–Kirchhoff stress (Bᵀσ d1 below, without
+    // forming B: the gradient-only evaluations, line searches' and Newton's, skip it).
+    const Mat3 P = volume * (F * state.S);
+    for (int s = 0; s < n; ++s) gradient->template segment<3>(3 * s).noalias() = P * G.col(s);
+  }
   if (hessian) {
+    // ∂ε/∂v (6 × 3n): column 3s + k is the strain of δF = e_k g_sᵀ.
+    StrainMap B(6, 3 * n);
+    for (int s = 0; s < n; ++s)
+      for (int k = 0; k < 3; ++k)
+        B.col(3 * s + k) = symmetricProductStrain(F.row(k).transpose(), G.col(s));
     const StrainMap psi_ee_B = (volume * strainHessian(state, material)) * B;
     // Bᵀ (Ψ_εε B). The default product of these sizes goes through Eigen's blocked GEMM,
     // packing for every tet (~2× slower). Fixed sizes (the nodal 12 × 12): lazyProduct's
@@ -528,6 +537,24 @@ double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& mate
   const Mat34 G = shapeGradients(rest);
   const Mat3 F = Mat3::Identity() + u * G.transpose();
   return gradientFormEnergy(rest.volume, material, F, G, gradient, hessian, psd);
+}
+
+PackedTet packTet(const TetElementRest& rest, const FemMaterialPoint& material, double weight) {
+  PackedTet tet;
+  tet.C_world = material.C_world;
+  tet.G = shapeGradients(rest);
+  tet.volume = weight * rest.volume;
+  tet.modulus = material.modulus;
+  tet.gamma = material.gamma;
+  return tet;
+}
+
+double tetElasticEnergy(const PackedTet& tet, const Mat34& u, Vec12* gradient, Mat12* hessian,
+                        bool psd) {
+  if (!u.allFinite())
+    throw InputError("tetElasticEnergy: nodal displacements u have a non-finite entry");
+  const Mat3 F = Mat3::Identity() + u * tet.G.transpose();
+  return gradientFormEnergy(tet.volume, tet, F, tet.G, gradient, hessian, psd);
 }
 
 Mat3X reducedShapeGradients(const TetElementRest& rest, const Eigen::Ref<const Mat4X>& Phi) {

@@ -9,6 +9,7 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <string>
 #include <vector>
@@ -506,6 +507,52 @@ TEST(TetElement, GradientAndHessianMatchFiniteDifferences) {
       EXPECT_LT((gradient - rest.volume * B.transpose() * vecOf(P)).cwiseAbs().maxCoeff(),
                 1e-10 * gradient.cwiseAbs().maxCoeff());
     }
+  }
+}
+
+// The packed tet (what FemElasticityTerm's loop reads) is the same element: weight 1 gives the
+// same numbers bit for bit, a cubature weight scales them (up to the weight's rounding); the
+// inverting case exercises the guard.
+TEST(TetElement, PackedTetIsTheSameElement) {
+  Random random(15);
+  for (double gamma : kGammas) {
+    const FemMaterialPoint m = tissue(random.rotation(), gamma);
+    const TetElementRest rest = tetElementRest(restTet(random), 0);
+    Mat34 moderate = Mat34::Zero(), inverting = Mat34::Zero();
+    for (int a = 0; a < 4; ++a) moderate.col(a) = random.vec(0.004);
+    inverting.col(3) = Vec3(0.002, 0.001, -0.03);
+    for (const Mat34* u : {&moderate, &inverting})
+      for (const bool psd : {false, true})
+        for (const double weight : {1.0, 0.37}) {
+          SCOPED_TRACE("gamma " + std::to_string(gamma) + ", weight " + std::to_string(weight));
+          Vec12 g, g_packed;
+          Mat12 H, H_packed;
+          const double E = tetElasticEnergy(rest, m, *u, &g, &H, psd);
+          const PackedTet packed = packTet(rest, m, weight);
+          EXPECT_EQ(packed.volume, weight * rest.volume);
+          const double E_packed = tetElasticEnergy(packed, *u, &g_packed, &H_packed, psd);
+          ASSERT_GT(g.norm(), 0.0);
+          ASSERT_GT(H.norm(), 0.0);
+          if (weight == 1.0) {
+            EXPECT_EQ(E_packed, E);
+            EXPECT_EQ(g_packed, g);
+            EXPECT_EQ(H_packed, H);
+          } else {
+            EXPECT_NEAR(E_packed, weight * E, 1e-13 * weight * E);
+            EXPECT_LT((g_packed - weight * g).cwiseAbs().maxCoeff(),
+                      1e-13 * weight * g.cwiseAbs().maxCoeff());
+            EXPECT_LT((H_packed - weight * H).cwiseAbs().maxCoeff(),
+                      1e-13 * weight * H.cwiseAbs().maxCoeff());
+          }
+          // Energy alone and gradient alone are the same numbers as with the Hessian.
+          Vec12 g_alone;
+          EXPECT_EQ(tetElasticEnergy(packed, *u), E_packed);
+          tetElasticEnergy(packed, *u, &g_alone);
+          EXPECT_EQ(g_alone, g_packed);
+        }
+    Mat34 bad = Mat34::Zero();
+    bad(1, 2) = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_THROW(tetElasticEnergy(packTet(rest, m, 1.0), bad), InputError);
   }
 }
 

@@ -145,6 +145,27 @@ double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& mate
                         const Mat34& u, Vec12* gradient = nullptr, Mat12* hessian = nullptr,
                         bool psd = false);
 
+/// What the nodal element loops read of one tet, packed in one place (FemElasticityTerm keeps
+/// an array of them, one per element, streamed in order): its material point's C_world, μ and γ
+/// (not the frame and C of FemMaterialPoint), its shape-function gradients and its weighted
+/// volume.
+struct PackedTet {
+  Mat6 C_world;  ///< as FemMaterialPoint::C_world (Pa)
+  Mat34 G;       ///< shape-function gradients g_a as columns (1/m; g_0 = −g_1 − g_2 − g_3)
+  double volume = 0.0;   ///< weight · rest volume (m³)
+  double modulus = 1.0;  ///< μ (Pa)
+  double gamma = 0.0;    ///< Fung exponent γ
+};
+
+/// The packed form of a tet with rest data `rest`, material point `material` and weight w
+/// (1, or a cubature weight).
+PackedTet packTet(const TetElementRest& rest, const FemMaterialPoint& material, double weight);
+
+/// w · tetElasticEnergy(rest, material, u, …) of the tet packTet(rest, material, w), the same
+/// law and options (the same arithmetic up to the weight's rounding).
+double tetElasticEnergy(const PackedTet& tet, const Mat34& u, Vec12* gradient = nullptr,
+                        Mat12* hessian = nullptr, bool psd = false);
+
 /// The rest shape's derivative of an element's gradient (the adjoint's Shape group, through the
 /// rest nodes X̄(β)): ADDS scale · ∂(λᵀ g)/∂X (3 × 4, column a: rest node a) into X_bar, where
 /// λᵀ g = volume · ⟨P(F), Dλ Dm⁻¹⟩ is the product of tetElasticEnergy's gradient with the nodal

@@ -11,6 +11,38 @@ namespace flsh::detail {
 FemElasticityTerm::FemElasticityTerm(const SoftKinematics& kinematics, const MaterialChain& chain,
                                      ElasticElements elements)
     : ElasticityTerm(kinematics, chain), elements_(std::move(elements)) {
+  const int T = elements_.size();
+  packed_.resize(size_t(T));
+  element_u_.resize(size_t(T));
+  int u_size = 0;
+  for (int e = 0; e < T; ++e) {
+    packed_[size_t(e)] =
+        packTet(elements_.rest[size_t(e)], elements_.materials[size_t(e)], elements_.weights[e]);
+    for (int a = 0; a < 4; ++a) {
+      const int j = elements_.tets(e, a);
+      element_u_[size_t(e)][a] = kin_.isSoftNode(j) ? kin_.nodeDof(j) : -1;
+      u_size = std::max(u_size, element_u_[size_t(e)][a] + 3);
+    }
+  }
+  // Soft nodes by their offset in u (the gather's order), each with its element slots.
+  std::vector<int> count(size_t(u_size / 3), 0), node_of_u(size_t(u_size / 3), -1);
+  for (int e = 0; e < T; ++e)
+    for (int a = 0; a < 4; ++a)
+      if (const int du = element_u_[size_t(e)][a]; du >= 0) ++count[size_t(du / 3)];
+  node_first_.assign(1, 0);
+  node_u_.clear();
+  for (size_t k = 0; k < count.size(); ++k)
+    if (count[k] > 0) {
+      node_u_.push_back(int(3 * k));
+      node_first_.push_back(node_first_.back() + count[k]);
+      node_of_u[k] = int(node_u_.size()) - 1;
+    }
+  node_slots_.resize(size_t(node_first_.back()));
+  std::vector<int> fill(node_first_.begin(), node_first_.end() - 1);
+  for (int e = 0; e < T; ++e)
+    for (int a = 0; a < 4; ++a)
+      if (const int du = element_u_[size_t(e)][a]; du >= 0)
+        node_slots_[size_t(fill[size_t(node_of_u[size_t(du / 3)])]++)] = 4 * e + a;
   // The blocks: soft-node pairs sharing a tet as (column node, row node), sorted, so that the
   // blocks are column-major.
   const MatX4i& tets = elements_.tets;
@@ -76,9 +108,9 @@ void FemElasticityTerm::planScatter(int threads) const {
 
 double FemElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                                    FixedHessianBlocks* blocks) const {
-  const MatX4i& tets = elements_.tets;
   const int T = elements_.size();
-  if (g) element_gradients_.resize(T);
+  const VecX& u = kin_.u;
+  if (g) element_gradients_.resize(size_t(T));
   if (H) blocks_.resize(block_dofs_.size());
   double E = 0.0;
   FirstFailure failure;
@@ -98,16 +130,12 @@ double FemElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset,
     for (int e = begin; planned && e < end; ++e) {
       double tet = 0.0;  // the reduction's E stays outside the lambda
       failure.run([&] {
-        Eigen::Matrix<double, 3, 4> U;
-        for (int a = 0; a < 4; ++a) U.col(a) = kin_.nodeDisplacement(kin_.u, tets(e, a));
-        const double w = elements_.weights[e];
+        Mat34 U;
+        const Eigen::Vector4i& du = element_u_[size_t(e)];
+        for (int a = 0; a < 4; ++a) U.col(a) = du[a] < 0 ? Vec3::Zero() : Vec3(u.segment<3>(du[a]));
         Mat12 He;
-        tet = w * tetElasticEnergy(elements_.rest[e], elements_.materials[e], U,
-                                   g ? &element_gradients_[e] : nullptr, H ? &He : nullptr, psd);
-        if (w != 1.0) {
-          if (g) element_gradients_[e] *= w;
-          if (H) He *= w;
-        }
+        tet = tetElasticEnergy(packed_[size_t(e)], U, g ? &element_gradients_[size_t(e)] : nullptr,
+                               H ? &He : nullptr, psd);
         if (!H) return;
         const int* action = &plan_.action[16 * size_t(e)];
         for (int b = 0; b < 4; ++b)
@@ -128,9 +156,17 @@ double FemElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset,
   }
   failure.rethrow();
   if (g) {
-    for (int e = 0; e < T; ++e)
-      for (int a = 0; a < 4; ++a)
-        kin_.addSoftGradient(*g, offset, tets(e, a), element_gradients_[e].segment<3>(3 * a));
+    // Per soft node, its elements' shares in element order (as one serial pass), on two threads.
+    const int nodes = int(node_u_.size());
+    double* out = g->data() + offset + kin_.boneDofs();
+#pragma omp parallel for schedule(static) if (nodes > 2000)
+    for (int k = 0; k < nodes; ++k) {
+      Eigen::Map<Vec3> sum(out + node_u_[size_t(k)]);
+      for (int i = node_first_[size_t(k)]; i < node_first_[size_t(k) + 1]; ++i) {
+        const int slot = node_slots_[size_t(i)];
+        sum += element_gradients_[size_t(slot >> 2)].segment<3>(3 * (slot & 3));
+      }
+    }
   }
   if (H) {
     for (size_t d = 0; d < deferred_.size(); ++d)

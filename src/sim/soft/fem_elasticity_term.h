@@ -36,6 +36,15 @@ class FemElasticityTerm final : public ElasticityTerm {
 
  private:
   ElasticElements elements_;
+  // What the elements' loop reads, in element order: each element's packed tet (its C_world, μ,
+  // γ, shape gradients and weighted volume in one place) and its nodes' offsets in the soft
+  // state u (−1: a bone node).
+  std::vector<PackedTet> packed_;
+  std::vector<Eigen::Vector4i> element_u_;
+  // The gradient's gather: soft node k's element slots 4 e + a are node_slots_[node_first_[k],
+  // node_first_[k + 1]) in increasing order, and node_u_[k] its offset in u; summed per node
+  // on both threads, in the order of one serial pass over the elements.
+  std::vector<int> node_first_, node_slots_, node_u_;
   // One 3 × 3 block ∂²E/∂u_row∂u_col per pair of soft nodes sharing a tet, at block_dofs_ (row,
   // column DoF relative to the simulable's first DoF; column-major order); element e's local
   // block (a, b) adds into block tet_block_[16 e + 4 a + b] (−1: a bone node).

@@ -1,5 +1,9 @@
 #include "solve/coarse_correction.h"
 
+#include <omp.h>
+
+#include <algorithm>
+
 namespace flsh::detail {
 
 bool CoarseCorrection::build(const SpMat& H, const std::vector<int>& dofs) {
@@ -17,6 +21,11 @@ bool CoarseCorrection::build(const SpMat& H, const std::vector<int>& dofs) {
       const int p = place[size_t(it.row())];
       if (p >= 0) E(p, k) = it.value();
     }
+  // Two threads when the coarse columns hold enough entries to pay for waking the second.
+  long entries = 0;
+  for (int k = 0; k < m; ++k)
+    entries += H.outerIndexPtr()[dofs[size_t(k)] + 1] - H.outerIndexPtr()[dofs[size_t(k)]];
+  parallel_ = entries > 50000;
   E_.compute(E);
   if (E_.info() != Eigen::Success) return false;
   H_ = &H;
@@ -34,10 +43,22 @@ void CoarseCorrection::subtractColumns(const VecX& t, VecX& v) const {
   const int* outer = H_->outerIndexPtr();
   const int* inner = H_->innerIndexPtr();
   const double* values = H_->valuePtr();
-  for (size_t k = 0; k < dofs_.size(); ++k) {
-    const double tk = t[Eigen::Index(k)];
-    if (tk == 0.0) continue;
-    for (int i = outer[dofs_[k]]; i < outer[dofs_[k] + 1]; ++i) v[inner[i]] -= values[i] * tk;
+  const int n = int(H_->rows());
+  // Each thread takes a range of rows of every column (rows sorted within a column): no shared
+  // writes, and every entry of v gets its terms in the columns' order, as on one thread.
+#pragma omp parallel if (parallel_)
+  {
+    const int parts = omp_get_num_threads(), p = omp_get_thread_num();
+    const int r0 = int(long(p) * n / parts), r1 = int(long(p + 1) * n / parts);
+    for (size_t k = 0; k < dofs_.size(); ++k) {
+      const double tk = t[Eigen::Index(k)];
+      if (tk == 0.0) continue;
+      const int* begin = inner + outer[dofs_[k]];
+      const int* end = inner + outer[dofs_[k] + 1];
+      const int* first = parts == 1 ? begin : std::lower_bound(begin, end, r0);
+      const int* last = parts == 1 ? end : std::lower_bound(first, end, r1);
+      for (const int* it = first; it != last; ++it) v[*it] -= values[it - inner] * tk;
+    }
   }
 }
 
@@ -47,7 +68,9 @@ void CoarseCorrection::coarseResidual(const VecX& r, const VecX& y, VecX& s) con
   const int* inner = H_->innerIndexPtr();
   const double* values = H_->valuePtr();
   s.resize(Eigen::Index(dofs_.size()));
-  for (size_t k = 0; k < dofs_.size(); ++k) {
+  const int m = int(dofs_.size());
+#pragma omp parallel for schedule(static) if (parallel_)
+  for (int k = 0; k < m; ++k) {
     double dot = 0.0;
     for (int i = outer[dofs_[k]]; i < outer[dofs_[k] + 1]; ++i) dot += values[i] * y[inner[i]];
     s[Eigen::Index(k)] = r[dofs_[k]] - dot;

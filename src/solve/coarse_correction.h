@@ -53,6 +53,7 @@ class CoarseCorrection {
   std::vector<int> dofs_;
   Eigen::LLT<MatX> E_;
   bool active_ = false;
+  bool parallel_ = false;  // the column products on two threads
   mutable VecX r_, t_, s_;
 };
 

@@ -6,6 +6,7 @@
 #include "solve/coarse_correction.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <Eigen/Dense>
 #include <random>
@@ -18,7 +19,7 @@ using detail::CoarseCorrection;
 
 /// A random sparse SPD matrix (n × n, full storage, compressed): a banded random coupling made
 /// diagonally dominant, with a dense coarse-like block on `dense` (every pair coupled).
-SpMat randomSpd(int n, const std::vector<int>& dense, unsigned seed) {
+SpMat randomSpd(int n, const std::vector<int>& dense, unsigned seed, int stride = 5) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> value(-1.0, 1.0);
   MatX A = MatX::Zero(n, n);
@@ -28,7 +29,7 @@ SpMat randomSpd(int n, const std::vector<int>& dense, unsigned seed) {
     for (int j : dense)
       if (i < j) A(i, j) = A(j, i) = value(rng);
   for (int i : dense)  // the coarse DoFs couple to everything, like bones to their nodes
-    for (int j = 0; j < n; j += 5)
+    for (int j = 0; j < n; j += stride)
       if (i != j) A(i, j) = A(j, i) = 0.5 * value(rng);
   for (int i = 0; i < n; ++i) A(i, i) = A.row(i).cwiseAbs().sum() + 0.5;
   SpMat S = A.sparseView();
@@ -100,6 +101,47 @@ TEST(CoarseCorrection, IsSymmetricPositiveDefiniteForAPoorFactor) {
     return ev.maxCoeff() / ev.minCoeff();
   };
   EXPECT_LT(condition(P * MatX(H)), condition(M.inverse() * MatX(H)));
+}
+
+// Coarse columns long enough for the two-thread products (> 50 000 entries, as an avatar's
+// bones): the same numbers bit for bit on one thread and on two, and the formula's.
+TEST(CoarseCorrection, LongColumnsGiveTheSameNumbersOnOneAndTwoThreads) {
+  constexpr int n = 2000;
+  std::vector<int> coarse_dofs;
+  for (int k = 0; k < 60; ++k) coarse_dofs.push_back(3 + 31 * k);
+  const SpMat H = randomSpd(n, coarse_dofs, 5, 2);
+  long entries = 0;
+  for (int d : coarse_dofs) entries += H.outerIndexPtr()[d + 1] - H.outerIndexPtr()[d];
+  ASSERT_GT(entries, 50000);
+  CoarseCorrection coarse;
+  ASSERT_TRUE(coarse.build(H, coarse_dofs));
+  const MatX Hd(H);
+  const VecX diagonal_inverse = Hd.diagonal().cwiseInverse();  // a poor M⁻¹: Jacobi
+  const auto jacobi = [&](VecX& x) { x = diagonal_inverse.cwiseProduct(x); };
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> value(-1.0, 1.0);
+  VecX r(n);
+  for (int i = 0; i < n; ++i) r[i] = value(rng);
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  VecX one = r;
+  coarse.apply(one, jacobi);
+  omp_set_num_threads(2);
+  VecX two = r;
+  coarse.apply(two, jacobi);
+  omp_set_num_threads(threads);
+  ASSERT_GT(one.norm(), 0.0);
+  EXPECT_EQ(one, two);
+  // P r = (I − QH) M⁻¹ (I − HQ) r + Q r.
+  const Eigen::Index m = Eigen::Index(coarse_dofs.size());
+  MatX Z = MatX::Zero(n, m);
+  for (Eigen::Index k = 0; k < m; ++k) Z(coarse_dofs[size_t(k)], k) = 1.0;
+  const MatX E = Z.transpose() * Hd * Z;
+  const Eigen::LLT<MatX> llt(E);
+  const VecX Qr = Z * llt.solve(Z.transpose() * r);
+  const VecX v = diagonal_inverse.cwiseProduct(r - Hd * Qr);
+  const VecX expected = v - Z * llt.solve(Z.transpose() * (Hd * v)) + Qr;
+  EXPECT_LT((one - expected).norm(), 1e-12 * expected.norm());
 }
 
 TEST(CoarseCorrection, SwitchesOffWithoutCoarseDofsOrWhenTheirBlockIsIndefinite) {

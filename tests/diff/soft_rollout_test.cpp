@@ -16,6 +16,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/diff/rollout.h"
+#include "flsh/diff/simulable_adjoint.h"
 #include "support/small_soft_avatar.h"
 #include "support/test_support.h"
 
@@ -335,6 +336,32 @@ INSTANTIATE_TEST_SUITE_P(Models, SoftRolloutGradient,
                          });
 
 class SoftRollout : public ::testing::TestWithParam<SoftModel> {};
+
+// The adjoint's exact Hessian (assembled from the fixed block lists on a kept pattern) is the
+// sum of the simulable's exact triplets, at a first state and, slots cached, at a second one
+// deeper in contact.
+TEST_P(SoftRollout, ExactHessianIsTheTripletsSum) {
+  auto sim = std::make_shared<Simulable>(test::smallSoftAvatar(GetParam()), scene().walk);
+  sim->initialize();
+  sim->setColliders(sceneColliders(GetParam()));
+  const SimulableAdjointModel model(sim);
+  const int n = model.numDofs();
+  for (int pass = 0; pass < 2; ++pass) {
+    if (pass == 1) sim->updateState(randomVector(n, 2e-3, 11));
+    std::vector<Triplet> triplets;
+    sim->getDynamicHessianTripletVector(triplets, 0, false);
+    sim->getPotentialHessianTripletVector(triplets, 0, false);
+    SpMat expected(n, n);
+    expected.setFromTriplets(triplets.begin(), triplets.end());
+    SpMat H;
+    model.exactHessian(H);
+    ASSERT_EQ(H.rows(), n);
+    ASSERT_EQ(H.cols(), n);
+    const MatX E(expected), A(H);
+    ASSERT_GT(E.cwiseAbs().maxCoeff(), 0.0);
+    EXPECT_LT((A - E).cwiseAbs().maxCoeff(), 1e-12 * E.cwiseAbs().maxCoeff()) << "pass " << pass;
+  }
+}
 
 // Collider offsets exist only with colliders, so not in the contact-or-free grid.
 TEST_P(SoftRollout, ColliderOffsetsGradient) {

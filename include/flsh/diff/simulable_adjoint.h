@@ -12,6 +12,7 @@
 
 #include "flsh/diff/adjoint_model.h"
 #include "flsh/sim/simulable.h"
+#include "flsh/solve/hessian_assembler.h"
 
 namespace flsh {
 
@@ -69,6 +70,11 @@ class SimulableAdjointModel final : public AdjointModel {
   mutable Simulable::MaterialProducts material_sum_;
   mutable bool material_pending_ = false;
   std::vector<SimParameter> wanted_;  // SimParameter order; all by default
+  // exactHessian's assembly: the triplets and fixed block lists summed on a pattern kept across
+  // steps (slots cached), as Scene assembles Newton's Hessian.
+  mutable HessianAssembler assembler_;
+  mutable std::vector<Triplet> triplets_;
+  mutable std::vector<FixedHessianBlocks> blocks_;
 };
 
 }  // namespace flsh

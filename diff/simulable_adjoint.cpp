@@ -72,17 +72,8 @@ void SimulableAdjointModel::restoreStep(const StepSnapshot& snapshot) {
 void SimulableAdjointModel::exactHessian(SpMat& H) const {
   // The FEM's elastic, inertia and gravity blocks come as fixed lists: on the cached pattern the
   // 26 k-DoF walk's Hessian takes ~30 ms, against ~96 ms for 2 M triplets through
-  // setFromTriplets. (Kinematic bones, refused by the constructor, would need their rows fixed:
-  // the triplets' path.)
-  if (!simulable_->options().kinematic_bones.empty()) {
-    std::vector<Triplet> triplets;
-    simulable_->getDynamicHessianTripletVector(triplets, 0, false);
-    simulable_->getPotentialHessianTripletVector(triplets, 0, false);
-    simulable_->fixMatrixKinematic(triplets, 0);
-    H.resize(numDofs(), numDofs());
-    H.setFromTriplets(triplets.begin(), triplets.end());
-    return;
-  }
+  // setFromTriplets. No kinematic rows to fix: the constructor refuses kinematic bones, and a
+  // simulable's options do not change after construction.
   triplets_.clear();
   blocks_.clear();
   simulable_->getHessianTripletVector(triplets_, blocks_, 0, false);

@@ -549,12 +549,7 @@ Mat34 shapeGradients(const TetElementRest& rest) {
 
 double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& material,
                         const Mat34& u, Vec12* gradient, Mat12* hessian, bool psd) {
-  if (!u.allFinite())
-    throw InputError("tetElasticEnergy: nodal displacements u have a non-finite entry");
-  // F = I + u Gᵀ with G's columns the shape-function gradients g_a.
-  const Mat34 G = shapeGradients(rest);
-  const Mat3 F = Mat3::Identity() + u * G.transpose();
-  return gradientFormEnergy(rest.volume, material, F, G, gradient, hessian, psd);
+  return tetElasticEnergy(packTet(rest, material, 1.0), u, gradient, hessian, psd);
 }
 
 PackedTet packTet(const TetElementRest& rest, const FemMaterialPoint& material, double weight) {
@@ -571,6 +566,7 @@ double tetElasticEnergy(const PackedTet& tet, const Mat34& u, Vec12* gradient, M
                         bool psd) {
   if (!u.allFinite())
     throw InputError("tetElasticEnergy: nodal displacements u have a non-finite entry");
+  // F = I + u Gᵀ with G's columns the shape-function gradients g_a.
   const Mat3 F = Mat3::Identity() + u * tet.G.transpose();
   return gradientFormEnergy(tet.volume, tet, F, tet.G, gradient, hessian, psd);
 }

@@ -124,6 +124,18 @@ Mat34 restTet(Random& random) {
   return X;
 }
 
+/// Nodal displacements of a rest tet: a moderate strain (random, ~4 mm) and one that inverts
+/// it (node 3 pushed through the opposite face).
+struct TetDisplacements {
+  Mat34 moderate, inverting;
+};
+TetDisplacements tetDisplacements(Random& random) {
+  TetDisplacements d{Mat34::Zero(), Mat34::Zero()};
+  for (int a = 0; a < 4; ++a) d.moderate.col(a) = random.vec(0.004);
+  d.inverting.col(3) = Vec3(0.002, 0.001, -0.03);
+  return d;
+}
+
 VecX flatten(const Mat34& u) { return Eigen::Map<const VecX>(u.data(), 12); }
 Mat34 unflatten(const VecX& v) { return Eigen::Map<const Mat34>(v.data()); }
 
@@ -468,9 +480,7 @@ TEST(TetElement, GradientAndHessianMatchFiniteDifferences) {
     const FemMaterialPoint m = skin(random.rotation(), gamma);
     const TetElementRest rest = tetElementRest(restTet(random), 0);
     // Moderate strain, and a displacement that inverts the tet (node 3 pushed through).
-    Mat34 moderate = Mat34::Zero(), inverting = Mat34::Zero();
-    for (int a = 0; a < 4; ++a) moderate.col(a) = random.vec(0.004);
-    inverting.col(3) = Vec3(0.002, 0.001, -0.03);
+    const auto [moderate, inverting] = tetDisplacements(random);
     for (const bool inverts : {false, true}) {
       const Mat34& u = inverts ? inverting : moderate;
       SCOPED_TRACE("gamma " + std::to_string(gamma));
@@ -518,9 +528,7 @@ TEST(TetElement, PackedTetIsTheSameElement) {
   for (double gamma : kGammas) {
     const FemMaterialPoint m = tissue(random.rotation(), gamma);
     const TetElementRest rest = tetElementRest(restTet(random), 0);
-    Mat34 moderate = Mat34::Zero(), inverting = Mat34::Zero();
-    for (int a = 0; a < 4; ++a) moderate.col(a) = random.vec(0.004);
-    inverting.col(3) = Vec3(0.002, 0.001, -0.03);
+    const auto [moderate, inverting] = tetDisplacements(random);
     for (const Mat34* u : {&moderate, &inverting})
       for (const bool psd : {false, true})
         for (const double weight : {1.0, 0.37}) {
@@ -568,9 +576,7 @@ TEST(ReducedTetElement, IsTheTetChainedThroughTheBasis) {
     for (int i = 0; i < Phi.size(); ++i) Phi.data()[i] = random.uniform(0.0, 1.0);
     // Z = U (Φ Φᵀ)⁻¹ Φ reproduces any nodal U (Φ has full row rank).
     const MatX right = (Phi * Phi.transpose()).inverse() * Phi;  // 4 × n, Φᵀ on its right is I
-    Mat34 moderate, inverting = Mat34::Zero();
-    for (int a = 0; a < 4; ++a) moderate.col(a) = random.vec(0.004);
-    inverting.col(3) = Vec3(0.002, 0.001, -0.03);
+    const auto [moderate, inverting] = tetDisplacements(random);
     const Mat3X G = reducedShapeGradients(rest, Phi);
     // (Φ ⊗ I₃): ∂u/∂z, node-major rows, handle-major columns.
     MatX P = MatX::Zero(12, 3 * n);

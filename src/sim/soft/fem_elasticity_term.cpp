@@ -109,7 +109,6 @@ void FemElasticityTerm::planScatter(int threads) const {
 double FemElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                                    FixedHessianBlocks* blocks) const {
   const int T = elements_.size();
-  const VecX& u = kin_.u;
   if (g) element_gradients_.resize(size_t(T));
   if (H) blocks_.resize(block_dofs_.size());
   double E = 0.0;
@@ -130,12 +129,10 @@ double FemElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset,
     for (int e = begin; planned && e < end; ++e) {
       double tet = 0.0;  // the reduction's E stays outside the lambda
       failure.run([&] {
-        Mat34 U;
-        const Eigen::Vector4i& du = element_u_[size_t(e)];
-        for (int a = 0; a < 4; ++a) U.col(a) = du[a] < 0 ? Vec3::Zero() : Vec3(u.segment<3>(du[a]));
         Mat12 He;
-        tet = tetElasticEnergy(packed_[size_t(e)], U, g ? &element_gradients_[size_t(e)] : nullptr,
-                               H ? &He : nullptr, psd);
+        tet =
+            tetElasticEnergy(packed_[size_t(e)], elementDisplacements(e),
+                             g ? &element_gradients_[size_t(e)] : nullptr, H ? &He : nullptr, psd);
         if (!H) return;
         const int* action = &plan_.action[16 * size_t(e)];
         for (int b = 0; b < 4; ++b)
@@ -184,31 +181,35 @@ double FemElasticityTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset,
 void FemElasticityTerm::materialElementDofs(int e, std::vector<int>& dofs) const {
   dofs.assign(12, -1);
   for (int a = 0; a < 4; ++a) {
-    const int j = elements_.tets(e, a);
-    if (!kin_.isSoftNode(j)) continue;
-    for (int k = 0; k < 3; ++k) dofs[size_t(3 * a + k)] = kin_.boneDofs() + kin_.nodeDof(j) + k;
+    const int du = element_u_[size_t(e)][a];
+    if (du < 0) continue;
+    for (int k = 0; k < 3; ++k) dofs[size_t(3 * a + k)] = kin_.boneDofs() + du + k;
   }
+}
+
+Mat34 FemElasticityTerm::elementDisplacements(int e) const {
+  const Eigen::Vector4i& du = element_u_[size_t(e)];
+  Mat34 U;
+  for (int a = 0; a < 4; ++a) U.col(a) = du[a] < 0 ? Vec3::Zero() : Vec3(kin_.u.segment<3>(du[a]));
+  return U;
 }
 
 // Λᵀ g_e = w V ⟨P(F), Λ Gᵀ⟩ with G the tet's shape-function gradients.
 FemMaterialDerivative FemElasticityTerm::materialElementGradient(int e, const Mat3X& Lambda) const {
   const TetElementRest& rest = elements_.rest[size_t(e)];
   const Mat3X G = reducedShapeGradients(rest, Mat4X::Identity(4, 4));
-  Mat3X U(3, 4);
-  for (int a = 0; a < 4; ++a) U.col(a) = kin_.nodeDisplacement(kin_.u, elements_.tets(e, a));
   FemMaterialDerivative d;
-  addStressMaterialGradient(Mat3::Identity() + U * G.transpose(), elements_.materials[size_t(e)],
-                            Lambda * G.transpose(), elements_.weights[e] * rest.volume, d);
+  addStressMaterialGradient(Mat3::Identity() + elementDisplacements(e) * G.transpose(),
+                            elements_.materials[size_t(e)], Lambda * G.transpose(),
+                            elements_.weights[e] * rest.volume, d);
   return d;
 }
 
 // Λᵀ g_e's rest shape: the element's Dm and volume (addTetGradientRestCotangent).
 void FemElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambda,
                                                      Mat34& X_bar) const {
-  Mat34 U;
-  for (int a = 0; a < 4; ++a) U.col(a) = kin_.nodeDisplacement(kin_.u, elements_.tets(e, a));
-  addTetGradientRestCotangent(elements_.rest[size_t(e)], elements_.materials[size_t(e)], U, Lambda,
-                              elements_.weights[e], X_bar);
+  addTetGradientRestCotangent(elements_.rest[size_t(e)], elements_.materials[size_t(e)],
+                              elementDisplacements(e), Lambda, elements_.weights[e], X_bar);
 }
 
 }  // namespace flsh::detail

@@ -41,6 +41,8 @@ class FemElasticityTerm final : public ElasticityTerm {
   // state u (−1: a bone node).
   std::vector<PackedTet> packed_;
   std::vector<Eigen::Vector4i> element_u_;
+  /// Element e's four nodal displacements (columns; zero at a bone node) at the current u.
+  Mat34 elementDisplacements(int e) const;
   // The gradient's gather: soft node k's element slots 4 e + a are node_slots_[node_first_[k],
   // node_first_[k + 1]) in increasing order, and node_u_[k] its offset in u; summed per node
   // on both threads, in the order of one serial pass over the elements.

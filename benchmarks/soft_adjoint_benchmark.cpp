@@ -29,7 +29,7 @@
 // avatars.
 //
 // Usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] [--tolerance T]
-//                               [--storage factors|snapshots] [--memory-only]
+//                               [--storage factors|snapshots] [--memory-only] [--modes V:C]
 //   --tolerance: Newton's relative gradient tolerance of the rollouts (default: the rollout's
 //                default, 1e-8);
 //   --storage:   what the tape keeps (RolloutOptions::tape_storage; default Auto: snapshots for
@@ -37,6 +37,9 @@
 //   --memory-only: one forward with the tape and one backward of a random state cotangent, then
 //                the peak resident memory against the memory before the rollout (for long
 //                horizons: e.g. `fem 1000 --memory-only`; no plain forward, no checks).
+//   --modes V:C: the ROM with the modal basis (ReducedBasisKind::Modes: the static modes and V
+//                vibration modes, compressed to C columns; C = 0 keeps them all) instead of the
+//                default handles.
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -121,17 +124,24 @@ int main(int argc, char** argv) {
   if (argc < 2 || (std::strcmp(argv[1], "fem") != 0 && std::strcmp(argv[1], "rom") != 0)) {
     std::fprintf(stderr,
                  "usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] "
-                 "[--tolerance T] [--storage factors|snapshots] [--memory-only]\n");
+                 "[--tolerance T] [--storage factors|snapshots] [--memory-only] [--modes V:C]\n");
     return 2;
   }
   const bool rom = std::strcmp(argv[1], "rom") == 0;
   int steps = rom ? 100 : 30, repeats = 3;
   double tolerance = -1.0;
   bool memory_only = false;
+  int vibration_modes = -1, modal_columns = 0;
   RolloutOptions rollout_options;
   int positional = 0;
   for (int i = 2; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--memory-only") == 0) {
+    if (std::strcmp(argv[i], "--modes") == 0 && i + 1 < argc) {
+      if (std::sscanf(argv[++i], "%d:%d", &vibration_modes, &modal_columns) != 2 ||
+          vibration_modes < 0 || modal_columns < 0) {
+        std::fprintf(stderr, "soft_adjoint_benchmark: --modes V:C with V, C >= 0\n");
+        return 2;
+      }
+    } else if (std::strcmp(argv[i], "--memory-only") == 0) {
       memory_only = true;
     } else if (std::strcmp(argv[i], "--tolerance") == 0 && i + 1 < argc) {
       tolerance = std::atof(argv[++i]);
@@ -157,7 +167,13 @@ int main(int argc, char** argv) {
   try {
     Setup s;
     auto body = std::make_shared<BodyModel>(makeSyntheticBody({}));
-    s.avatar = std::make_shared<SoftAvatar>(body, VecX(), SoftAvatarSettings{});
+    SoftAvatarSettings settings;
+    if (vibration_modes >= 0) {
+      settings.reduced.basis_kind = ReducedBasisKind::Modes;
+      settings.reduced.modes.vibration_modes = vibration_modes;
+      settings.reduced.modes.columns = modal_columns;
+    }
+    s.avatar = std::make_shared<SoftAvatar>(body, VecX(), settings);
     s.avatar->enableSoftTissue();
     if (rom) {
       s.avatar->enableReducedModel();
@@ -182,9 +198,10 @@ int main(int argc, char** argv) {
         rom ? rollout_options.reduced_newton : rollout_options.soft_tissue_newton;
     const int n = makeSimulable(s)->numDofs();
     std::printf(
-        "%s: %d DoFs, avatar built/loaded in %.2f s; %d steps at h = 1/30 s, walk, "
+        "%s%s: %d DoFs, avatar built/loaded in %.2f s; %d steps at h = 1/30 s, walk, "
         "ground; Newton tolerance %.1e (relative)\n",
-        rom ? "ROM" : "FEM", n, build, steps, newton.gradient_tolerance);
+        rom ? "ROM" : "FEM", rom && vibration_modes >= 0 ? " (modes)" : "", n, build, steps,
+        newton.gradient_tolerance);
 
     if (memory_only) {
       const double before = peakResidentMB();

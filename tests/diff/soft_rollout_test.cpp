@@ -96,8 +96,9 @@ RolloutInputs baseInputs(const Case& c) {
       warm_up.run(3);
       return std::pair{moving->getState(), moving->getVelocity()};
     };
-    static const auto fem = walked(SoftModel::Fem), rom = walked(SoftModel::Rom);
-    const auto& start = c.model == SoftModel::Fem ? fem : rom;
+    static const auto fem = walked(SoftModel::Fem), rom = walked(SoftModel::Rom),
+                      modes = walked(SoftModel::RomModes);
+    const auto& start = c.model == SoftModel::Fem ? fem : c.model == SoftModel::Rom ? rom : modes;
     in.initial_state = start.first;
     in.initial_velocity = start.second;
   }
@@ -166,8 +167,9 @@ const Loss& lossFor(SoftModel model) {
     Simulable sim(test::smallSoftAvatar(m));
     return Loss(sim.numDofs(), sim.numBoneDofs(), scene().body->numVertices());
   };
-  static const Loss fem = make(SoftModel::Fem), rom = make(SoftModel::Rom);
-  return model == SoftModel::Fem ? fem : rom;
+  static const Loss fem = make(SoftModel::Fem), rom = make(SoftModel::Rom),
+                    modes = make(SoftModel::RomModes);
+  return model == SoftModel::Fem ? fem : model == SoftModel::Rom ? rom : modes;
 }
 
 // The avatar with the material parameters moved by `step` (the same discretization).
@@ -207,8 +209,16 @@ double lossAlong(const Case& c, const RolloutVariables& d, double eps) {
   return lossFor(c.model).value(rollout);
 }
 
-// dot(∇L, d) against (L(+ε) − L(−ε)) / 2ε: relative error ≤ 1e-6 (ROM), 1e-5 (FEM).
-void expectDirectionalDerivative(const Case& c, const RolloutVariables& d, double eps) {
+// dot(∇L, d) against (L(+ε) − L(−ε)) / 2ε: relative error ≤ 1e-6 (ROM), 1e-5 (FEM). The modal
+// ROM's losses curve more along these directions (its stiff static-correction coordinates): the
+// fourth-order difference (8 (L(ε) − L(−ε)) − (L(2ε) − L(−2ε))) / 12ε, at `modes_eps` when given.
+// Measured (second / fourth order): Shape with contact 1.3e-6 / 7.7e-9 at ε = 1e-4; InitialState
+// without contact 2.3e-6 / 9.7e-7 at 1e-3 and 2.7e-5 / 2.0e-7 at 3e-3; InitialVelocity without
+// contact 8e-7 to 2.2e-6 between 1e-4 and 1e-3 (the loss's noise: the same with Newton stopping at
+// 1e-13), 1.3e-8 / 2.5e-9 at 3e-3.
+void expectDirectionalDerivative(const Case& c, const RolloutVariables& d, double eps,
+                                 double modes_eps = 0.0) {
+  if (c.model == SoftModel::RomModes && modes_eps > 0.0) eps = modes_eps;
   auto sim = makeSimulable(c);
   Rollout rollout(sim, tightOptions(c.coarse_correction));
   rollout.run(kSteps, baseInputs(c));
@@ -233,9 +243,13 @@ void expectDirectionalDerivative(const Case& c, const RolloutVariables& d, doubl
   EXPECT_EQ(grad.shape.size(), sim->parameterSize(SimParameter::Shape));
   const double analytic = dot(grad, d);
   ASSERT_GT(std::abs(analytic), 1e-8) << "the directional derivative is zero: vacuous check";
-  const double fd = (lossAlong(c, d, eps) - lossAlong(c, d, -eps)) / (2.0 * eps);
+  const double central = lossAlong(c, d, eps) - lossAlong(c, d, -eps);
+  const double fd =
+      c.model == SoftModel::RomModes
+          ? (8.0 * central - (lossAlong(c, d, 2 * eps) - lossAlong(c, d, -2 * eps))) / (12.0 * eps)
+          : central / (2.0 * eps);
   const double error = std::abs(analytic - fd) / std::abs(fd);
-  const double tol = c.model == SoftModel::Rom ? 1e-6 : 1e-5;
+  const double tol = c.model == SoftModel::Fem ? 1e-5 : 1e-6;
   EXPECT_LE(error, tol) << "analytic " << analytic << ", central difference " << fd;
   char text[32];
   std::snprintf(text, sizeof(text), "%.3g", error);
@@ -316,22 +330,25 @@ TEST_P(SoftRolloutGradient, InitialState) {
   // (Newton stops at a 1e-11 gradient), which grows as 1/ε — RomWithContact 7e-8 at 1e-4,
   // 5e-7 at 1e-5, 8e-9 at 1e-3 (GCC -O3), but 1.7e-6 at 1e-4 in the clang -O1 sanitizer build —
   // while the truncation error is still ≤ 4e-8 at 1e-3 in all four cases.
-  expectDirectionalDerivative(c, d, 1e-3);
+  expectDirectionalDerivative(c, d, 1e-3, 3e-3);
 }
 
 TEST_P(SoftRolloutGradient, InitialVelocity) {
   const Case c = scenario(true);
   RolloutVariables d;
   d.initial_velocity = randomVector(makeSimulable(c)->numDofs(), 0.1, 9);
-  expectDirectionalDerivative(c, d, 1e-4);
+  expectDirectionalDerivative(c, d, 1e-4, 3e-3);
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, SoftRolloutGradient,
-                         ::testing::Combine(::testing::Values(SoftModel::Fem, SoftModel::Rom),
+                         ::testing::Combine(::testing::Values(SoftModel::Fem, SoftModel::Rom,
+                                                              SoftModel::RomModes),
                                             ::testing::Values(true, false)),
                          [](const auto& info) {
-                           return std::string(std::get<0>(info.param) == SoftModel::Fem ? "Fem"
-                                                                                        : "Rom") +
+                           const SoftModel m = std::get<0>(info.param);
+                           return std::string(m == SoftModel::Fem   ? "Fem"
+                                              : m == SoftModel::Rom ? "Rom"
+                                                                    : "RomModes") +
                                   (std::get<1>(info.param) ? "WithContact" : "WithoutContact");
                          });
 
@@ -371,8 +388,9 @@ TEST_P(SoftRollout, ColliderOffsetsGradient) {
 }
 
 // Thrown at the ground at 8 m/s: Newton needs PSD directions (and, for the FEM, line-search cuts;
-// the ROM's reduced Newton took none even at 20 m/s) on the way to the converged states; the
-// gradient is that of the converged rollout all the same.
+// the handle ROM's reduced Newton took none even at 20 m/s; the modal ROM takes ~35 cuts and no
+// PSD direction at 8 m/s) on the way to the converged states; the gradient is that of the
+// converged rollout all the same.
 TEST_P(SoftRollout, GradientAcrossLineSearchCutsAndPsdDirections) {
   Case c{GetParam(), true};
   c.drop = 8.0;
@@ -388,8 +406,10 @@ TEST_P(SoftRollout, GradientAcrossLineSearchCutsAndPsdDirections) {
       cuts += rollout.tape().stepInfo(t).line_search_steps;
       psd += rollout.tape().stepInfo(t).psd_fallbacks;
     }
-    ASSERT_GT(psd, 0);
-    if (c.model == SoftModel::Fem) {
+    if (c.model != SoftModel::RomModes) {
+      ASSERT_GT(psd, 0);
+    }
+    if (c.model != SoftModel::Rom) {
       ASSERT_GT(cuts, 0);
     }
   }
@@ -505,7 +525,8 @@ TEST_P(SoftRollout, SnapshotTapeMatchesTheFactorTape) {
   EXPECT_LT((sensitivities[0] - sensitivities[1]).norm(), 1e-9 * sensitivities[0].norm());
 }
 
-INSTANTIATE_TEST_SUITE_P(Models, SoftRollout, ::testing::Values(SoftModel::Fem, SoftModel::Rom),
+INSTANTIATE_TEST_SUITE_P(Models, SoftRollout,
+                         ::testing::Values(SoftModel::Fem, SoftModel::Rom, SoftModel::RomModes),
                          test::modelName);
 
 }  // namespace

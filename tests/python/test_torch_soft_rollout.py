@@ -1,4 +1,5 @@
-"""flsh.torch.simulate through the soft skeletons (model="fem" and "rom"): torch.autograd.gradcheck
+"""flsh.torch.simulate through the soft skeletons (model="fem" and "rom", the ROM with the handle
+basis and with modes and handles, "rom_modes"): torch.autograd.gradcheck
 on the input groups (pose and root targets, stiffnesses, initial state and velocity, the soft
 state included, the material coefficients, β), on joints and on the simulated surface, with
 ground contact. A 800-vertex synthetic body with a coarse interior walking for T = 4 steps; the
@@ -17,22 +18,32 @@ STEPS = 4
 @pytest.fixture(scope="module")
 def simulators(body, walk, tmp_path_factory):
     """FEM and ROM simulators of the small soft avatar (conftest's 800-vertex body), with a
-    ground plane 1 cm above the lowest surface node of the walk's initial state."""
+    ground plane 1 cm above the lowest surface node of the walk's initial state. "rom_modes":
+    the ROM with modes and handles (the static modes and 6 vibration modes in 24 columns),
+    converged to a gradient of 1e-12 instead of the default 1e-10: at 1e-10 its rollouts differ
+    by up to ~1e-10 in the weighted surface sums, which central differences over 2e-4 turn into
+    ~1e-6 (β: 9e-7 at 1e-4 against 1.7e-9 at 1e-12)."""
     cache = tmp_path_factory.mktemp("soft_cache")
     settings = dict(handles=16, elastic_cubature_points=60, inertial_cubature_points=60,
                     cubature_training_samples=80)
+    modal = dict(settings, basis="modes+handles", vibration_modes=6, modal_columns=24)
+    tight = flsh.RolloutOptions().reduced_newton
+    tight.gradient_tolerance = 1e-12
+    tight.max_iterations = 100
     out = {}
-    for model in ("fem", "rom"):
+    for name, model, kwargs, newton in (("fem", "fem", settings, None),
+                                        ("rom", "rom", settings, None),
+                                        ("rom_modes", "rom", modal, tight)):
         free = flsh.torch.RolloutSimulator(body, walk, steps=STEPS, model=model, voxel_size=0.02,
                                            resolution=0.5, cache_dir=cache,
-                                           avatar_settings=settings)
+                                           avatar_settings=kwargs)
         sim = free.make_simulable()
         sim.initialize()
         lowest = sim.get_nodes()[:, 1].min()
         ground = flsh.Collider.plane(point=[0.0, lowest + 0.01, 0.0], normal=[0.0, 1.0, 0.0])
-        out[model] = flsh.torch.RolloutSimulator(
+        out[name] = flsh.torch.RolloutSimulator(
             body, walk, steps=STEPS, model=model, voxel_size=0.02, resolution=0.5,
-            cache_dir=cache, avatar_settings=settings, colliders=[ground])
+            cache_dir=cache, avatar_settings=kwargs, colliders=[ground], newton=newton)
     return out
 
 
@@ -100,7 +111,7 @@ def test_gradcheck_surface(simulators, model, rng):
                                     eps=1e-4, atol=5e-8, rtol=1e-5, fast_mode=True)
 
 
-@pytest.mark.parametrize("model", ["fem", "rom"])
+@pytest.mark.parametrize("model", ["fem", "rom", "rom_modes"])
 def test_gradcheck_material(simulators, model, rng):
     """The material coefficients, on the surface and the joints: gradcheck on a few log-values
     (soft-tissue and skin moduli, densities, the Fung exponent; the vector's other entries
@@ -137,7 +148,7 @@ def test_material_is_for_soft_models_only(body, walk, simulators):
         flsh.torch.simulate(simulator, material=torch.zeros(3, dtype=torch.float64))
 
 
-@pytest.mark.parametrize("model", ["fem", "rom"])
+@pytest.mark.parametrize("model", ["fem", "rom", "rom_modes"])
 def test_gradcheck_betas(simulators, model, rng):
     """β through the soft tissue (rest nodes, masses, materials, joints, the simulated surface),
     on the surface and the joints: the avatar at β keeps the default one's discretization."""

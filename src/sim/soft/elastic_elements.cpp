@@ -174,6 +174,46 @@ void ElasticityTerm::addAccumulatedMaterialProducts(const MatX& elements, const 
   if (rest_outer.size() > 0) addRestStiffnessProducts(rest_outer, values_bar, shape, beta_bar);
 }
 
+void ElasticityTerm::addRestFormCotangents(const std::vector<int>& tet,
+                                           const std::vector<TetElementRest>& rest,
+                                           const std::vector<Mat6>& C_world,
+                                           const MatX4i& mesh_tets,
+                                           const std::function<bool(int, Mat9&)>& form,
+                                           VecX& values_bar, const ShapeChain* shape,
+                                           VecX* beta_bar) const {
+  const TetMaterialMap& map = chain_.map();
+  const int T = int(tet.size());
+  const int threads = T > 1000 ? std::max(1, omp_get_max_threads()) : 1;
+  std::vector<VecX> partial(size_t(threads), VecX::Zero(values_bar.size()));
+  std::vector<VecX> betas(size_t(threads), VecX::Zero(shape ? shape->numBetas() : 0));
+  const Eigen::Matrix<double, 6, 9>& S = voigtLinearStrainMatrix();
+  FirstFailure failure;
+#pragma omp parallel num_threads(threads)
+  {
+    const int k = omp_get_thread_num();
+#pragma omp for schedule(static)
+    for (int t = 0; t < T; ++t)
+      failure.run([&] {
+        Mat9 Tt;
+        if (!form(t, Tt)) return;
+        TetMaterialCotangent bar;
+        bar.C_world = rest[size_t(t)].volume * S * Tt * S.transpose();
+        TetGeometryCotangent geometry;
+        map.addCotangent(tet[size_t(t)], bar, partial[size_t(k)], shape ? &geometry : nullptr);
+        if (!shape) return;
+        shape->addGeometryCotangent(tet[size_t(t)], geometry, betas[size_t(k)]);
+        Mat34 X_bar = Mat34::Zero();
+        addTetLinearFormRestCotangent(rest[size_t(t)], C_world[size_t(t)], Tt, 1.0, X_bar);
+        shape->addTetNodesCotangent(mesh_tets.row(tet[size_t(t)]).transpose(), X_bar,
+                                    betas[size_t(k)]);
+      });
+  }
+  failure.rethrow();
+  for (const VecX& p : partial) values_bar += p;
+  if (beta_bar)
+    for (const VecX& b : betas) *beta_bar += b;
+}
+
 template <class Visit>
 void ElasticityTerm::forEachLocalUnit(int e, std::vector<int>& dofs, Visit&& visit) const {
   materialElementDofs(e, dofs);

@@ -4,6 +4,7 @@
 // with its rest shape gradients and its material point. Private to Simulable.
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include "flsh/core/hessian_blocks.h"
@@ -134,6 +135,16 @@ class ElasticityTerm : public NodeTerm<1> {
   virtual void addRestStiffnessProducts(const MatX& W, VecX& values_bar,
                                         const ShapeChain* shape = nullptr,
                                         VecX* beta_bar = nullptr) const {}
+  /// The rest quadratic's share for both ROMs: for each tet k (`tet[k]` of the mesh, nodes
+  /// `mesh_tets`' row, rest shape and C_world) with T_k from form(k, T) (Σ over the steps of
+  /// vec(∇λ_u) vec(∇u)ᵀ, 9 × 9, vec column-major; false: the tet does not move), ADDS its C_world's
+  /// cotangent V S T Sᵀ (S: voigtLinearStrainMatrix) through the material map into values_bar and,
+  /// with `shape`, β's share (the tet's area and volume, its rest shape) into beta_bar. On the
+  /// available threads from 1000 tets (per-thread sums added in thread order).
+  void addRestFormCotangents(const std::vector<int>& tet, const std::vector<TetElementRest>& rest,
+                             const std::vector<Mat6>& C_world, const MatX4i& mesh_tets,
+                             const std::function<bool(int, Mat9&)>& form, VecX& values_bar,
+                             const ShapeChain* shape, VecX* beta_bar) const;
 
  private:
   /// Element e's rows ∂g/∂c at its DoFs: row(dof, values) for every local direction with a DoF.

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "flsh/core/error.h"
+#include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
 #include "volume/subspace_tets.h"
@@ -12,7 +13,7 @@ namespace flsh::detail {
 
 ModalElasticityTerm::ModalElasticityTerm(const SoftAvatar& avatar, const SoftKinematics& kinematics,
                                          const MaterialChain& chain, ElasticElements elements)
-    : ElasticityTerm(kinematics, chain), elements_(std::move(elements)) {
+    : ElasticityTerm(kinematics, chain), avatar_(avatar), elements_(std::move(elements)) {
   const ReducedData& rom = avatar.reducedData();
   const VolumetricData& data = avatar.volumetricData();
   const int T = elements_.size();
@@ -197,28 +198,154 @@ int ModalElasticityTerm::boundedSamples() const {
   return count;
 }
 
-// ---- the Material and Shape groups: not yet for modal bases ----------------------------------
+// ---- the Material and Shape groups ------------------------------------------------------------
 
-namespace {
-
-[[noreturn]] void notYet() {
-  throw InputError(
-      "Simulable: the Material and Shape parameter groups are not available yet for a reduced "
-      "basis with modes (ReducedBasisKind 'modes' / 'modes+handles'); use the handle basis or "
-      "the FEM for them");
+const ModalElasticityTerm::EveryTet& ModalElasticityTerm::everyTet() const {
+  if (!every_tet_)
+    every_tet_ = avatar_.derived<EveryTet>("modal_elasticity.every_tet", [&] {
+      ElasticTets all = deformableTets(avatar_.volumetricData());
+      auto every = std::make_unique<EveryTet>();
+      every->tet = std::move(all.tets);
+      every->rest = std::move(all.rest);
+      for (const FemMaterialPoint& m : all.materials) every->C_world.push_back(m.C_world);
+      return every.release();
+    });
+  return *every_tet_;
 }
 
-}  // namespace
-
-int ModalElasticityTerm::numMaterialElements() const { notYet(); }
-int ModalElasticityTerm::materialElementTet(int) const { notYet(); }
-void ModalElasticityTerm::materialElementDofs(int, std::vector<int>&) const { notYet(); }
-FemMaterialDerivative ModalElasticityTerm::materialElementGradient(int, const Mat3X&) const {
-  notYet();
+int ModalElasticityTerm::numMaterialElements() const {
+  return elements_.size() + (rest_stiffness_.size() > 0 ? int(everyTet().tet.size()) : 0);
 }
-Eigen::Vector4i ModalElasticityTerm::materialElementNodes(int) const { notYet(); }
-void ModalElasticityTerm::materialElementRestCotangent(int, const Mat3X&, Mat34&) const {
-  notYet();
+
+int ModalElasticityTerm::materialElementTet(int e) const {
+  return e < elements_.size() ? elements_.tet[size_t(e)]
+                              : everyTet().tet[size_t(e - elements_.size())];
+}
+
+Eigen::Vector4i ModalElasticityTerm::materialElementNodes(int e) const {
+  return avatar_.volumetricData().templ->mesh.tets.row(materialElementTet(e)).transpose();
+}
+
+void ModalElasticityTerm::localDofs(int e, std::vector<int>& dofs) const {
+  if (e < elements_.size()) {
+    elementDofs(e, dofs);
+    return;
+  }
+  // An elastic tet of the rest quadratic has a soft node (deformableTets).
+  dofs.clear();
+  const Eigen::Vector4i nodes = materialElementNodes(e);
+  for (int a = 0; a < 4; ++a)
+    for (auto* phi = kin_.basisBegin(nodes[a]); phi != kin_.basisEnd(nodes[a]); ++phi)
+      dofs.push_back(3 * phi->first);
+  std::sort(dofs.begin(), dofs.end());
+  dofs.erase(std::unique(dofs.begin(), dofs.end()), dofs.end());
+  const int handles = int(dofs.size());
+  dofs.resize(size_t(3 * handles));
+  for (int s = handles - 1; s >= 0; --s)
+    for (int c = 2; c >= 0; --c) dofs[size_t(3 * s + c)] = dofs[size_t(s)] + c;
+  for (int k = 0; k < num_modes_; ++k) dofs.push_back(modal_base_ + k);
+}
+
+void ModalElasticityTerm::materialElementDofs(int e, std::vector<int>& dofs) const {
+  localDofs(e, dofs);
+  for (int& d : dofs) d += kin_.boneDofs();
+}
+
+void ModalElasticityTerm::nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat34& lu) const {
+  std::vector<int> dofs;
+  localDofs(e, dofs);
+  const int h = int(std::lower_bound(dofs.begin(), dofs.end(), modal_base_) - dofs.begin());
+  VecX lambda_modes(num_modes_);
+  for (int k = 0; k < num_modes_; ++k) lambda_modes[k] = Lambda((h + k) % 3, (h + k) / 3);
+  const Eigen::Vector4i nodes = materialElementNodes(e);
+  lu.setZero();
+  for (int a = 0; a < 4; ++a) {
+    const int j = nodes[a];
+    u.col(a) = kin_.nodeDisplacement(kin_.u, j);
+    if (!kin_.isSoftNode(j)) continue;
+    for (auto* phi = kin_.basisBegin(j); phi != kin_.basisEnd(j); ++phi) {
+      const auto at = std::lower_bound(dofs.begin(), dofs.begin() + h, 3 * phi->first);
+      lu.col(a) += phi->second * Lambda.col(Eigen::Index(at - dofs.begin()) / 3);
+    }
+    if (num_modes_ > 0) lu.col(a) += kin_.modeRows(j) * lambda_modes;
+  }
+}
+
+SampleElement ModalElasticityTerm::sample(int e) const {
+  return {elements_.rest[size_t(e)], elements_.materials[size_t(e)], elements_.weights[e],
+          rest_stiffness_.size() > 0 ? rest_floors_[e] : 0.0};
+}
+
+FemMaterialDerivative ModalElasticityTerm::materialElementGradient(int e,
+                                                                   const Mat3X& Lambda) const {
+  if (e < elements_.size() && !moves_[size_t(e)]) return {};
+  Mat34 u, lu;
+  nodalForm(e, Lambda, u, lu);
+  if (e < elements_.size()) return sampleMaterialGradient(sample(e), u, lu);
+  return restFormMaterialGradient(everyTet().rest[size_t(e - elements_.size())], u, lu);
+}
+
+void ModalElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambda,
+                                                       Mat34& X_bar) const {
+  if (e < elements_.size() && !moves_[size_t(e)]) return;
+  Mat34 u, lu;
+  nodalForm(e, Lambda, u, lu);
+  if (e < elements_.size()) {
+    addSampleRestCotangent(sample(e), u, lu, X_bar);
+    return;
+  }
+  const int k = e - elements_.size();
+  addTetLinearFormRestCotangent(everyTet().rest[size_t(k)], everyTet().C_world[size_t(k)], u, lu,
+                                1.0, X_bar);
+}
+
+void ModalElasticityTerm::addRestOuter(const VecX& lambda, MatX& W) const {
+  if (rest_stiffness_.size() == 0) return;
+  const int m = kin_.numSoftDofs();
+  if (W.size() == 0) W = MatX::Zero(m, m);
+  W.noalias() += lambda.segment(kin_.boneDofs(), m) * kin_.u.transpose();
+}
+
+// T_t = D_t W D_tᵀ = Σ_{a,b} (g_a ⊗ I₃) N_ab (g_b ⊗ I₃)ᵀ with N_ab = B_a W B_bᵀ (3 × 3): the
+// products P_a = B_a W (3 × m) once per soft node, then N_ab = P_a B_bᵀ per tet.
+void ModalElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values_bar,
+                                                   const ShapeChain* shape, VecX* beta_bar) const {
+  if (rest_stiffness_.size() == 0 || W.size() == 0) return;
+  const int n = kin_.numNodes(), m = int(W.cols()), r = num_modes_;
+  MatX P = MatX::Zero(3 * Eigen::Index(n), m);
+#pragma omp parallel for schedule(static) if (n > 1000)
+  for (int j = 0; j < n; ++j) {
+    if (!kin_.isSoftNode(j)) continue;
+    auto Pj = P.middleRows<3>(3 * Eigen::Index(j));
+    for (auto* phi = kin_.basisBegin(j); phi != kin_.basisEnd(j); ++phi)
+      Pj += phi->second * W.middleRows<3>(3 * Eigen::Index(phi->first));
+    if (r > 0) Pj.noalias() += kin_.modeRows(j) * W.bottomRows(r);
+  }
+  const EveryTet& all = everyTet();
+  const MatX4i& mesh = avatar_.volumetricData().templ->mesh.tets;
+  const auto form = [&](int t, Mat9& Tt) {
+    const Eigen::Vector4i nodes = mesh.row(all.tet[size_t(t)]).transpose();
+    const Mat3X G = reducedShapeGradients(all.rest[size_t(t)], Mat4X::Identity(4, 4));
+    Tt.setZero();
+    bool moves = false;
+    for (int a = 0; a < 4; ++a) {
+      if (!kin_.isSoftNode(nodes[a])) continue;
+      moves = true;
+      const auto Pa = P.middleRows<3>(3 * Eigen::Index(nodes[a]));
+      for (int b = 0; b < 4; ++b) {
+        const int j = nodes[b];
+        if (!kin_.isSoftNode(j)) continue;
+        Mat3 N = Mat3::Zero();
+        for (auto* phi = kin_.basisBegin(j); phi != kin_.basisEnd(j); ++phi)
+          N += phi->second * Pa.middleCols<3>(3 * Eigen::Index(phi->first));
+        if (r > 0) N.noalias() += Pa.rightCols(r) * kin_.modeRows(j).transpose();
+        for (int l = 0; l < 3; ++l)
+          for (int k = 0; k < 3; ++k) Tt.block<3, 3>(3 * l, 3 * k) += (G(l, a) * G(k, b)) * N;
+      }
+    }
+    return moves;
+  };
+  addRestFormCotangents(all.tet, all.rest, all.C_world, mesh, form, values_bar, shape, beta_bar);
 }
 
 }  // namespace flsh::detail

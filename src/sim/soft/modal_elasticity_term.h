@@ -13,13 +13,20 @@
 // m_e × m_e rest Hessian per sample. The handle basis alone keeps its cheaper form
 // (reduced_elasticity_term.h). Private to Simulable.
 //
-// Not yet: the Material and Shape parameter groups (the adjoint's), which throw InputError.
+// The Material and Shape groups (the adjoint's, elastic_elements.h): the material elements are
+// the samples, then with the split every elastic tet of ½ zᵀ K z (K = Σ_t V_t D_tᵀ A₀ D_t, the
+// basis held: SoftAvatar::withMaterial / withShape recompute K on the same columns). Each takes
+// its nodal form (nodal_element_derivatives.h): the nodes' displacements and the local
+// direction's through the basis rows. A reverse sweep sums W = Σ λ zᵀ and passes over the tets
+// once, each tet's T = D_t W D_tᵀ formed from per-node products B_a W (B_a = ∂u_a/∂z).
 #pragma once
 
+#include <memory>
 #include <utility>
 #include <vector>
 
 #include "sim/soft/elastic_elements.h"
+#include "sim/soft/nodal_element_derivatives.h"
 
 namespace flsh::detail {
 
@@ -49,8 +56,29 @@ class ModalElasticityTerm final : public ElasticityTerm, public ReducedElasticit
   FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const override;
   Eigen::Vector4i materialElementNodes(int e) const override;
   void materialElementRestCotangent(int e, const Mat3X& Lambda, Mat34& X_bar) const override;
+  int numProductElements() const override { return elements_.size(); }
+  void addRestOuter(const VecX& lambda, MatX& W) const override;
+
+ public:
+  void addRestStiffnessProducts(const MatX& rest_outer, VecX& values_bar,
+                                const ShapeChain* shape = nullptr,
+                                VecX* beta_bar = nullptr) const override;
 
  private:
+  /// Every elastic tet (the split's rest quadratic), built on first use and shared by the
+  /// avatar's simulables (SoftAvatar::derived).
+  struct EveryTet {
+    std::vector<int> tet;
+    std::vector<TetElementRest> rest;
+    std::vector<Mat6> C_world;
+  };
+  const EveryTet& everyTet() const;
+  /// Material element e's soft-state entries (ascending; its handles', then every mode's).
+  void localDofs(int e, std::vector<int>& dofs) const;
+  /// Material element e's nodal displacements u and the local direction's λ_u (Λ: 3 × its
+  /// local columns, localDofs three by three) through the nodes' basis rows.
+  void nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat34& lu) const;
+  SampleElement sample(int e) const;
   /// Element e's weighted energy (the excess under the split) at f = vec(F − I), with its
   /// gradient and Hessian in f when asked (restSplitExcess needs the gradient for the Hessian).
   double law(int e, const Vec9& f, Vec9* g9, Mat9* H9, bool psd, bool* bounded = nullptr) const;
@@ -59,6 +87,7 @@ class ModalElasticityTerm final : public ElasticityTerm, public ReducedElasticit
   /// Element e's soft-state entries (ascending): its handles', then every mode's.
   void elementDofs(int e, std::vector<int>& dofs) const;
   using RowMatX = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const SoftAvatar& avatar_;
   ElasticElements elements_;
   int num_modes_ = 0, modal_base_ = 0;         // r, and the modes' first soft-state entry (3H)
   std::vector<char> moves_;                    // per element: a node of it is soft
@@ -69,6 +98,7 @@ class ModalElasticityTerm final : public ElasticityTerm, public ReducedElasticit
   MatX rest_stiffness_;             // K (numSoftDofs square), empty without the split
   std::vector<Mat9> rest_tangent_;  // per element with the split: V A₀
   VecX rest_floors_;                // per element with the split
+  mutable std::shared_ptr<const EveryTet> every_tet_;
 };
 
 }  // namespace flsh::detail

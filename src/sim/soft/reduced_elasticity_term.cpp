@@ -1,15 +1,13 @@
 #include "sim/soft/reduced_elasticity_term.h"
 
-#include <omp.h>
-
 #include <algorithm>
-#include <cmath>
 #include <string>
 
 #include "flsh/core/error.h"
 #include "flsh/volume/elastic_tets.h"
 #include "flsh/volume/reduced_data.h"
 #include "flsh/volume/volumetric_data.h"
+#include "sim/soft/nodal_element_derivatives.h"
 
 namespace flsh::detail {
 
@@ -271,111 +269,53 @@ void ReducedElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values
                                                      VecX* beta_bar) const {
   if (rest_stiffness_.size() == 0 || W.size() == 0) return;
   const ReducedTets& all = everyTet();
-  const TetMaterialMap& map = materialChain().map();
-  const int T = int(all.tet.size());
-  const int threads = T > 1000 ? std::max(1, omp_get_max_threads()) : 1;
-  std::vector<VecX> partial(size_t(threads), VecX::Zero(values_bar.size()));
-  std::vector<VecX> betas(size_t(threads), VecX::Zero(shape ? shape->numBetas() : 0));
-  // S: vec(∇u) ↦ Voigt strain (voigtLinearStrainMatrix), so that a tet's K_t = vol Σ_{s,r}
-  // B_sᵀ C B_r with B_s = S (I₃ ⊗ g_s) gives λᵀ dK_t z summed over the steps as
-  // vol ⟨dC, S T Sᵀ⟩ with T = (G̃ ⊗ I₃) W_t (G̃ᵀ ⊗ I₃) (9 × 9), the same T the rest shape's
-  // linear form takes.
-  const Eigen::Matrix<double, 6, 9>& S = voigtLinearStrainMatrix();
-#pragma omp parallel num_threads(threads)
-  {
-    const int k = omp_get_thread_num();
-    MatX X;
-#pragma omp for schedule(static)
-    for (int t = 0; t < T; ++t) {
-      const int begin = all.handle_start[size_t(t)], n = all.count(t);
-      if (n == 0) continue;
-      // T[(i, j), (k, l)] = Σ_{s, r} G̃(j, s) G̃(l, r) W(3h_s + i, 3h_r + k): X = W_t (G̃ᵀ ⊗ I₃)
-      // first (3n × 9, read from W's blocks), then T = (G̃ ⊗ I₃) X.
-      const auto G = all.gradients.middleCols(begin, n);
-      X.setZero(3 * n, 9);
-      for (int s = 0; s < n; ++s) {
-        const int hs = 3 * all.handles[size_t(begin + s)];
-        for (int r = 0; r < n; ++r) {
-          const Mat3 Wsr = W.block<3, 3>(hs, 3 * all.handles[size_t(begin + r)]);
-          for (int l = 0; l < 3; ++l) X.block<3, 3>(3 * s, 3 * l) += G(l, r) * Wsr;
-        }
+  const auto form = [&](int t, Mat9& Tt) {
+    const int begin = all.handle_start[size_t(t)], n = all.count(t);
+    if (n == 0) return false;
+    // T[(i, j), (k, l)] = Σ_{s, r} G̃(j, s) G̃(l, r) W(3h_s + i, 3h_r + k): X = W_t (G̃ᵀ ⊗ I₃)
+    // first (3n × 9, read from W's blocks), then T = (G̃ ⊗ I₃) X.
+    const auto G = all.gradients.middleCols(begin, n);
+    MatX X = MatX::Zero(3 * n, 9);
+    for (int s = 0; s < n; ++s) {
+      const int hs = 3 * all.handles[size_t(begin + s)];
+      for (int r = 0; r < n; ++r) {
+        const Mat3 Wsr = W.block<3, 3>(hs, 3 * all.handles[size_t(begin + r)]);
+        for (int l = 0; l < 3; ++l) X.block<3, 3>(3 * s, 3 * l) += G(l, r) * Wsr;
       }
-      Mat9 Tt = Mat9::Zero();
-      for (int s = 0; s < n; ++s)
-        for (int j = 0; j < 3; ++j) Tt.middleRows<3>(3 * j) += G(j, s) * X.middleRows<3>(3 * s);
-      TetMaterialCotangent bar;
-      bar.C_world = all.volume[size_t(t)] * S * Tt * S.transpose();
-      TetGeometryCotangent geometry;
-      map.addCotangent(all.tet[size_t(t)], bar, partial[size_t(k)], shape ? &geometry : nullptr);
-      if (!shape) continue;
-      shape->addGeometryCotangent(all.tet[size_t(t)], geometry, betas[size_t(k)]);
-      Mat34 X_bar = Mat34::Zero();
-      addTetLinearFormRestCotangent(all.rest[size_t(t)], all.C_world[size_t(t)], Tt, 1.0, X_bar);
-      shape->addTetNodesCotangent(materialElementNodes(elements_.size() + t), X_bar,
-                                  betas[size_t(k)]);
     }
-  }
-  for (const VecX& p : partial) values_bar += p;
-  if (beta_bar)
-    for (const VecX& b : betas) *beta_bar += b;
+    Tt.setZero();
+    for (int s = 0; s < n; ++s)
+      for (int j = 0; j < 3; ++j) Tt.middleRows<3>(3 * j) += G(j, s) * X.middleRows<3>(3 * s);
+    return true;
+  };
+  addRestFormCotangents(all.tet, all.rest, all.C_world, avatar_.volumetricData().templ->mesh.tets,
+                        form, values_bar, shape, beta_bar);
 }
 
-namespace {
-
-void addScaled(double a, const FemMaterialDerivative& x, FemMaterialDerivative& y) {
-  y.C_world += a * x.C_world;
-  y.modulus += a * x.modulus;
-  y.gamma += a * x.gamma;
+// The four nodes' displacements u = Z Φᵀ and the direction's λ_u = Λ Φᵀ (Φ: their basis rows on
+// the element's handles).
+void ReducedElasticityTerm::nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat34& lu) const {
+  const bool sample = e < elements_.size();
+  const int k = sample ? e : e - elements_.size();
+  const std::vector<int>& start = sample ? handle_start_ : everyTet().handle_start;
+  const std::vector<int>& handles = sample ? handles_ : everyTet().handles;
+  const int begin = start[size_t(k)], n = start[size_t(k) + 1] - begin;
+  const Mat4X Phi = nodeBasis(materialElementNodes(e), &handles[size_t(begin)], n);
+  u = handleDisplacements(&handles[size_t(begin)], n) * Phi.transpose();
+  lu = Lambda * Phi.transpose();
 }
 
-}  // namespace
-
-// Samples under the split: λᵀ∇f_e = f_r (λᵀ∇ψ − λᵀb) + f_q λᵀb (b = K̃ z, q = ½ zᵀ b, r = ψ − q;
-// restSplitExcess), whose derivative (in the material or the rest shape) adds to f_r, f_q's own
-// terms the second-order part of f in (r, q): in the bounded branch
-// (h′ / ((c − 1) q)) (w λᵀ∇r + x λᵀb) (w dr + x dq). The floors c_e are the discretization's
-// (held). So d(λᵀ∇f_e) = a_gψ d(λᵀ∇ψ) + a_gq d(λᵀb) + a_ψ dψ + a_q dq with these weights.
-ReducedElasticityTerm::SampleWeights ReducedElasticityTerm::sampleWeights(
-    int e, const Mat3X& Z, const Mat3X& Lambda) const {
-  const double w = elements_.weights[e];
-  SampleWeights out;
-  out.gpsi = w;
-  if (rest_stiffness_.size() == 0) return out;
-  const int n = int(Z.cols()), m = 3 * n;
-  const Eigen::Map<const MatX> K(rest_hessians_.data() + rest_hessian_start_[size_t(e)], m, m);
-  const Eigen::Map<const VecX> z(Z.data(), m), l(Lambda.data(), m);
-  const VecX b = K * z;
-  const double q = 0.5 * z.dot(b), gq = l.dot(b);
-  const int begin = handle_start_[size_t(e)];
-  const Mat3X G = gradients_.middleCols(begin, n);
-  const FemMaterialPoint& material = elements_.materials[size_t(e)];
-  const double V = elements_.rest[size_t(e)].volume;
-  const Mat3 F = Mat3::Identity() + Z * G.transpose(), dF = Lambda * G.transpose();
-  Mat3 P;
-  const double psi = V * fungEnergyDensity(F, material, &P);
-  const double r = psi - q, x = q > 0.0 ? -w * r / q : -1.0;
-  if (x <= 1.0) {
-    out.gq = -w;
-    return out;
-  }
-  const double gpsi = V * P.cwiseProduct(dF).sum();
-  const double c = rest_floors_[e], decay = std::exp(-(x - 1.0) / (c - 1.0));
-  const double h = c - (c - 1.0) * decay, f_r = w * decay, f_q = x * decay - h;
-  const double coef = decay / ((c - 1.0) * q) * (w * (gpsi - gq) + x * gq);
-  out.gpsi = f_r;
-  out.gq = f_q - f_r;
-  out.psi = coef * w;
-  out.q = coef * (x - w);
-  return out;
+SampleElement ReducedElasticityTerm::sample(int e) const {
+  return {elements_.rest[size_t(e)], elements_.materials[size_t(e)], elements_.weights[e],
+          rest_stiffness_.size() > 0 ? rest_floors_[e] : 0.0};
 }
 
-// Every tet of K: V ε(Λ) ε(Z)ᵀ on C_world; a sample: the weights above on the law's material
-// derivatives.
+// Every tet of K: V ε(Λ) ε(Z)ᵀ on C_world (through G̃, without the nodes); a sample: its nodal
+// form (nodal_element_derivatives.h).
 FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
                                                                      const Mat3X& Lambda) const {
-  FemMaterialDerivative d;
-  const bool sample = e < elements_.size();
-  if (!sample) {
+  if (e >= elements_.size()) {
+    FemMaterialDerivative d;
     const ReducedTets& all = everyTet();
     const int k = e - elements_.size(), begin = all.handle_start[size_t(k)], n = all.count(k);
     const Mat3X Z = handleDisplacements(&all.handles[size_t(begin)], n);
@@ -384,52 +324,30 @@ FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
                 voigtLinearStrain(Z * G.transpose()).transpose();
     return d;
   }
-  const int begin = handle_start_[size_t(e)], n = handle_start_[size_t(e) + 1] - begin;
-  if (n == 0) return d;
-  const Mat3X Z = handleDisplacements(&handles_[size_t(begin)], n);
-  const Mat3X G = gradients_.middleCols(begin, n);
-  const FemMaterialPoint& material = elements_.materials[size_t(e)];
-  const double V = elements_.rest[size_t(e)].volume;
-  const Mat3 F = Mat3::Identity() + Z * G.transpose(), dF = Lambda * G.transpose();
-  const SampleWeights a = sampleWeights(e, Z, Lambda);
-  FemMaterialDerivative part;
-  addStressMaterialGradient(F, material, dF, V, part);
-  addScaled(a.gpsi, part, d);
-  const Vec6 ez = voigtLinearStrain(Z * G.transpose()), el = voigtLinearStrain(dF);
-  d.C_world += (a.gq * V) * el * ez.transpose() + (0.5 * a.q * V) * ez * ez.transpose();
-  if (a.psi != 0.0) addEnergyDensityMaterialGradient(F, material, a.psi * V, d);
-  return d;
+  if (handle_start_[size_t(e) + 1] == handle_start_[size_t(e)]) return {};
+  Mat34 u, lu;
+  nodalForm(e, Lambda, u, lu);
+  return sampleMaterialGradient(sample(e), u, lu);
 }
 
 Eigen::Vector4i ReducedElasticityTerm::materialElementNodes(int e) const {
   return avatar_.volumetricData().templ->mesh.tets.row(materialElementTet(e)).transpose();
 }
 
-// The same weights on the rest-shape kernels, in the tet's nodal form: u = Z Φᵀ, λ_u = Λ Φᵀ (Φ:
-// the four nodes' basis rows on the element's handles), G̃ = G Φ.
 void ReducedElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambda,
                                                          Mat34& X_bar) const {
-  const bool sample = e < elements_.size();
-  const int k = sample ? e : e - elements_.size();
-  const std::vector<int>& start = sample ? handle_start_ : everyTet().handle_start;
-  const std::vector<int>& handles = sample ? handles_ : everyTet().handles;
-  const int begin = start[size_t(k)], n = start[size_t(k) + 1] - begin;
-  if (n == 0) return;
-  const Mat4X Phi = nodeBasis(materialElementNodes(e), &handles[size_t(begin)], n);
-  const Mat3X Z = handleDisplacements(&handles[size_t(begin)], n);
-  const Mat34 u = Z * Phi.transpose(), lu = Lambda * Phi.transpose();
-  if (!sample) {
-    const ReducedTets& all = everyTet();
-    addTetLinearFormRestCotangent(all.rest[size_t(k)], all.C_world[size_t(k)], u, lu, 1.0, X_bar);
+  const bool sample_tet = e < elements_.size();
+  const int k = sample_tet ? e : e - elements_.size();
+  const std::vector<int>& start = sample_tet ? handle_start_ : everyTet().handle_start;
+  if (start[size_t(k) + 1] == start[size_t(k)]) return;
+  Mat34 u, lu;
+  nodalForm(e, Lambda, u, lu);
+  if (sample_tet) {
+    addSampleRestCotangent(sample(e), u, lu, X_bar);
     return;
   }
-  const TetElementRest& rest = elements_.rest[size_t(e)];
-  const FemMaterialPoint& material = elements_.materials[size_t(e)];
-  const SampleWeights a = sampleWeights(e, Z, Lambda);
-  addTetGradientRestCotangent(rest, material, u, lu, a.gpsi, X_bar);
-  if (a.gq != 0.0) addTetLinearFormRestCotangent(rest, material.C_world, u, lu, a.gq, X_bar);
-  if (a.psi != 0.0) addTetEnergyRestCotangent(rest, material, u, a.psi, X_bar);
-  if (a.q != 0.0) addTetLinearFormRestCotangent(rest, material.C_world, u, u, 0.5 * a.q, X_bar);
+  const ReducedTets& all = everyTet();
+  addTetLinearFormRestCotangent(all.rest[size_t(k)], all.C_world[size_t(k)], u, lu, 1.0, X_bar);
 }
 
 }  // namespace flsh::detail

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "sim/soft/elastic_elements.h"
+#include "sim/soft/nodal_element_derivatives.h"
 
 namespace flsh::detail {
 
@@ -81,13 +82,10 @@ class ReducedElasticityTerm final : public ElasticityTerm, public ReducedElastic
   Mat3X handleDisplacements(const int* handles, int n) const;
   /// The four nodes' basis rows on n handles (4 × n): Φ(a, s) = φ_{handles[s]}(nodes[a]).
   Mat4X nodeBasis(const Eigen::Vector4i& nodes, const int* handles, int n) const;
-  /// The weights of a sample's d(Λᵀ ∇f_e) on the derivatives of Λᵀ∇ψ, Λᵀ K̃ z, ψ and q
-  /// (materialElementGradient, materialElementRestCotangent): w on the first alone without the
-  /// split.
-  struct SampleWeights {
-    double gpsi = 0.0, gq = 0.0, psi = 0.0, q = 0.0;
-  };
-  SampleWeights sampleWeights(int e, const Mat3X& Z, const Mat3X& Lambda) const;
+  /// Material element e's nodal displacements u and direction λ_u = Λ Φᵀ.
+  void nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat34& lu) const;
+  /// Sample e as nodal_element_derivatives.h takes it.
+  SampleElement sample(int e) const;
   /// Element e (count handles, cubature weight w, their displacements Z) under the
   /// rest-stiffness split: its weighted excess over its rest quadratic, bounded below;
   /// gradient and Hessian (in the handles' coordinates, weighted) written into the views.

@@ -95,7 +95,7 @@ void expectMaterialDerivatives(Simulable& sim, SoftModel model) {
   // The reverse sweep's form (summed over steps, chained once) gives the same, and is linear.
   Simulable::MaterialProducts sum;
   sim.accumulateMaterialProducts(lambda, sum);
-  EXPECT_EQ(sum.rest_outer.size() > 0, model == SoftModel::Rom);
+  EXPECT_EQ(sum.rest_outer.size() > 0, model != SoftModel::Fem);
   EXPECT_LT((sim.finishMaterialProducts(sum) - vjp).norm(), 1e-10 * (1.0 + vjp.norm()));
   const VecX lambda2 = test::randomVector(n, 1.0, 43);
   sim.accumulateMaterialProducts(lambda2, sum);
@@ -134,12 +134,15 @@ int pushIntoTheBoundedBranch(Simulable& sim) {
   return bounded;
 }
 
-TEST(SoftMaterialDerivatives, RomRestSplitBoundedBranch) {
-  auto sim = test::softTermScenario(SoftModel::Rom);
+// The ROMs (handles; modes and handles) with samples in the rest split's bounded branch.
+class RestSplitBoundedBranch : public ::testing::TestWithParam<SoftModel> {};
+
+TEST_P(RestSplitBoundedBranch, Material) {
+  auto sim = test::softTermScenario(GetParam());
   const int bounded = pushIntoTheBoundedBranch(*sim);
   ASSERT_GT(bounded, 0) << "no sample reached the bounded branch";
   RecordProperty("bounded_samples", bounded);
-  expectMaterialDerivatives(*sim, SoftModel::Rom);
+  expectMaterialDerivatives(*sim, GetParam());
 }
 
 // β: ∂g/∂β against central differences of the total gradient of simulables on
@@ -237,8 +240,8 @@ TEST_P(SoftParameterDerivatives, ShapeMatchesFiniteDifferences) {
 }
 
 // The ROM's rest split in its bounded branch for β too.
-TEST(SoftShapeDerivatives, RomRestSplitBoundedBranch) {
-  const std::shared_ptr<const SoftAvatar> base = test::smallSoftAvatar(SoftModel::Rom);
+TEST_P(RestSplitBoundedBranch, Shape) {
+  const std::shared_ptr<const SoftAvatar> base = test::smallSoftAvatar(GetParam());
   const VecX beta = testBeta(int(base->betas().size()));
   auto sim = test::softTermScenario(base->withShape(beta));
   const int bounded = pushIntoTheBoundedBranch(*sim);
@@ -247,7 +250,10 @@ TEST(SoftShapeDerivatives, RomRestSplitBoundedBranch) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, SoftParameterDerivatives,
-                         ::testing::Values(SoftModel::Fem, SoftModel::Rom), test::modelName);
+                         ::testing::Values(SoftModel::Fem, SoftModel::Rom, SoftModel::RomModes),
+                         test::modelName);
+INSTANTIATE_TEST_SUITE_P(Roms, RestSplitBoundedBranch,
+                         ::testing::Values(SoftModel::Rom, SoftModel::RomModes), test::modelName);
 
 }  // namespace
 }  // namespace flsh

@@ -50,7 +50,9 @@ class ModelKinematics {
   virtual void surfaceJacobian(std::vector<Triplet>& triplets) const = 0;
   /// Surface node i at the prepared state as a SkinnedPoint (sim/terms/term_blocks.h: its
   /// bones' weights and lever arms; id set by the caller). The ROM's after surface().
-  virtual void surfacePoint(int i, SkinnedPoint& p) const = 0;
+  /// `soft_blocks` false leaves p.soft empty (a caller that reads the bones' part alone: the
+  /// ROM with modes forms M_i Ψ_i for them).
+  virtual void surfacePoint(int i, SkinnedPoint& p, bool soft_blocks = true) const = 0;
   /// Adds Σ_i J_iᵀ f_i over every surface node (f: #V × 3) into g (numDofs): surfaceJacobian's
   /// transpose product without forming it. The ROM's after surface().
   virtual void surfaceForces(const MatX3& forces, VecX& g) const = 0;

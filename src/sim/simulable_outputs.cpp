@@ -98,7 +98,7 @@ void Simulable::getNodesCotangents(const MatX3& dL_dnodes, VecX* state, VecX* pr
     detail::SkinnedPoint point;
     for (int i = 0; i < V; ++i) {
       if (dL_dnodes.row(i).isZero(0.0)) continue;
-      m.kinematics->surfacePoint(i, point);
+      m.kinematics->surfacePoint(i, point, false);
       for (int a = 0; a < point.count; ++a) {
         const int b = point.bone[a];
         rest_joints->segment<3>(3 * b) -=

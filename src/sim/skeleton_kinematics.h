@@ -59,7 +59,7 @@ class SkeletonKinematics final : public ModelKinematics {
   /// Vertex i's influences and lever arms as a SkinnedPoint (sim/terms/term_blocks.h; id set by
   /// the caller).
   void point(int i, const std::vector<Mat3>& R, SkinnedPoint& p) const;
-  void surfacePoint(int i, SkinnedPoint& p) const override { point(i, *R_, p); }
+  void surfacePoint(int i, SkinnedPoint& p, bool = true) const override { point(i, *R_, p); }
   void surfaceForces(const MatX3& forces, VecX& g) const override;
 
  private:

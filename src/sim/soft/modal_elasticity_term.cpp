@@ -306,13 +306,15 @@ void ModalElasticityTerm::addRestOuter(const VecX& lambda, MatX& W) const {
   W.noalias() += lambda.segment(kin_.boneDofs(), m) * kin_.u.transpose();
 }
 
-// T_t = D_t W D_tᵀ = Σ_{a,b} (g_a ⊗ I₃) N_ab (g_b ⊗ I₃)ᵀ with N_ab = B_a W B_bᵀ (3 × 3): the
-// products P_a = B_a W (3 × m) once per soft node, then N_ab = P_a B_bᵀ per tet.
+// T_t = D_t W D_tᵀ, block (l, k) = Σ_{a,b} g_a(l) g_b(k) B_a W B_bᵀ: the products P_a = B_a W
+// (3 × m, B_a = ∂u_a/∂z) once per soft node, then per tet P̃_l = Σ_a g_a(l) P_a and the modes'
+// Ψ̃_k = Σ_b g_b(k) Ψ_b, so block (l, k) = P̃_l's modal columns · Ψ̃_kᵀ plus the handles' φ
+// columns of P̃_l: 9 dot products of length r per block, in contiguous rows.
 void ModalElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values_bar,
                                                    const ShapeChain* shape, VecX* beta_bar) const {
   if (rest_stiffness_.size() == 0 || W.size() == 0) return;
   const int n = kin_.numNodes(), m = int(W.cols()), r = num_modes_;
-  MatX P = MatX::Zero(3 * Eigen::Index(n), m);
+  RowMatX P = RowMatX::Zero(3 * Eigen::Index(n), m);  // node j's rows 3j .. 3j + 2
 #pragma omp parallel for schedule(static) if (n > 1000)
   for (int j = 0; j < n; ++j) {
     if (!kin_.isSoftNode(j)) continue;
@@ -323,27 +325,41 @@ void ModalElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values_b
   }
   const EveryTet& all = everyTet();
   const MatX4i& mesh = avatar_.volumetricData().templ->mesh.tets;
+  using Rows3 = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>;
   const auto form = [&](int t, Mat9& Tt) {
     const Eigen::Vector4i nodes = mesh.row(all.tet[size_t(t)]).transpose();
     const Mat3X G = reducedShapeGradients(all.rest[size_t(t)], Mat4X::Identity(4, 4));
-    Tt.setZero();
+    thread_local Rows3 Pt[3], Psit[3];
+    for (int l = 0; l < 3; ++l) {
+      Pt[l].setZero(3, m);
+      Psit[l].setZero(3, r);
+    }
     bool moves = false;
     for (int a = 0; a < 4; ++a) {
       if (!kin_.isSoftNode(nodes[a])) continue;
       moves = true;
       const auto Pa = P.middleRows<3>(3 * Eigen::Index(nodes[a]));
-      for (int b = 0; b < 4; ++b) {
-        const int j = nodes[b];
-        if (!kin_.isSoftNode(j)) continue;
-        Mat3 N = Mat3::Zero();
-        for (auto* phi = kin_.basisBegin(j); phi != kin_.basisEnd(j); ++phi)
-          N += phi->second * Pa.middleCols<3>(3 * Eigen::Index(phi->first));
-        if (r > 0) N.noalias() += Pa.rightCols(r) * kin_.modeRows(j).transpose();
-        for (int l = 0; l < 3; ++l)
-          for (int k = 0; k < 3; ++k) Tt.block<3, 3>(3 * l, 3 * k) += (G(l, a) * G(k, b)) * N;
+      for (int l = 0; l < 3; ++l) {
+        Pt[l] += G(l, a) * Pa;
+        if (r > 0) Psit[l] += G(l, a) * kin_.modeRows(nodes[a]);
       }
     }
-    return moves;
+    if (!moves) return false;
+    for (int l = 0; l < 3; ++l)
+      for (int k = 0; k < 3; ++k) {
+        auto block = Tt.block<3, 3>(3 * l, 3 * k);
+        if (r > 0)
+          block = Pt[l].rightCols(r).lazyProduct(Psit[k].transpose());
+        else
+          block.setZero();
+      }
+    for (int b = 0; b < 4; ++b)
+      for (auto* phi = kin_.basisBegin(nodes[b]); phi != kin_.basisEnd(nodes[b]); ++phi)
+        for (int l = 0; l < 3; ++l)
+          for (int k = 0; k < 3; ++k)
+            Tt.block<3, 3>(3 * l, 3 * k) +=
+                (G(k, b) * phi->second) * Pt[l].middleCols<3>(3 * Eigen::Index(phi->first));
+    return true;
   };
   addRestFormCotangents(all.tet, all.rest, all.C_world, mesh, form, values_bar, shape, beta_bar);
 }

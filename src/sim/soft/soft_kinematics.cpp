@@ -220,8 +220,26 @@ void SoftKinematics::poseBlendTangent(const std::vector<Mat3>& R, const VecX& de
       for (int c = 0; c < 3; ++c) d_feature[9 * (b - 1) + 3 * r + c] = dL(r, c);
   }
   dP.resize(Eigen::Index(nodes.size()), 3);
-  for (size_t k = 0; k < nodes.size(); ++k)
-    dP.row(Eigen::Index(k)) = (posedirs_->middleRows<3>(3 * nodes[k]) * d_feature).transpose();
+  const bool dense = manyUnslotted(nodes);
+  const VecX all = dense ? VecX((*posedirs_) * d_feature) : VecX();
+  for (size_t k = 0; k < nodes.size(); ++k) {
+    const int j = nodes[k], slot = reduced_ ? blend_slot_[size_t(j)] : -1;
+    if (slot >= 0)
+      dP.row(Eigen::Index(k)) = d_feature.transpose() * posedirs_T_.middleCols<3>(3 * slot);
+    else if (dense)
+      dP.row(Eigen::Index(k)) = all.segment<3>(3 * j).transpose();
+    else
+      dP.row(Eigen::Index(k)) = (posedirs_->middleRows<3>(3 * j) * d_feature).transpose();
+  }
+}
+
+// posedirs is 3N × 207 column-major: a node's three rows are 207 scattered cache lines. The ROM's
+// surface and mass nodes have their rows contiguous (posedirs_T_); for many other nodes one pass
+// over the whole matrix (a product with a dense 3N vector) reads less than row by row.
+bool SoftKinematics::manyUnslotted(const std::vector<int>& nodes) const {
+  size_t unslotted = 0;
+  for (int j : nodes) unslotted += reduced_ && blend_slot_[size_t(j)] >= 0 ? 0 : 1;
+  return 8 * unslotted > size_t(numNodes());
 }
 
 // ⟨L̄_b, R_pᵀ [w]× R_b⟩ = ⟨A, [w]×⟩ = w · vee(A − Aᵀ) with A = R_p L̄_b R_bᵀ: +vee to bone b,
@@ -230,8 +248,18 @@ void SoftKinematics::poseBlendCotangent(const std::vector<Mat3>& R, const std::v
                                         const std::vector<Vec3>& mu,
                                         VecX& rotation_cotangent) const {
   VecX feature_bar = VecX::Zero(feature_.size());
-  for (size_t k = 0; k < nodes.size(); ++k)
-    feature_bar.noalias() += posedirs_->middleRows<3>(3 * nodes[k]).transpose() * mu[k];
+  const bool dense = manyUnslotted(nodes);
+  VecX all = dense ? VecX::Zero(posedirs_->rows()) : VecX();
+  for (size_t k = 0; k < nodes.size(); ++k) {
+    const int j = nodes[k], slot = reduced_ ? blend_slot_[size_t(j)] : -1;
+    if (slot >= 0)
+      feature_bar.noalias() += posedirs_T_.middleCols<3>(3 * slot) * mu[k];
+    else if (dense)
+      all.segment<3>(3 * j) += mu[k];
+    else
+      feature_bar.noalias() += posedirs_->middleRows<3>(3 * j).transpose() * mu[k];
+  }
+  if (dense) feature_bar.noalias() += posedirs_->transpose() * all;
   for (int b = 1; b < num_bones_; ++b) {
     const int p = parents_[b];
     Mat3 L_bar;
@@ -463,7 +491,7 @@ void SoftKinematics::pointAt(int j, const std::vector<Mat3>& R, const VecX& stat
 }
 
 void SoftKinematics::fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y, const Mat3& M,
-                               SkinnedPoint& p) const {
+                               SkinnedPoint& p, bool soft_blocks) const {
   p.count = influence_start_[j + 1] - influence_start_[j];
   for (int a = 0; a < p.count; ++a) {
     const Influence& inf = influences_[influence_start_[j] + a];
@@ -472,7 +500,7 @@ void SoftKinematics::fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y,
     p.lever[a] = R[inf.bone] * (Y - joints_.row(inf.bone).transpose());
   }
   p.soft.clear();
-  if (node_dof_[j] < 0) return;
+  if (node_dof_[j] < 0 || !soft_blocks) return;
   if (!reduced_) {
     p.soft.emplace_back(bone_dofs_ + node_dof_[j], M);
     return;

@@ -201,7 +201,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// bones' weights and lever arms, and its soft DoFs' blocks; id set by the caller), for the
   /// node terms' parameter blocks.
   void point(int j, SkinnedPoint& p) const;
-  void surfacePoint(int i, SkinnedPoint& p) const override { point(i, p); }
+  void surfacePoint(int i, SkinnedPoint& p, bool soft_blocks = true) const override {
+    fillPoint(i, *cur_R_, Y_.row(i).transpose(), node_M_[i], p, soft_blocks);
+  }
   void surfaceForces(const MatX3& forces, VecX& g) const override;
   /// Node j as a SkinnedPoint at other bones and soft state (e.g. q_n or q_{n−1}, for the
   /// inertia's prediction x̂), with the held pose blend: lever arms R_b (Y_j − J_b) with
@@ -267,8 +269,8 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
  private:
   Vec3 blendOf(int j) const;
   /// p from node j's influences, rotations R, unposed position Y and M_j = Σ_b w_jb R_b.
-  void fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y, const Mat3& M,
-                 SkinnedPoint& p) const;
+  void fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y, const Mat3& M, SkinnedPoint& p,
+                 bool soft_blocks = true) const;
   /// t_b − R_b J_b per bone: x_j = Σ_b w_jb (R_b Y_j + shift_b).
   void boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const;
   /// x_j = Σ_b w_jb (R_b Y + shift_b) for node j's unposed position Y (shift: boneShifts'), and
@@ -294,6 +296,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   std::vector<Mat3> held_R_;  // ROM: the rotations feature_ comes from
   /// The pose feature of rotations R (9 per bone but the root: R_pᵀ R_b − I).
   void featureOf(const std::vector<Mat3>& R, VecX& feature) const;
+  /// Whether more than an eighth of all nodes in `nodes` have no contiguous posedirs rows (the
+  /// pose blend's tangent and cotangent then go through the whole matrix at once).
+  bool manyUnslotted(const std::vector<int>& nodes) const;
   mutable MatX3 blend_;  // #N × 3
   int pose_stamp_ = 0;
   mutable std::vector<int> blend_stamp_;

@@ -252,10 +252,11 @@ void ModalElasticityTerm::materialElementDofs(int e, std::vector<int>& dofs) con
 }
 
 void ModalElasticityTerm::nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat34& lu) const {
-  std::vector<int> dofs;
+  thread_local std::vector<int> dofs;  // per call on the sweeps' threads: no allocation
+  thread_local VecX lambda_modes;
   localDofs(e, dofs);
   const int h = int(std::lower_bound(dofs.begin(), dofs.end(), modal_base_) - dofs.begin());
-  VecX lambda_modes(num_modes_);
+  lambda_modes.resize(num_modes_);
   for (int k = 0; k < num_modes_; ++k) lambda_modes[k] = Lambda((h + k) % 3, (h + k) / 3);
   const Eigen::Vector4i nodes = materialElementNodes(e);
   lu.setZero();

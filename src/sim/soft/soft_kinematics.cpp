@@ -500,6 +500,7 @@ void SoftKinematics::fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y,
     p.lever[a] = R[inf.bone] * (Y - joints_.row(inf.bone).transpose());
   }
   p.soft.clear();
+  p.modes = nullptr;
   if (node_dof_[j] < 0 || !soft_blocks) return;
   if (!reduced_) {
     p.soft.emplace_back(bone_dofs_ + node_dof_[j], M);
@@ -508,9 +509,10 @@ void SoftKinematics::fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y,
   for (int k = phi_start_[j]; k < phi_start_[j + 1]; ++k)
     p.soft.emplace_back(bone_dofs_ + 3 * phi_[k].first, phi_[k].second * M);
   if (num_modes_ == 0) return;
-  const Eigen::Matrix<double, 3, Eigen::Dynamic> MPsi = M * modeRows(j);
-  for (int g = 0; g < num_modes_ / 3; ++g)
-    p.soft.emplace_back(bone_dofs_ + 3 * num_handles_ + 3 * g, MPsi.middleCols<3>(3 * g));
+  p.modes = modes_.data() + size_t(3) * size_t(num_modes_) * size_t(j);
+  p.num_modes = num_modes_;
+  p.modal_dof = bone_dofs_ + 3 * num_handles_;
+  p.blend = M;
 }
 
 void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces,

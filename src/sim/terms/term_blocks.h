@@ -39,7 +39,10 @@ inline int rotationRow(int b) { return 6 * b + 3; }
 /// μ = Σ_a C_aᵀ λ_a = Σ_a w_a (λt_a − [y_a]× λω_a). A soft skeleton's node also moves with soft
 /// DoFs: `soft` lists (first DoF s, S = ∂x/∂q[s, s + 3)), 3 × 3 each (FEM: its own u_j, S = M_j;
 /// ROM: every handle of its basis row, S = φ_h M_j); they reach rows s through Sᵀ and add S λ_s
-/// to μ. Empty for the articulated skeleton.
+/// to μ. A ROM with modes adds ∂x/∂z_modes = M_j Ψ_j (3 × r) as `modes` (Ψ_j's rows, 3 × r
+/// row-major; null without), `blend` (M_j) and `modal_dof` (the first modal DoF), applied as
+/// M_j (Ψ_j λ_m) and Ψ_jᵀ (M_jᵀ f) without forming the product. Empty for the articulated
+/// skeleton.
 struct SkinnedPoint {
   int id = -1;  ///< unique within one parameterBlocks call (a sink may keep the last μ)
   int count = 0;
@@ -47,13 +50,21 @@ struct SkinnedPoint {
   double weight[kNumJoints];
   Vec3 lever[kNumJoints];
   std::vector<std::pair<int, Mat3>> soft;
+  const double* modes = nullptr;
+  int num_modes = 0, modal_dof = 0;
+  Mat3 blend = Mat3::Zero();
 
+  /// Ψ_j as a 3 × r map (valid when modes is not null).
+  Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>> modeRows() const {
+    return {modes, 3, num_modes};
+  }
   Vec3 cotangent(const VecX& lambda) const {
     Vec3 mu = Vec3::Zero();
     for (int a = 0; a < count; ++a)
       mu += weight[a] * (lambda.segment<3>(translationRow(bone[a])) -
                          lever[a].cross(lambda.segment<3>(rotationRow(bone[a]))));
     for (const auto& [s, S] : soft) mu += S * lambda.segment<3>(s);
+    if (modes) mu += blend * (modeRows() * lambda.segment(modal_dof, num_modes));
     return mu;
   }
   /// g += Σ_a C_a f (+ Sᵀ f at the soft rows): the point's node-space force f on the DoFs.
@@ -63,6 +74,8 @@ struct SkinnedPoint {
       g.segment<3>(rotationRow(bone[k])) += weight[k] * lever[k].cross(f);
     }
     for (const auto& [s, S] : soft) g.segment<3>(s) += S.transpose() * f;
+    if (modes)
+      g.segment(modal_dof, num_modes).noalias() += modeRows().transpose() * (blend.transpose() * f);
   }
 };
 
@@ -181,6 +194,11 @@ class JacobianSink {
       add(p, rotationRow(bone), param, point.weight[k] * skew(point.lever[k]) * x);
     }
     for (const auto& [s, S] : point.soft) add(p, s, param, S.transpose() * x);
+    if (point.modes) {
+      const Eigen::Matrix<double, 3, B::ColsAtCompileTime> Mx = point.blend.transpose() * x;
+      for (int g = 0; g < point.num_modes; g += 3)
+        add(p, point.modal_dof + g, param, point.modeRows().middleCols<3>(g).transpose() * Mx);
+    }
   }
 
  private:

@@ -47,7 +47,7 @@ ElasticElements elasticElements(const SoftAvatar& avatar);
 VecX elementRestFloors(const ReducedData& rom, const ElasticElements& elements);
 
 /// The elastic energy of a soft skeleton (FEM: fem_elasticity_term.h; ROM:
-/// reduced_elasticity_term.h).
+/// reduced_elasticity_term.h with handles, modal_elasticity_term.h with modes).
 ///
 /// Material derivatives (SimParameter::Material, in the coefficient values of MaterialChain):
 /// the gradient's product with a direction Λ is, element by element, a function of the

@@ -174,6 +174,12 @@ void ElasticityTerm::addAccumulatedMaterialProducts(const MatX& elements, const 
   if (rest_outer.size() > 0) addRestStiffnessProducts(rest_outer, values_bar, shape, beta_bar);
 }
 
+void ElasticityTerm::addSoftStateOuter(const VecX& lambda, MatX& W) const {
+  const int m = kin_.numSoftDofs();
+  if (W.size() == 0) W = MatX::Zero(m, m);
+  W.noalias() += lambda.segment(kin_.boneDofs(), m) * kin_.u.transpose();
+}
+
 void ElasticityTerm::addRestFormCotangents(const std::vector<int>& tet,
                                            const std::vector<TetElementRest>& rest,
                                            const std::vector<Mat6>& C_world,

@@ -12,6 +12,7 @@
 #include "flsh/sim/energy_term.h"
 #include "flsh/volume/reduced_data.h"
 #include "sim/soft/material_chain.h"
+#include "sim/soft/nodal_element_derivatives.h"
 #include "sim/soft/node_term.h"
 #include "sim/soft/shape_chain.h"
 #include "sim/soft/soft_kinematics.h"
@@ -40,6 +41,13 @@ inline TetMaterialCotangent materialCotangent(const FemMaterialDerivative& d) {
 /// The avatar's elastic elements (volume/elastic_tets.h: the tets with a soft-tissue node, at
 /// the avatar's rest nodes X̄(β)), all of them or the ROM's elastic cubature's.
 ElasticElements elasticElements(const SoftAvatar& avatar);
+
+/// Element e of a ROM's elastic cubature as nodal_element_derivatives.h takes it: with the
+/// rest-stiffness split's floor when `floors` (elementRestFloors) is not empty.
+inline SampleElement sampleElement(const ElasticElements& elements, const VecX& floors, int e) {
+  return {elements.rest[size_t(e)], elements.materials[size_t(e)], elements.weights[e],
+          floors.size() > 0 ? floors[e] : 0.0};
+}
 
 /// The floors of the ROM's rest-stiffness split (ReducedData::elastic_floors) of each element
 /// (a sample of rom's elastic cubature). InputError when rom has no floor per sample or an
@@ -127,8 +135,12 @@ class ElasticityTerm : public NodeTerm<1> {
   /// The leading material elements whose products take λ element by element (the rest: the
   /// ROM's rest stiffness, through addRestOuter and addRestStiffnessProducts).
   virtual int numProductElements() const { return numMaterialElements(); }
-  /// ROM with the split: ADDS λ zᵀ over the handles' coordinates into W (resized from empty).
+  /// ROM with the split: ADDS λ zᵀ over the soft state's coordinates into W (resized from
+  /// empty; addSoftStateOuter).
   virtual void addRestOuter(const VecX& lambda, MatX& W) const {}
+  /// W += λ_z zᵀ (numSoftDofs square; resized from empty): the soft state's rows of λ and the
+  /// current soft state.
+  void addSoftStateOuter(const VecX& lambda, MatX& W) const;
   /// ROM with the split: ADDS into values_bar the rest stiffness's share for Σ λ zᵀ = W (one
   /// pass over every elastic tet) and, with `shape`, β's share of the tets' areas, volumes and
   /// rest shapes into beta_bar. Nothing otherwise.

@@ -232,17 +232,11 @@ void ModalElasticityTerm::localDofs(int e, std::vector<int>& dofs) const {
     return;
   }
   // An elastic tet of the rest quadratic has a soft node (deformableTets).
+  thread_local std::vector<int> handles;
+  kin_.tetHandles(materialElementNodes(e), handles);
   dofs.clear();
-  const Eigen::Vector4i nodes = materialElementNodes(e);
-  for (int a = 0; a < 4; ++a)
-    for (auto* phi = kin_.basisBegin(nodes[a]); phi != kin_.basisEnd(nodes[a]); ++phi)
-      dofs.push_back(3 * phi->first);
-  std::sort(dofs.begin(), dofs.end());
-  dofs.erase(std::unique(dofs.begin(), dofs.end()), dofs.end());
-  const int handles = int(dofs.size());
-  dofs.resize(size_t(3 * handles));
-  for (int s = handles - 1; s >= 0; --s)
-    for (int c = 2; c >= 0; --c) dofs[size_t(3 * s + c)] = dofs[size_t(s)] + c;
+  for (int h : handles)
+    for (int c = 0; c < 3; ++c) dofs.push_back(3 * h + c);
   for (int k = 0; k < num_modes_; ++k) dofs.push_back(modal_base_ + k);
 }
 
@@ -272,17 +266,13 @@ void ModalElasticityTerm::nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat34&
   }
 }
 
-SampleElement ModalElasticityTerm::sample(int e) const {
-  return {elements_.rest[size_t(e)], elements_.materials[size_t(e)], elements_.weights[e],
-          rest_stiffness_.size() > 0 ? rest_floors_[e] : 0.0};
-}
-
 FemMaterialDerivative ModalElasticityTerm::materialElementGradient(int e,
                                                                    const Mat3X& Lambda) const {
   if (e < elements_.size() && !moves_[size_t(e)]) return {};
   Mat34 u, lu;
   nodalForm(e, Lambda, u, lu);
-  if (e < elements_.size()) return sampleMaterialGradient(sample(e), u, lu);
+  if (e < elements_.size())
+    return sampleMaterialGradient(sampleElement(elements_, rest_floors_, e), u, lu);
   return restFormMaterialGradient(everyTet().rest[size_t(e - elements_.size())], u, lu);
 }
 
@@ -292,7 +282,7 @@ void ModalElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambd
   Mat34 u, lu;
   nodalForm(e, Lambda, u, lu);
   if (e < elements_.size()) {
-    addSampleRestCotangent(sample(e), u, lu, X_bar);
+    addSampleRestCotangent(sampleElement(elements_, rest_floors_, e), u, lu, X_bar);
     return;
   }
   const int k = e - elements_.size();
@@ -301,10 +291,7 @@ void ModalElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambd
 }
 
 void ModalElasticityTerm::addRestOuter(const VecX& lambda, MatX& W) const {
-  if (rest_stiffness_.size() == 0) return;
-  const int m = kin_.numSoftDofs();
-  if (W.size() == 0) W = MatX::Zero(m, m);
-  W.noalias() += lambda.segment(kin_.boneDofs(), m) * kin_.u.transpose();
+  if (rest_stiffness_.size() > 0) addSoftStateOuter(lambda, W);
 }
 
 // T_t = D_t W D_tᵀ, block (l, k) = Σ_{a,b} g_a(l) g_b(k) B_a W B_bᵀ: the products P_a = B_a W

@@ -26,7 +26,6 @@
 #include <vector>
 
 #include "sim/soft/elastic_elements.h"
-#include "sim/soft/nodal_element_derivatives.h"
 
 namespace flsh::detail {
 
@@ -78,7 +77,6 @@ class ModalElasticityTerm final : public ElasticityTerm, public ReducedElasticit
   /// Material element e's nodal displacements u and the local direction's λ_u (Λ: 3 × its
   /// local columns, localDofs three by three) through the nodes' basis rows.
   void nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat34& lu) const;
-  SampleElement sample(int e) const;
   /// Element e's weighted energy (the excess under the split) at f = vec(F − I), with its
   /// gradient and Hessian in f when asked (restSplitExcess needs the gradient for the Hessian).
   double law(int e, const Vec9& f, Vec9* g9, Mat9* H9, bool psd, bool* bounded = nullptr) const;

@@ -84,11 +84,7 @@ ReducedElasticityTerm::ReducedTets ReducedElasticityTerm::reducedTets(
 #pragma omp parallel for schedule(dynamic, 256) if (E > 1000)
   for (int e = 0; e < E; ++e) {
     std::vector<int>& h = handles[size_t(e)];
-    for (int a = 0; a < 4; ++a)
-      for (auto* phi = kin_.basisBegin(tets(e, a)); phi != kin_.basisEnd(tets(e, a)); ++phi)
-        h.push_back(phi->first);
-    std::sort(h.begin(), h.end());
-    h.erase(std::unique(h.begin(), h.end()), h.end());
+    kin_.tetHandles(tets.row(e).transpose(), h);
     const Mat4X Phi = nodeBasis(tets.row(e).transpose(), h.data(), int(h.size()));
     gradients[size_t(e)] = reducedShapeGradients(rest[size_t(e)], Phi);
   }
@@ -256,10 +252,7 @@ void ReducedElasticityTerm::materialElementDofs(int e, std::vector<int>& dofs) c
 // coordinates): the cotangent of C_world is V_t B_t W_t B_tᵀ for W = Σ λ zᵀ (bilinear), so the
 // reverse sweep sums W over steps and passes over the tets once.
 void ReducedElasticityTerm::addRestOuter(const VecX& lambda, MatX& W) const {
-  if (rest_stiffness_.size() == 0) return;
-  const int m = 3 * kin_.numHandles();
-  if (W.size() == 0) W = MatX::Zero(m, m);
-  W.noalias() += lambda.segment(kin_.boneDofs(), m) * kin_.u.transpose();
+  if (rest_stiffness_.size() > 0) addSoftStateOuter(lambda, W);
 }
 
 // With `shape`, each tet's rest shape too: λᵀ K_t z = V ⟨σ(Z G̃ᵀ), Λ G̃ᵀ⟩ is bilinear, so Σ over
@@ -305,11 +298,6 @@ void ReducedElasticityTerm::nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat3
   lu = Lambda * Phi.transpose();
 }
 
-SampleElement ReducedElasticityTerm::sample(int e) const {
-  return {elements_.rest[size_t(e)], elements_.materials[size_t(e)], elements_.weights[e],
-          rest_stiffness_.size() > 0 ? rest_floors_[e] : 0.0};
-}
-
 // Every tet of K: V ε(Λ) ε(Z)ᵀ on C_world (through G̃, without the nodes); a sample: its nodal
 // form (nodal_element_derivatives.h).
 FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
@@ -327,7 +315,7 @@ FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
   if (handle_start_[size_t(e) + 1] == handle_start_[size_t(e)]) return {};
   Mat34 u, lu;
   nodalForm(e, Lambda, u, lu);
-  return sampleMaterialGradient(sample(e), u, lu);
+  return sampleMaterialGradient(sampleElement(elements_, rest_floors_, e), u, lu);
 }
 
 Eigen::Vector4i ReducedElasticityTerm::materialElementNodes(int e) const {
@@ -343,7 +331,7 @@ void ReducedElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lam
   Mat34 u, lu;
   nodalForm(e, Lambda, u, lu);
   if (sample_tet) {
-    addSampleRestCotangent(sample(e), u, lu, X_bar);
+    addSampleRestCotangent(sampleElement(elements_, rest_floors_, e), u, lu, X_bar);
     return;
   }
   const ReducedTets& all = everyTet();

@@ -13,7 +13,6 @@
 #include <vector>
 
 #include "sim/soft/elastic_elements.h"
-#include "sim/soft/nodal_element_derivatives.h"
 
 namespace flsh::detail {
 
@@ -84,8 +83,6 @@ class ReducedElasticityTerm final : public ElasticityTerm, public ReducedElastic
   Mat4X nodeBasis(const Eigen::Vector4i& nodes, const int* handles, int n) const;
   /// Material element e's nodal displacements u and direction λ_u = Λ Φᵀ.
   void nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat34& lu) const;
-  /// Sample e as nodal_element_derivatives.h takes it.
-  SampleElement sample(int e) const;
   /// Element e (count handles, cubature weight w, their displacements Z) under the
   /// rest-stiffness split: its weighted excess over its rest quadratic, bounded below;
   /// gradient and Hessian (in the handles' coordinates, weighted) written into the views.

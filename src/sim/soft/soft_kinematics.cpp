@@ -425,6 +425,15 @@ void SoftKinematics::surface(MatX3* x, MatX3* Y) const {
 
 // ---- the chain rule to the soft state -----------------------------------------------------------
 
+void SoftKinematics::tetHandles(const Eigen::Vector4i& nodes, std::vector<int>& handles) const {
+  handles.clear();
+  for (int a = 0; a < 4; ++a)
+    for (auto* phi = basisBegin(nodes[a]); phi != basisEnd(nodes[a]); ++phi)
+      handles.push_back(phi->first);
+  std::sort(handles.begin(), handles.end());
+  handles.erase(std::unique(handles.begin(), handles.end()), handles.end());
+}
+
 void SoftKinematics::displacementBasis(int j, std::vector<std::pair<int, Mat3>>& out) const {
   out.clear();
   if (!reduced_) {

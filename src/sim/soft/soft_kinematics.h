@@ -90,6 +90,8 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// modeRows).
   const std::pair<int, double>* basisBegin(int j) const { return phi_.data() + phi_start_[j]; }
   const std::pair<int, double>* basisEnd(int j) const { return phi_.data() + phi_start_[j + 1]; }
+  /// ROM: the handles whose basis reaches any of a tet's four nodes, ascending, into `handles`.
+  void tetHandles(const Eigen::Vector4i& nodes, std::vector<int>& handles) const;
   /// ROM with modes: Ψ_j, node j's 3 × r rows of the modes (zero on bone nodes).
   Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>> modeRows(
       int j) const {

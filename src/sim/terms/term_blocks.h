@@ -196,8 +196,7 @@ class JacobianSink {
     for (const auto& [s, S] : point.soft) add(p, s, param, S.transpose() * x);
     if (point.modes) {
       const Eigen::Matrix<double, 3, B::ColsAtCompileTime> Mx = point.blend.transpose() * x;
-      for (int g = 0; g < point.num_modes; g += 3)
-        add(p, point.modal_dof + g, param, point.modeRows().middleCols<3>(g).transpose() * Mx);
+      add(p, point.modal_dof, param, point.modeRows().transpose() * Mx);
     }
   }
 

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <iomanip>
 #include <limits>
 #include <sstream>
 #include <vector>
@@ -370,9 +371,9 @@ void readPly(const std::string& path, const std::string& data, MatX3& V, MatX3i&
   if (minimum_body_bytes > double(data.size() - pos)) {
     std::ostringstream msg;
     msg << "file is truncated: the header declares " << vertex_element->count << " vertices and "
-        << (face_element ? face_element->count : 0) << " faces, which need at least "
-        << (long long)minimum_body_bytes << " bytes, but the body has " << (data.size() - pos)
-        << " bytes";
+        << (face_element ? face_element->count : 0) << " faces, which need at least " << std::fixed
+        << std::setprecision(0) << minimum_body_bytes << " bytes, but the body has "
+        << (data.size() - pos) << " bytes";
     malformed(path, msg.str());
   }
 

@@ -304,6 +304,13 @@ TEST(MeshIo, RejectsMalformedFilesWithMessages) {
        "ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\n"
        "property double x\nproperty double y\nproperty double z\nend_header\n",
        "truncated"},
+      // Rows whose byte count overflows a 64-bit integer (found by fuzz_mesh under UBSan).
+      {"hugebody.ply",
+       "ply\nformat ascii 1.0\nelement vertex 1\nproperty double x\nproperty double y\n"
+       "property double z\nelement junk 1000000000000000000\nproperty double a\n"
+       "property double b\nproperty double c\nproperty double d\nproperty double e\n"
+       "end_header\n0 0 0\n",
+       "need at least 10000000000000000000 bytes"},
       {"notply.ply", "solid cube\n", "not a PLY file"},
       {"quad.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n", "only triangles"},
       {"range.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n", "out of range"},

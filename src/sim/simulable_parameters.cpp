@@ -138,8 +138,10 @@ std::vector<VecX> Simulable::getGradientParameterVJPs(const VecX& lambda,
   const EnergyTerm* elastic = m.soft ? &m.soft->elasticTerm() : nullptr;
   for (const EnergyTerm* term : m.terms) {
     if (summed && term == elastic)
-      m.soft->elasticTerm().accumulateMaterialProducts(lambda, material_sum->elements,
-                                                       material_sum->rest_outer);
+      m.soft->elasticTerm().accumulateMaterialProducts(
+          lambda, material_sum->elements, material_sum->rest_outer,
+          shape ? &m.soft->shapeChain() : nullptr,
+          shape ? &products[SimParameter::Shape] : nullptr);
     else
       term->addParameterProducts(c, lambda, products);
   }

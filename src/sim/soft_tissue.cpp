@@ -114,7 +114,7 @@ void SoftTissue::addNodeOffsetTangent(const TermContext& c, const MatX3& dY, Vec
 void SoftTissue::addShapeProducts(const TermContext& c, const VecX& lambda, VecX& beta_bar,
                                   long version, bool summed) const {
   shape_chain_.addNodeCotangent(nodeOffsetCotangent(c, lambda, version), beta_bar);
-  elastic_->addShapeProducts(lambda, shape_chain_, beta_bar, summed);
+  if (!summed) elastic_->addShapeProducts(lambda, shape_chain_, beta_bar);
 }
 
 void SoftTissue::addShapeTangent(const TermContext& c, const VecX& dbeta, VecX& out) const {

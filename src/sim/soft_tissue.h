@@ -159,8 +159,9 @@ class SoftTissue final : public TwoThreadSchedule {
   // ∂/∂β: inertia, gravity, contact) — the rest nodes through every node term's Y
   // (node_offset_derivatives.h) and the elastic term's rest shapes and materials
   // (ElasticityTerm::addShapeProducts) ----
-  /// ADDS λᵀ ∂g/∂β into beta_bar (K); `summed`: without the elastic share that comes from a
-  /// sweep's sums (ElasticityTerm::addShapeProducts).
+  /// ADDS λᵀ ∂g/∂β into beta_bar (K); `summed`: without the elastic term's share, which a
+  /// sweep takes from its sums (ElasticityTerm::accumulateMaterialProducts with the shape, then
+  /// addAccumulatedMaterialProducts).
   void addShapeProducts(const TermContext& c, const VecX& lambda, VecX& beta_bar, long version,
                         bool summed = false) const;
   /// ADDS ∂g/∂β dβ into out / ∂g/∂β into J (numDofs × K).

@@ -120,26 +120,41 @@ void ElasticityTerm::addParameterProducts(const TermContext&, const VecX& lambda
   addAccumulatedMaterialProducts(elements, rest_outer, out[SimParameter::Material]);
 }
 
+// One pass for the material's and β's shares: each element's state (the ROMs' nodal form, the
+// law at F) serves both.
 void ElasticityTerm::accumulateMaterialProducts(const VecX& lambda, MatX& elements,
-                                                MatX& rest_outer) const {
+                                                MatX& rest_outer, const ShapeChain* shape,
+                                                VecX* beta_bar) const {
   const int E = numProductElements();
   if (elements.size() == 0) elements = MatX::Zero(E, kMaterialPointValues);
+  const bool with_shape = shape && beta_bar;
+  // Each element costs microseconds (the law's dP/dF, the rest-shape kernels): threads pay from
+  // a hundred elements on (the ROM's cubature samples). Per-thread β sums added in thread order.
+  const int threads = E > 100 ? std::max(1, omp_get_max_threads()) : 1;
+  std::vector<VecX> betas(size_t(threads), VecX::Zero(with_shape ? shape->numBetas() : 0));
   FirstFailure failure;
-#pragma omp parallel if (E > 1000)
+#pragma omp parallel num_threads(threads)
   {
+    const int k = omp_get_thread_num();
     std::vector<int> dofs;
 #pragma omp for schedule(static)
     for (int e = 0; e < E; ++e)
       failure.run([&] {
         materialElementDofs(e, dofs);
-        const FemMaterialDerivative d =
-            materialElementGradient(e, gatherDirections(dofs, lambda, 0));
+        FemMaterialDerivative d;
+        Mat34 X_bar = Mat34::Zero();
+        materialElementProducts(e, gatherDirections(dofs, lambda, 0), &d,
+                                with_shape ? &X_bar : nullptr);
         elements.row(e).head<36>() += Eigen::Map<const Eigen::RowVectorXd>(d.C_world.data(), 36);
         elements(e, 36) += d.modulus;
         elements(e, 37) += d.gamma;
+        if (with_shape)
+          shape->addTetNodesCotangent(materialElementNodes(e), X_bar, betas[size_t(k)]);
       });
   }
   failure.rethrow();
+  if (with_shape)
+    for (const VecX& b : betas) *beta_bar += b;
   addRestOuter(lambda, rest_outer);
 }
 
@@ -272,34 +287,29 @@ void ElasticityTerm::addParameterJacobians(const TermContext&, ParameterProducts
 
 // ---- Shape ----------------------------------------------------------------------------------
 
-void ElasticityTerm::addElementRestShapeCotangent(int e, const Mat3X& Lambda,
-                                                  const ShapeChain& shape, VecX& beta_bar) const {
-  Mat34 X_bar = Mat34::Zero();
-  materialElementRestCotangent(e, Lambda, X_bar);
-  shape.addTetNodesCotangent(materialElementNodes(e), X_bar, beta_bar);
-}
-
 void ElasticityTerm::addElementShapeCotangent(int e, const Mat3X& Lambda, const ShapeChain& shape,
                                               VecX& beta_bar, VecX& values_bar) const {
-  addElementRestShapeCotangent(e, Lambda, shape, beta_bar);
+  FemMaterialDerivative d;
+  Mat34 X_bar = Mat34::Zero();
+  materialElementProducts(e, Lambda, &d, &X_bar);
+  shape.addTetNodesCotangent(materialElementNodes(e), X_bar, beta_bar);
   const int t = materialElementTet(e);
   TetGeometryCotangent geometry;
-  chain_.map().addCotangent(t, materialCotangent(materialElementGradient(e, Lambda)), values_bar,
-                            &geometry);
+  chain_.map().addCotangent(t, materialCotangent(d), values_bar, &geometry);
   shape.addGeometryCotangent(t, geometry, beta_bar);
 }
 
 // Element by element on the available threads (per-thread sums added in thread order), the
 // coefficient values' share chained once.
-void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shape, VecX& beta_bar,
-                                      bool summed) const {
-  const int E = summed ? numProductElements() : numMaterialElements(), K = shape.numBetas();
+void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shape,
+                                      VecX& beta_bar) const {
+  const int E = numMaterialElements(), K = shape.numBetas();
   // Each element costs microseconds (the law's dP/dF and the rest-shape kernels): threads pay
   // from a hundred elements on (the ROM's cubature samples).
   const int threads = E > 100 ? std::max(1, omp_get_max_threads()) : 1;
   std::vector<VecX> betas(size_t(threads), VecX::Zero(K));
-  // The coefficient values' cotangents (one per tet of the map: large) only when not summed.
-  std::vector<VecX> values(size_t(threads), VecX::Zero(summed ? 0 : chain_.numValues()));
+  // The coefficient values' cotangents: one per tet of the map.
+  std::vector<VecX> values(size_t(threads), VecX::Zero(chain_.numValues()));
   FirstFailure failure;
 #pragma omp parallel num_threads(threads)
   {
@@ -311,19 +321,16 @@ void ElasticityTerm::addShapeProducts(const VecX& lambda, const ShapeChain& shap
         materialElementDofs(e, dofs);
         const Mat3X Lambda = gatherDirections(dofs, lambda, 0);
         if (Lambda.isZero(0.0)) return;
-        if (summed)
-          addElementRestShapeCotangent(e, Lambda, shape, betas[size_t(k)]);
-        else
-          addElementShapeCotangent(e, Lambda, shape, betas[size_t(k)], values[size_t(k)]);
+        addElementShapeCotangent(e, Lambda, shape, betas[size_t(k)], values[size_t(k)]);
       });
   }
   failure.rethrow();
   for (int k = 1; k < threads; ++k) {
     betas[0] += betas[size_t(k)];
-    if (!summed) values[0] += values[size_t(k)];
+    values[0] += values[size_t(k)];
   }
   beta_bar += betas[0];
-  if (!summed) beta_bar.noalias() += shape.valuesJacobian().transpose() * values[0];
+  beta_bar.noalias() += shape.valuesJacobian().transpose() * values[0];
 }
 
 template <class Row>

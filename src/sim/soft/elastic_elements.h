@@ -92,7 +92,11 @@ class ElasticityTerm : public NodeTerm<1> {
   /// `elements` (numProductElements() × kMaterialPointValues, resized from empty) element e's
   /// material-point cotangent of λᵀ g (C_world's 36 entries column-major, μ, γ) and, for the
   /// ROM with the rest-stiffness split, λ zᵀ into `rest_outer` (3H × 3H, resized from empty).
-  void accumulateMaterialProducts(const VecX& lambda, MatX& elements, MatX& rest_outer) const;
+  /// `shape` (may be null): in the same pass, ADDS into beta_bar the product elements' share
+  /// of λᵀ ∂g/∂β that needs this step's state (what addShapeProducts adds when `summed`).
+  void accumulateMaterialProducts(const VecX& lambda, MatX& elements, MatX& rest_outer,
+                                  const ShapeChain* shape = nullptr,
+                                  VecX* beta_bar = nullptr) const;
   /// ADDS into values_bar (coefficient values) the cotangent of such sums: each element's
   /// through the material map, the rest stiffness's with one pass over every elastic tet.
   /// `shape` (may be null): also ADDS into beta_bar β's share of the same sums that does not
@@ -105,14 +109,13 @@ class ElasticityTerm : public NodeTerm<1> {
   static constexpr int kMaterialPointValues = 38;
 
   // ---- Shape (β): element by element, the rest nodes X̄(β) move Λᵀ g_e through the tet's rest
-  // shape (materialElementRestCotangent) and its material point through c(β) and the skin
+  // shape (materialElementProducts' X_bar) and its material point through c(β) and the skin
   // fraction's area and volume (the per-tet material map; frames held) ----
-  /// ADDS λᵀ ∂g/∂β (K) into beta_bar at the prepared state. `summed` (a reverse sweep that also
-  /// accumulates the material products, accumulateMaterialProducts): only the share that needs
-  /// this step's state — the rest shapes of the product elements (the FEM's tets, the ROM's
-  /// samples) —, the rest coming once from addAccumulatedMaterialProducts.
-  void addShapeProducts(const VecX& lambda, const ShapeChain& shape, VecX& beta_bar,
-                        bool summed = false) const;
+  /// ADDS λᵀ ∂g/∂β (K) into beta_bar at the prepared state. (A reverse sweep takes the share
+  /// that needs each step's state — the rest shapes of the product elements, the FEM's tets or
+  /// the ROM's samples — in accumulateMaterialProducts, the rest once from
+  /// addAccumulatedMaterialProducts.)
+  void addShapeProducts(const VecX& lambda, const ShapeChain& shape, VecX& beta_bar) const;
   /// ADDS ∂g/∂β dβ into out (numDofs) / ∂g/∂β into J (numDofs × K): the elements' rows.
   void addShapeTangent(const VecX& dbeta, const ShapeChain& shape, VecX& out) const;
   void addShapeJacobian(const ShapeChain& shape, MatX& J) const;
@@ -127,11 +130,19 @@ class ElasticityTerm : public NodeTerm<1> {
   virtual int numMaterialElements() const = 0;
   virtual int materialElementTet(int e) const = 0;
   virtual void materialElementDofs(int e, std::vector<int>& dofs) const = 0;
-  virtual FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const = 0;
-  /// The element's tet's four nodes, and ADDS into X_bar (3 × 4, column a: node a) the
-  /// cotangent of their rest positions of Λᵀ g_e, the material point held.
+  /// The element's tet's four nodes.
   virtual Eigen::Vector4i materialElementNodes(int e) const = 0;
-  virtual void materialElementRestCotangent(int e, const Mat3X& Lambda, Mat34& X_bar) const = 0;
+  /// Element e's products of Λᵀ g_e, each when asked (non-null): `d` (zero on entry) receives
+  /// the material point's cotangent; X_bar (3 × 4, column a: node a) has the cotangent of the
+  /// tet's rest node positions, the material point held, ADDED. One call for both shares the
+  /// element's state (the ROMs' nodal form, the law at F).
+  virtual void materialElementProducts(int e, const Mat3X& Lambda, FemMaterialDerivative* d,
+                                       Mat34* X_bar) const = 0;
+  FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const {
+    FemMaterialDerivative d;
+    materialElementProducts(e, Lambda, &d, nullptr);
+    return d;
+  }
   /// The leading material elements whose products take λ element by element (the rest: the
   /// ROM's rest stiffness, through addRestOuter and addRestStiffnessProducts).
   virtual int numProductElements() const { return numMaterialElements(); }
@@ -166,9 +177,6 @@ class ElasticityTerm : public NodeTerm<1> {
   /// 3 × #columns).
   template <class Visit>
   void forEachLocalUnit(int e, std::vector<int>& dofs, Visit&& visit) const;
-  /// Element e's rest shape's share of ∂(Λᵀ g_e)/∂β, ADDED into beta_bar.
-  void addElementRestShapeCotangent(int e, const Mat3X& Lambda, const ShapeChain& shape,
-                                    VecX& beta_bar) const;
   /// Element e's share of ∂(Λᵀ g_e)/∂β: ADDS into beta_bar its rest nodes' and area/volume's
   /// part and into values_bar its coefficient values' cotangent (chained by the caller).
   void addElementShapeCotangent(int e, const Mat3X& Lambda, const ShapeChain& shape, VecX& beta_bar,

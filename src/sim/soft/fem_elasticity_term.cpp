@@ -194,22 +194,20 @@ Mat34 FemElasticityTerm::elementDisplacements(int e) const {
   return U;
 }
 
-// Λᵀ g_e = w V ⟨P(F), Λ Gᵀ⟩ with G the tet's shape-function gradients.
-FemMaterialDerivative FemElasticityTerm::materialElementGradient(int e, const Mat3X& Lambda) const {
+// Λᵀ g_e = w V ⟨P(F), Λ Gᵀ⟩ with G the tet's shape-function gradients; its rest shape: the
+// element's Dm and volume (addTetGradientRestCotangent).
+void FemElasticityTerm::materialElementProducts(int e, const Mat3X& Lambda,
+                                                FemMaterialDerivative* d, Mat34* X_bar) const {
   const TetElementRest& rest = elements_.rest[size_t(e)];
-  const Mat3X G = reducedShapeGradients(rest, Mat4X::Identity(4, 4));
-  FemMaterialDerivative d;
-  addStressMaterialGradient(Mat3::Identity() + elementDisplacements(e) * G.transpose(),
-                            elements_.materials[size_t(e)], Lambda * G.transpose(),
-                            elements_.weights[e] * rest.volume, d);
-  return d;
-}
-
-// Λᵀ g_e's rest shape: the element's Dm and volume (addTetGradientRestCotangent).
-void FemElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambda,
-                                                     Mat34& X_bar) const {
-  addTetGradientRestCotangent(elements_.rest[size_t(e)], elements_.materials[size_t(e)],
-                              elementDisplacements(e), Lambda, elements_.weights[e], X_bar);
+  const Mat34 U = elementDisplacements(e);
+  if (d) {
+    const Mat3X G = reducedShapeGradients(rest, Mat4X::Identity(4, 4));
+    addStressMaterialGradient(Mat3::Identity() + U * G.transpose(), elements_.materials[size_t(e)],
+                              Lambda * G.transpose(), elements_.weights[e] * rest.volume, *d);
+  }
+  if (X_bar)
+    addTetGradientRestCotangent(rest, elements_.materials[size_t(e)], U, Lambda,
+                                elements_.weights[e], *X_bar);
 }
 
 }  // namespace flsh::detail

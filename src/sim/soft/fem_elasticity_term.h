@@ -28,11 +28,11 @@ class FemElasticityTerm final : public ElasticityTerm {
   int numMaterialElements() const override { return elements_.size(); }
   int materialElementTet(int e) const override { return elements_.tet[size_t(e)]; }
   void materialElementDofs(int e, std::vector<int>& dofs) const override;
-  FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const override;
   Eigen::Vector4i materialElementNodes(int e) const override {
     return elements_.tets.row(e).transpose();
   }
-  void materialElementRestCotangent(int e, const Mat3X& Lambda, Mat34& X_bar) const override;
+  void materialElementProducts(int e, const Mat3X& Lambda, FemMaterialDerivative* d,
+                               Mat34* X_bar) const override;
 
  private:
   ElasticElements elements_;

@@ -266,28 +266,20 @@ void ModalElasticityTerm::nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat34&
   }
 }
 
-FemMaterialDerivative ModalElasticityTerm::materialElementGradient(int e,
-                                                                   const Mat3X& Lambda) const {
-  if (e < elements_.size() && !moves_[size_t(e)]) return {};
-  Mat34 u, lu;
-  nodalForm(e, Lambda, u, lu);
-  if (e < elements_.size())
-    return sampleMaterialGradient(sampleElement(elements_, rest_floors_, e), u, lu);
-  return restFormMaterialGradient(everyTet().rest[size_t(e - elements_.size())], u, lu);
-}
-
-void ModalElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambda,
-                                                       Mat34& X_bar) const {
+void ModalElasticityTerm::materialElementProducts(int e, const Mat3X& Lambda,
+                                                  FemMaterialDerivative* d, Mat34* X_bar) const {
   if (e < elements_.size() && !moves_[size_t(e)]) return;
   Mat34 u, lu;
   nodalForm(e, Lambda, u, lu);
   if (e < elements_.size()) {
-    addSampleRestCotangent(sampleElement(elements_, rest_floors_, e), u, lu, X_bar);
+    sampleProducts(sampleElement(elements_, rest_floors_, e), u, lu, d, X_bar);
     return;
   }
   const int k = e - elements_.size();
-  addTetLinearFormRestCotangent(everyTet().rest[size_t(k)], everyTet().C_world[size_t(k)], u, lu,
-                                1.0, X_bar);
+  if (d) *d = restFormMaterialGradient(everyTet().rest[size_t(k)], u, lu);
+  if (X_bar)
+    addTetLinearFormRestCotangent(everyTet().rest[size_t(k)], everyTet().C_world[size_t(k)], u, lu,
+                                  1.0, *X_bar);
 }
 
 void ModalElasticityTerm::addRestOuter(const VecX& lambda, MatX& W) const {

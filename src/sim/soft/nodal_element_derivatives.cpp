@@ -54,30 +54,29 @@ void addScaled(double a, const FemMaterialDerivative& x, FemMaterialDerivative& 
 
 }  // namespace
 
-FemMaterialDerivative sampleMaterialGradient(const SampleElement& s, const Mat34& u,
-                                             const Mat34& lu) {
+void sampleProducts(const SampleElement& s, const Mat34& u, const Mat34& lu,
+                    FemMaterialDerivative* d, Mat34* X_bar) {
+  if (!d && !X_bar) return;
   const Mat3 H = displacementGradient(s.rest, u), dF = displacementGradient(s.rest, lu);
   const Mat3 F = Mat3::Identity() + H;
   const Vec6 ez = voigtLinearStrain(H), el = voigtLinearStrain(dF);
   const SplitWeights a = splitWeights(s, F, dF, ez, el);
-  const double V = s.rest.volume;
-  FemMaterialDerivative d, part;
-  addStressMaterialGradient(F, s.material, dF, V, part);
-  addScaled(a.gpsi, part, d);
-  d.C_world += (a.gq * V) * el * ez.transpose() + (0.5 * a.q * V) * ez * ez.transpose();
-  if (a.psi != 0.0) addEnergyDensityMaterialGradient(F, s.material, a.psi * V, d);
-  return d;
-}
-
-void addSampleRestCotangent(const SampleElement& s, const Mat34& u, const Mat34& lu, Mat34& X_bar) {
-  const Mat3 H = displacementGradient(s.rest, u), dF = displacementGradient(s.rest, lu);
-  const SplitWeights a =
-      splitWeights(s, Mat3::Identity() + H, dF, voigtLinearStrain(H), voigtLinearStrain(dF));
-  const Mat6& C = s.material.C_world;
-  addTetGradientRestCotangent(s.rest, s.material, u, lu, a.gpsi, X_bar);
-  if (a.gq != 0.0) addTetLinearFormRestCotangent(s.rest, C, u, lu, a.gq, X_bar);
-  if (a.psi != 0.0) addTetEnergyRestCotangent(s.rest, s.material, u, a.psi, X_bar);
-  if (a.q != 0.0) addTetLinearFormRestCotangent(s.rest, C, u, u, 0.5 * a.q, X_bar);
+  if (d) {
+    const double V = s.rest.volume;
+    FemMaterialDerivative part;
+    *d = FemMaterialDerivative();
+    addStressMaterialGradient(F, s.material, dF, V, part);
+    addScaled(a.gpsi, part, *d);
+    d->C_world += (a.gq * V) * el * ez.transpose() + (0.5 * a.q * V) * ez * ez.transpose();
+    if (a.psi != 0.0) addEnergyDensityMaterialGradient(F, s.material, a.psi * V, *d);
+  }
+  if (X_bar) {
+    const Mat6& C = s.material.C_world;
+    addTetGradientRestCotangent(s.rest, s.material, u, lu, a.gpsi, *X_bar);
+    if (a.gq != 0.0) addTetLinearFormRestCotangent(s.rest, C, u, lu, a.gq, *X_bar);
+    if (a.psi != 0.0) addTetEnergyRestCotangent(s.rest, s.material, u, a.psi, *X_bar);
+    if (a.q != 0.0) addTetLinearFormRestCotangent(s.rest, C, u, u, 0.5 * a.q, *X_bar);
+  }
 }
 
 FemMaterialDerivative restFormMaterialGradient(const TetElementRest& rest, const Mat34& u,

@@ -30,13 +30,12 @@ struct SampleElement {
   double floor = 0.0;
 };
 
-/// The material-point cotangent of λᵀ g_e of a sample (its nodal displacements u, direction lu).
-FemMaterialDerivative sampleMaterialGradient(const SampleElement& sample, const Mat34& u,
-                                             const Mat34& lu);
-/// ADDS into X_bar (3 × 4, column a: node a) the rest nodes' cotangent of a sample's λᵀ g_e, the
-/// material point held.
-void addSampleRestCotangent(const SampleElement& sample, const Mat34& u, const Mat34& lu,
-                            Mat34& X_bar);
+/// A sample's products of λᵀ g_e (its nodal displacements u, direction lu), each when asked
+/// (non-null): `d` receives its material-point cotangent; X_bar (3 × 4, column a: node a) has
+/// the rest nodes' cotangent, the material point held, ADDED. Both at once share the strain and
+/// the split's weights.
+void sampleProducts(const SampleElement& sample, const Mat34& u, const Mat34& lu,
+                    FemMaterialDerivative* d, Mat34* X_bar);
 /// The material-point cotangent of a rest-quadratic tet's λᵀ K_t z: V ε(λ_u) ε(u)ᵀ on C_world.
 FemMaterialDerivative restFormMaterialGradient(const TetElementRest& rest, const Mat34& u,
                                                const Mat34& lu);

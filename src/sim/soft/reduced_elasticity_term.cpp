@@ -298,44 +298,35 @@ void ReducedElasticityTerm::nodalForm(int e, const Mat3X& Lambda, Mat34& u, Mat3
   lu = Lambda * Phi.transpose();
 }
 
-// Every tet of K: V ε(Λ) ε(Z)ᵀ on C_world (through G̃, without the nodes); a sample: its nodal
-// form (nodal_element_derivatives.h).
-FemMaterialDerivative ReducedElasticityTerm::materialElementGradient(int e,
-                                                                     const Mat3X& Lambda) const {
-  if (e >= elements_.size()) {
-    FemMaterialDerivative d;
-    const ReducedTets& all = everyTet();
-    const int k = e - elements_.size(), begin = all.handle_start[size_t(k)], n = all.count(k);
-    const Mat3X Z = handleDisplacements(&all.handles[size_t(begin)], n);
-    const auto G = all.gradients.middleCols(begin, n);
-    d.C_world = all.volume[size_t(k)] * voigtLinearStrain(Lambda * G.transpose()) *
-                voigtLinearStrain(Z * G.transpose()).transpose();
-    return d;
-  }
-  if (handle_start_[size_t(e) + 1] == handle_start_[size_t(e)]) return {};
-  Mat34 u, lu;
-  nodalForm(e, Lambda, u, lu);
-  return sampleMaterialGradient(sampleElement(elements_, rest_floors_, e), u, lu);
-}
-
-Eigen::Vector4i ReducedElasticityTerm::materialElementNodes(int e) const {
-  return avatar_.volumetricData().templ->mesh.tets.row(materialElementTet(e)).transpose();
-}
-
-void ReducedElasticityTerm::materialElementRestCotangent(int e, const Mat3X& Lambda,
-                                                         Mat34& X_bar) const {
+// Every tet of K: V ε(Λ) ε(Z)ᵀ on C_world (through G̃, without the nodes), its rest shape in
+// nodal form; a sample: its nodal form (nodal_element_derivatives.h).
+void ReducedElasticityTerm::materialElementProducts(int e, const Mat3X& Lambda,
+                                                    FemMaterialDerivative* d, Mat34* X_bar) const {
   const bool sample_tet = e < elements_.size();
   const int k = sample_tet ? e : e - elements_.size();
+  if (!sample_tet && d) {
+    const ReducedTets& all = everyTet();
+    const int begin = all.handle_start[size_t(k)], n = all.count(k);
+    const Mat3X Z = handleDisplacements(&all.handles[size_t(begin)], n);
+    const auto G = all.gradients.middleCols(begin, n);
+    d->C_world = all.volume[size_t(k)] * voigtLinearStrain(Lambda * G.transpose()) *
+                 voigtLinearStrain(Z * G.transpose()).transpose();
+    if (!X_bar) return;
+  }
   const std::vector<int>& start = sample_tet ? handle_start_ : everyTet().handle_start;
   if (start[size_t(k) + 1] == start[size_t(k)]) return;
   Mat34 u, lu;
   nodalForm(e, Lambda, u, lu);
   if (sample_tet) {
-    addSampleRestCotangent(sampleElement(elements_, rest_floors_, e), u, lu, X_bar);
+    sampleProducts(sampleElement(elements_, rest_floors_, e), u, lu, d, X_bar);
     return;
   }
   const ReducedTets& all = everyTet();
-  addTetLinearFormRestCotangent(all.rest[size_t(k)], all.C_world[size_t(k)], u, lu, 1.0, X_bar);
+  addTetLinearFormRestCotangent(all.rest[size_t(k)], all.C_world[size_t(k)], u, lu, 1.0, *X_bar);
+}
+
+Eigen::Vector4i ReducedElasticityTerm::materialElementNodes(int e) const {
+  return avatar_.volumetricData().templ->mesh.tets.row(materialElementTet(e)).transpose();
 }
 
 }  // namespace flsh::detail

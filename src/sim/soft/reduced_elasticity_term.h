@@ -48,9 +48,9 @@ class ReducedElasticityTerm final : public ElasticityTerm, public ReducedElastic
   int numMaterialElements() const override;
   int materialElementTet(int e) const override;
   void materialElementDofs(int e, std::vector<int>& dofs) const override;
-  FemMaterialDerivative materialElementGradient(int e, const Mat3X& Lambda) const override;
   Eigen::Vector4i materialElementNodes(int e) const override;
-  void materialElementRestCotangent(int e, const Mat3X& Lambda, Mat34& X_bar) const override;
+  void materialElementProducts(int e, const Mat3X& Lambda, FemMaterialDerivative* d,
+                               Mat34* X_bar) const override;
   int numProductElements() const override { return elements_.size(); }
   void addRestOuter(const VecX& lambda, MatX& W) const override;
 

@@ -508,9 +508,10 @@ SimulableStep Simulable::saveStep() const {
     s.u = m.soft->u;
     s.u_n = m.soft->u_n;
     s.u_nm1 = m.soft->u_nm1;
-    if (const std::vector<Mat3>* held = m.soft->heldPoseRotations())
+    if (const std::vector<Mat3>* held = m.soft->heldPoseRotations()) {
       s.pose_blend_R = *held;
-    else
+      m.soft->evaluatedPoseBlend(s.pose_blend_nodes, s.pose_blend_rows);
+    } else
       s.pose_blend = m.soft->poseBlend();
   }
   return s;
@@ -583,6 +584,16 @@ void Simulable::restoreStep(const SimulableStep& s) {
                        std::to_string(s.pose_blend_R.size()) + " pose blend rotations, expected " +
                        std::to_string(n) + " bones (or none)");
     requireFiniteRotations("pose_blend_R", s.pose_blend_R);
+    if (s.pose_blend_rows.rows() != Eigen::Index(s.pose_blend_nodes.size()))
+      throw InputError("Simulable::restoreStep: the snapshot has " +
+                       std::to_string(s.pose_blend_rows.rows()) + " rows of pose_blend_rows for " +
+                       std::to_string(s.pose_blend_nodes.size()) + " pose_blend_nodes");
+    for (size_t k = 0; k < s.pose_blend_nodes.size(); ++k)
+      if (s.pose_blend_nodes[k] < 0 || s.pose_blend_nodes[k] >= m.soft->numNodes())
+        throw InputError("Simulable::restoreStep: the snapshot's pose_blend_nodes[" +
+                         std::to_string(k) + "] is " + std::to_string(s.pose_blend_nodes[k]) +
+                         ", expected a node in [0, " + std::to_string(m.soft->numNodes()) + ")");
+    requireFinite("pose_blend_rows", s.pose_blend_rows);
   }
   m.q.R = s.R;
   m.q.t = s.t;
@@ -601,9 +612,10 @@ void Simulable::restoreStep(const SimulableStep& s) {
     m.soft->u_nm1 = s.u_nm1;
     if (s.pose_blend.rows())
       m.soft->setPoseBlendOffsets(s.pose_blend);
-    else if (!s.pose_blend_R.empty())
+    else if (!s.pose_blend_R.empty()) {
       m.soft->setPoseBlend(s.pose_blend_R);
-    else
+      m.soft->seedPoseBlend(s.pose_blend_nodes, s.pose_blend_rows);
+    } else
       m.soft->setPoseBlend(m.q_n.R);  // held from q_n, as preUpdate holds it
     m.setSoftPrediction();
   }

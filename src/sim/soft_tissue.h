@@ -79,6 +79,12 @@ class SoftTissue final : public TwoThreadSchedule {
   void setPoseBlendOffsets(const MatX3& offsets) { kin_.setPoseBlendOffsets(offsets); }
   /// ROM: the rotations the held pose blend was set from (null for the FEM and after offsets).
   const std::vector<Mat3>* heldPoseRotations() const { return kin_.heldPoseRotations(); }
+  void evaluatedPoseBlend(std::vector<int>& nodes, MatX3& offsets) const {
+    kin_.evaluatedPoseBlend(nodes, offsets);
+  }
+  void seedPoseBlend(const std::vector<int>& nodes, const MatX3& offsets) {
+    kin_.seedPoseBlend(nodes, offsets);
+  }
   void positions(const BoneFrames& bones, const VecX& state, MatX3& x) const {
     kin_.positions(bones, state, x);
   }

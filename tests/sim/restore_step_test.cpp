@@ -172,6 +172,35 @@ TEST(SimulableRestoreStep, RomSnapshotsHoldThePoseBlendOfTheirPose) {
   EXPECT_THAT(messageOf<InputError>([&] { sim.restoreStep(nan_R); }),
               HasSubstr("the snapshot's pose_blend_R[3](1, 2) is "));
   EXPECT_EQ(sim.getVolumeNodes(), nodes_after_post);
+  // The offsets the step had evaluated come along and are taken as they are: restored with or
+  // without them, the same nodes and the same gradient, bit for bit. Bad ones are refused.
+  ASSERT_FALSE(after_post.pose_blend_nodes.empty());
+  ASSERT_EQ(after_post.pose_blend_rows.rows(), Eigen::Index(after_post.pose_blend_nodes.size()));
+  EXPECT_FALSE(after_post.pose_blend_rows.isZero(0.0));
+  SimulableStep unseeded = after_post;
+  unseeded.pose_blend_nodes.clear();
+  unseeded.pose_blend_rows.resize(0, 3);
+  sim.restoreStep(unseeded);
+  const MatX3 nodes_unseeded = sim.getVolumeNodes();
+  VecX gradient_unseeded = VecX::Zero(sim.numDofs()), gradient = VecX::Zero(sim.numDofs());
+  const double energy_unseeded = sim.getEnergyAndGradientVector(gradient_unseeded);
+  sim.restoreStep(after_post);
+  EXPECT_EQ(sim.getVolumeNodes(), nodes_unseeded);
+  EXPECT_EQ(sim.getEnergyAndGradientVector(gradient), energy_unseeded);
+  EXPECT_EQ(gradient, gradient_unseeded);
+  SimulableStep short_rows = after_post;
+  short_rows.pose_blend_rows.conservativeResize(short_rows.pose_blend_rows.rows() - 1, 3);
+  EXPECT_THAT(messageOf<InputError>([&] { sim.restoreStep(short_rows); }),
+              HasSubstr("rows of pose_blend_rows for"));
+  SimulableStep far_node = after_post;
+  far_node.pose_blend_nodes[1] = avatar->volumetricData().numNodes();
+  EXPECT_THAT(messageOf<InputError>([&] { sim.restoreStep(far_node); }),
+              HasSubstr("the snapshot's pose_blend_nodes[1] is "));
+  SimulableStep nan_row = after_post;
+  nan_row.pose_blend_rows(2, 0) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THAT(messageOf<InputError>([&] { sim.restoreStep(nan_row); }),
+              HasSubstr("the snapshot's pose_blend_rows(2, 0) is "));
+  EXPECT_EQ(sim.getVolumeNodes(), nodes_after_post);
   // Offsets of one's own are saved as they are.
   SimulableStep own = good;
   own.pose_blend = MatX3::Constant(avatar->volumetricData().numNodes(), 3, 0.001);

@@ -66,6 +66,11 @@ struct SimulableStep {
   VecX u, u_n, u_nm1;
   MatX3 pose_blend;
   std::vector<Mat3> pose_blend_R;
+  /// With pose_blend_R (the ROM): the offsets the step had evaluated, row k for node
+  /// pose_blend_nodes[k] (m), restored as they are so that a reverse pass does not evaluate them
+  /// again. They must come from pose_blend_R: clear both when changing it or R_n.
+  std::vector<int> pose_blend_nodes;
+  MatX3 pose_blend_rows;
 };
 
 /// Diagnostics of the last energy evaluation.

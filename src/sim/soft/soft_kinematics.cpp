@@ -282,6 +282,23 @@ Vec3 SoftKinematics::blendOf(int j) const {
   return P;
 }
 
+void SoftKinematics::evaluatedPoseBlend(std::vector<int>& nodes, MatX3& offsets) const {
+  nodes.clear();
+  if (heldPoseRotations() && pose_stamp_ > 0)  // stamp 0: the rest pose's zero offsets
+    for (int j = 0; j < numNodes(); ++j)
+      if (blend_stamp_[size_t(j)] == pose_stamp_) nodes.push_back(j);
+  offsets.resize(Eigen::Index(nodes.size()), 3);
+  for (size_t k = 0; k < nodes.size(); ++k) offsets.row(Eigen::Index(k)) = blend_.row(nodes[k]);
+}
+
+void SoftKinematics::seedPoseBlend(const std::vector<int>& nodes, const MatX3& offsets) {
+  if (!heldPoseRotations()) return;
+  for (size_t k = 0; k < nodes.size(); ++k) {
+    blend_.row(nodes[k]) = offsets.row(Eigen::Index(k));
+    blend_stamp_[size_t(nodes[k])] = pose_stamp_;
+  }
+}
+
 const MatX3& SoftKinematics::poseBlend() const {
   if (reduced_)
     for (int j = 0; j < numNodes(); ++j) blendOf(j);

@@ -165,6 +165,12 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   const std::vector<Mat3>* heldPoseRotations() const {
     return reduced_ && from_feature_ ? &held_R_ : nullptr;
   }
+  /// ROM, a blend held from rotations: the nodes whose offsets have been evaluated (ascending)
+  /// and their offsets (rows of `offsets`); empty otherwise.
+  void evaluatedPoseBlend(std::vector<int>& nodes, MatX3& offsets) const;
+  /// ROM, right after setPoseBlend(R) with the rotations such rows were evaluated from: takes
+  /// them as evaluated (a reverse pass's restored step then reads them instead of posedirs).
+  void seedPoseBlend(const std::vector<int>& nodes, const MatX3& offsets);
   /// Derivatives of the pose blend offsets P_j = posedirs_j · feature(R) in the rotations R it
   /// was set from (the increment chart R_b ← exp([δω_b]×) R_b; feature: R_pᵀ R_b − I per bone
   /// b ≥ 1), for the adjoint (the held pose blend is a function of q_n). Tangent: δP_j of

@@ -11,12 +11,17 @@ material, L-BFGS on the adjoint gradients of flsh.torch.simulate finds them.
 --subjects N fits one material shared by N bodies of known, different shapes (β₀ from −1 to 1),
 the way the FLSH paper estimated its soft-tissue parameters from the DYNA scans.
 
+--basis picks the ROM's reduced basis: "handles" (the default: bounded biharmonic weights of
+surface handles), "modes" (static-correction modes of every bone DoF plus --vibration-modes
+fixed-interface modes, compressed to --modal-columns; issue 26) or "modes+handles".
+
 Printed: the parameters (truth, start, fit), the surface's RMS distance to the noise-free truth
 before and after, loss evaluations, L-BFGS iterations and wall time.
 
 Usage:
     PYTHONPATH=build/python /usr/bin/python3 examples/python/fit_soft_tissue.py \\
-        [--model fem|rom] [--vertices 0] [--steps 24] [--loss vertices|surface] \\
+        [--model fem|rom] [--basis handles|modes|modes+handles] [--vibration-modes 24] \\
+        [--modal-columns 72] [--vertices 0] [--steps 24] [--loss vertices|surface] \\
         [--subjects 1] [--iterations 30] [--cache DIR]
 --vertices 0 is the full-size synthetic body (6890 vertices); small bodies run in seconds.
 """
@@ -42,7 +47,7 @@ SMALL_ROM = dict(handles=16, elastic_cubature_points=60, inertial_cubature_point
 class Problem:
     """The simulator of the jump and the maps from the unknowns to simulated surfaces."""
 
-    def __init__(self, body, shapes, model="rom", steps=24, cache=None):
+    def __init__(self, body, shapes, model="rom", steps=24, cache=None, basis=None):
         self.body = body
         self.faces = torch.tensor(np.asarray(body.faces), dtype=torch.long)
         jump = flsh.make_builtin_motion("jump", seconds=max(1.6, (steps + 2) / FPS), fps=FPS)
@@ -57,8 +62,11 @@ class Problem:
             floor = min(floor, float(v[:, 1].min()))
         ground = flsh.Collider.plane(point=[0.0, floor, 0.0], normal=[0.0, 1.0, 0.0])
         small = body.num_vertices < 6890
+        settings = dict(SMALL_ROM) if (small and model == "rom") else {}
+        if model == "rom" and basis:
+            settings.update(basis)
         kwargs = dict(steps=steps, model=model, cache_dir=cache, colliders=[ground],
-                      avatar_settings=SMALL_ROM if (small and model == "rom") else {})
+                      avatar_settings=settings)
         if small:
             kwargs.update(voxel_size=0.02, resolution=0.5)
         self.simulator = flsh.torch.RolloutSimulator(body, jump, **kwargs)
@@ -97,8 +105,10 @@ def scan_points(vertices, faces, generator):
 
 
 def fit(vertices=800, model="rom", steps=24, loss="vertices", subjects=1, iterations=30,
-        seed=7, cache=None, log=print):
-    """Runs the workflow and returns its figures (a dict)."""
+        seed=7, cache=None, log=print, basis=None):
+    """Runs the workflow and returns its figures (a dict). basis: the ROM's basis settings
+    (avatar settings such as dict(basis="modes", vibration_modes=24, modal_columns=72)); None:
+    the default handles."""
     started = time.perf_counter()
     body = flsh.make_synthetic_body(vertices=vertices) if vertices else \
         flsh.make_synthetic_body()
@@ -108,7 +118,7 @@ def fit(vertices=800, model="rom", steps=24, loss="vertices", subjects=1, iterat
     else:
         shapes = [torch.tensor([b0, 0.0], dtype=torch.float64)
                   for b0 in np.linspace(-1.0, 1.0, subjects)]  # known
-    problem = Problem(body, shapes, model, steps, cache)
+    problem = Problem(body, shapes, model, steps, cache, basis)
     generator = torch.Generator().manual_seed(seed)
     fit_shape = subjects == 1
     clean, scans = [], []
@@ -122,7 +132,10 @@ def fit(vertices=800, model="rom", steps=24, loss="vertices", subjects=1, iterat
                 points = v
             scans.append(points + NOISE * torch.randn(points.shape, generator=generator,
                                                       dtype=torch.float64))
-    log(f"{model.upper()}, {body.num_vertices} vertices, {steps} steps of the jump at "
+    basis_text = "" if model != "rom" or not basis else \
+        f" ({basis['basis']}: {basis.get('vibration_modes')} vibration modes, " \
+        f"{basis.get('modal_columns')} columns)"
+    log(f"{model.upper()}{basis_text}, {body.num_vertices} vertices, {steps} steps of the jump at "
         f"{FPS:.0f} Hz on the ground, {subjects} subject(s), loss on "
         f"{'unordered scan points' if loss == 'surface' else 'vertices'}, "
         f"truth simulated in {time.perf_counter() - started:.1f} s")
@@ -194,11 +207,23 @@ def main():
     parser.add_argument("--iterations", type=int, default=30)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--cache", default=None, help="avatar cache folder")
+    parser.add_argument("--basis", choices=("handles", "modes", "modes+handles"),
+                        default="handles", help="the ROM's reduced basis")
+    parser.add_argument("--vibration-modes", type=int, default=24,
+                        help="fixed-interface vibration modes (--basis modes…)")
+    parser.add_argument("--modal-columns", type=int, default=72,
+                        help="columns after compression (--basis modes…; 0 keeps them all)")
     args = parser.parse_args()
     if args.steps < 1 or args.subjects < 1 or args.iterations < 1:
         parser.error("--steps, --subjects and --iterations must be ≥ 1")
+    if args.vibration_modes < 0 or args.modal_columns < 0:
+        parser.error("--vibration-modes and --modal-columns must be ≥ 0")
+    basis = None
+    if args.basis != "handles":
+        basis = dict(basis=args.basis, vibration_modes=args.vibration_modes,
+                     modal_columns=args.modal_columns)
     fit(args.vertices, args.model, args.steps, args.loss, args.subjects, args.iterations,
-        args.seed, args.cache)
+        args.seed, args.cache, basis=basis)
 
 
 if __name__ == "__main__":

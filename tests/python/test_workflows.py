@@ -1,8 +1,8 @@
 """Short versions of the PyTorch workflows in examples/python on synthetic ground truth:
 workflow 2 (train_physics_loss.py: a network trained through the simulator with a physics loss)
 and workflow 3 (recover_jump.py: β and the take-off velocity of a simulated jump recovered from
-its joint trajectory); and that the scripts run (also workflow 4, fit_soft_tissue.py, whose fit
-is tested in test_fit_material.py)."""
+its joint trajectory); and that the scripts run (also workflow 4, fit_soft_tissue.py, with the
+ROM's default handle basis and with modes, whose fit is tested in test_fit_material.py)."""
 import subprocess
 import sys
 from pathlib import Path
@@ -40,7 +40,11 @@ def test_workflow_scripts_run(tmp_path):
                                                "--epochs", "2", "--validation", "1"]),
                        ("recover_jump", ["--steps", "4", "--iterations", "2"]),
                        ("fit_soft_tissue", ["--vertices", "800", "--steps", "2", "--iterations",
-                                            "1", "--loss", "surface", "--cache", str(tmp_path)])):
+                                            "1", "--loss", "surface", "--cache", str(tmp_path)]),
+                       ("fit_soft_tissue", ["--vertices", "800", "--steps", "2", "--iterations",
+                                            "1", "--basis", "modes+handles",
+                                            "--vibration-modes", "6", "--modal-columns", "24",
+                                            "--cache", str(tmp_path)])):
         result = subprocess.run([sys.executable, str(EXAMPLES / f"{name}.py"), *args],
                                 capture_output=True, text=True)
         assert result.returncode == 0, result.stderr

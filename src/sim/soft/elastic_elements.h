@@ -92,8 +92,9 @@ class ElasticityTerm : public NodeTerm<1> {
   /// `elements` (numProductElements() × kMaterialPointValues, resized from empty) element e's
   /// material-point cotangent of λᵀ g (C_world's 36 entries column-major, μ, γ) and, for the
   /// ROM with the rest-stiffness split, λ zᵀ into `rest_outer` (3H × 3H, resized from empty).
-  /// `shape` (may be null): in the same pass, ADDS into beta_bar the product elements' share
-  /// of λᵀ ∂g/∂β that needs this step's state (what addShapeProducts adds when `summed`).
+  /// `shape` (may be null): in the same pass, ADDS into beta_bar the share of λᵀ ∂g/∂β that
+  /// needs this step's state: the product elements' rest shapes (the rest of β's share comes
+  /// once from addAccumulatedMaterialProducts).
   void accumulateMaterialProducts(const VecX& lambda, MatX& elements, MatX& rest_outer,
                                   const ShapeChain* shape = nullptr,
                                   VecX* beta_bar = nullptr) const;

@@ -627,7 +627,7 @@ TEST(ReducedTetElement, GradientAndHessianMatchFiniteDifferences) {
   Mat3X Z(3, n);
   for (int s = 0; s < n; ++s) Z.col(s) = random.vec(0.002);
   const auto flat = [](const Mat3X& z) { return VecX(Eigen::Map<const VecX>(z.data(), z.size())); };
-  const auto unflat = [n](const VecX& x) { return Mat3X(Eigen::Map<const Mat3X>(x.data(), 3, n)); };
+  const auto unflat = [](const VecX& x) { return Mat3X(Eigen::Map<const Mat3X>(x.data(), 3, n)); };
   VecX gradient(3 * n);
   MatX hessian(3 * n, 3 * n);
   Eigen::Ref<VecX> g_view = gradient;
@@ -671,7 +671,7 @@ TEST(ReducedTetElement, RestSplitExcessMatchesFiniteDifferencesInBothBranches) {
     reducedTetElasticEnergy(rest.volume, m, G, Mat3X::Zero(3, n), nullptr, &view, false);
   }
   ASSERT_GT(K.cwiseAbs().maxCoeff(), 0.0);
-  const auto unflat = [n](const VecX& x) { return Mat3X(Eigen::Map<const Mat3X>(x.data(), 3, n)); };
+  const auto unflat = [](const VecX& x) { return Mat3X(Eigen::Map<const Mat3X>(x.data(), 3, n)); };
   // f, and its gradient / Hessian when asked, at flattened z.
   const auto excess = [&](const VecX& z, double w, VecX* g, MatX* H, bool psd, bool* bounded,
                           double lowest) {

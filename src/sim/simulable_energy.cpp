@@ -114,7 +114,8 @@ double Simulable::getEnergyAndGradientVector(VecX& g, int offset) const {
 double Simulable::getBoneEnergyAndGradientVector(VecX& g, int offset) const {
   const Impl& m = *impl_;
   m.ensureContact();
-  const TermContext c = m.context();
+  TermContext c = m.context();
+  c.bone_block_only = true;  // the presolve reads the bones' rows alone
   const double dynamic = m.is_static ? 0.0 : sumEnergies(m.dynamic_terms, c, &g, offset, true);
   return dynamic + sumEnergies(m.potential_terms, c, &g, offset, true);
 }

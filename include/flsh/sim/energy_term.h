@@ -66,9 +66,10 @@ struct TermContext {
   const SparseSkinWeights& skin;
   /// Up to date (the simulable runs its broad phase before contact terms are called).
   const SurfaceContactState& contact;
-  /// Hessians: only the bones' block is asked for (Simulable::getBoneHessianTripletVector, for
-  /// Newton's coarse presolve); a term may leave out its other blocks (the soft tissue's node
-  /// terms do). Terms that ignore it stay correct.
+  /// Only the bones' rows of the gradient and the bones' block of the Hessian are asked for
+  /// (Simulable::getBoneEnergyAndGradientVector and getBoneHessianTripletVector, for Newton's
+  /// coarse presolve); a term may leave out its other entries and blocks (the soft tissue's
+  /// node terms do). Terms that ignore it stay correct.
   bool bone_block_only = false;
 };
 

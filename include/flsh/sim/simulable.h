@@ -265,8 +265,9 @@ class Simulable {
   /// The energy and gradient of the terms that move with the bones: every term but the soft
   /// tissue's elasticity (EnergyTerm::dependsOnBones), which reads the soft state alone. With the
   /// soft state held they are the bones' objective up to a constant, for Newton's coarse
-  /// presolve (Scene::coarseEnergyAndGradient). The gradient is ADDED into g (numDofs at
-  /// offset); its bone entries equal getGradientVector's. Without soft tissue: every term.
+  /// presolve (Scene::coarseEnergyAndGradient). The gradient's bone entries are ADDED into g
+  /// (numDofs at offset) and equal getGradientVector's; its soft-state entries may be left out
+  /// (the node terms skip their chain rule to the soft state). Without soft tissue: every term.
   double getBoneEnergyAndGradientVector(VecX& g, int offset = 0) const;
   /// Those terms' Hessian, appended as getHessianTripletVector appends (triplets, then lists):
   /// its bone–bone block equals the whole Hessian's.

@@ -91,7 +91,7 @@ void NodalGravityTerm::femHessian(const Vec3& gravity, std::vector<Triplet>& H,
 }
 
 double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
-                                  bool psd, FixedHessianBlocks* blocks) const {
+                                  bool psd, FixedHessianBlocks* blocks, bool bones_only) const {
   const std::vector<int>& nodes = masses_.nodes;
   const MatX3& x = kin_.x();
   double E = 0.0;
@@ -101,7 +101,7 @@ double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Trip
     E -= masses_.mass[j] * gravity.dot(x.row(j).transpose());
     forces_[idx] = -masses_.mass[j] * gravity;
   }
-  if (g) kin_.mapForces(nodes, forces_, *g, offset);
+  if (g) kin_.mapForces(nodes, forces_, *g, offset, bones_only);
   if (H && kin_.reduced()) {
     reducedHessian(gravity, *H, offset, psd);
   } else if (H) {

@@ -28,7 +28,7 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
 
   const char* name() const override { return "nodal gravity"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override {
-    return evaluate(c.options.gravity, g, nullptr, offset, true);
+    return evaluate(c.options.gravity, g, nullptr, offset, true, nullptr, c.bone_block_only);
   }
   /// FEM: the coupling blocks as fixed blocks; ROM: bone triplets, handle blocks into list 1.
   void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -37,9 +37,9 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
 
   /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM:
   /// femHessian's, with `blocks` its fixed-block list; ROM: bone triplets into H, rotation–handle
-  /// blocks into value list 1).
+  /// blocks into value list 1). `bones_only`: the gradient's bone rows alone.
   double evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                  FixedHessianBlocks* blocks = nullptr) const;
+                  FixedHessianBlocks* blocks = nullptr, bool bones_only = false) const;
   /// ∂g/∂p as local blocks (term_blocks.h).
   template <class Sink>
   void parameterBlocks(const TermContext& c, Sink& sink) const;

@@ -54,7 +54,7 @@ double NodalInertiaTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, 
     E += 0.5 * k * masses_.mass[j] * d.squaredNorm();
     forces_[idx] = k * masses_.mass[j] * d;
   }
-  if (g) kin_.mapForces(nodes, forces_, *g, offset);
+  if (g) kin_.mapForces(nodes, forces_, *g, offset, bone_block_only);
   if (H) {
     scalars_.resize(count);
     for (size_t idx = 0; idx < count; ++idx) scalars_[idx] = k * masses_.mass[nodes[idx]];

@@ -31,8 +31,8 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
                    const MaterialChain& chain, const ShapeChain& shape, double time_step);
 
   const char* name() const override { return "nodal inertia"; }
-  double evaluate(const TermContext&, VecX* g, int offset) const override {
-    return evaluate(g, nullptr, offset, true);
+  double evaluate(const TermContext& c, VecX* g, int offset) const override {
+    return evaluate(g, nullptr, offset, true, nullptr, c.bone_block_only);
   }
   /// FEM: the bone–tissue coupling and node-diagonal blocks as fixed blocks; ROM: value list 0.
   void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -64,7 +64,8 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM: triplets
   /// appended to H, or with `blocks` the bone–tissue coupling and node-diagonal blocks returned
   /// at the kinematics' coupling positions; ROM: into value list 0). `bone_block_only`: the
-  /// Hessian's bone–bone blocks alone, as triplets (TermContext::bone_block_only).
+  /// gradient's bone rows and the Hessian's bone–bone blocks alone, the latter as triplets
+  /// (TermContext::bone_block_only).
   double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                   FixedHessianBlocks* blocks = nullptr, bool bone_block_only = false) const;
   /// ROM: the Hessian of one share of the mass nodes (see kShareBesidePotential) into value list

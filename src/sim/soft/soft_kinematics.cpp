@@ -542,7 +542,7 @@ void SoftKinematics::fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y,
 }
 
 void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces,
-                               VecX& g, int offset) const {
+                               VecX& g, int offset, bool bones_only) const {
   const std::vector<Mat3>& R = *cur_R_;
   for (size_t idx = 0; idx < nodes.size(); ++idx) {
     const Vec3& f = forces[idx];
@@ -556,7 +556,7 @@ void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<
       g.segment<3>(offset + 6 * b) += w * f;
       g.segment<3>(offset + 6 * b + 3) += w * r.cross(f);
     }
-    if (node_dof_[j] >= 0) addSoftGradient(g, offset, j, node_M_[j].transpose() * f);
+    if (!bones_only && node_dof_[j] >= 0) addSoftGradient(g, offset, j, node_M_[j].transpose() * f);
   }
 }
 

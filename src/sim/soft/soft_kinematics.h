@@ -226,9 +226,10 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   }
 
   // ---- the chain rule to q (at the prepared state) ----
-  /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g.
+  /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g; `bones_only`: the
+  /// bones' rows alone (the soft state's are left alone: TermContext::bone_block_only).
   void mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces, VecX& g,
-                 int offset) const;
+                 int offset, bool bones_only = false) const;
   /// Appends Σ_j J_jᵀ K_j J_j (K_j symmetric 3 × 3; null = none) plus, when `forces` is given,
   /// the curvature of the rotating points against f_j: exact (psd = false) or, for psd, the PSD
   /// projection of each bone's rotation curvature (the mixed δω–δu terms dropped).

@@ -417,7 +417,10 @@ TEST_P(SoftRollout, GradientAcrossLineSearchCutsAndPsdDirections) {
   const VecX v = randomVector(kSteps * 72, 0.1, 24);
   d.pose_targets = Eigen::Map<const RowMatX>(v.data(), kSteps, 72);
   d.shape = randomVector(int(test::smallSoftAvatar(c.model)->betas().size()), 1.0, 25);
-  expectDirectionalDerivative(c, d, 1e-5);
+  // The modal ROM at 3e-5: on an AVX-512 machine (2026-12-02) its loss along d took a different
+  // line-search path between some of the ±ε, ±2ε rollouts at ε ≤ 1e-5 (relative error 1.1e-5 at
+  // 3e-6, 3.0e-6 at 1e-5) and is smooth at 3e-5 (1.7e-9) and 1e-4 (3.4e-7).
+  expectDirectionalDerivative(c, d, 1e-5, 3e-5);
 }
 
 // backward(…, groups) returns the groups asked for, as the full backward has them, and no others.

@@ -197,6 +197,7 @@ void SoftKinematics::featureOf(const std::vector<Mat3>& R, VecX& feature) const 
 
 void SoftKinematics::setPoseBlend(const std::vector<Mat3>& R) {
   featureOf(R, feature_);
+  ++blend_epoch_;
   if (reduced_) {
     ++pose_stamp_;
     from_feature_ = true;
@@ -297,6 +298,7 @@ void SoftKinematics::seedPoseBlend(const std::vector<int>& nodes, const MatX3& o
     blend_.row(nodes[k]) = offsets.row(Eigen::Index(k));
     blend_stamp_[size_t(nodes[k])] = pose_stamp_;
   }
+  ++blend_epoch_;
 }
 
 const MatX3& SoftKinematics::poseBlend() const {
@@ -307,6 +309,7 @@ const MatX3& SoftKinematics::poseBlend() const {
 
 void SoftKinematics::setPoseBlendOffsets(const MatX3& offsets) {
   blend_ = offsets;
+  ++blend_epoch_;
   if (reduced_) std::fill(blend_stamp_.begin(), blend_stamp_.end(), pose_stamp_);
   from_feature_ = false;
 }
@@ -416,21 +419,35 @@ void SoftKinematics::prepare(long version, const BoneFrames& bones) const {
 
 void SoftKinematics::skinNodes(const std::vector<int>& nodes) const {
   const int n = numNodes();
-  if (Y_.rows() != n) Y_.setZero(n, 3);
+  if (Y_.rows() != n) {
+    Y_.setZero(n, 3);
+    y_stamp_.assign(size_t(n), 0);
+    y_current_ = 0;
+  }
   if (x_.rows() != n) x_.setZero(n, 3);
   node_M_.resize(n);
+  // Y_j = X̄_j + P_j + u_j reads neither the bones nor the joints: its rows stay current while
+  // the soft state and the held pose blend do (the bones' presolve, a line search along the
+  // bones, the first evaluation after the presolve).
+  if (y_current_ == 0 || y_epoch_ != blend_epoch_ || y_state_.size() != u.size() || y_state_ != u) {
+    ++y_current_;
+    y_epoch_ = blend_epoch_;
+    y_state_ = u;
+  }
   const std::vector<Mat3>& R = *cur_R_;
   const MatX3& t = *cur_t_;
   Vec3 shift[kNumJoints];
   boneShifts(R, t, shift);
-  // Nodes are distinct: each writes its own rows (and blendOf its own row and stamp).
+  // Nodes are distinct: each writes its own rows and stamp (and blendOf its own row and stamp).
   const long count = long(nodes.size());
 #pragma omp parallel for schedule(static) if (count >= 512)
   for (long idx = 0; idx < count; ++idx) {
     const int j = nodes[size_t(idx)];
-    const Vec3 Y = rest_.row(j).transpose() + blendOf(j) + nodeDisplacement(u, j);
-    Y_.row(j) = Y.transpose();
-    x_.row(j) = skin(j, R, shift, Y, &node_M_[j]).transpose();
+    if (y_stamp_[size_t(j)] != y_current_) {
+      Y_.row(j) = (rest_.row(j).transpose() + blendOf(j) + nodeDisplacement(u, j)).transpose();
+      y_stamp_[size_t(j)] = y_current_;
+    }
+    x_.row(j) = skin(j, R, shift, Y_.row(j).transpose(), &node_M_[j]).transpose();
   }
 }
 

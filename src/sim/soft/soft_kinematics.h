@@ -310,6 +310,7 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   bool manyUnslotted(const std::vector<int>& nodes) const;
   mutable MatX3 blend_;  // #N × 3
   int pose_stamp_ = 0;
+  long blend_epoch_ = 0;  // counts the changes of the held pose blend (for Y_'s rows)
   mutable std::vector<int> blend_stamp_;
   MatX posedirs_T_;
   std::vector<int> blend_slot_;
@@ -338,6 +339,11 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   // Caches of the prepared state.
   mutable long version_ = -1;
   mutable MatX3 x_, Y_;
+  // Y_ row j is current when y_stamp_[j] == y_current_, which changes with the soft state
+  // (y_state_: the one it was skinned at) and the held pose blend (y_epoch_).
+  mutable std::vector<long> y_stamp_;
+  mutable long y_current_ = 0, y_epoch_ = -1;
+  mutable VecX y_state_;
   mutable std::vector<Mat3> node_M_;  // M_j = Σ_b w_jb R_b
   mutable const std::vector<Mat3>* cur_R_ = nullptr;
   mutable const MatX3* cur_t_ = nullptr;

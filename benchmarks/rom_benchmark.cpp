@@ -63,7 +63,9 @@
 // (ReducedBasisKind::ModesAndHandles; without +H: Modes), e.g. m24:72/500/500 or m24+87exact.
 // A last sN trains both cubatures on N samples (default 400, which caps a cubature at about
 // 400 tets: the selection stops when more no longer lower the training error), e.g.
-// m24:96/1000/1000s2000.
+// m24:96/1000/1000s2000. A very last iN caps Newton at N iterations per step
+// (NewtonOptions::max_iterations, the real-time trade; a step that reaches it keeps its last
+// iterate), e.g. m12:24/150/100i3.
 //
 // --galerkin LIST: how far the Galerkin solution in a basis's span is from the FEM as handles are
 // added, without dynamics or cubature: the linear static sag of a standing body (the FEM's
@@ -132,7 +134,13 @@ struct ModelSpec {
   // static modes and this many vibration modes (−1: the handle basis), compressed to `columns`
   // (0: all).
   int vibration_modes = -1, columns = 0;
+  int max_iterations = 0;  // Newton iterations per step at most (0: the scene's default)
   std::string name() const {
+    return avatarName() +
+           (max_iterations > 0 ? " i" + std::to_string(max_iterations) : std::string());
+  }
+  /// The avatar's part of the name (models differing in the budget alone share an avatar).
+  std::string avatarName() const {
     if (kind == Kind::Skeleton) return "skeleton";
     if (kind == Kind::Fem) return "FEM";
     std::string basis = std::to_string(handles);
@@ -157,6 +165,14 @@ struct ModelSpec {
 ModelSpec parseModel(const std::string& text) {
   std::string rest = text;
   ModelSpec m;
+  const size_t budget = rest.find_last_of('i');
+  if (budget != std::string::npos && budget + 1 < rest.size() &&
+      rest.find_first_not_of("0123456789", budget + 1) == std::string::npos) {
+    m.max_iterations = std::atoi(rest.c_str() + budget + 1);
+    if (m.max_iterations < 1)
+      throw std::runtime_error("--models: '" + text + "': an iteration budget iN needs N ≥ 1");
+    rest.resize(budget);
+  }
   if (rest.rfind("m", 0) == 0) {  // mV[:C][+H]…: a basis with modes
     int consumed = 0;
     if (std::sscanf(rest.c_str(), "m%d%n", &m.vibration_modes, &consumed) != 1 ||
@@ -293,8 +309,11 @@ struct Trajectory {
   int unconverged = 0;
 };
 
-Trajectory simulate(std::shared_ptr<SoftAvatar> avatar, const Scenario& sc, int frames) {
-  Run r = makeRun(avatar, sc, SceneOptions());
+Trajectory simulate(std::shared_ptr<SoftAvatar> avatar, const Scenario& sc, int frames,
+                    int max_iterations = 0) {
+  SceneOptions options;
+  if (max_iterations > 0) options.reduced_newton.max_iterations = max_iterations;
+  Run r = makeRun(avatar, sc, options);
   Trajectory t;
   double stepping = 0.0;
   for (int f = 0; f < frames; ++f) {
@@ -525,8 +544,9 @@ int compare(int frames, const std::string& png, const std::string& csv,
   std::map<std::string, std::shared_ptr<SoftAvatar>> avatars;
   for (const ModelSpec& m : models) {
     double build = 0.0;
-    avatars[m.name()] = makeAvatar(body, m, &build);
-    std::printf("built %-18s in %6.2f s\n", m.name().c_str(), build);
+    if (avatars.count(m.avatarName())) continue;
+    avatars[m.avatarName()] = makeAvatar(body, m, &build);
+    std::printf("built %-18s in %6.2f s\n", m.avatarName().c_str(), build);
   }
   std::vector<Row> rows;
   for (const Scenario& sc : scenarios) {
@@ -534,7 +554,9 @@ int compare(int frames, const std::string& png, const std::string& csv,
     std::fflush(stdout);
     const Trajectory fem = simulate(avatars["FEM"], sc, frames);
     for (const ModelSpec& m : models) {
-      const Trajectory t = m.kind == Kind::Fem ? fem : simulate(avatars[m.name()], sc, frames);
+      const Trajectory t = m.kind == Kind::Fem
+                               ? fem
+                               : simulate(avatars[m.avatarName()], sc, frames, m.max_iterations);
       Row row;
       row.model = m.name();
       row.scenario = sc.name;
@@ -554,7 +576,7 @@ int compare(int frames, const std::string& png, const std::string& csv,
         ++counted;
       }
       row.mean_error = counted ? row.mean_error / counted : 0.0;
-      if (m.kind == Kind::Rom) row.best_fit = basisBestFit(*avatars[m.name()], fem);
+      if (m.kind == Kind::Rom) row.best_fit = basisBestFit(*avatars[m.avatarName()], fem);
       rows.push_back(row);
       char fit[48] = "";
       if (row.best_fit >= 0)
@@ -676,11 +698,12 @@ int speed(int steps, const ModelSpec& m, double tolerance, const std::string& mo
   std::printf("steps: %d in %.3f s -> %.1f steps/s (%d not converged)\n", steps, total,
               steps / total, unconverged);
   std::printf(
-      "per step: %.2f Newton iterations, %.2f approximate directions (%.2f on a reused factor), "
-      "%.2f Hessian assemblies (%.2f reused), %.2f factorizations, %.1f PCG iterations\n",
-      sum.iterations / n, sum.approximate_directions / n, sum.approximate_reuses / n,
-      sum.hessian_evaluations / n, sum.hessian_reuses / n, sum.factorizations / n,
-      sum.cg_iterations / n);
+      "per step: %.2f Newton iterations (after %.2f on the bones alone), %.2f approximate "
+      "directions (%.2f on a reused factor), %.2f Hessian assemblies (%.2f reused), %.2f "
+      "factorizations, %.1f PCG iterations\n",
+      sum.iterations / n, sum.coarse_iterations / n, sum.approximate_directions / n,
+      sum.approximate_reuses / n, sum.hessian_evaluations / n, sum.hessian_reuses / n,
+      sum.factorizations / n, sum.cg_iterations / n);
   std::printf(
       "per step ms: energy %.3f, gradient %.3f, Hessian %.3f, factorization %.3f, "
       "solves %.3f, other %.3f\n",

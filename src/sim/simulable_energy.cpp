@@ -116,9 +116,6 @@ double Simulable::getBoneEnergyAndGradientVector(VecX& g, int offset) const {
   m.ensureContact();
   TermContext c = m.context();
   c.bone_block_only = true;  // the presolve reads the bones' rows alone
-  double nodes = 0.0;
-  if (m.runsOnTwoThreads() && m.schedule->boneGradient(c, g, offset, nodes))
-    return nodes + boneSpringGradient(g, offset);
   const double dynamic = m.is_static ? 0.0 : sumEnergies(m.dynamic_terms, c, &g, offset, true);
   return dynamic + sumEnergies(m.potential_terms, c, &g, offset, true);
 }

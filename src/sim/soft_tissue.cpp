@@ -150,32 +150,6 @@ double SoftTissue::gradient(const TermContext& c, VecX& g, int offset) const {
   return E + contact_energy;
 }
 
-double SoftTissue::massNodeForces(const Vec3& gravity) const {
-  // ∂/∂x_j of inertia plus gravity: m_j ((x_j − x̂_j) / h² − g); their energies
-  // m_j (‖x_j − x̂_j‖² / (2h²) − g · x_j).
-  const double h = inertia_->timeStep(), k = 1.0 / (h * h);
-  const std::vector<int>& nodes = masses_.nodes;
-  const MatX3& x = kin_.x();
-  const MatX3& x_hat = inertia_->prediction();
-  double E = 0.0;
-  forces_.resize(nodes.size());
-  for (size_t idx = 0; idx < nodes.size(); ++idx) {
-    const int j = nodes[idx];
-    const Vec3 xj = x.row(j).transpose(), d = xj - x_hat.row(j).transpose();
-    E += masses_.mass[j] * (0.5 * k * d.squaredNorm() - gravity.dot(xj));
-    forces_[idx] = masses_.mass[j] * (k * d - gravity);
-  }
-  return E;
-}
-
-bool SoftTissue::boneGradient(const TermContext& c, VecX& g, int offset, double& energy) const {
-  if (!kin_.reduced()) return false;
-  const double E = massNodeForces(c.options.gravity);
-  kin_.mapForces(masses_.nodes, forces_, g, offset, true);
-  energy = E + contact_->evaluate(c, &g, offset);
-  return true;
-}
-
 void SoftTissue::hessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
                           std::vector<Triplet>& H_potential, int offset, bool psd) const {
   scheduledHessians(c, H_dynamic, H_potential, offset, psd, false);
@@ -209,13 +183,25 @@ double SoftTissue::reducedGradient(const Vec3& gravity, VecX& g, int offset,
   const ReducedElasticity& elastic = *reduced_elastic_;
   const int T = elastic.numElements();
   const int base = offset + kin_.boneDofs();
+  const double h = inertia_->timeStep(), k = 1.0 / (h * h);
   const std::vector<int>& nodes = masses_.nodes;
+  const MatX3& x = kin_.x();
+  const MatX3& x_hat = inertia_->prediction();
   const int split = int(kGradientTetsBesideInertia * T);
+  forces_.resize(nodes.size());
   gradient_scratch_.setZero(g.size());
   double energies[2] = {0.0, 0.0};
   onTwoThreads([&](int part) {
     if (part == 0) {
-      const double E = massNodeForces(gravity);
+      // ∂/∂x_j of inertia plus gravity: m_j ((x_j − x̂_j) / h² − g); their energies
+      // m_j (‖x_j − x̂_j‖² / (2h²) − g · x_j).
+      double E = 0.0;
+      for (size_t idx = 0; idx < nodes.size(); ++idx) {
+        const int j = nodes[idx];
+        const Vec3 xj = x.row(j).transpose(), d = xj - x_hat.row(j).transpose();
+        E += masses_.mass[j] * (0.5 * k * d.squaredNorm() - gravity.dot(xj));
+        forces_[idx] = masses_.mass[j] * (k * d - gravity);
+      }
       kin_.mapForces(nodes, forces_, g, offset);
       energies[0] = E + elastic.elements(0, split, g.data() + base, nullptr, true);
     } else {

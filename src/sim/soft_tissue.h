@@ -103,9 +103,6 @@ class SoftTissue final : public TwoThreadSchedule {
   /// The ROM's two-thread schedule (TwoThreadSchedule; throws for the FEM): reducedGradient,
   /// reducedHessians with contact at c.contact's candidates (skinned first) beside inertia.
   double gradient(const TermContext& c, VecX& g, int offset) const override;
-  /// ROM: inertia's and gravity's bone rows by one mapping of their summed node forces (as
-  /// reducedGradient's), then contact's, on one thread.
-  bool boneGradient(const TermContext& c, VecX& g, int offset, double& energy) const override;
   void hessians(const TermContext& c, std::vector<Triplet>& H_dynamic,
                 std::vector<Triplet>& H_potential, int offset, bool psd) const override;
   /// ROM with modes and the rest-stiffness split: hessians' exact form with a constant soft–soft
@@ -227,9 +224,6 @@ class SoftTissue final : public TwoThreadSchedule {
   mutable VecX offset_lambda_;
   mutable MatX3 offset_cotangent_;
   mutable std::vector<Vec3> forces_;
-  /// Inertia's plus gravity's node forces of the mass nodes into forces_ (at the prepared
-  /// state); returns their energy.
-  double massNodeForces(const Vec3& gravity) const;
   mutable VecX gradient_scratch_;
 };
 

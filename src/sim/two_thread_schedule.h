@@ -28,13 +28,6 @@ class TwoThreadSchedule {
                                    std::vector<Triplet>& H_potential, int offset) const {
     return false;
   }
-  /// The gradient's bone rows of the node terms that move with the bones (all but the
-  /// elasticity: EnergyTerm::dependsOnBones) added into g, for the bones' presolve
-  /// (Simulable::getBoneEnergyAndGradientVector); returns their energy. False: the model has no
-  /// such pass (nothing evaluated; the terms are asked one by one).
-  virtual bool boneGradient(const TermContext& c, VecX& g, int offset, double& energy) const {
-    return false;
-  }
   /// Whether approximateHessians gives one (when not static).
   virtual bool hasApproximateHessians() const { return false; }
 };

@@ -1,6 +1,5 @@
 #include "solve/coarse_presolve.h"
 
-#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -45,12 +44,7 @@ class CoarseView final : public Objective {
       throw Error("newtonSolve: Objective::coarseHessian gave " + std::to_string(dense_.rows()) +
                   " × " + std::to_string(dense_.cols()) + ", expected " +
                   std::to_string(numDofs()) + " square");
-    // The full n × n pattern, built once per solve and then refilled: the dense solver reads
-    // such a matrix's values as the column-major dense matrix (no conversion either way).
-    const Eigen::Index n = dense_.rows();
-    if (H.rows() != n || H.cols() != n || !H.isCompressed() || H.nonZeros() != n * n)
-      H = MatX::Ones(n, n).sparseView();
-    std::copy(dense_.data(), dense_.data() + n * n, H.valuePtr());
+    H = dense_.sparseView(0.0, 0.0);
   }
   void step(const VecX& dq) override {
     held_ = false;

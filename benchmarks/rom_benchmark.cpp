@@ -161,18 +161,24 @@ struct ModelSpec {
 // One --models entry: H (87/500/500), H/E/I (0 tets: that cubature off, its energy integrated
 // exactly), Hexact, with a trailing "pou" for the partition-of-unity basis: "150", "87/250/250",
 // "87/500/0", "87exact", "300pou", "150/500/500pou"; a last "sN" sets the cubatures' training
-// samples (ReducedSettings::training_samples), e.g. "m24:96/1000/1000s2000".
+// samples (ReducedSettings::training_samples), e.g. "m24:96/1000/1000s2000"; a very last "iN"
+// caps Newton's iterations per step, e.g. "m12:24/100/100i3".
 ModelSpec parseModel(const std::string& text) {
   std::string rest = text;
   ModelSpec m;
-  const size_t budget = rest.find_last_of('i');
-  if (budget != std::string::npos && budget + 1 < rest.size() &&
-      rest.find_first_not_of("0123456789", budget + 1) == std::string::npos) {
-    m.max_iterations = std::atoi(rest.c_str() + budget + 1);
-    if (m.max_iterations < 1)
-      throw std::runtime_error("--models: '" + text + "': an iteration budget iN needs N ≥ 1");
-    rest.resize(budget);
-  }
+  // A trailing `tag` followed by digits N ≥ 1, removed from rest: N (0 when there is none).
+  const auto trailingCount = [&](char tag, const char* what) {
+    const size_t at = rest.find_last_of(tag);
+    if (at == std::string::npos || at + 1 >= rest.size() ||
+        rest.find_first_not_of("0123456789", at + 1) != std::string::npos)
+      return 0;
+    const int count = std::atoi(rest.c_str() + at + 1);
+    if (count < 1)
+      throw std::runtime_error("--models: '" + text + "': " + what + " " + tag + "N need N ≥ 1");
+    rest.resize(at);
+    return count;
+  };
+  m.max_iterations = trailingCount('i', "iteration budgets");
   if (rest.rfind("m", 0) == 0) {  // mV[:C][+H]…: a basis with modes
     int consumed = 0;
     if (std::sscanf(rest.c_str(), "m%d%n", &m.vibration_modes, &consumed) != 1 ||
@@ -194,14 +200,7 @@ ModelSpec parseModel(const std::string& text) {
     rest.resize(rest.size() - tail.size());
     return true;
   };
-  const size_t s = rest.find_last_of('s');
-  if (s != std::string::npos && s + 1 < rest.size() &&
-      rest.find_first_not_of("0123456789", s + 1) == std::string::npos) {
-    m.training_samples = std::atoi(rest.c_str() + s + 1);
-    if (m.training_samples < 1)
-      throw std::runtime_error("--models: '" + text + "': training samples sN need N ≥ 1");
-    rest.resize(s);
-  }
+  m.training_samples = trailingCount('s', "training samples");
   m.pou = ends("pou");
   const bool exact = ends("exact");
   int h = 0, e = 0, i = 0, consumed = 0;

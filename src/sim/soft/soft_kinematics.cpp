@@ -421,15 +421,14 @@ void SoftKinematics::skinNodes(const std::vector<int>& nodes) const {
   const int n = numNodes();
   if (Y_.rows() != n) {
     Y_.setZero(n, 3);
-    y_stamp_.assign(size_t(n), 0);
-    y_current_ = 0;
+    y_stamp_.assign(size_t(n), 0);  // y_current_ is ≥ 1 from the first skinning on
   }
   if (x_.rows() != n) x_.setZero(n, 3);
   node_M_.resize(n);
   // Y_j = X̄_j + P_j + u_j reads neither the bones nor the joints: its rows stay current while
   // the soft state and the held pose blend do (the bones' presolve, a line search along the
   // bones, the first evaluation after the presolve).
-  if (y_current_ == 0 || y_epoch_ != blend_epoch_ || y_state_.size() != u.size() || y_state_ != u) {
+  if (y_epoch_ != blend_epoch_ || y_state_.size() != u.size() || y_state_ != u) {
     ++y_current_;
     y_epoch_ = blend_epoch_;
     y_state_ = u;

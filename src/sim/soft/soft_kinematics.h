@@ -342,7 +342,7 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   // Y_ row j is current when y_stamp_[j] == y_current_, which changes with the soft state
   // (y_state_: the one it was skinned at) and the held pose blend (y_epoch_).
   mutable std::vector<long> y_stamp_;
-  mutable long y_current_ = 0, y_epoch_ = -1;
+  mutable long y_current_ = 0, y_epoch_ = -1;  // y_epoch_ −1: nothing skinned yet
   mutable VecX y_state_;
   mutable std::vector<Mat3> node_M_;  // M_j = Σ_b w_jb R_b
   mutable const std::vector<Mat3>* cur_R_ = nullptr;

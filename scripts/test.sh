@@ -4,9 +4,9 @@
 #   suite     C++ (GoogleTest, CLI scripts, the installed package, the fuzzers' regression
 #             inputs) and Python (pytest), all through ctest, in BUILD_DIR (default build/);
 #   sanitize  the C++ tests of the areas holding the file readers, solvers, contact, energy
-#             densities, rendering and core, and the CLI tests, again under AddressSanitizer +
+#             densities, rendering and core, again under AddressSanitizer +
 #             UndefinedBehaviorSanitizer (scripts/sanitize.sh, in build-sanitize/;
-#             FLSH_SANITIZE_AREAS=all for every area);
+#             FLSH_SANITIZE_AREAS=all for every area, the CLI tests included);
 #   fuzz      each libFuzzer target of the readers for FLSH_FUZZ_SECONDS (default 30) seconds
 #             (scripts/fuzz.sh, in the same build-sanitize/).
 # Usage: [FLSH_TEST_STAGES=suite] bash scripts/test.sh [BUILD_DIR]

@@ -9,13 +9,17 @@
 // any model ≤ 0.3 s from the cache. Usage: avatar_benchmark [RUNS] [BODY.npz]; prints the
 // median over RUNS (default 3) of each figure.
 //
-// ROM mode, avatar_benchmark --rom [RUNS] [BODY.npz]: the ROM avatar (soft tissue, reduced
-// model, both cubatures, default ReducedSettings):
+// ROM mode, avatar_benchmark --rom [RUNS] [BODY.npz] [--modes V:C] [--elastic N] [--inertial N]
+// [--samples S]: the ROM avatar (soft tissue, reduced model, both cubatures; default
+// ReducedSettings, or the modal basis of V vibration modes compressed to C columns (0: all),
+// cubatures of N tets trained on S samples):
 //   rom cold       empty cache: template, shape and reduced levels, with the stages of each
 //                  (handles, basis, training samples, cubature selection)
 //   rom warm       the same avatar again: all three levels from the cache
 // plus the handle count, the basis bound violation, the cubature sizes and held-out errors.
 // Goals (issue "ROM soft skeleton"): ≤ 12 s cold, ≤ 0.3 s from the cache.
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -25,8 +29,6 @@
 #include <memory>
 #include <string>
 #include <vector>
-
-#include <unistd.h>
 
 #include "flsh/body/synthetic_body.h"
 #include "flsh/volume/soft_avatar.h"
@@ -77,9 +79,10 @@ struct RomTimed {
 };
 
 RomTimed buildRom(const std::shared_ptr<const BodyModel>& body, const VecX& betas,
-                  const std::string& cache_dir) {
+                  const ReducedSettings& reduced, const std::string& cache_dir) {
   SoftAvatarSettings settings;
   settings.volumetric.cache_dir = cache_dir;
+  settings.reduced = reduced;
   SoftAvatar avatar(body, betas, settings);
   avatar.enableSoftTissue();
   avatar.enableReducedModel();
@@ -98,7 +101,7 @@ RomTimed buildRom(const std::shared_ptr<const BodyModel>& body, const VecX& beta
   return t;
 }
 
-int romBenchmark(int runs, const std::string& model_path) {
+int romBenchmark(int runs, const std::string& model_path, const ReducedSettings& reduced) {
   std::map<std::string, std::vector<double>> f;
   RomTimed last;
   const auto root =
@@ -108,7 +111,7 @@ int romBenchmark(int runs, const std::string& model_path) {
     const auto body = std::make_shared<const BodyModel>(
         model_path.empty() ? makeSyntheticBody({}) : loadBodyModel(model_path));
     const VecX betas = VecX::Zero(body->numBetas());
-    const RomTimed cold = buildRom(body, betas, cache);
+    const RomTimed cold = buildRom(body, betas, reduced, cache);
     const VolumetricBuildReport& v = cold.volumetric;
     const ReducedBuildReport& r = cold.reduced;
     if (!cold.reduced.warnings.empty())
@@ -126,7 +129,7 @@ int romBenchmark(int runs, const std::string& model_path) {
     f["    cubature selection"].push_back(r.seconds_cubature);
     f["    reduced cache store"].push_back(r.seconds_cache_store);
 
-    const RomTimed warm = buildRom(body, betas, cache);
+    const RomTimed warm = buildRom(body, betas, reduced, cache);
     if (!warm.volumetric.template_from_cache || !warm.volumetric.data_from_cache ||
         !warm.reduced.from_cache)
       std::fprintf(stderr, "warning: the warm run missed the cache\n");
@@ -141,6 +144,12 @@ int romBenchmark(int runs, const std::string& model_path) {
   std::printf("ROM avatar generation, %s, %d nodes / %d tets, median of %d runs (s)\n",
               model_path.empty() ? "synthetic body (6890 vertices)" : model_path.c_str(),
               last.nodes, last.tets, runs);
+  std::printf("basis %s", reducedBasisKindName(reduced.basis_kind));
+  if (reduced.basis_kind != ReducedBasisKind::Handles)
+    std::printf(" (%d vibration modes, %d columns)", reduced.modes.vibration_modes, d.numModes());
+  std::printf(", cubatures of %d / %d tets asked, %d training samples\n",
+              reduced.elastic_cubature_points, reduced.inertial_cubature_points,
+              reduced.training_samples);
   for (const char* key :
        {"rom cold total", "  skeleton part", "  template level (mesh, fields)",
         "  shape level (bones, materials)", "  volumetric cache store", "  reduced level total",
@@ -168,9 +177,46 @@ int romBenchmark(int runs, const std::string& model_path) {
 
 }  // namespace
 
+// avatar_benchmark --rom's arguments: RUNS and BODY.npz by position, then the reduced settings.
+int romMain(int argc, char** argv) {
+  int runs = 3;
+  std::string model_path;
+  ReducedSettings reduced;
+  int positional = 0;
+  for (int i = 2; i < argc; ++i) {
+    const std::string a = argv[i];
+    const bool has_value = i + 1 < argc;
+    if (a == "--modes" && has_value) {
+      const std::string v = argv[++i];
+      const auto colon = v.find(':');
+      reduced.basis_kind = ReducedBasisKind::Modes;
+      reduced.modes.vibration_modes = std::atoi(v.substr(0, colon).c_str());
+      reduced.modes.columns = colon == std::string::npos ? 0 : std::atoi(v.c_str() + colon + 1);
+    } else if (a == "--elastic" && has_value) {
+      reduced.elastic_cubature_points = std::atoi(argv[++i]);
+    } else if (a == "--inertial" && has_value) {
+      reduced.inertial_cubature_points = std::atoi(argv[++i]);
+    } else if (a == "--samples" && has_value) {
+      reduced.training_samples = std::atoi(argv[++i]);
+    } else if (a.rfind("--", 0) != 0 && positional == 0) {
+      runs = std::max(1, std::atoi(a.c_str()));
+      ++positional;
+    } else if (a.rfind("--", 0) != 0 && positional == 1) {
+      model_path = a;
+      ++positional;
+    } else {
+      std::fprintf(stderr,
+                   "avatar_benchmark --rom: unknown or incomplete argument '%s' (expected [RUNS] "
+                   "[BODY.npz] [--modes V:C] [--elastic N] [--inertial N] [--samples S])\n",
+                   a.c_str());
+      return 2;
+    }
+  }
+  return romBenchmark(runs, model_path, reduced);
+}
+
 int main(int argc, char** argv) {
-  if (argc > 1 && std::string(argv[1]) == "--rom")
-    return romBenchmark(argc > 2 ? std::max(1, std::atoi(argv[2])) : 3, argc > 3 ? argv[3] : "");
+  if (argc > 1 && std::string(argv[1]) == "--rom") return romMain(argc, argv);
   const int runs = argc > 1 ? std::max(1, std::atoi(argv[1])) : 3;
   const std::string model_path = argc > 2 ? argv[2] : "";
   auto load = [&] {

@@ -50,9 +50,95 @@ VecX solvePassive(const MatX& G, const VecX& c, const std::vector<int>& passive)
   return Gp.completeOrthogonalDecomposition().solve(cp);
 }
 
+/// The Cholesky factor L Lᵀ = G_PP of a passive set P kept between Lawson–Hanson's solves:
+/// an element entering appends one row to L (O(p²) instead of a new O(p³) factorization, the
+/// selection's main cost at hundreds of elements); any other change refactors.
+class PassiveFactor {
+ public:
+  /// y = G_PP⁻¹ c_P, y[a] for passive[a] (ascending indices); the minimum-norm solution (as
+  /// solvePassive) when G_PP is singular.
+  VecX solve(const MatX& G, const VecX& c, const std::vector<int>& passive) {
+    const int p = int(passive.size());
+    if (!(valid_ && (p == size_ || p == size_ + 1) && covers(passive))) refactor(G, passive);
+    if (valid_ && p == size_ + 1) append(G, passive);
+    if (!valid_) return solvePassive(G, c, passive);
+    VecX z(p);  // c in the factor's order
+    for (int a = 0; a < p; ++a) z[a] = c[order_[size_t(a)]];
+    const auto L = L_.topLeftCorner(p, p).triangularView<Eigen::Lower>();
+    L.solveInPlace(z);
+    L.transpose().solveInPlace(z);
+    if (!z.allFinite()) {
+      valid_ = false;
+      return solvePassive(G, c, passive);
+    }
+    VecX y(p);
+    for (int a = 0; a < p; ++a) y[a] = z[position_[size_t(passive[size_t(a)])]];
+    return y;
+  }
+
+ private:
+  // Whether every element of the factor is in `passive`.
+  bool covers(const std::vector<int>& passive) const {
+    int found = 0;
+    for (int i : passive) found += position_.size() > size_t(i) && position_[size_t(i)] >= 0;
+    return found == size_;
+  }
+  void refactor(const MatX& G, const std::vector<int>& passive) {
+    const int p = int(passive.size());
+    position_.assign(size_t(G.rows()), -1);
+    order_.assign(passive.begin(), passive.end());
+    MatX Gp(p, p);
+    for (int a = 0; a < p; ++a)
+      for (int b = 0; b < p; ++b) Gp(a, b) = G(passive[size_t(a)], passive[size_t(b)]);
+    const Eigen::LLT<MatX> llt(Gp);
+    valid_ = llt.info() == Eigen::Success;
+    size_ = valid_ ? p : 0;
+    if (!valid_) {
+      order_.clear();
+      return;
+    }
+    L_ = llt.matrixL();
+    for (int a = 0; a < p; ++a) position_[size_t(order_[size_t(a)])] = a;
+  }
+  // Appends the one element of `passive` not in the factor: L's new row l = L⁻¹ g, diagonal
+  // √(G_ii − lᵀl), or the factor is given up when that is not clearly positive.
+  void append(const MatX& G, const std::vector<int>& passive) {
+    int fresh = -1;
+    for (int i : passive)
+      if (position_[size_t(i)] < 0) fresh = i;
+    const int p = size_;
+    VecX g(p);
+    for (int a = 0; a < p; ++a) g[a] = G(order_[size_t(a)], fresh);
+    L_.topLeftCorner(p, p).triangularView<Eigen::Lower>().solveInPlace(g);
+    const double d2 = G(fresh, fresh) - g.squaredNorm();
+    if (!(d2 > 1e-12 * std::abs(G(fresh, fresh))) || !g.allFinite()) {
+      valid_ = false;
+      size_ = 0;
+      return;
+    }
+    if (L_.rows() < p + 1) {
+      MatX grown = MatX::Zero(std::max(2 * p, p + 1), std::max(2 * p, p + 1));
+      grown.topLeftCorner(p, p) = L_.topLeftCorner(p, p);
+      L_ = std::move(grown);
+    }
+    L_.row(p).head(p) = g.transpose();
+    L_(p, p) = std::sqrt(d2);
+    order_.push_back(fresh);
+    position_[size_t(fresh)] = p;
+    size_ = p + 1;
+  }
+
+  bool valid_ = false;
+  int size_ = 0;               // elements in the factor
+  std::vector<int> order_;     // the factor's elements, in its order
+  std::vector<int> position_;  // element → row of L, −1 when not in the factor
+  MatX L_;                     // lower triangular, the top-left size_ square in use
+};
+
 /// Lawson–Hanson on the normal equations: min ½ xᵀGx − cᵀx, x ≥ 0, warm-started from x (any
 /// vector; its positive entries are the first passive set). Returns x ≥ 0.
 VecX nnlsGram(const MatX& G, const VecX& c, VecX x) {
+  PassiveFactor factor;
   const int n = int(c.size());
   x = x.cwiseMax(0.0);
   // Gradient entries below this count as zero: rounding of G x − c relative to its terms.
@@ -84,7 +170,7 @@ VecX nnlsGram(const MatX& G, const VecX& c, VecX x) {
       for (int i = 0; i < n; ++i)
         if (in_passive[i]) passive.push_back(i);
       if (passive.empty()) break;
-      const VecX y = solvePassive(G, c, passive);
+      const VecX y = factor.solve(G, c, passive);
       double alpha = 1;
       int blocking = -1;
       for (int a = 0; a < int(passive.size()); ++a) {
@@ -165,6 +251,9 @@ Cubature exactCubature(int elements) {
 
 namespace {
 constexpr int kCorrelationBlock = 1024;  // columns per task of selectCubature's correlation
+// Smallest cosine between a candidate and the residual: above the rounding of a single-precision
+// correlation over thousands of samples (~1e-7 · √samples relative).
+constexpr double kSingleCosine = 1e-5;
 }  // namespace
 
 Cubature selectCubature(const MatX& A, const CubatureOptions& options) {
@@ -185,6 +274,11 @@ Cubature selectCubature(const MatX& A, const CubatureOptions& options) {
   if (!(b_norm > 0))
     throw InputError(std::string(who) + ": the target A·1 is zero, expected a non-zero target");
   const VecX column_norms = A.colwise().norm().transpose();
+  // The rounds' correlation reads A in single precision, made once: each round's pass over the
+  // whole of A is memory-bound (at 2000 samples × 35 000 tets, 550 MB in double), and halving
+  // its bytes halves it. Only the ranking of the candidates sees the rounding (~1e-7 of a
+  // correlation); G, c, the weights and the residual stay in double.
+  const Eigen::MatrixXf A_single = A.cast<float>();
 
   std::vector<int> selected;  // in selection order
   std::vector<char> is_selected(E, 0);
@@ -201,25 +295,29 @@ Cubature selectCubature(const MatX& A, const CubatureOptions& options) {
     // Correlation of every unselected element with the residual (normalized columns): the
     // round's main cost (A is read whole), on every thread in fixed blocks of columns (the same
     // values for any thread count).
-    VecX correlation(E);
+    Eigen::VectorXf correlation(E);
+    const Eigen::VectorXf residual_single = residual.cast<float>();
     const int blocks = (E + kCorrelationBlock - 1) / kCorrelationBlock;
 #pragma omp parallel for schedule(static)
     for (int k = 0; k < blocks; ++k) {
       const int first = k * kCorrelationBlock, n = std::min(kCorrelationBlock, E - first);
-      correlation.segment(first, n).noalias() = A.middleCols(first, n).transpose() * residual;
+      correlation.segment(first, n).noalias() =
+          A_single.middleCols(first, n).transpose() * residual_single;
     }
+    // A candidate's cosine with the residual must be clear of the single-precision rounding.
     std::vector<int> candidates;
+    const double residual_norm = residual.norm();
     for (int e = 0; e < E; ++e)
       if (!is_selected[e] && column_norms[e] > 0 &&
-          correlation[e] > 1e-14 * column_norms[e] * residual.norm())
+          correlation[e] > kSingleCosine * column_norms[e] * residual_norm)
         candidates.push_back(e);
     if (candidates.empty()) break;  // no element can lower the error
     const int take = std::min<int>(
         {options.points_per_round, int(candidates.size()), count - int(selected.size())});
     std::partial_sort(candidates.begin(), candidates.begin() + take, candidates.end(),
                       [&](int a, int b2) {
-                        const double sa = correlation[a] / column_norms[a];
-                        const double sb = correlation[b2] / column_norms[b2];
+                        const double sa = double(correlation[a]) / column_norms[a];
+                        const double sb = double(correlation[b2]) / column_norms[b2];
                         return sa != sb ? sa > sb : a < b2;
                       });
     ++out.rounds;
@@ -235,8 +333,15 @@ Cubature selectCubature(const MatX& A, const CubatureOptions& options) {
       w[old_size + k] = 0;
       c[old_size + k] = A.col(e).dot(b);
     }
+    // The new columns of G: each selected column read once against the round's new ones
+    // (gathered), not once per new column; every entry a fixed dot product, whatever the threads.
+    MatX fresh(A.rows(), take);
+    for (int k = 0; k < take; ++k) fresh.col(k) = A.col(selected[old_size + k]);
+#pragma omp parallel for schedule(static)
+    for (int j = 0; j < new_size; ++j)
+      G.row(j).segment(old_size, take).noalias() = A.col(selected[j]).transpose() * fresh;
     for (int k = old_size; k < new_size; ++k)
-      for (int j = 0; j <= k; ++j) G(j, k) = G(k, j) = A.col(selected[j]).dot(A.col(selected[k]));
+      for (int j = 0; j < k; ++j) G(k, j) = G(j, k);
     w = nnlsGram(G, c, w);
     // Elements the fit dropped to weight 0 leave the set (and may come back later).
     std::vector<int> keep;

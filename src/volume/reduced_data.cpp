@@ -191,6 +191,26 @@ void parallelFor(int n, Body&& body) {
   }
 }
 
+// samples × columns, row s filled by row(s, block, k): the row is block's row k. Tasks take
+// kSampleChunk samples each and fill a block of their own (column-major, so that one column's
+// chunk of entries shares a cache line) copied into the result, instead of writing one entry per
+// column `samples` doubles apart (at 2000 samples, each write on another page).
+constexpr int kSampleChunk = 8;
+// Rows `tail` (may be empty) are appended below the samples.
+template <class RowFn>
+MatX sampleRows(int samples, Eigen::Index columns, RowFn&& row, const MatX& tail = MatX()) {
+  MatX A(samples + tail.rows(), columns);
+  if (tail.size() > 0) A.bottomRows(tail.rows()) = tail;
+  const int chunks = (samples + kSampleChunk - 1) / kSampleChunk;
+  parallelFor(chunks, [&](int chunk) {
+    const int first = chunk * kSampleChunk, n = std::min(kSampleChunk, samples - first);
+    MatX block(n, columns);
+    for (int k = 0; k < n; ++k) row(first + k, block, k);
+    A.middleRows(first, n) = block;
+  });
+  return A;
+}
+
 Mat34 tetNodes(const MatX3& nodes, const MatX4i& tets, int t) {
   Mat34 X;
   for (int a = 0; a < 4; ++a) X.col(a) = nodes.row(tets(t, a)).transpose();
@@ -330,8 +350,10 @@ MatX elasticSamples(const VolumetricData& data, const ReducedData& d, const Elas
     U.col(k) *= scale;
   }
   const MatX4i& tets = data.templ->mesh.tets;
-  MatX A(samples, E);
-  parallelFor(samples, [&](int s) {
+  std::vector<PackedTet> packed{size_t(E)};  // what each sample reads of a tet, packed once
+  for (int c = 0; c < E; ++c)
+    packed[size_t(c)] = packTet(elements.rest[size_t(c)], elements.materials[size_t(c)], 1.0);
+  return sampleRows(samples, E, [&](int s, MatX& block, int row) {
     const int k = modal_column[size_t(s)];
     const MatX u = k >= 0 ? MatX(Eigen::Map<const NodeRows>(U.col(k).data(), N, 3))
                           : MatX(d.basis * handle_displacements[size_t(s)]);  // #N × 3
@@ -339,10 +361,9 @@ MatX elasticSamples(const VolumetricData& data, const ReducedData& d, const Elas
       const int t = elements.tets[size_t(c)];
       Mat34 ue;
       for (int a = 0; a < 4; ++a) ue.col(a) = u.row(tets(t, a)).transpose();
-      A(s, c) = tetElasticEnergy(elements.rest[size_t(c)], elements.materials[size_t(c)], ue);
+      block(row, c) = tetElasticEnergy(packed[size_t(c)], ue);
     }
   });
-  return A;
 }
 
 // Node velocities (#N × 3) of skinned bone motions, joint velocities v and angular velocities ω of
@@ -371,12 +392,13 @@ void tetKineticEnergies(const VecX& speed_squared, const MatX4i& tets, const Vec
   }
 }
 
-// samples × #T: Σ_{a∈e} (m_e/4)‖v_a‖² (twice the lumped kinetic energy, J) of each tet for random
+// samples × #T (then the rows `tail` appended): Σ_{a∈e} (m_e/4)‖v_a‖² (twice the lumped kinetic
+// energy, J) of each tet for random
 // skinned bone twists plus random subspace velocities: each handle's of RMS speed kHandleSpeed,
 // the modes' ż ~ N(0, σ² I) with σ such that the soft nodes' mass-weighted RMS speed is
 // kHandleSpeed (the modes are mass-orthonormal: Σ_j m_j ‖v_j‖² = ‖ż‖²).
 MatX inertialSamples(const VolumetricData& data, const ReducedData& rom, const VecX& tet_masses,
-                     int samples, std::uint64_t seed) {
+                     int samples, std::uint64_t seed, const MatX& tail) {
   const MatX& W = data.templ->fields.weights;  // #N × bones
   const SpMat& basis = rom.basis;
   const int B = int(W.cols()), H = rom.numHandles(), r = rom.numModes();
@@ -411,16 +433,18 @@ MatX inertialSamples(const VolumetricData& data, const ReducedData& rom, const V
   for (int s = 0; s < samples && r > 0; ++s) Zdot.col(s) = draws[size_t(s)].modes;
   const MatX mode_velocities = r > 0 ? MatX(rom.modes * Zdot) : MatX();
   using NodeRows = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
-  MatX A(samples, T);
-  parallelFor(samples, [&](int s) {
-    const Velocities& d = draws[size_t(s)];
-    MatX extra = H > 0 ? MatX(basis * d.handles) : MatX::Zero(data.numNodes(), 3);
-    if (r > 0) extra += Eigen::Map<const NodeRows>(mode_velocities.col(s).data(), extra.rows(), 3);
-    const MatX v = skinnedBoneVelocities(W, data.rest_nodes, data.rest_joints, d.bone_linear,
-                                         d.bone_angular, extra);
-    tetKineticEnergies(v.rowwise().squaredNorm(), tets, tet_masses, A, s);
-  });
-  return A;
+  return sampleRows(
+      samples, T,
+      [&](int s, MatX& block, int row) {
+        const Velocities& d = draws[size_t(s)];
+        MatX extra = H > 0 ? MatX(basis * d.handles) : MatX::Zero(data.numNodes(), 3);
+        if (r > 0)
+          extra += Eigen::Map<const NodeRows>(mode_velocities.col(s).data(), extra.rows(), 3);
+        const MatX v = skinnedBoneVelocities(W, data.rest_nodes, data.rest_joints, d.bone_linear,
+                                             d.bone_angular, extra);
+        tetKineticEnergies(v.rowwise().squaredNorm(), tets, tet_masses, block, row);
+      },
+      tail);
 }
 
 // Twice the lumped kinetic energy of each tet (rows × #T) for the skeleton's unit articulated
@@ -509,10 +533,13 @@ double largestRowError(const MatX& A, const Cubature& c) {
 // to training_amplitude), and unscaled the largest few would decide the whole selection. A
 // cubature exact on the scaled rows is exact on the unscaled ones.
 MatX perSampleRelative(MatX A) {
-  for (Eigen::Index s = 0; s < A.rows(); ++s) {
-    const double total = A.row(s).sum();
-    if (total > 0) A.row(s) /= total;
-  }
+  // The rows' totals summed column by column (the order of a row's own sum, A read in storage
+  // order), then each column divided.
+  VecX total = VecX::Zero(A.rows());
+  for (Eigen::Index c = 0; c < A.cols(); ++c) total += A.col(c);
+  for (Eigen::Index s = 0; s < A.rows(); ++s)
+    if (!(total[s] > 0)) total[s] = 1;  // left as it is
+  for (Eigen::Index c = 0; c < A.cols(); ++c) A.col(c).array() /= total.array();
   return A;
 }
 
@@ -520,7 +547,8 @@ MatX perSampleRelative(MatX A) {
 // kHeldOutSamples) from seed + 1: a diagnostic whose evaluation (every tet of every sample) cost
 // as much as the training's; columns mapped to template tet indices by `column_tets`
 // (ascending, so the order is kept). `extra_rows` (may be empty): fixed rows added to the
-// training samples only. sample_matrix(seed, count): count samples × columns.
+// training samples only. sample_matrix(seed, count, tail): count samples × columns, then the
+// rows `tail`.
 template <class SampleFn>
 Cubature trainCubature(SampleFn&& sample_matrix, int samples, int count, double tolerance,
                        std::uint64_t seed, const std::vector<int>& column_tets, double* test_error,
@@ -529,12 +557,7 @@ Cubature trainCubature(SampleFn&& sample_matrix, int samples, int count, double 
   auto t0 = Clock::now();
   Cubature cubature;
   {
-    MatX rows = sample_matrix(seed, samples);
-    if (extra_rows.size() > 0) {
-      rows.conservativeResize(rows.rows() + extra_rows.rows(), Eigen::NoChange);
-      rows.bottomRows(extra_rows.rows()) = extra_rows;
-    }
-    const MatX training = perSampleRelative(std::move(rows));
+    const MatX training = perSampleRelative(sample_matrix(seed, samples, extra_rows));
     *seconds_training += secondsSince(t0);
     t0 = Clock::now();
     CubatureOptions options;
@@ -546,7 +569,7 @@ Cubature trainCubature(SampleFn&& sample_matrix, int samples, int count, double 
   t0 = Clock::now();
   {
     const int held_out_samples = std::min(samples, std::max(kHeldOutSamples, samples / 4));
-    const MatX held_out = perSampleRelative(sample_matrix(seed + 1, held_out_samples));
+    const MatX held_out = perSampleRelative(sample_matrix(seed + 1, held_out_samples, MatX()));
     *seconds_training += secondsSince(t0);
     t0 = Clock::now();
     *test_error = cubatureRelativeError(held_out, cubature.elements, cubature.weights);
@@ -577,7 +600,7 @@ void finishReducedData(const VolumetricData& data, const BodyModel& body,
           std::max(kMaxTrainingShear * data.tissue_thickness[i], kSmallestTrainingAmplitude);
     r.seconds_training += secondsSince(t0);
     d.elastic = trainCubature(
-        [&](std::uint64_t seed, int count) {
+        [&](std::uint64_t seed, int count, const MatX& /*tail: none*/) {
           return elasticSamples(data, d, elements, handle_reach, vertex_reach, count,
                                 settings.training_amplitude, seed);
         },
@@ -597,8 +620,8 @@ void finishReducedData(const VolumetricData& data, const BodyModel& body,
     const MatX rigid_rows = rigidMotionRows(data, body.parents, tet_masses);
     r.seconds_training += secondsSince(t0);
     d.inertial = trainCubature(
-        [&](std::uint64_t seed, int count) {
-          return inertialSamples(data, d, tet_masses, count, seed);
+        [&](std::uint64_t seed, int count, const MatX& tail) {
+          return inertialSamples(data, d, tet_masses, count, seed, tail);
         },
         samples, settings.inertial_cubature_points, kInertialTrainingTolerance, settings.seed,
         all_tets, &d.inertial_test_error, &r.seconds_training, &r.seconds_cubature, rigid_rows);

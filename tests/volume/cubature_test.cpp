@@ -176,6 +176,56 @@ TEST(NonNegativeLeastSquares, MatchesBruteForceAndKkt) {
   EXPECT_GT(active_somewhere, 5);  // the bounds are exercised, not just unconstrained fits
 }
 
+// Large enough that Lawson–Hanson's passive set grows by dozens of single entries (each a
+// row appended to the kept Cholesky factor) with blocking steps between them (refactorizations):
+// the solution must still satisfy the optimality conditions to rounding.
+TEST(NonNegativeLeastSquares, ManyEntriesAndBlockingStepsKeepKkt) {
+  int passive_total = 0, active_total = 0;
+  for (unsigned seed = 1; seed <= 6; ++seed) {
+    const int m = 150, n = 100;
+    const MatX A = test::randomVector(m * n, 1.0, seed).reshaped(m, n);
+    const VecX b = test::randomVector(m, 1.0, seed + 1000);
+    const VecX x = nonNegativeLeastSquares(A, b);
+    const VecX gradient = A.transpose() * (A * x - b);
+    const double scale = (A.transpose() * b).cwiseAbs().maxCoeff();
+    ASSERT_GT(scale, 0.0);
+    ASSERT_GE(x.minCoeff(), 0.0);
+    for (int i = 0; i < n; ++i) {
+      if (x[i] > 0) {
+        ++passive_total;
+        EXPECT_NEAR(gradient[i], 0, 1e-11 * scale) << "seed " << seed << " entry " << i;
+      } else {
+        ++active_total;
+        EXPECT_GE(gradient[i], -1e-11 * scale) << "seed " << seed << " entry " << i;
+      }
+    }
+  }
+  EXPECT_GT(passive_total, 6 * 20);  // dozens of entries per solve
+  EXPECT_GT(active_total, 6 * 20);   // and many bounds active
+}
+
+// The selection's weights are the non-negative least-squares fit on the elements it kept
+// (every weight > 0, so the fit's gradient vanishes there), over many rounds of warm starts.
+TEST(Cubature, SelectedWeightsAreTheOptimalFitOnTheirElements) {
+  // Generic non-negative entries (full rank, unlike syntheticTraining's few modes), so that the
+  // selection runs to its count.
+  const MatX A = test::randomVector(300 * 400, 1.0, 11).cwiseAbs().reshaped(300, 400);
+  CubatureOptions options;
+  options.count = 120;
+  options.points_per_round = 3;
+  const Cubature cubature = selectCubature(A, options);
+  ASSERT_GT(cubature.elements.size(), 20);
+  ASSERT_GT(cubature.rounds, 10);
+  MatX As(A.rows(), cubature.elements.size());
+  for (int k = 0; k < cubature.elements.size(); ++k) As.col(k) = A.col(cubature.elements[k]);
+  const VecX b = A.rowwise().sum();
+  const VecX gradient = As.transpose() * (As * cubature.weights - b);
+  const double scale = (As.transpose() * b).cwiseAbs().maxCoeff();
+  ASSERT_GT(scale, 0.0);
+  EXPECT_GT(cubature.weights.minCoeff(), 0.0);
+  EXPECT_LE(gradient.cwiseAbs().maxCoeff(), 1e-9 * scale);
+}
+
 TEST(NonNegativeLeastSquares, RepeatedAndZeroColumnsAreHandled) {
   MatX A(4, 3);
   A << 1, 1, 0,  //

@@ -54,9 +54,11 @@ constexpr double kInertialTrainingTolerance = 1e-3;
 // The elastic selection runs to the requested count: stopping at 1e-3 kept ~290 tets, too few
 // to give every handle's directions stiffness with 150 handles (the simulation blew up).
 constexpr double kElasticTrainingTolerance = 0.0;
-// Fewest held-out samples of a cubature's error estimate (a quarter of the training samples
-// otherwise): the estimate's spread over seeds is well below its value at 100 (default body:
-// elastic 1.26 % on 400 held-out samples, ~1.2–1.4 % on 100; the selection does not use them).
+// Held-out samples of a cubature's error estimate: a quarter of the training samples, at least
+// kHeldOutSamples and at most twice that. The estimate's spread over seeds is well below its
+// value at 100 (default body: elastic 1.26 % on 400 held-out samples, ~1.2–1.4 % on 100; the
+// selection does not use them), and a quarter of 2000 training samples would cost a fifth of
+// the training for a diagnostic.
 constexpr int kHeldOutSamples = 100;
 constexpr double kPi = 3.14159265358979323846;
 // RMS scales of the random inertial training velocities: bone translation (m/s), bone rotation
@@ -544,7 +546,7 @@ MatX perSampleRelative(MatX A) {
 }
 
 // Selection on `samples` training samples (seed), held-out error on a quarter as many (at least
-// kHeldOutSamples) from seed + 1: a diagnostic whose evaluation (every tet of every sample) cost
+// kHeldOutSamples, at most twice that) from seed + 1: a diagnostic whose evaluation (every tet of every sample) cost
 // as much as the training's; columns mapped to template tet indices by `column_tets`
 // (ascending, so the order is kept). `extra_rows` (may be empty): fixed rows added to the
 // training samples only. sample_matrix(seed, count, tail): count samples × columns, then the
@@ -568,7 +570,8 @@ Cubature trainCubature(SampleFn&& sample_matrix, int samples, int count, double 
   }
   t0 = Clock::now();
   {
-    const int held_out_samples = std::min(samples, std::max(kHeldOutSamples, samples / 4));
+    const int held_out_samples =
+        std::min(samples, std::clamp(samples / 4, kHeldOutSamples, 2 * kHeldOutSamples));
     const MatX held_out = perSampleRelative(sample_matrix(seed + 1, held_out_samples, MatX()));
     *seconds_training += secondsSince(t0);
     t0 = Clock::now();

@@ -60,8 +60,8 @@ struct ReducedSettings {
   /// Sample tets of each cubature (≥ 1); a cubature that is switched off is not built.
   int elastic_cubature_points = 500;
   int inertial_cubature_points = 500;
-  /// Random training samples per cubature; as many again, from another seed, measure the
-  /// held-out error.
+  /// Random training samples per cubature; a quarter as many (at least 100, at most 200, at most
+  /// as many), from another seed, measure the held-out error.
   int training_samples = 400;
   /// Largest handle displacement of an elastic training sample, m (samples spread their
   /// amplitudes from small to this, so that the Fung stiffening is represented).

@@ -173,6 +173,7 @@ TEST(ModalReducedData, CacheRoundTripIsBitwiseAndInvalidModesAreRebuilt) {
 
 TEST(ModalReducedData, KeyDependsOnTheKindAndTheModalSettingsOnly) {
   ReducedSettings handles;
+  handles.basis_kind = ReducedBasisKind::Handles;
   handles.num_handles = 2;
   handles.training_samples = 3;
   const std::string base = buildReducedData(volume(), body(), handles, false, false, nullptr).key;

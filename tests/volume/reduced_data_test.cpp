@@ -6,7 +6,6 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
-
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -43,6 +42,8 @@ const BodyModel& body() { return softAvatar()->body(); }
 
 ReducedSettings smallSettings() {
   ReducedSettings s;
+  // This file tests the handle basis, whatever the default.
+  s.basis_kind = ReducedBasisKind::Handles;
   s.num_handles = 12;
   s.elastic_cubature_points = 60;
   s.inertial_cubature_points = 60;
@@ -272,16 +273,17 @@ TEST(ReducedData, InertialCubatureHasTheSkeletonsRigidInertia) {
         continue;
       }
       const int p = parents[size_t(b)];
-      linear[size_t(b)] = linear[size_t(p)] +
-                          angular[size_t(p)].cross(Vec3(v.rest_joints.row(b) - v.rest_joints.row(p)));
+      linear[size_t(b)] =
+          linear[size_t(p)] +
+          angular[size_t(p)].cross(Vec3(v.rest_joints.row(b) - v.rest_joints.row(p)));
     }
     double exact = 0.0, cubature = 0.0;
     for (int j = 0; j < v.numNodes(); ++j) {
       Vec3 velocity = Vec3::Zero();
       for (int b = 0; b < B; ++b)
-        velocity += W(j, b) * (linear[size_t(b)] +
-                               angular[size_t(b)].cross(Vec3(v.rest_nodes.row(j) -
-                                                             v.rest_joints.row(b))));
+        velocity +=
+            W(j, b) * (linear[size_t(b)] +
+                       angular[size_t(b)].cross(Vec3(v.rest_nodes.row(j) - v.rest_joints.row(b))));
       exact += lumped[j] * velocity.squaredNorm();
       cubature += masses[j] * velocity.squaredNorm();
     }
@@ -511,8 +513,8 @@ TEST(ReducedData, SurfacePartitionOfUnityOption) {
   ReducedSettings settings = smallSettings();
   settings.surface_partition_of_unity = true;
   const ReducedData pou = buildReducedData(volume(), body(), settings, false, false, nullptr);
-  const ReducedData plain = buildReducedData(volume(), body(), smallSettings(), false, false,
-                                             nullptr);
+  const ReducedData plain =
+      buildReducedData(volume(), body(), smallSettings(), false, false, nullptr);
   EXPECT_NE(pou.key, plain.key);
   const MatX B = MatX(pou.basis), P = MatX(plain.basis);
   const VolumetricData& v = volume();

@@ -10,7 +10,7 @@
 // median over RUNS (default 3) of each figure.
 //
 // ROM mode, avatar_benchmark --rom [RUNS] [BODY.npz] [--modes V:C] [--elastic N] [--inertial N]
-// [--samples S]: the ROM avatar (soft tissue, reduced model, both cubatures; default
+// [--training-samples S]: the ROM avatar (soft tissue, reduced model, both cubatures; default
 // ReducedSettings, or the modal basis of V vibration modes compressed to C columns (0: all),
 // cubatures of N tets trained on S samples):
 //   rom cold       empty cache: template, shape and reduced levels, with the stages of each
@@ -196,7 +196,7 @@ int romMain(int argc, char** argv) {
       reduced.elastic_cubature_points = std::atoi(argv[++i]);
     } else if (a == "--inertial" && has_value) {
       reduced.inertial_cubature_points = std::atoi(argv[++i]);
-    } else if (a == "--samples" && has_value) {
+    } else if (a == "--training-samples" && has_value) {
       reduced.training_samples = std::atoi(argv[++i]);
     } else if (a.rfind("--", 0) != 0 && positional == 0) {
       runs = std::max(1, std::atoi(a.c_str()));
@@ -205,10 +205,11 @@ int romMain(int argc, char** argv) {
       model_path = a;
       ++positional;
     } else {
-      std::fprintf(stderr,
-                   "avatar_benchmark --rom: unknown or incomplete argument '%s' (expected [RUNS] "
-                   "[BODY.npz] [--modes V:C] [--elastic N] [--inertial N] [--samples S])\n",
-                   a.c_str());
+      std::fprintf(
+          stderr,
+          "avatar_benchmark --rom: unknown or incomplete argument '%s' (expected [RUNS] "
+          "[BODY.npz] [--modes V:C] [--elastic N] [--inertial N] [--training-samples S])\n",
+          a.c_str());
       return 2;
     }
   }

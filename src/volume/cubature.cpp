@@ -34,14 +34,20 @@ void checkMatrix(const MatX& A, const char* who) {
 
 /// Solves G_PP y = c_P (G symmetric positive semi-definite); the minimum-norm solution when G_PP
 /// is singular (repeated or zero columns).
-VecX solvePassive(const MatX& G, const VecX& c, const std::vector<int>& passive) {
+/// G_PP: the rows and columns `passive` of G.
+MatX passiveBlock(const MatX& G, const std::vector<int>& passive) {
   const int p = int(passive.size());
   MatX Gp(p, p);
+  for (int a = 0; a < p; ++a)
+    for (int b = 0; b < p; ++b) Gp(a, b) = G(passive[size_t(a)], passive[size_t(b)]);
+  return Gp;
+}
+
+VecX solvePassive(const MatX& G, const VecX& c, const std::vector<int>& passive) {
+  const int p = int(passive.size());
+  const MatX Gp = passiveBlock(G, passive);
   VecX cp(p);
-  for (int a = 0; a < p; ++a) {
-    cp[a] = c[passive[a]];
-    for (int b = 0; b < p; ++b) Gp(a, b) = G(passive[a], passive[b]);
-  }
+  for (int a = 0; a < p; ++a) cp[a] = c[passive[a]];
   const Eigen::LLT<MatX> llt(Gp);
   if (llt.info() == Eigen::Success) {
     VecX y = llt.solve(cp);
@@ -87,10 +93,7 @@ class PassiveFactor {
     const int p = int(passive.size());
     position_.assign(size_t(G.rows()), -1);
     order_.assign(passive.begin(), passive.end());
-    MatX Gp(p, p);
-    for (int a = 0; a < p; ++a)
-      for (int b = 0; b < p; ++b) Gp(a, b) = G(passive[size_t(a)], passive[size_t(b)]);
-    const Eigen::LLT<MatX> llt(Gp);
+    const Eigen::LLT<MatX> llt(passiveBlock(G, passive));
     valid_ = llt.info() == Eigen::Success;
     size_ = valid_ ? p : 0;
     if (!valid_) {

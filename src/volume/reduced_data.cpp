@@ -309,15 +309,16 @@ MatX surfacePartitionOfUnity(const VolumetricData& data, const MatX& weights) {
   return out;
 }
 
-// samples × #elastic elements: the elastic energy (J) of each tet under random displacements of
-// the subspace, of amplitudes log-uniform in [1 mm, training_amplitude]. Handle samples: every
-// handle moves in a random direction by a random fraction of the amplitude, at most its reach
-// (handle_reach, H, m). Modal samples: a random direction z ~ N(0, I) of the (mass-orthonormal)
-// modes, scaled so that the largest node displacement is the amplitude and no surface vertex
-// moves further than its reach (vertex_reach, #V, m). ModesAndHandles alternates the two.
+// samples × #elastic elements (then the rows `tail` appended): the elastic energy (J) of each tet
+// under random displacements of the subspace, of amplitudes log-uniform in [1 mm,
+// training_amplitude]. Handle samples: every handle moves in a random direction by a random
+// fraction of the amplitude, at most its reach (handle_reach, H, m). Modal samples: a random
+// direction z ~ N(0, I) of the (mass-orthonormal) modes, scaled so that the largest node
+// displacement is the amplitude and no surface vertex moves further than its reach (vertex_reach,
+// #V, m). ModesAndHandles alternates the two.
 MatX elasticSamples(const VolumetricData& data, const ReducedData& d, const ElasticTets& elements,
                     const VecX& handle_reach, const VecX& vertex_reach, int samples,
-                    double amplitude, std::uint64_t seed) {
+                    double amplitude, std::uint64_t seed, const MatX& tail) {
   const int H = d.numHandles(), r = d.numModes(), E = int(elements.tets.size());
   const double smallest = std::min(kSmallestTrainingAmplitude, amplitude);
   SampleRandom random(seed);
@@ -355,17 +356,20 @@ MatX elasticSamples(const VolumetricData& data, const ReducedData& d, const Elas
   std::vector<PackedTet> packed{size_t(E)};  // what each sample reads of a tet, packed once
   for (int c = 0; c < E; ++c)
     packed[size_t(c)] = packTet(elements.rest[size_t(c)], elements.materials[size_t(c)], 1.0);
-  return sampleRows(samples, E, [&](int s, MatX& block, int row) {
-    const int k = modal_column[size_t(s)];
-    const MatX u = k >= 0 ? MatX(Eigen::Map<const NodeRows>(U.col(k).data(), N, 3))
-                          : MatX(d.basis * handle_displacements[size_t(s)]);  // #N × 3
-    for (int c = 0; c < E; ++c) {
-      const int t = elements.tets[size_t(c)];
-      Mat34 ue;
-      for (int a = 0; a < 4; ++a) ue.col(a) = u.row(tets(t, a)).transpose();
-      block(row, c) = tetElasticEnergy(packed[size_t(c)], ue);
-    }
-  });
+  return sampleRows(
+      samples, E,
+      [&](int s, MatX& block, int row) {
+        const int k = modal_column[size_t(s)];
+        const MatX u = k >= 0 ? MatX(Eigen::Map<const NodeRows>(U.col(k).data(), N, 3))
+                              : MatX(d.basis * handle_displacements[size_t(s)]);  // #N × 3
+        for (int c = 0; c < E; ++c) {
+          const int t = elements.tets[size_t(c)];
+          Mat34 ue;
+          for (int a = 0; a < 4; ++a) ue.col(a) = u.row(tets(t, a)).transpose();
+          block(row, c) = tetElasticEnergy(packed[size_t(c)], ue);
+        }
+      },
+      tail);
 }
 
 // Node velocities (#N × 3) of skinned bone motions, joint velocities v and angular velocities ω of
@@ -395,10 +399,9 @@ void tetKineticEnergies(const VecX& speed_squared, const MatX4i& tets, const Vec
 }
 
 // samples × #T (then the rows `tail` appended): Σ_{a∈e} (m_e/4)‖v_a‖² (twice the lumped kinetic
-// energy, J) of each tet for random
-// skinned bone twists plus random subspace velocities: each handle's of RMS speed kHandleSpeed,
-// the modes' ż ~ N(0, σ² I) with σ such that the soft nodes' mass-weighted RMS speed is
-// kHandleSpeed (the modes are mass-orthonormal: Σ_j m_j ‖v_j‖² = ‖ż‖²).
+// energy, J) of each tet for random skinned bone twists plus random subspace velocities: each
+// handle's of RMS speed kHandleSpeed, the modes' ż ~ N(0, σ² I) with σ such that the soft nodes'
+// mass-weighted RMS speed is kHandleSpeed (the modes are mass-orthonormal: Σ_j m_j ‖v_j‖² = ‖ż‖²).
 MatX inertialSamples(const VolumetricData& data, const ReducedData& rom, const VecX& tet_masses,
                      int samples, std::uint64_t seed, const MatX& tail) {
   const MatX& W = data.templ->fields.weights;  // #N × bones
@@ -546,10 +549,10 @@ MatX perSampleRelative(MatX A) {
 }
 
 // Selection on `samples` training samples (seed), held-out error on a quarter as many (at least
-// kHeldOutSamples, at most twice that) from seed + 1: a diagnostic whose evaluation (every tet of every sample) cost
-// as much as the training's; columns mapped to template tet indices by `column_tets`
-// (ascending, so the order is kept). `extra_rows` (may be empty): fixed rows added to the
-// training samples only. sample_matrix(seed, count, tail): count samples × columns, then the
+// kHeldOutSamples, at most twice that) from seed + 1: a diagnostic, whose evaluation (every tet
+// of every sample) once cost as much as the training's; columns mapped to template tet indices by
+// `column_tets` (ascending, so the order is kept). `extra_rows` (may be empty): fixed rows added to
+// the training samples only. sample_matrix(seed, count, tail): count samples × columns, then the
 // rows `tail`.
 template <class SampleFn>
 Cubature trainCubature(SampleFn&& sample_matrix, int samples, int count, double tolerance,
@@ -603,9 +606,9 @@ void finishReducedData(const VolumetricData& data, const BodyModel& body,
           std::max(kMaxTrainingShear * data.tissue_thickness[i], kSmallestTrainingAmplitude);
     r.seconds_training += secondsSince(t0);
     d.elastic = trainCubature(
-        [&](std::uint64_t seed, int count, const MatX& /*tail: none*/) {
+        [&](std::uint64_t seed, int count, const MatX& tail) {
           return elasticSamples(data, d, elements, handle_reach, vertex_reach, count,
-                                settings.training_amplitude, seed);
+                                settings.training_amplitude, seed, tail);
         },
         samples, settings.elastic_cubature_points, kElasticTrainingTolerance, settings.seed,
         elements.tets, &d.elastic_test_error, &r.seconds_training, &r.seconds_cubature);

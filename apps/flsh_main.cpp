@@ -8,7 +8,9 @@
 //                 [--no-cache]
 //   flsh avatar --model BODY.npz [--betas b0,b1,…] [--soft fem|rom] [--cache DIR]
 //               [--resolution R] [--materials FILE] [--no-cache]
-//               [--handles H] [--elastic-cubature N] [--inertial-cubature N]
+//               [--basis modes|handles|modes+handles] [--vibration-modes M]
+//               [--modal-columns C] [--handles H] [--elastic-cubature N]
+//               [--inertial-cubature N] [--partition-of-unity]
 //
 // Every command prints a one-line summary on success. Every failure (a bad option, file or
 // value, an impossible size, a failed simulation) exits with status 2 and a message naming the
@@ -198,6 +200,7 @@ struct AvatarArgs {
   int vibration_modes = ReducedSettings().modes.vibration_modes;
   int modal_columns = ReducedSettings().modes.columns;  ///< 0 = every column
   bool reduced_options_given = false;
+  bool basis_given = false, handles_given = false, modal_options_given = false;
 };
 
 // Builds (or loads) an avatar and prints its statistics as JSON on stdout.
@@ -215,7 +218,20 @@ int cmdAvatar(const AvatarArgs& args) {
         "--handles, --elastic-cubature, --inertial-cubature, --partition-of-unity, --basis, "
         "--vibration-modes and --modal-columns are only for --soft rom, got --soft " +
         args.soft);
-  const ReducedBasisKind basis = parseReducedBasisKind(args.basis, "--basis");
+  // As in scene files: --handles without --basis chooses the handle basis (the modal basis,
+  // the default, has no handles).
+  const ReducedBasisKind basis = args.basis_given     ? parseReducedBasisKind(args.basis, "--basis")
+                                 : args.handles_given ? ReducedBasisKind::Handles
+                                                      : ReducedSettings().basis_kind;
+  if (args.handles_given && basis == ReducedBasisKind::Modes)
+    throw InputError(
+        "--handles: not used by --basis modes (handles belong to --basis handles or "
+        "modes+handles)");
+  if (args.modal_options_given && basis == ReducedBasisKind::Handles)
+    throw InputError(
+        std::string("--vibration-modes and --modal-columns: only for --basis modes "
+                    "or modes+handles") +
+        (args.basis_given ? "" : " (--handles without --basis chooses the handle basis)"));
   checkRange("--vibration-modes", args.vibration_modes, 0, 100000, false, "an integer");
   checkRange("--modal-columns", args.modal_columns, 0, 100000, false, "an integer, 0 = all");
   checkRange("--handles", args.handles, 1, 100000, false, "an integer");
@@ -539,10 +555,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   avatar->add_option("--materials", avatar_args.materials,
                      "material file (JSON, docs/materials.md; default: built-in coefficients)");
-  auto* handles_option = avatar
-                             ->add_option("--handles", avatar_args.handles,
-                                          "--soft rom: point handles of the reduced basis")
-                             ->capture_default_str();
+  auto* handles_option =
+      avatar
+          ->add_option("--handles", avatar_args.handles,
+                       "--soft rom: point handles of the reduced basis (without --basis: "
+                       "the handle basis)")
+          ->capture_default_str();
   auto* elastic_option =
       avatar
           ->add_option("--elastic-cubature", avatar_args.elastic_cubature,
@@ -591,6 +609,9 @@ int main(int argc, char** argv) {
                                               basis_option->count() + vibration_option->count() +
                                               columns_option->count() >
                                           0;
+      avatar_args.basis_given = basis_option->count() > 0;
+      avatar_args.handles_given = handles_option->count() > 0;
+      avatar_args.modal_options_given = vibration_option->count() + columns_option->count() > 0;
       return cmdAvatar(avatar_args);
     }
     if (command == "simulate") {

@@ -9,10 +9,11 @@
 // any model ≤ 0.3 s from the cache. Usage: avatar_benchmark [RUNS] [BODY.npz]; prints the
 // median over RUNS (default 3) of each figure.
 //
-// ROM mode, avatar_benchmark --rom [RUNS] [BODY.npz] [--modes V:C] [--elastic N] [--inertial N]
-// [--training-samples S]: the ROM avatar (soft tissue, reduced model, both cubatures; default
-// ReducedSettings, or the modal basis of V vibration modes compressed to C columns (0: all),
-// cubatures of N tets trained on S samples):
+// ROM mode, avatar_benchmark --rom [RUNS] [BODY.npz] [--modes V:C | --handles H] [--elastic N]
+// [--inertial N] [--training-samples S]: the ROM avatar (soft tissue, reduced model, both
+// cubatures; default ReducedSettings: the modal basis 24:72; or the modal basis of V vibration
+// modes compressed to C columns (0: all), or the handle basis of H handles; cubatures of N tets
+// trained on S samples):
 //   rom cold       empty cache: template, shape and reduced levels, with the stages of each
 //                  (handles, basis, training samples, cubature selection)
 //   rom warm       the same avatar again: all three levels from the cache
@@ -192,6 +193,9 @@ int romMain(int argc, char** argv) {
       reduced.basis_kind = ReducedBasisKind::Modes;
       reduced.modes.vibration_modes = std::atoi(v.substr(0, colon).c_str());
       reduced.modes.columns = colon == std::string::npos ? 0 : std::atoi(v.c_str() + colon + 1);
+    } else if (a == "--handles" && has_value) {
+      reduced.basis_kind = ReducedBasisKind::Handles;
+      reduced.num_handles = std::atoi(argv[++i]);
     } else if (a == "--elastic" && has_value) {
       reduced.elastic_cubature_points = std::atoi(argv[++i]);
     } else if (a == "--inertial" && has_value) {

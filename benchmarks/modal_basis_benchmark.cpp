@@ -146,6 +146,7 @@ int main(int argc, char** argv) {
     auto body = std::make_shared<BodyModel>(makeSyntheticBody(body_options));
     SoftAvatarSettings settings;
     settings.volumetric.tet_mesh.resolution = resolution;
+    settings.reduced.basis_kind = ReducedBasisKind::Handles;
     settings.reduced.num_handles = handles;
     auto avatar = std::make_shared<SoftAvatar>(body, VecX(), settings);
     avatar->enableSoftTissue();

@@ -230,6 +230,7 @@ std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, co
   settings.volumetric.material_file = g_material_file;
   if (m.kind == Kind::Rom) {
     settings.reduced.num_handles = std::max(m.handles, 1);
+    settings.reduced.basis_kind = ReducedBasisKind::Handles;  // hN: the handle basis
     if (m.vibration_modes >= 0) {
       settings.reduced.basis_kind =
           m.handles > 0 ? ReducedBasisKind::ModesAndHandles : ReducedBasisKind::Modes;
@@ -847,6 +848,7 @@ int galerkin(const std::string& list) {
     std::printf("| %d |", handles);
     for (bool pou : {false, true}) {
       ReducedSettings settings;
+      settings.basis_kind = ReducedBasisKind::Handles;
       settings.num_handles = handles;
       settings.surface_partition_of_unity = pou;
       const ReducedData r = buildReducedData(data, *body, settings, false, false, nullptr);

@@ -316,6 +316,7 @@ struct Avatars {
     settings.volumetric.cache_dir = cache_dir;
     settings.volumetric.tet_mesh.resolution = 0.5;
     settings.volumetric.material_file = materialFile(tissue);
+    settings.reduced.basis_kind = ReducedBasisKind::Handles;
     settings.reduced.num_handles = 16;
     settings.reduced.elastic_cubature_points = 60;
     settings.reduced.inertial_cubature_points = 60;

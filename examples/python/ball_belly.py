@@ -1,8 +1,8 @@
 """A ball hits the belly of a standing avatar: a sphere collider moves along −z at belly height
 into the front of the body and back, which tracks the built-in "stand" motion on the ground.
 Writes a PNG sheet (body and ball) and prints how far the body is pushed. With --soft the avatar
-is the FEM soft skeleton (docs/fem.md), with --rom the ROM soft skeleton (docs/rom.md: a reduced
-basis over --handles surface handles, elastic and inertial cubature): the belly gives way, the
+is the FEM soft skeleton (docs/fem.md), with --rom the ROM soft skeleton (docs/rom.md: the
+default modal basis, or --handles surface handles; elastic and inertial cubature): the belly gives way, the
 sheet colours the body by the soft-tissue displacement |u| and the largest displacement is
 printed.
 
@@ -53,7 +53,8 @@ def main():
                              help="FEM soft tissue instead of the skeleton")
     model_group.add_argument("--rom", action="store_true",
                              help="ROM soft tissue (reduced basis, cubatures) instead of the skeleton")
-    parser.add_argument("--handles", type=int, default=87, help="ROM handles (--rom)")
+    parser.add_argument("--handles", type=int, default=None,
+                        help="ROM handles (--rom; default: the modal basis, no handles)")
     parser.add_argument("--resolution", type=float, default=1.0,
                         help="tet-mesh resolution (--soft, --rom)")
     parser.add_argument("--cache", default="",
@@ -78,7 +79,9 @@ def main():
     avatar.init_volumetric_data()
     if args.rom:
         reduced = avatar.reduced_data
-        print(f"ROM: {reduced.num_handles} handles; elastic cubature "
+        spans = [f"{n} {what}" for n, what in ((reduced.num_modes, "modes"),
+                                               (reduced.num_handles, "handles")) if n]
+        print(f"ROM: {', '.join(spans)}; elastic cubature "
               f"{len(reduced.elastic_cubature)} tets (held-out error "
               f"{100 * reduced.elastic_test_error:.2f} %), inertial cubature "
               f"{len(reduced.inertial_cubature)} tets ({100 * reduced.inertial_test_error:.2f} %); "

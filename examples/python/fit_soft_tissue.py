@@ -11,9 +11,10 @@ material, L-BFGS on the adjoint gradients of flsh.torch.simulate finds them.
 --subjects N fits one material shared by N bodies of known, different shapes (β₀ from −1 to 1),
 the way the FLSH paper estimated its soft-tissue parameters from the DYNA scans.
 
---basis picks the ROM's reduced basis: "handles" (the default: bounded biharmonic weights of
-surface handles), "modes" (static-correction modes of every bone DoF plus --vibration-modes
-fixed-interface modes, compressed to --modal-columns; issue 26) or "modes+handles".
+--basis picks the ROM's reduced basis: "handles" (this example's default, that of its figures in
+docs/adjoint.md: bounded biharmonic weights of surface handles), "modes" (the library's default:
+static-correction modes of every bone DoF plus --vibration-modes fixed-interface modes,
+compressed to --modal-columns) or "modes+handles".
 
 Printed: the parameters (truth, start, fit), the surface's RMS distance to the noise-free truth
 before and after, loss evaluations, L-BFGS iterations and wall time.
@@ -63,8 +64,10 @@ class Problem:
         ground = flsh.Collider.plane(point=[0.0, floor, 0.0], normal=[0.0, 1.0, 0.0])
         small = body.num_vertices < 6890
         settings = dict(SMALL_ROM) if (small and model == "rom") else {}
-        if model == "rom" and basis:
-            settings.update(basis)
+        if model == "rom":
+            settings.update(basis or {"basis": "handles"})
+            if settings["basis"] == "modes":  # the modal basis alone has no handles
+                settings.pop("handles", None)
         kwargs = dict(steps=steps, model=model, cache_dir=cache, colliders=[ground],
                       avatar_settings=settings)
         if small:
@@ -108,7 +111,7 @@ def fit(vertices=800, model="rom", steps=24, loss="vertices", subjects=1, iterat
         seed=7, cache=None, log=print, basis=None):
     """Runs the workflow and returns its figures (a dict). basis: the ROM's basis settings
     (avatar settings such as dict(basis="modes", vibration_modes=24, modal_columns=72)); None:
-    the default handles."""
+    the handle basis (16 handles on small bodies, 87 at full size)."""
     started = time.perf_counter()
     body = flsh.make_synthetic_body(vertices=vertices) if vertices else \
         flsh.make_synthetic_body()

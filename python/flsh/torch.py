@@ -184,8 +184,8 @@ class RolloutSimulator:
     own_material and material_names); β reaches them through SoftAvatar.with_shape (the
     discretization is held, see simulate). resolution: interior node density of the tet mesh (soft models);
     cache_dir: where soft avatars are cached (None: $FLSH_CACHE_DIR or ~/.cache/flsh);
-    avatar_settings: further flsh.SoftAvatar keyword arguments (e.g. handles,
-    elastic_cubature_points, material_file). options:
+    avatar_settings: further flsh.SoftAvatar keyword arguments (e.g. basis, vibration_modes,
+    handles, elastic_cubature_points, material_file). options:
     flsh.SimulableOptions or None. colliders: flsh.Collider list (e.g. a ground plane). newton:
     flsh.NewtonOptions of the model's steps, or None; the gradients are exact for the converged
     steps, so the default is tight: the skeleton's gradient_tolerance 1e-11 (central differences

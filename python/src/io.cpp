@@ -41,7 +41,15 @@ void bind_io(py::module_& m) {
       .def_readonly("resolution", &AvatarSpec::resolution, "tet-mesh resolution ('fem', 'rom')")
       .def_readonly("material_file", &AvatarSpec::material_file,
                     "material file, resolved ('fem', 'rom'); '' = built-in")
-      .def_readonly("handles", &AvatarSpec::handles, "reduced-basis handles ('rom')")
+      .def_property_readonly(
+          "basis", [](const AvatarSpec& a) { return std::string(reducedBasisKindName(a.basis)); },
+          "the reduced basis ('rom'): 'modes', 'handles' or 'modes+handles'")
+      .def_readonly("vibration_modes", &AvatarSpec::vibration_modes,
+                    "fixed-interface vibration modes of the modal basis ('rom' with modes)")
+      .def_readonly("modal_columns", &AvatarSpec::modal_columns,
+                    "columns of the compressed modal basis ('rom' with modes); 0 = all")
+      .def_readonly("handles", &AvatarSpec::handles,
+                    "point handles ('rom' with the handle basis or modes+handles)")
       .def_readonly("elastic_cubature", &AvatarSpec::elastic_cubature,
                     "elastic cubature tets ('rom'); 0 = off")
       .def_readonly("inertial_cubature", &AvatarSpec::inertial_cubature,

@@ -386,12 +386,12 @@ void bind_volume(py::module_& m) {
       .def(
           py::init([](std::shared_ptr<BodyModel> body, const py::object& betas, double density,
                       double voxel_size, double resolution, const std::string& material_file,
-                      const py::object& cache_dir, bool use_cache, int handles,
+                      const py::object& cache_dir, bool use_cache, const py::object& handles,
                       int elastic_cubature_points, int inertial_cubature_points,
                       int cubature_training_samples, double cubature_training_amplitude,
                       std::uint64_t cubature_seed, double basis_drop_below,
-                      bool surface_partition_of_unity, const std::string& basis,
-                      int vibration_modes, int modal_columns) {
+                      bool surface_partition_of_unity, const py::object& basis, int vibration_modes,
+                      int modal_columns) {
             if (!body) throw py::value_error("body: expected a BodyModel, got None");
             const VecX b = betas.is_none() ? VecX(VecX::Zero(body->numBetas()))
                                            : to_vector(betas, "betas", -1, "(K,)");
@@ -405,7 +405,13 @@ void bind_volume(py::module_& m) {
                   py::module_::import("os").attr("fspath")(cache_dir).cast<std::string>();
             settings.volumetric.use_cache = use_cache;
             ReducedSettings& r = settings.reduced;
-            r.num_handles = checked_count(handles, "handles", 1, "point handles of the ROM");
+            if (!handles.is_none()) {
+              if (!py::isinstance<py::int_>(handles))
+                throw py::type_error("handles: expected an int or None, got " +
+                                     py::str(py::type::of(handles)).cast<std::string>());
+              r.num_handles =
+                  checked_count(handles.cast<int>(), "handles", 1, "point handles of the ROM");
+            }
             r.elastic_cubature_points =
                 checked_count(elastic_cubature_points, "elastic_cubature_points", 1,
                               "sample tets; enable_elastic_cubature(False) switches it off");
@@ -426,7 +432,20 @@ void bind_volume(py::module_& m) {
                                     std::to_string(basis_drop_below));
             r.basis_drop_below = basis_drop_below;
             r.surface_partition_of_unity = surface_partition_of_unity;
-            r.basis_kind = parseReducedBasisKind(basis, "SoftAvatar: basis");
+            // As in scene files: handles without a basis choose the handle basis (the modal
+            // basis, the default, has none).
+            if (!basis.is_none() && !py::isinstance<py::str>(basis))
+              throw py::type_error(
+                  "basis: expected 'modes', 'handles', 'modes+handles' or None, got " +
+                  py::str(py::type::of(basis)).cast<std::string>());
+            r.basis_kind = !basis.is_none()     ? parseReducedBasisKind(basis.cast<std::string>(),
+                                                                        "SoftAvatar: basis")
+                           : !handles.is_none() ? ReducedBasisKind::Handles
+                                                : ReducedSettings().basis_kind;
+            if (!handles.is_none() && r.basis_kind == ReducedBasisKind::Modes)
+              throw py::value_error(
+                  "handles: not used by basis='modes' (handles belong to basis='handles' or "
+                  "'modes+handles')");
             if (vibration_modes < 0)
               throw py::value_error("vibration_modes: expected ≥ 0, got " +
                                     std::to_string(vibration_modes));
@@ -441,30 +460,30 @@ void bind_volume(py::module_& m) {
           py::arg("density") = defaults.density, py::arg("voxel_size") = defaults.voxel_size,
           py::arg("resolution") = 1.0, py::arg("material_file") = std::string(),
           py::arg("cache_dir") = py::none(), py::arg("use_cache") = true,
-          py::arg("handles") = rd.num_handles,
+          py::arg("handles") = py::none(),
           py::arg("elastic_cubature_points") = rd.elastic_cubature_points,
           py::arg("inertial_cubature_points") = rd.inertial_cubature_points,
           py::arg("cubature_training_samples") = rd.training_samples,
           py::arg("cubature_training_amplitude") = rd.training_amplitude,
           py::arg("cubature_seed") = rd.seed, py::arg("basis_drop_below") = rd.basis_drop_below,
           py::arg("surface_partition_of_unity") = rd.surface_partition_of_unity,
-          py::arg("basis") = std::string(reducedBasisKindName(rd.basis_kind)),
-          py::arg("vibration_modes") = rd.modes.vibration_modes,
+          py::arg("basis") = py::none(), py::arg("vibration_modes") = rd.modes.vibration_modes,
           py::arg("modal_columns") = rd.modes.columns,
           "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³ and voxel_size "
           "m (the skeleton's bone inertias). Soft tissue: resolution (interior node density of the "
           "tet mesh, 1 ≈ 10 000 nodes for SMPL), material_file (JSON, '' = built-in defaults), "
           "cache_dir (None = $FLSH_CACHE_DIR or ~/.cache/flsh), use_cache. Reduced model (ROM, "
-          "enable_reduced_model(); docs/rom.md): handles (point handles on the surface, ≥ 1), "
+          "enable_reduced_model(); docs/rom.md): basis: 'modes' (the default: the avatar's "
+          "static-correction and vibration modes), 'handles' (the FLSH paper's surface handles) "
+          "or 'modes+handles'; None = 'modes', or 'handles' when handles is given. With modes, "
+          "vibration_modes (≥ 0) and modal_columns (compressed to this many, 0 = all; cut to a "
+          "multiple of 3). handles (point handles on the surface, ≥ 1; None = 87), "
           "elastic_cubature_points / inertial_cubature_points (sample tets of each cubature when "
           "enabled, ≥ 1), cubature_training_samples (random training samples per cubature), "
           "cubature_training_amplitude (largest handle displacement of a training sample, m), "
-          "cubature_seed, basis_drop_below (basis weights below it are dropped, in [0, 0.01]), "
-          "surface_partition_of_unity (the basis rescaled to sum to 1 on the soft surface: about "
-          "half the error against the FEM, slower; docs/rom.md). basis: 'handles', 'modes' (the "
-          "avatar's static-correction and vibration modes) or 'modes+handles'; with modes, "
-          "vibration_modes (≥ 0) and modal_columns (compressed to this many, 0 = all; cut to a "
-          "multiple of 3).")
+          "cubature_seed, basis_drop_below (handle weights below it are dropped, in [0, 0.01]), "
+          "surface_partition_of_unity (the handle weights rescaled to sum to 1 on the soft "
+          "surface: about half the error against the FEM, slower; docs/rom.md).")
       .def(
           "init_volumetric_data",
           [](SoftAvatar& a) {
@@ -579,8 +598,21 @@ void bind_volume(py::module_& m) {
       .def_property_readonly("elastic_cubature_enabled", &SoftAvatar::elasticCubatureEnabled)
       .def_property_readonly("inertial_cubature_enabled", &SoftAvatar::inertialCubatureEnabled)
       .def_property_readonly(
+          "basis",
+          [](const SoftAvatar& a) {
+            return std::string(reducedBasisKindName(a.settings().reduced.basis_kind));
+          },
+          "the reduced model's basis: 'modes', 'handles' or 'modes+handles' (setting)")
+      .def_property_readonly(
+          "vibration_modes",
+          [](const SoftAvatar& a) { return a.settings().reduced.modes.vibration_modes; },
+          "fixed-interface vibration modes of a basis with modes (setting)")
+      .def_property_readonly(
+          "modal_columns", [](const SoftAvatar& a) { return a.settings().reduced.modes.columns; },
+          "columns of the compressed modal basis, 0 = all (setting)")
+      .def_property_readonly(
           "handles", [](const SoftAvatar& a) { return a.settings().reduced.num_handles; },
-          "point handles the reduced model asks for (setting)")
+          "point handles of a basis with handles (setting)")
       .def_property_readonly(
           "elastic_cubature_points",
           [](const SoftAvatar& a) { return a.settings().reduced.elastic_cubature_points; },

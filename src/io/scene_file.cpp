@@ -503,9 +503,27 @@ class SceneReader {
     // Settings of the reduced basis and its cubatures, which only the ROM builds.
     const std::string only_rom = "only for \"simulation\": \"rom\" (this avatar is \"" +
                                  avatar.simulation + "\", which has no reduced basis)";
+    if (node.contains("basis")) {
+      const std::string p = child(path, "basis");
+      if (avatar.simulation != "rom") fail(p, only_rom);
+      const std::string kind = toString(node["basis"], p);
+      try {
+        avatar.basis = parseReducedBasisKind(kind, p);
+      } catch (const InputError&) {
+        fail(p, "expected \"handles\", \"modes\" or \"modes+handles\", got \"" + kind + "\"");
+      }
+    }
     if (node.contains("handles")) {
       const std::string p = child(path, "handles");
       if (avatar.simulation != "rom") fail(p, only_rom);
+      // Handles without a basis choose the handle basis (the scene files written before the
+      // modal basis became the default keep their meaning); the modal basis alone has none.
+      if (!node.contains("basis"))
+        avatar.basis = ReducedBasisKind::Handles;
+      else if (avatar.basis == ReducedBasisKind::Modes)
+        fail(p,
+             "not used by \"basis\": \"modes\" (handles belong to \"basis\": \"handles\" "
+             "or \"modes+handles\")");
       avatar.handles = toIntRange(node["handles"], p, 1, 100000);
     }
     for (const char* key : {"elastic_cubature", "inertial_cubature"}) {
@@ -526,23 +544,15 @@ class SceneReader {
       if (avatar.simulation != "rom") fail(p, only_rom);
       avatar.surface_partition_of_unity = toBool(node["surface_partition_of_unity"], p);
     }
-    if (node.contains("basis")) {
-      const std::string p = child(path, "basis");
-      if (avatar.simulation != "rom") fail(p, only_rom);
-      const std::string kind = toString(node["basis"], p);
-      try {
-        avatar.basis = parseReducedBasisKind(kind, p);
-      } catch (const InputError&) {
-        fail(p, "expected \"handles\", \"modes\" or \"modes+handles\", got \"" + kind + "\"");
-      }
-    }
     for (const char* key : {"vibration_modes", "modal_columns"}) {
       if (!node.contains(key)) continue;
       const std::string p = child(path, key);
       if (avatar.simulation != "rom" || avatar.basis == ReducedBasisKind::Handles)
-        fail(p,
-             "only for \"simulation\": \"rom\" with \"basis\": \"modes\" or "
-             "\"modes+handles\"");
+        fail(p, std::string("only for \"simulation\": \"rom\" with \"basis\": \"modes\" or "
+                            "\"modes+handles\"") +
+                    (avatar.simulation == "rom" && !node.contains("basis")
+                         ? " (\"handles\" without a \"basis\" chooses the handle basis)"
+                         : ""));
       (std::string(key) == "vibration_modes" ? avatar.vibration_modes : avatar.modal_columns) =
           toIntRange(node[key], p, 0, 100000);
     }

@@ -643,6 +643,13 @@ void finishReducedData(const VolumetricData& data, const BodyModel& body,
 
 }  // namespace
 
+ModalBasisSettings defaultReducedModes() {
+  ModalBasisSettings s;
+  s.vibration_modes = 24;
+  s.columns = 72;
+  return s;
+}
+
 const char* reducedBasisKindName(ReducedBasisKind kind) {
   switch (kind) {
     case ReducedBasisKind::Handles:

@@ -154,6 +154,31 @@ if "$flsh" avatar --model synthetic:600 --soft rom --basis mode >/dev/null 2>bad
 fi
 grep -q "basis kind 'mode', expected one of 'handles', 'modes', 'modes+handles'" bad.err ||
   { cat bad.err; fail "--basis mode: message"; }
+# The default basis is the modal one; --handles without --basis chooses the handle basis (as
+# "handles" without "basis" in a scene file), handles with the modal basis alone are an error.
+"$flsh" avatar --model synthetic:600 --soft rom --resolution 0.3 --elastic-cubature 40 \
+  --inertial-cubature 30 --cache cache >avatar_default.json 2>avatar_default.err ||
+  { cat avatar_default.err; fail "flsh avatar --soft rom with the default basis"; }
+$py - <<'PY'
+import json
+r = json.load(open("avatar_default.json"))["reduced"]
+assert r["basis"] == "modes" and r["handles"] == 0 and r["modes"] == 72, r
+PY
+expect_cli_error() {  # expect_cli_error MESSAGE ARGS...
+  local message=$1
+  shift
+  set +e
+  "$flsh" avatar --model synthetic:600 --soft rom "$@" >/dev/null 2>bad.err
+  local rc=$?
+  set -e
+  [ "$rc" -eq 2 ] || { cat bad.err; fail "exit code $rc (expected 2) for: $*"; }
+  grep -qF -- "$message" bad.err || { cat bad.err; fail "message should contain: $message"; }
+}
+expect_cli_error "--handles: not used by --basis modes" --basis modes --handles 5
+expect_cli_error "--vibration-modes and --modal-columns: only for --basis modes or modes+handles (--handles without --basis chooses the handle basis)" \
+  --handles 5 --vibration-modes 3
+expect_cli_error "--vibration-modes and --modal-columns: only for --basis modes or modes+handles" \
+  --basis handles --modal-columns 12
 
 # --partition-of-unity: another basis (its own cache entry) of the same size.
 "$flsh" avatar --model synthetic:600 --soft rom --resolution 0.3 --handles 12 \
@@ -192,6 +217,8 @@ expect_error 'bad.json: avatars[0].elastic_cubature: expected a number of sample
   '{"avatars": [{"vertices": 600, "simulation": "rom", "elastic_cubature": -5}]}'
 expect_error 'bad.json: avatars[0].handles: expected a number, got string "12"' \
   '{"avatars": [{"vertices": 600, "simulation": "rom", "handles": "12"}]}'
+expect_error 'bad.json: avatars[0].handles: not used by "basis": "modes"' \
+  '{"avatars": [{"vertices": 600, "simulation": "rom", "basis": "modes", "handles": 12}]}'
 expect_error 'bad.json: newton.reduced_gradient_tolerance: expected 0 < value <= 1' \
   '{"newton": {"reduced_gradient_tolerance": -1}, "avatars": [{"vertices": 600}]}'
 # More handles than the body's soft-tissue surface vertices: found when the avatar is built.

@@ -294,7 +294,14 @@ TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
   EXPECT_EQ(a.simulation, "rom");
   EXPECT_DOUBLE_EQ(a.resolution, TetMeshOptions().resolution);
   EXPECT_TRUE(a.material_file.empty());
-  // The documented defaults: 87 handles, 500 sample tets per cubature (both on).
+  // The documented defaults: the modal basis of 24 vibration modes compressed to 72 columns, 500
+  // sample tets per cubature (both on); 87 handles for the handle basis.
+  EXPECT_EQ(a.basis, ReducedBasisKind::Modes);
+  EXPECT_EQ(a.vibration_modes, 24);
+  EXPECT_EQ(a.modal_columns, 72);
+  EXPECT_EQ(a.basis, ReducedSettings().basis_kind);
+  EXPECT_EQ(a.vibration_modes, ReducedSettings().modes.vibration_modes);
+  EXPECT_EQ(a.modal_columns, ReducedSettings().modes.columns);
   EXPECT_EQ(a.handles, 87);
   EXPECT_EQ(a.elastic_cubature, 500);
   EXPECT_EQ(a.inertial_cubature, 500);
@@ -327,7 +334,7 @@ TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
   EXPECT_EQ(r.basis, ReducedBasisKind::ModesAndHandles);
   EXPECT_EQ(r.vibration_modes, 12);
   EXPECT_EQ(r.modal_columns, 48);
-  EXPECT_EQ(scene.avatars[1].basis, ReducedBasisKind::Handles);  // the default
+  EXPECT_EQ(scene.avatars[1].basis, ReducedBasisKind::Modes);  // the default
   EXPECT_DOUBLE_EQ(scene.reduced_gradient_tolerance, 3e-6);
   EXPECT_DOUBLE_EQ(scene.soft_tissue_gradient_tolerance, 2e-4);
   // Absent lagged-factor keys: each solver's defaults.
@@ -339,6 +346,26 @@ TEST(SceneFile, RomAvatarsReadTheirVolumetricAndReducedSettings) {
   // The FEM avatar keeps the (unused) reduced defaults.
   EXPECT_EQ(scene.avatars[1].simulation, "fem");
   EXPECT_EQ(scene.avatars[1].handles, 87);
+}
+
+// Scene files written before the modal basis became the default name handles without a basis:
+// they keep the handle basis. "basis" given wins, and its order among the keys does not matter.
+TEST(SceneFile, HandlesWithoutABasisChooseTheHandleBasis) {
+  const SceneSpec scene = parse(R"({"avatars": [
+    {"simulation": "rom", "handles": 24},
+    {"simulation": "rom", "handles": 24, "basis": "modes+handles"},
+    {"basis": "handles", "simulation": "rom"},
+    {"simulation": "rom", "vibration_modes": 12}]})");
+  ASSERT_EQ(scene.avatars.size(), 4u);
+  EXPECT_EQ(scene.avatars[0].basis, ReducedBasisKind::Handles);
+  EXPECT_EQ(scene.avatars[0].handles, 24);
+  EXPECT_EQ(scene.avatars[1].basis, ReducedBasisKind::ModesAndHandles);
+  EXPECT_EQ(scene.avatars[1].handles, 24);
+  EXPECT_EQ(scene.avatars[2].basis, ReducedBasisKind::Handles);
+  EXPECT_EQ(scene.avatars[2].handles, 87);
+  EXPECT_EQ(scene.avatars[3].basis, ReducedBasisKind::Modes);
+  EXPECT_EQ(scene.avatars[3].vibration_modes, 12);
+  EXPECT_EQ(scene.avatars[3].modal_columns, 72);
 }
 
 TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
@@ -436,9 +463,16 @@ TEST(SceneFile, BadRomSettingsAreNamedWithTheirPath) {
        "avatars[0].basis: only for \"simulation\": \"rom\""},
       {R"({"avatars": [{"simulation": "rom", "basis": "mode"}]})",
        "avatars[0].basis: expected \"handles\", \"modes\" or \"modes+handles\", got \"mode\""},
-      {R"({"avatars": [{"simulation": "rom", "vibration_modes": 10}]})",
+      {R"({"avatars": [{"simulation": "rom", "basis": "handles", "vibration_modes": 10}]})",
        "avatars[0].vibration_modes: only for \"simulation\": \"rom\" with \"basis\": "
        "\"modes\" or \"modes+handles\""},
+      {R"({"avatars": [{"simulation": "rom", "handles": 20, "modal_columns": 30}]})",
+       "avatars[0].modal_columns: only for \"simulation\": \"rom\" with \"basis\": "
+       "\"modes\" or \"modes+handles\" (\"handles\" without a \"basis\" chooses the handle "
+       "basis)"},
+      {R"({"avatars": [{"simulation": "rom", "basis": "modes", "handles": 20}]})",
+       "avatars[0].handles: not used by \"basis\": \"modes\" (handles belong to \"basis\": "
+       "\"handles\" or \"modes+handles\")"},
       {R"({"avatars": [{"simulation": "rom", "basis": "modes", "modal_columns": -3}]})",
        "avatars[0].modal_columns: expected an integer in [0, 100000], got -3"},
       // Volumetric keys are for both soft-tissue models, not the skeleton.
@@ -648,12 +682,14 @@ TEST(SceneFile, ExampleFilesParseAndTheDefaultMatchesTheBuiltIn) {
   EXPECT_EQ(soft.avatars[0].simulation, "fem");
   EXPECT_DOUBLE_EQ(soft.soft_tissue_gradient_tolerance, 1e-5);
 
-  // The ROM example: full-body defaults (87 handles, both cubatures with 500 tets).
+  // The ROM example: full-body defaults (the modal basis 24:72, both cubatures with 500 tets).
   const SceneSpec rom = loadSceneFile((examples / "soft_rom_jumping_jacks.json").string());
   ASSERT_EQ(rom.avatars.size(), 1u);
   EXPECT_EQ(rom.avatars[0].simulation, "rom");
   EXPECT_EQ(rom.avatars[0].synthetic_vertices, 6890);
-  EXPECT_EQ(rom.avatars[0].handles, 87);
+  EXPECT_EQ(rom.avatars[0].basis, ReducedBasisKind::Modes);
+  EXPECT_EQ(rom.avatars[0].vibration_modes, ReducedSettings().modes.vibration_modes);
+  EXPECT_EQ(rom.avatars[0].modal_columns, ReducedSettings().modes.columns);
   EXPECT_EQ(rom.avatars[0].elastic_cubature, 500);
   EXPECT_EQ(rom.avatars[0].inertial_cubature, 500);
   EXPECT_EQ(rom.avatars[0].motion, "builtin:jumping_jacks");

@@ -57,7 +57,8 @@ def rom(avatar):
 
 def test_settings_are_keyword_arguments_with_the_documented_defaults(small_body):
     plain = flsh.SoftAvatar(small_body)
-    assert plain.handles == 87
+    assert plain.basis == "modes" and plain.vibration_modes == 24 and plain.modal_columns == 72
+    assert plain.handles == 87  # of the handle basis
     assert plain.elastic_cubature_points == 500 and plain.inertial_cubature_points == 500
     assert not plain.reduced_model_enabled
     assert not plain.elastic_cubature_enabled and not plain.inertial_cubature_enabled
@@ -65,6 +66,11 @@ def test_settings_are_keyword_arguments_with_the_documented_defaults(small_body)
                              inertial_cubature_points=9)
     assert (custom.handles, custom.elastic_cubature_points, custom.inertial_cubature_points) == (
         5, 7, 9)
+    assert custom.basis == "handles"  # handles without a basis choose the handle basis
+    assert flsh.SoftAvatar(small_body, handles=5, basis="modes+handles").basis == "modes+handles"
+    assert flsh.SoftAvatar(small_body, basis="handles").handles == 87
+    with pytest.raises(TypeError, match="handles: expected an int or None, got <class 'float'>"):
+        flsh.SoftAvatar(small_body, handles=5.0)
     custom.enableReducedModel()
     custom.enableElasticCubature()
     custom.enable_inertial_cubature(True)
@@ -76,6 +82,7 @@ def test_settings_are_keyword_arguments_with_the_documented_defaults(small_body)
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"handles": 0}, "handles: expected an integer ≥ 1"),
+    ({"handles": 5, "basis": "modes"}, "handles: not used by basis='modes'"),
     ({"elastic_cubature_points": 0}, "elastic_cubature_points: expected an integer ≥ 1"),
     ({"inertial_cubature_points": -3}, "inertial_cubature_points: expected an integer ≥ 1"),
     ({"cubature_training_samples": 0}, "cubature_training_samples: expected an integer ≥ 1"),

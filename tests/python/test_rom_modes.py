@@ -11,8 +11,9 @@ NUM_BONE_DOFS = 6 * 24
 
 
 def _modal_avatar(body, cache_dir, basis, handles=6):
-    avatar = flsh.SoftAvatar(body, resolution=0.3, cache_dir=str(cache_dir), handles=handles,
-                             basis=basis, vibration_modes=3, modal_columns=13,
+    avatar = flsh.SoftAvatar(body, resolution=0.3, cache_dir=str(cache_dir),
+                             handles=handles if "handles" in basis else None, basis=basis,
+                             vibration_modes=3, modal_columns=13,
                              elastic_cubature_points=40, inertial_cubature_points=30,
                              cubature_training_samples=60)
     avatar.enable_soft_tissue()

@@ -447,7 +447,8 @@ def test_scene_files():
         flsh.load_scene_file(ROOT / "no_such_scene.json")
     rom = flsh.load_scene_file(ROOT / "examples" / "scenes" / "soft_rom_jumping_jacks.json")
     assert rom.avatars[0].simulation == "rom"
-    assert rom.avatars[0].handles == 87 and rom.avatars[0].elastic_cubature == 500
+    assert rom.avatars[0].basis == "modes" and rom.avatars[0].vibration_modes == 24
+    assert rom.avatars[0].modal_columns == 72 and rom.avatars[0].elastic_cubature == 500
     assert rom.avatars[0].inertial_cubature == 500 and rom.avatars[0].resolution > 0
     assert rom.reduced_gradient_tolerance > 0
     # Lagged-factor settings: each soft solver's defaults unless the file sets them.

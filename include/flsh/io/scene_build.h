@@ -72,9 +72,8 @@ SceneOptions sceneOptionsOf(const SceneSpec& scene);
 /// flags give them: 0 sample tets switches that cubature off (exact integration), and its count
 /// then keeps the (unused) default.
 void setReducedSettings(ReducedSettings& reduced, int handles, int elastic, int inertial,
-                        bool partition_of_unity, ReducedBasisKind basis = ReducedBasisKind::Handles,
-                        int vibration_modes = ReducedSettings().modes.vibration_modes,
-                        int modal_columns = 0);
+                        bool partition_of_unity, ReducedBasisKind basis, int vibration_modes,
+                        int modal_columns);
 
 /// Soft tissue, the reduced model and the cubatures that are on (as setReducedSettings).
 void enableReducedModel(SoftAvatar& avatar, int elastic, int inertial);

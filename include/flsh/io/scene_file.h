@@ -48,8 +48,9 @@ struct AvatarSpec {
   /// the soft surface; about half the error against the FEM, docs/rom.md).
   bool surface_partition_of_unity = ReducedSettings().surface_partition_of_unity;
   /// "rom" only: what spans the soft tissue (ReducedSettings::basis_kind, the key "basis":
-  /// "handles", "modes" or "modes+handles") and, with modes, the vibration modes and the
-  /// compressed column count (ModalBasisSettings::vibration_modes / columns; 0 = every column).
+  /// "handles", "modes" or "modes+handles"; default "modes", but "handles" given without a
+  /// "basis" means "handles") and, with modes, the vibration modes and the compressed column
+  /// count (ModalBasisSettings::vibration_modes / columns; 0 = every column).
   ReducedBasisKind basis = ReducedSettings().basis_kind;
   int vibration_modes = ReducedSettings().modes.vibration_modes;
   int modal_columns = ReducedSettings().modes.columns;

@@ -50,12 +50,23 @@ const char* reducedBasisKindName(ReducedBasisKind kind);
 /// names otherwise.
 ReducedBasisKind parseReducedBasisKind(const std::string& name, const std::string& where);
 
+/// The modal basis a ROM avatar uses by default: the static-correction modes of the 144 bone
+/// DoFs plus the 24 lowest fixed-interface vibration modes, compressed to 72 columns. It won
+/// the speed–accuracy table of docs/benchmarks.md (5 / 11 / 7.5 % off the FEM on walk / jumping
+/// jacks / ball, against 64–66 % for 87 handles, at the same steps/s; built in 10–13 s at the
+/// default resolution). ModalBasisSettings' own defaults (50 modes, every column) are those of
+/// the basis as a standalone tool (computeModalBasis).
+ModalBasisSettings defaultReducedModes();
+
 struct ReducedSettings {
-  ReducedBasisKind basis_kind = ReducedBasisKind::Handles;
+  /// Modes by default (docs/rom.md); Handles is the FLSH paper's basis, kept for the control
+  /// handles give (and the scene files and `flsh avatar` calls that name handles without a
+  /// basis choose it).
+  ReducedBasisKind basis_kind = ReducedBasisKind::Modes;
   /// The modal basis of the kinds with modes. Its column count is cut to a multiple of 3 (the
   /// last columns, the least important, go): the simulation groups the modal coordinates in
   /// threes.
-  ModalBasisSettings modes;
+  ModalBasisSettings modes = defaultReducedModes();
   int num_handles = 87;  ///< point handles on the surface (≥ 1; kinds with handles)
   /// Sample tets of each cubature (≥ 1); a cubature that is switched off is not built.
   int elastic_cubature_points = 500;

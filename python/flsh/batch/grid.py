@@ -19,9 +19,9 @@ AVATAR_KEYS = ("name", "model", "vertices", "betas")
 SAMPLE_KEYS = ("samples", "seed", "num_betas", "std", "name", "model", "vertices")
 MOTION_KEYS = ("motion", "name", "up", "motion_seconds", "offset", "yaw_degrees")
 SIMULATIONS = ("skeleton", "fem", "rom")
-SIMULATION_KEYS = ("simulation", "name", "resolution", "materials", "handles",
-                   "elastic_cubature", "inertial_cubature", "surface_partition_of_unity",
-                   "options")
+SIMULATION_KEYS = ("simulation", "name", "resolution", "materials", "basis", "vibration_modes",
+                   "modal_columns", "handles", "elastic_cubature", "inertial_cubature",
+                   "surface_partition_of_unity", "options")
 JOB_KEYS = ("name", "avatar", "motion", "simulation", "scene")
 MERGED_SCENE_KEYS = ("outputs", "newton")  # merged key by key; other keys are replaced
 
@@ -184,8 +184,9 @@ class Expander:
 
     def simulation(self, value, key, default_name=""):
         """A simulation entry: "skeleton", "fem", "rom" or {"simulation": ..., "name", and
-        the scene format's avatar keys of that model: resolution, materials, handles,
-        elastic_cubature, inertial_cubature, surface_partition_of_unity, options}. Named
+        the scene format's avatar keys of that model: resolution, materials, basis,
+        vibration_modes, modal_columns, handles, elastic_cubature, inertial_cubature,
+        surface_partition_of_unity, options}. Named
         by the model or "name" (default_name is not used)."""
         fields = dict(self.r.object(value, key, SIMULATION_KEYS)) if isinstance(value, dict) \
             else {"simulation": value}

@@ -8,7 +8,7 @@
 //                 [--no-cache]
 //   flsh avatar --model BODY.npz [--betas b0,b1,…] [--soft fem|rom] [--cache DIR]
 //               [--resolution R] [--materials FILE] [--no-cache]
-//               [--basis modes|handles|modes+handles] [--vibration-modes M]
+//               [--preset realtime] [--basis modes|handles|modes+handles] [--vibration-modes M]
 //               [--modal-columns C] [--handles H] [--elastic-cubature N]
 //               [--inertial-cubature N] [--partition-of-unity]
 //
@@ -41,6 +41,7 @@
 #include "flsh/format/mesh_io.h"
 #include "flsh/format/npz.h"
 #include "flsh/io/output_dir.h"
+#include "flsh/io/presets.h"
 #include "flsh/io/scene_build.h"
 #include "flsh/io/scene_file.h"
 #include "flsh/io/scene_outputs.h"
@@ -215,8 +216,8 @@ int cmdAvatar(const AvatarArgs& args) {
              "interior node density relative to the default");
   if (args.reduced_options_given && args.soft != "rom")
     throw InputError(
-        "--handles, --elastic-cubature, --inertial-cubature, --partition-of-unity, --basis, "
-        "--vibration-modes and --modal-columns are only for --soft rom, got --soft " +
+        "--preset, --handles, --elastic-cubature, --inertial-cubature, --partition-of-unity, "
+        "--basis, --vibration-modes and --modal-columns are only for --soft rom, got --soft " +
         args.soft);
   // As in scene files: --handles without --basis chooses the handle basis (the modal basis,
   // the default, has no handles).
@@ -574,6 +575,11 @@ int main(int argc, char** argv) {
   auto* pou_option =
       avatar->add_flag("--partition-of-unity", avatar_args.partition_of_unity,
                        "--soft rom: basis rescaled to sum to 1 on the soft surface (docs/rom.md)");
+  std::string preset_name;
+  auto* preset_option = avatar->add_option(
+      "--preset", preset_name,
+      "--soft rom: realtime (modes 12:24, 100-tet cubatures; flsh/io/presets.h); the options "
+      "given beside it win");
   auto* basis_option = avatar
                            ->add_option("--basis", avatar_args.basis,
                                         "--soft rom: handles, modes or modes+handles (docs/rom.md)")
@@ -604,12 +610,24 @@ int main(int argc, char** argv) {
     if (command == "pose") return cmdPose(model, motion_spec, out, betas, up);
     if (command == "demo") return cmdDemo(demo_out, vertices, name, seconds);
     if (command == "avatar") {
-      avatar_args.reduced_options_given = handles_option->count() + elastic_option->count() +
-                                              inertial_option->count() + pou_option->count() +
-                                              basis_option->count() + vibration_option->count() +
-                                              columns_option->count() >
+      if (preset_option->count() > 0) {  // the preset's defaults under the options given
+        const ReducedSettings r =
+            presetReducedSettings(parsePreset(preset_name, "flsh avatar: --preset"));
+        if (basis_option->count() == 0 && handles_option->count() == 0)
+          avatar_args.basis = reducedBasisKindName(r.basis_kind);
+        if (vibration_option->count() == 0) avatar_args.vibration_modes = r.modes.vibration_modes;
+        if (columns_option->count() == 0) avatar_args.modal_columns = r.modes.columns;
+        if (elastic_option->count() == 0) avatar_args.elastic_cubature = r.elastic_cubature_points;
+        if (inertial_option->count() == 0)
+          avatar_args.inertial_cubature = r.inertial_cubature_points;
+      }
+      avatar_args.reduced_options_given = preset_option->count() + handles_option->count() +
+                                              elastic_option->count() + inertial_option->count() +
+                                              pou_option->count() + basis_option->count() +
+                                              vibration_option->count() + columns_option->count() >
                                           0;
-      avatar_args.basis_given = basis_option->count() > 0;
+      avatar_args.basis_given =
+          basis_option->count() > 0 || (preset_option->count() > 0 && handles_option->count() == 0);
       avatar_args.handles_given = handles_option->count() > 0;
       avatar_args.modal_options_given = vibration_option->count() + columns_option->count() > 0;
       return cmdAvatar(avatar_args);

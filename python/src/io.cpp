@@ -99,6 +99,11 @@ void bind_io(py::module_& m) {
                     "LaggedFactorOptions of the FEM's solver (newton.soft_tissue_lagged)")
       .def_readonly("reduced_lagged", &SceneSpec::reduced_lagged,
                     "LaggedFactorOptions of the ROM's solver (newton.reduced_lagged)")
+      .def_property_readonly(
+          "preset", [](const SceneSpec& s) { return std::string(presetName(s.preset)); },
+          "'none' or 'realtime' (the scene key \"preset\")")
+      .def_readonly("reduced_iteration_budget", &SceneSpec::reduced_iteration_budget,
+                    "Newton iterations per step of the ROM's solver as a budget; 0 = none")
       .def_readonly("avatar_contact", &SceneSpec::avatar_contact)
       .def_readonly("outputs", &SceneSpec::outputs, "OutputSpec")
       .def("__repr__", [](const SceneSpec& s) {
@@ -238,6 +243,8 @@ void bind_io(py::module_& m) {
         report["factorizations"] = r.factorizations;
         report["cg_iterations"] = r.cg_iterations;
         report["unconverged"] = r.unconverged;
+        report["iteration_budget"] = r.iteration_budget;
+        report["at_budget"] = r.at_budget;
         report["max_contacts"] = r.max_contacts;
         py::dict displacement;
         for (size_t i = 0; i < r.avatar_names.size(); ++i)

@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "bindings.h"
+#include "flsh/io/presets.h"
 #include "flsh/volume/closest_surface_points.h"
 #include "flsh/volume/modal_basis.h"
 #include "flsh/volume/reduced_data.h"
@@ -387,11 +388,12 @@ void bind_volume(py::module_& m) {
           py::init([](std::shared_ptr<BodyModel> body, const py::object& betas, double density,
                       double voxel_size, double resolution, const std::string& material_file,
                       const py::object& cache_dir, bool use_cache, const py::object& handles,
-                      int elastic_cubature_points, int inertial_cubature_points,
-                      int cubature_training_samples, double cubature_training_amplitude,
-                      std::uint64_t cubature_seed, double basis_drop_below,
-                      bool surface_partition_of_unity, const py::object& basis, int vibration_modes,
-                      int modal_columns) {
+                      const py::object& elastic_cubature_points,
+                      const py::object& inertial_cubature_points, int cubature_training_samples,
+                      double cubature_training_amplitude, std::uint64_t cubature_seed,
+                      double basis_drop_below, bool surface_partition_of_unity,
+                      const py::object& basis, const py::object& vibration_modes,
+                      const py::object& modal_columns, const py::object& preset) {
             if (!body) throw py::value_error("body: expected a BodyModel, got None");
             const VecX b = betas.is_none() ? VecX(VecX::Zero(body->numBetas()))
                                            : to_vector(betas, "betas", -1, "(K,)");
@@ -404,20 +406,31 @@ void bind_volume(py::module_& m) {
               settings.volumetric.cache_dir =
                   py::module_::import("os").attr("fspath")(cache_dir).cast<std::string>();
             settings.volumetric.use_cache = use_cache;
+            // The preset's settings first, then the arguments given (None: the preset's).
+            if (!preset.is_none() && !py::isinstance<py::str>(preset))
+              throw py::type_error("preset: expected 'none', 'realtime' or None, got " +
+                                   py::str(py::type::of(preset)).cast<std::string>());
             ReducedSettings& r = settings.reduced;
-            if (!handles.is_none()) {
-              if (!py::isinstance<py::int_>(handles))
-                throw py::type_error("handles: expected an int or None, got " +
-                                     py::str(py::type::of(handles)).cast<std::string>());
+            r = presetReducedSettings(
+                preset.is_none() ? Preset::None
+                                 : parsePreset(preset.cast<std::string>(), "SoftAvatar: preset"));
+            const auto given = [](const py::object& value, const char* name) {
+              if (!value.is_none() && !py::isinstance<py::int_>(value))
+                throw py::type_error(std::string(name) + ": expected an int or None, got " +
+                                     py::str(py::type::of(value)).cast<std::string>());
+              return !value.is_none();
+            };
+            if (given(handles, "handles"))
               r.num_handles =
                   checked_count(handles.cast<int>(), "handles", 1, "point handles of the ROM");
-            }
-            r.elastic_cubature_points =
-                checked_count(elastic_cubature_points, "elastic_cubature_points", 1,
-                              "sample tets; enable_elastic_cubature(False) switches it off");
-            r.inertial_cubature_points =
-                checked_count(inertial_cubature_points, "inertial_cubature_points", 1,
-                              "sample tets; enable_inertial_cubature(False) switches it off");
+            if (given(elastic_cubature_points, "elastic_cubature_points"))
+              r.elastic_cubature_points =
+                  checked_count(elastic_cubature_points.cast<int>(), "elastic_cubature_points", 1,
+                                "sample tets; enable_elastic_cubature(False) switches it off");
+            if (given(inertial_cubature_points, "inertial_cubature_points"))
+              r.inertial_cubature_points =
+                  checked_count(inertial_cubature_points.cast<int>(), "inertial_cubature_points", 1,
+                                "sample tets; enable_inertial_cubature(False) switches it off");
             r.training_samples =
                 checked_count(cubature_training_samples, "cubature_training_samples", 1,
                               "random training samples per cubature");
@@ -438,37 +451,40 @@ void bind_volume(py::module_& m) {
               throw py::type_error(
                   "basis: expected 'modes', 'handles', 'modes+handles' or None, got " +
                   py::str(py::type::of(basis)).cast<std::string>());
-            r.basis_kind = !basis.is_none()     ? parseReducedBasisKind(basis.cast<std::string>(),
-                                                                        "SoftAvatar: basis")
-                           : !handles.is_none() ? ReducedBasisKind::Handles
-                                                : ReducedSettings().basis_kind;
+            if (!basis.is_none())
+              r.basis_kind = parseReducedBasisKind(basis.cast<std::string>(), "SoftAvatar: basis");
+            else if (!handles.is_none())
+              r.basis_kind = ReducedBasisKind::Handles;
             if (!handles.is_none() && r.basis_kind == ReducedBasisKind::Modes)
               throw py::value_error(
                   "handles: not used by basis='modes' (handles belong to basis='handles' or "
                   "'modes+handles')");
-            if (vibration_modes < 0)
-              throw py::value_error("vibration_modes: expected ≥ 0, got " +
-                                    std::to_string(vibration_modes));
-            if (modal_columns < 0)
-              throw py::value_error("modal_columns: expected ≥ 0 (0: every column), got " +
-                                    std::to_string(modal_columns));
-            r.modes.vibration_modes = vibration_modes;
-            r.modes.columns = modal_columns;
+            if (given(vibration_modes, "vibration_modes")) {
+              r.modes.vibration_modes = vibration_modes.cast<int>();
+              if (r.modes.vibration_modes < 0)
+                throw py::value_error("vibration_modes: expected ≥ 0, got " +
+                                      std::to_string(r.modes.vibration_modes));
+            }
+            if (given(modal_columns, "modal_columns")) {
+              r.modes.columns = modal_columns.cast<int>();
+              if (r.modes.columns < 0)
+                throw py::value_error("modal_columns: expected ≥ 0 (0: every column), got " +
+                                      std::to_string(r.modes.columns));
+            }
             return std::make_shared<SoftAvatar>(std::move(body), b, settings);
           }),
           py::arg("body"), py::arg("betas") = py::none(), py::kw_only(),
           py::arg("density") = defaults.density, py::arg("voxel_size") = defaults.voxel_size,
           py::arg("resolution") = 1.0, py::arg("material_file") = std::string(),
           py::arg("cache_dir") = py::none(), py::arg("use_cache") = true,
-          py::arg("handles") = py::none(),
-          py::arg("elastic_cubature_points") = rd.elastic_cubature_points,
-          py::arg("inertial_cubature_points") = rd.inertial_cubature_points,
+          py::arg("handles") = py::none(), py::arg("elastic_cubature_points") = py::none(),
+          py::arg("inertial_cubature_points") = py::none(),
           py::arg("cubature_training_samples") = rd.training_samples,
           py::arg("cubature_training_amplitude") = rd.training_amplitude,
           py::arg("cubature_seed") = rd.seed, py::arg("basis_drop_below") = rd.basis_drop_below,
           py::arg("surface_partition_of_unity") = rd.surface_partition_of_unity,
-          py::arg("basis") = py::none(), py::arg("vibration_modes") = rd.modes.vibration_modes,
-          py::arg("modal_columns") = rd.modes.columns,
+          py::arg("basis") = py::none(), py::arg("vibration_modes") = py::none(),
+          py::arg("modal_columns") = py::none(), py::arg("preset") = py::none(),
           "body: BodyModel; betas (≤K,) zero padded, None = zeros; density kg/m³ and voxel_size "
           "m (the skeleton's bone inertias). Soft tissue: resolution (interior node density of the "
           "tet mesh, 1 ≈ 10 000 nodes for SMPL), material_file (JSON, '' = built-in defaults), "
@@ -476,10 +492,13 @@ void bind_volume(py::module_& m) {
           "enable_reduced_model(); docs/rom.md): basis: 'modes' (the default: the avatar's "
           "static-correction and vibration modes), 'handles' (the FLSH paper's surface handles) "
           "or 'modes+handles'; None = 'modes', or 'handles' when handles is given. With modes, "
-          "vibration_modes (≥ 0) and modal_columns (compressed to this many, 0 = all; cut to a "
-          "multiple of 3). handles (point handles on the surface, ≥ 1; None = 87), "
-          "elastic_cubature_points / inertial_cubature_points (sample tets of each cubature when "
-          "enabled, ≥ 1), cubature_training_samples (random training samples per cubature), "
+          "vibration_modes (≥ 0; None = 24) and modal_columns (compressed to this many, 0 = all; "
+          "cut to a multiple of 3; None = 72). handles (point handles on the surface, ≥ 1; None "
+          "= 87), elastic_cubature_points / inertial_cubature_points (sample tets of each "
+          "cubature when enabled, ≥ 1; None = 500), preset (None or 'none': the defaults above; "
+          "'realtime': modes 12:24 and 100-tet cubatures, the arguments given win; a scene's "
+          "Newton budget is the scene key \"preset\", or SceneOptions.reduced_newton."
+          "max_iterations = 3), cubature_training_samples (random training samples per cubature), "
           "cubature_training_amplitude (largest handle displacement of a training sample, m), "
           "cubature_seed, basis_drop_below (handle weights below it are dropped, in [0, 0.01]), "
           "surface_partition_of_unity (the handle weights rescaled to sum to 1 on the soft "

@@ -232,7 +232,9 @@ SceneOptions sceneOptionsOf(const SceneSpec& scene) {
   options.soft_tissue_newton.step_tolerance = scene.newton.step_tolerance;
   if (scene.soft_tissue_gradient_tolerance > 0)
     options.soft_tissue_newton.gradient_tolerance = scene.soft_tissue_gradient_tolerance;
-  options.reduced_newton.max_iterations = scene.newton.max_iterations;
+  options.reduced_newton.max_iterations = scene.reduced_iteration_budget > 0
+                                              ? scene.reduced_iteration_budget
+                                              : scene.newton.max_iterations;
   options.reduced_newton.step_tolerance = scene.newton.step_tolerance;
   if (scene.reduced_gradient_tolerance > 0)
     options.reduced_newton.gradient_tolerance = scene.reduced_gradient_tolerance;

@@ -248,9 +248,18 @@ class SceneReader {
   SceneSpec read(const json& root, const SceneOverrides& overrides) const {
     if (!root.is_object()) fail("(top level)", "expected a JSON object, got " + describe(root));
     checkKeys(root, "",
-              {"time_step", "duration", "avatar_contact", "newton", "avatars", "colliders",
-               "ground", "outputs", "cache_dir", "use_cache"});
+              {"time_step", "duration", "preset", "avatar_contact", "newton", "avatars",
+               "colliders", "ground", "outputs", "cache_dir", "use_cache"});
     SceneSpec scene;
+    if (root.contains("preset")) {
+      const std::string name = toString(root["preset"], "preset");
+      try {
+        scene.preset = parsePreset(name, "preset");
+      } catch (const InputError&) {
+        fail("preset", "expected \"none\" or \"realtime\", got \"" + name + "\"");
+      }
+      scene.reduced_iteration_budget = presetReducedIterationBudget(scene.preset);
+    }
     if (root.contains("time_step"))
       scene.time_step = toRange(root["time_step"], "time_step", 0.0, 1.0, true, "s");
     if (root.contains("duration"))
@@ -263,6 +272,7 @@ class SceneReader {
       scene.avatar_contact = toBool(root["avatar_contact"], "avatar_contact");
     if (root.contains("newton")) {
       scene.newton = readNewton(root["newton"], "newton");
+      if (root["newton"].contains("max_iterations")) scene.reduced_iteration_budget = 0;
       if (root["newton"].contains("soft_tissue_gradient_tolerance"))
         scene.soft_tissue_gradient_tolerance =
             toRange(root["newton"]["soft_tissue_gradient_tolerance"],
@@ -452,6 +462,15 @@ class SceneReader {
                "yaw_degrees",
                "options"});
     AvatarSpec avatar;
+    const ReducedSettings reduced =
+        presetReducedSettings(scene.preset);  // defaults of the ROM keys
+    avatar.basis = reduced.basis_kind;
+    avatar.vibration_modes = reduced.modes.vibration_modes;
+    avatar.modal_columns = reduced.modes.columns;
+    avatar.handles = reduced.num_handles;
+    avatar.elastic_cubature = reduced.elastic_cubature_points;
+    avatar.inertial_cubature = reduced.inertial_cubature_points;
+    avatar.surface_partition_of_unity = reduced.surface_partition_of_unity;
     avatar.name = node.contains("name") ? toName(node["name"], child(path, "name"))
                                         : "avatar" + std::to_string(index);
     if (node.contains("model")) {

@@ -120,6 +120,13 @@ SceneRunReport runScene(const SceneSpec& spec, const SceneRunOptions& options) {
   report.frames = 1 + report.steps / wanted.every;
   report.time_step = spec.time_step;
   report.output_dir = wanted.dir;
+  // The ROM's solver runs the scene when it has a "rom" avatar and no "fem" one (Scene).
+  bool rom = false, fem = false;
+  for (const AvatarSpec& a : spec.avatars) {
+    rom = rom || a.simulation == "rom";
+    fem = fem || a.simulation == "fem";
+  }
+  if (rom && !fem) report.iteration_budget = spec.reduced_iteration_budget;
   // The outputs go to a staging folder beside outputs.dir, which replaces it at the end.
   std::unique_ptr<StagedOutputDir> out_dir;
   if (any_output)
@@ -171,7 +178,9 @@ SceneRunReport runScene(const SceneSpec& spec, const SceneRunOptions& options) {
     report.factorizations += stats.newton.factorizations;
     report.cg_iterations += stats.newton.cg_iterations;
     report.max_contacts = std::max(report.max_contacts, stats.active_contacts);
-    if (!stats.newton.converged && report.unconverged++ == 0)
+    if (report.iteration_budget > 0 && stats.newton.max_iterations_reached)
+      ++report.at_budget;
+    else if (!stats.newton.converged && report.unconverged++ == 0)
       report.first_unconverged = "step " + std::to_string(s) + ": " + stats.newton.message;
     if (s % wanted.every == 0) record(s * h);
     progress.update(s, s * h);
@@ -221,17 +230,21 @@ std::string SceneRunReport::summary() const {
                                                (ground_automatic ? ", auto)" : ")")
                                          : "";
   const double per_step = 1.0 / std::max(1, steps);
+  const std::string budget_note = iteration_budget > 0
+                                      ? ", " + std::to_string(at_budget) + " at the budget of " +
+                                            std::to_string(iteration_budget) + " iterations"
+                                      : "";
   std::snprintf(line, sizeof(line),
                 "simulate: %s: %d avatar(s), %d collider(s)%s, %d steps of %.4g s (%.3g s), "
                 "%d frames; %.0f steps/s, %.2f Newton iterations/step (%.2f factorizations, "
-                "%.1f PCG iterations), %d unconverged, "
+                "%.1f PCG iterations), %d unconverged%s, "
                 "max %d contacts; wall time: set-up %.2f s, simulation %.2f s, output %.2f s; "
                 "wrote %s in %s\n",
                 source.c_str(), avatars, colliders, ground_note.c_str(), steps, time_step,
                 steps * time_step, frames, steps / std::max(simulation_seconds, 1e-9),
                 newton_iterations * per_step, factorizations * per_step, cg_iterations * per_step,
-                unconverged, max_contacts, setup_seconds, simulation_seconds, output_seconds,
-                outputs.empty() ? "nothing" : outputs.c_str(), output_dir.c_str());
+                unconverged, budget_note.c_str(), max_contacts, setup_seconds, simulation_seconds,
+                output_seconds, outputs.empty() ? "nothing" : outputs.c_str(), output_dir.c_str());
   return text + line;
 }
 

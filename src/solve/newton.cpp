@@ -332,6 +332,7 @@ NewtonResult newtonSolve(Objective& objective, const NewtonOptions& options, Lin
       break;
     }
     if (iteration >= options.max_iterations) {
+      result.max_iterations_reached = true;
       result.message = format("max_iterations (%g) reached with |g|inf = %.3g",
                               options.max_iterations, gradient_norm);
       break;

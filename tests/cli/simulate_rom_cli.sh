@@ -180,6 +180,47 @@ expect_cli_error "--vibration-modes and --modal-columns: only for --basis modes 
 expect_cli_error "--vibration-modes and --modal-columns: only for --basis modes or modes+handles" \
   --basis handles --modal-columns 12
 
+# The realtime preset: the modal basis 12:24, 100-tet cubatures and a budget of 3 Newton
+# iterations per step, whose end is reported as such and not as a failure.
+cat > realtime.json <<'JSON'
+{
+  "preset": "realtime",
+  "time_step": 0.03333333333333333,
+  "duration": 0.3,
+  "ground": "auto",
+  "avatars": [{"name": "soft", "vertices": 600, "simulation": "rom", "resolution": 0.3,
+               "motion": "builtin:walk", "motion_seconds": 0.5}],
+  "outputs": {"dir": "out_realtime", "ply": false, "gltf": false, "png": false}
+}
+JSON
+"$flsh" simulate realtime.json --cache cache >realtime.log 2>realtime.err ||
+  { cat realtime.err; fail "scene with the realtime preset"; }
+grep -Eq "avatar 'soft' \(rom\): 24 modes, 0 handles" realtime.err ||
+  { cat realtime.err; fail "realtime: stderr should report the 24 modes"; }
+grep -Eq "3\.00 Newton iterations/step .* 0 unconverged, [0-9]+ at the budget of 3 iterations" realtime.log ||
+  { cat realtime.log; fail "realtime: 3 iterations per step, the budget reported, none unconverged"; }
+$py - <<'PY'
+import numpy as np
+d = np.load("out_realtime/states.npz")
+assert d["soft_states"].shape == (10, 144 + 24), d["soft_states"].shape
+assert np.isfinite(d["soft_states"]).all() and d["soft_max_displacement_mm"].max() > 0
+PY
+"$flsh" avatar --model synthetic:600 --soft rom --resolution 0.3 --preset realtime \
+  --inertial-cubature 30 --cache cache >avatar_rt.json 2>avatar_rt.err ||
+  { cat avatar_rt.err; fail "flsh avatar --preset realtime"; }
+$py - <<'PY'
+import json
+r = json.load(open("avatar_rt.json"))["reduced"]
+assert r["basis"] == "modes" and r["modes"] == 24 and r["handles"] == 0, r
+assert 1 <= r["elastic_cubature"]["tets"] <= 100 and 1 <= r["inertial_cubature"]["tets"] <= 30, r
+PY
+expect_cli_error "flsh avatar: --preset: unknown preset 'fast', expected 'none' or 'realtime'" \
+  --preset fast
+if "$flsh" avatar --model synthetic:600 --soft fem --preset realtime >/dev/null 2>bad.err; then
+  fail "--preset accepted with --soft fem"
+fi
+grep -q "only for --soft rom" bad.err || { cat bad.err; fail "--preset with fem: message"; }
+
 # --partition-of-unity: another basis (its own cache entry) of the same size.
 "$flsh" avatar --model synthetic:600 --soft rom --resolution 0.3 --handles 12 \
   --elastic-cubature 40 --inertial-cubature 30 --partition-of-unity --cache cache \

@@ -368,6 +368,57 @@ TEST(SceneFile, HandlesWithoutABasisChooseTheHandleBasis) {
   EXPECT_EQ(scene.avatars[3].modal_columns, 72);
 }
 
+// "preset": "realtime" gives every "rom" avatar the preset's basis and cubatures (the avatar's
+// own keys win) and the ROM's solver its iteration budget (unless newton.max_iterations is
+// given); "none" and an absent key are the defaults.
+TEST(SceneFile, ThePresetFillsInTheRomDefaultsAndTheIterationBudget) {
+  const ReducedSettings realtime = presetReducedSettings(Preset::Realtime);
+  const SceneSpec scene = parse(R"({"preset": "realtime", "avatars": [
+    {"simulation": "rom"},
+    {"simulation": "rom", "elastic_cubature": 300, "modal_columns": 36},
+    {"simulation": "rom", "handles": 20},
+    {"simulation": "fem"}]})");
+  EXPECT_EQ(scene.preset, Preset::Realtime);
+  EXPECT_EQ(scene.reduced_iteration_budget, 3);
+  EXPECT_EQ(io::sceneOptionsOf(scene).reduced_newton.max_iterations, 3);
+  EXPECT_EQ(io::sceneOptionsOf(scene).soft_tissue_newton.max_iterations,
+            scene.newton.max_iterations);
+  const AvatarSpec& a = scene.avatars[0];
+  EXPECT_EQ(a.basis, ReducedBasisKind::Modes);
+  EXPECT_EQ(a.vibration_modes, 12);
+  EXPECT_EQ(a.modal_columns, 24);
+  EXPECT_EQ(a.elastic_cubature, 100);
+  EXPECT_EQ(a.inertial_cubature, 100);
+  EXPECT_EQ(a.vibration_modes, realtime.modes.vibration_modes);
+  EXPECT_EQ(a.elastic_cubature, realtime.elastic_cubature_points);
+  EXPECT_EQ(scene.avatars[1].elastic_cubature, 300);
+  EXPECT_EQ(scene.avatars[1].modal_columns, 36);
+  EXPECT_EQ(scene.avatars[1].vibration_modes, 12);
+  EXPECT_EQ(scene.avatars[1].inertial_cubature, 100);
+  EXPECT_EQ(scene.avatars[2].basis, ReducedBasisKind::Handles);  // handles without a basis
+  EXPECT_EQ(scene.avatars[2].handles, 20);
+  EXPECT_EQ(scene.avatars[2].elastic_cubature, 100);
+
+  const SceneSpec limited = parse(
+      R"({"preset": "realtime", "newton": {"max_iterations": 7}, "avatars": [{"simulation": "rom"}]})");
+  EXPECT_EQ(limited.reduced_iteration_budget, 0);
+  EXPECT_EQ(io::sceneOptionsOf(limited).reduced_newton.max_iterations, 7);
+  EXPECT_EQ(limited.avatars[0].modal_columns, 24);
+
+  for (const char* text : {R"({"avatars": [{"simulation": "rom"}]})",
+                           R"({"preset": "none", "avatars": [{"simulation": "rom"}]})"}) {
+    const SceneSpec plain = parse(text);
+    EXPECT_EQ(plain.preset, Preset::None);
+    EXPECT_EQ(plain.reduced_iteration_budget, 0);
+    EXPECT_EQ(plain.avatars[0].modal_columns, ReducedSettings().modes.columns);
+    EXPECT_EQ(plain.avatars[0].elastic_cubature, ReducedSettings().elastic_cubature_points);
+  }
+  EXPECT_THAT(messageOf<InputError>([] { parse(R"({"preset": "fast", "avatars": [{}]})"); }),
+              HasSubstr("scene.json: preset: expected \"none\" or \"realtime\", got \"fast\""));
+  EXPECT_THAT(messageOf<InputError>([] { parse(R"({"preset": 3, "avatars": [{}]})"); }),
+              HasSubstr("scene.json: preset: expected a string"));
+}
+
 TEST(SceneFile, ReadsTheLaggedFactorSettingsOfBothSoftSolvers) {
   const SceneSpec scene = parse(R"({
     "newton": {"soft_tissue_lagged": {"cg_relative_tolerance": 0.02, "max_cg_iterations": 40,

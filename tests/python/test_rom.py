@@ -71,6 +71,19 @@ def test_settings_are_keyword_arguments_with_the_documented_defaults(small_body)
     assert flsh.SoftAvatar(small_body, basis="handles").handles == 87
     with pytest.raises(TypeError, match="handles: expected an int or None, got <class 'float'>"):
         flsh.SoftAvatar(small_body, handles=5.0)
+    # The realtime preset: the small modal ROM; the arguments given win.
+    realtime = flsh.SoftAvatar(small_body, preset="realtime")
+    assert (realtime.basis, realtime.vibration_modes, realtime.modal_columns) == ("modes", 12, 24)
+    assert (realtime.elastic_cubature_points, realtime.inertial_cubature_points) == (100, 100)
+    mixed = flsh.SoftAvatar(small_body, preset="realtime", modal_columns=36, handles=10,
+                            inertial_cubature_points=50)
+    assert (mixed.basis, mixed.handles, mixed.modal_columns) == ("handles", 10, 36)
+    assert (mixed.elastic_cubature_points, mixed.inertial_cubature_points) == (100, 50)
+    assert flsh.SoftAvatar(small_body, preset="none").modal_columns == 72
+    with pytest.raises(ValueError, match="SoftAvatar: preset: unknown preset 'fast'"):
+        flsh.SoftAvatar(small_body, preset="fast")
+    with pytest.raises(TypeError, match="preset: expected 'none', 'realtime' or None"):
+        flsh.SoftAvatar(small_body, preset=1)
     custom.enableReducedModel()
     custom.enableElasticCubature()
     custom.enable_inertial_cubature(True)

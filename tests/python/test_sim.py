@@ -451,6 +451,10 @@ def test_scene_files():
     assert rom.avatars[0].modal_columns == 72 and rom.avatars[0].elastic_cubature == 500
     assert rom.avatars[0].inertial_cubature == 500 and rom.avatars[0].resolution > 0
     assert rom.reduced_gradient_tolerance > 0
+    realtime = flsh.load_scene_file(ROOT / "examples" / "scenes" / "rom_realtime_walk.json")
+    assert realtime.preset == "realtime" and realtime.reduced_iteration_budget == 3
+    assert (realtime.avatars[0].basis, realtime.avatars[0].modal_columns) == ("modes", 24)
+    assert rom.preset == "none" and rom.reduced_iteration_budget == 0
     # Lagged-factor settings: each soft solver's defaults unless the file sets them.
     lagged = default.soft_tissue_lagged
     assert lagged.enabled and lagged.cg_relative_tolerance == 0.05

@@ -303,8 +303,14 @@ TEST(Newton, ReportsMaxIterationsAndValidatesOptions) {
   options.max_iterations = 2;
   const NewtonResult r = newtonSolve(f, options);
   EXPECT_FALSE(r.converged);
+  EXPECT_TRUE(r.max_iterations_reached);
   EXPECT_EQ(r.iterations, 2);
   EXPECT_NE(r.message.find("max_iterations"), std::string::npos) << r.message;
+  options.max_iterations = 100;  // converged, or failed otherwise: not at the limit
+  FunctionObjective again = rosenbrock(true);
+  const NewtonResult done = newtonSolve(again, options);
+  EXPECT_TRUE(done.converged);
+  EXPECT_FALSE(done.max_iterations_reached);
 
   NewtonOptions bad;
   bad.armijo = 1.5;

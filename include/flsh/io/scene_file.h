@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "flsh/contact/collider.h"
+#include "flsh/io/presets.h"
 #include "flsh/sim/simulable.h"
 #include "flsh/solve/newton.h"
 #include "flsh/solve/scene.h"
@@ -108,6 +109,14 @@ struct SceneSpec {
   /// reduced_newton.coarse_presolve); keys absent keep those solvers' defaults.
   CoarsePresolveOptions soft_tissue_presolve = softTissueNewtonDefaults().coarse_presolve;
   CoarsePresolveOptions reduced_presolve = reducedNewtonDefaults().coarse_presolve;
+  /// "preset": a named bundle of defaults (flsh/io/presets.h): its ROM settings for every
+  /// "rom" avatar (the avatar's own keys win) and its Newton iteration budget for the ROM's
+  /// solver (unless "newton.max_iterations" is given).
+  Preset preset = Preset::None;
+  /// Newton iterations per step of the ROM's solver as a budget, whose end is not a failure
+  /// (presetReducedIterationBudget; 0: none, the solver ends at its tolerance or fails at
+  /// newton.max_iterations).
+  int reduced_iteration_budget = 0;
   bool avatar_contact = true;
   OutputSpec outputs;
   /// Avatar cache of the "fem" / "rom" avatars' volumetric bodies and reduced data: folder

@@ -51,6 +51,10 @@ struct SceneRunReport {
   long newton_iterations = 0, factorizations = 0, cg_iterations = 0;
   int unconverged = 0, max_contacts = 0;
   std::string first_unconverged;  ///< "step N: message" of the first unconverged step
+  /// With an iteration budget (SceneSpec::reduced_iteration_budget, the realtime preset): the
+  /// budget, and the steps that used all of it (not counted as unconverged: the budget is the
+  /// trade asked for); 0 without one.
+  int iteration_budget = 0, at_budget = 0;
   double setup_seconds = 0.0, simulation_seconds = 0.0, output_seconds = 0.0;
   std::string output_dir;            ///< outputs.dir
   std::vector<std::string> written;  ///< what was written there ("states.npz", …)

@@ -196,6 +196,10 @@ struct NewtonOptions {
 
 struct NewtonResult {
   bool converged = false;
+  /// The solve stopped at NewtonOptions::max_iterations (converged false, its last accepted
+  /// iterate kept): a failure for a tolerance, the intended end for an iteration budget (the
+  /// real-time preset, flsh/io/presets.h).
+  bool max_iterations_reached = false;
   int iterations = 0;
   double energy = 0.0;
   double gradient_norm = 0.0;  ///< ‖g‖∞ at the end

@@ -611,8 +611,7 @@ int main(int argc, char** argv) {
     if (command == "demo") return cmdDemo(demo_out, vertices, name, seconds);
     if (command == "avatar") {
       if (preset_option->count() > 0) {  // the preset's defaults under the options given
-        const ReducedSettings r =
-            presetReducedSettings(parsePreset(preset_name, "flsh avatar: --preset"));
+        const ReducedSettings r = presetReducedSettings(parsePreset(preset_name, "--preset"));
         if (basis_option->count() == 0 && handles_option->count() == 0)
           avatar_args.basis = reducedBasisKindName(r.basis_kind);
         if (vibration_option->count() == 0) avatar_args.vibration_modes = r.modes.vibration_modes;

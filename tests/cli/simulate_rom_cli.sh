@@ -214,7 +214,7 @@ r = json.load(open("avatar_rt.json"))["reduced"]
 assert r["basis"] == "modes" and r["modes"] == 24 and r["handles"] == 0, r
 assert 1 <= r["elastic_cubature"]["tets"] <= 100 and 1 <= r["inertial_cubature"]["tets"] <= 30, r
 PY
-expect_cli_error "flsh avatar: --preset: unknown preset 'fast', expected 'none' or 'realtime'" \
+expect_cli_error "flsh avatar: error: --preset: unknown preset 'fast', expected 'none' or 'realtime'" \
   --preset fast
 if "$flsh" avatar --model synthetic:600 --soft fem --preset realtime >/dev/null 2>bad.err; then
   fail "--preset accepted with --soft fem"

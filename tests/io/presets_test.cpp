@@ -12,9 +12,8 @@ TEST(Presets, NamesRoundTripAndUnknownNamesAreNamed) {
   for (Preset preset : {Preset::None, Preset::Realtime})
     EXPECT_EQ(parsePreset(presetName(preset), "test"), preset);
   const std::string message =
-      test::messageOf<InputError>([] { parsePreset("real-time", "flsh avatar: --preset"); });
-  EXPECT_EQ(message,
-            "flsh avatar: --preset: unknown preset 'real-time', expected 'none' or 'realtime'");
+      test::messageOf<InputError>([] { parsePreset("real-time", "--preset"); });
+  EXPECT_EQ(message, "--preset: unknown preset 'real-time', expected 'none' or 'realtime'");
 }
 
 TEST(Presets, NoneIsTheLibraryDefaultAndRealtimeTheSmallModalRom) {

@@ -21,6 +21,7 @@
 // once, each tet's T = D_t W D_tᵀ formed from per-node products B_a W (B_a = ∂u_a/∂z).
 #pragma once
 
+#include <array>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -70,6 +71,12 @@ class ModalElasticityTerm final : public ElasticityTerm, public ReducedElasticit
     std::vector<int> tet;
     std::vector<TetElementRest> rest;
     std::vector<Mat6> C_world;
+    /// The ordered pairs (a, b) of soft nodes that share one of these tets (a's partners
+    /// pair_node[pair_start[a] .. pair_start[a + 1]), ascending, a itself among them), and per
+    /// tet its 16 pairs' indices (−1 where a node is not soft): the rest-stiffness products
+    /// form each pair's 3 × 3 block once, not once per tet around it.
+    std::vector<int> pair_start, pair_node;
+    std::vector<std::array<int, 16>> tet_pairs;
   };
   const EveryTet& everyTet() const;
   /// Material element e's soft-state entries (ascending; its handles', then every mode's).

@@ -685,6 +685,19 @@ ReducedData buildReducedData(const VolumetricData& data, const BodyModel& body,
         "bone_of_node / materials of the wrong size), expected buildVolumetricData's "
         "output");
   const std::string key = reducedKey(data, settings, elastic_cubature, inertial_cubature);
+  // Settings of the handle basis next to the modal basis alone (C++ code written when handles
+  // were the default): said once, not an error (the scene file, the CLI and Python reject them).
+  if (settings.basis_kind == ReducedBasisKind::Modes) {
+    if (settings.num_handles != ReducedSettings().num_handles)
+      r.warnings += "buildReducedData: ReducedSettings::num_handles = " +
+                    std::to_string(settings.num_handles) +
+                    " is not used by basis_kind = Modes (the default since 2026-12-02); set "
+                    "basis_kind = Handles or ModesAndHandles for handles\n";
+    if (settings.surface_partition_of_unity)
+      r.warnings +=
+          "buildReducedData: ReducedSettings::surface_partition_of_unity is not used by "
+          "basis_kind = Modes (it rescales the handles' weights)\n";
+  }
 
   if (cache) {
     const auto t0 = Clock::now();

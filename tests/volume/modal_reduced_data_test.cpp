@@ -171,6 +171,32 @@ TEST(ModalReducedData, CacheRoundTripIsBitwiseAndInvalidModesAreRebuilt) {
   EXPECT_TRUE(rebuilt.modes == built.modes);
 }
 
+// C++ code written when handles were the default sets num_handles (or the partition of unity)
+// without a basis kind: the modal basis then says that they are not used.
+TEST(ModalReducedData, HandleSettingsBesideTheModalBasisAloneAreReported) {
+  ReducedSettings s = modalSettings(ReducedBasisKind::Modes);
+  s.num_handles = 16;
+  s.surface_partition_of_unity = true;
+  ReducedBuildReport report;
+  buildReducedData(volume(), body(), s, false, false, nullptr, &report);
+  EXPECT_NE(report.warnings.find("ReducedSettings::num_handles = 16 is not used by basis_kind = "
+                                 "Modes"),
+            std::string::npos)
+      << report.warnings;
+  EXPECT_NE(report.warnings.find("surface_partition_of_unity is not used"), std::string::npos)
+      << report.warnings;
+  s.num_handles = ReducedSettings().num_handles;
+  s.surface_partition_of_unity = false;
+  ReducedBuildReport quiet;
+  buildReducedData(volume(), body(), s, false, false, nullptr, &quiet);
+  EXPECT_EQ(quiet.warnings, "");
+  s.basis_kind = ReducedBasisKind::ModesAndHandles;  // handles used: nothing to say
+  s.num_handles = 16;
+  ReducedBuildReport both;
+  buildReducedData(volume(), body(), s, false, false, nullptr, &both);
+  EXPECT_EQ(both.warnings.find("not used"), std::string::npos) << both.warnings;
+}
+
 TEST(ModalReducedData, KeyDependsOnTheKindAndTheModalSettingsOnly) {
   ReducedSettings handles;
   handles.basis_kind = ReducedBasisKind::Handles;

@@ -101,11 +101,13 @@ void reportReducedData(const std::string& name, const SoftAvatar& avatar, bool u
                             : report.from_cache
                                 ? format("hit (%.2f s)", report.seconds_total)
                                 : format("miss (built and stored in %.1f s)", report.seconds_total);
-  const std::string modes =
-      data.numModes() > 0 ? std::to_string(data.numModes()) + " modes, " : std::string();
-  log("avatar '" + name + "' (rom): " + modes + std::to_string(data.numHandles()) +
-      " handles, basis " + std::to_string(long(data.basis.nonZeros())) +
-      " nonzeros; elastic cubature " +
+  // "72 modes", "87 handles, basis N nonzeros" or both, by the basis kind.
+  std::string basis;
+  if (data.numModes() > 0) basis = std::to_string(data.numModes()) + " modes";
+  if (data.basis_kind != ReducedBasisKind::Modes)
+    basis += (basis.empty() ? "" : ", ") + std::to_string(data.numHandles()) + " handles, basis " +
+             std::to_string(long(data.basis.nonZeros())) + " nonzeros";
+  log("avatar '" + name + "' (rom): " + basis + "; elastic cubature " +
       cubatureSummary(data.elastic, data.elastic_test_error, avatar.elasticCubatureEnabled()) +
       "; inertial cubature " +
       cubatureSummary(data.inertial, data.inertial_test_error, avatar.inertialCubatureEnabled(),

@@ -130,7 +130,7 @@ sed 's/"handles": 12,/"basis": "modes", "vibration_modes": 3, "modal_columns": 1
 grep -q '"basis": "modes"' modes.json || fail "modes.json: the substitution did not apply"
 "$flsh" simulate modes.json --cache cache --out out_modes >modes.log 2>modes.err ||
   { cat modes.err; fail "scene with a modal basis"; }
-grep -Eq "avatar 'soft' \(rom\): 12 modes, 0 handles" modes.err ||
+grep -Eq "avatar 'soft' \(rom\): 12 modes; elastic cubature" modes.err ||
   { cat modes.err; fail "stderr should report the 12 modes"; }
 grep -q "0 unconverged" modes.log || { cat modes.log; fail "modes: every step should converge"; }
 $py - <<'PY'
@@ -195,7 +195,7 @@ cat > realtime.json <<'JSON'
 JSON
 "$flsh" simulate realtime.json --cache cache >realtime.log 2>realtime.err ||
   { cat realtime.err; fail "scene with the realtime preset"; }
-grep -Eq "avatar 'soft' \(rom\): 24 modes, 0 handles" realtime.err ||
+grep -Eq "avatar 'soft' \(rom\): 24 modes; elastic cubature [0-9]+ tets" realtime.err ||
   { cat realtime.err; fail "realtime: stderr should report the 24 modes"; }
 grep -Eq "3\.00 Newton iterations/step .* 0 unconverged, [0-9]+ at the budget of 3 iterations" realtime.log ||
   { cat realtime.log; fail "realtime: 3 iterations per step, the budget reported, none unconverged"; }

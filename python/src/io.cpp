@@ -263,7 +263,8 @@ void bind_io(py::module_& m) {
       "outputs (meshes/, states.npz, animation.glb, sheet.png) in out_dir ('' = the file's "
       "outputs.dir), written through a staging folder; progress, warnings and the summary on "
       "stderr (progress=True). Returns a dict of the run's figures (steps, Newton "
-      "iterations, contacts, max_displacement_mm per soft avatar, written files, times, "
+      "iterations, unconverged steps, the ROM's iteration_budget of a preset (0: none) and "
+      "the steps at_budget, contacts, max_displacement_mm per soft avatar, written files, times, "
       "summary). Overrides (0 = keep): duration s, time_step s.");
 }
 

@@ -51,6 +51,7 @@ def test_run_scene_writes_what_flsh_simulate_writes(scene_file, tmp_path, capfd)
     assert report["colliders"] == 2 and report["ground_height"] < -0.5
     assert report["max_contacts"] > 0
     assert report["unconverged"] == 0
+    assert report["iteration_budget"] == 0 and report["at_budget"] == 0  # no preset
     assert "1 avatar(s), 2 collider(s) (ground at y = " in report["summary"]
     assert os.path.isfile(tmp_path / "py_out" / "states.npz")
 
@@ -64,6 +65,22 @@ def test_run_scene_writes_what_flsh_simulate_writes(scene_file, tmp_path, capfd)
         assert sorted(a.files) == sorted(b.files)
         for key in a.files:
             np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def test_the_realtime_preset_reports_steps_at_its_budget_not_as_unconverged(tmp_path):
+    """A small ROM walker under "preset": "realtime": 3 Newton iterations per step, the steps
+    that use them all counted apart from unconverged ones (docs/rom.md)."""
+    path = tmp_path / "realtime.json"
+    path.write_text(json.dumps({
+        "preset": "realtime", "time_step": 1 / 30, "duration": 0.2, "ground": "auto",
+        "avatars": [{"vertices": 600, "simulation": "rom", "resolution": 0.3,
+                     "motion": "builtin:walk", "motion_seconds": 0.5}],
+        "outputs": {"png": False, "gltf": False, "ply": False}, "cache_dir": "cache"}))
+    report = flsh.run_scene(path, str(tmp_path / "out"), progress=False)
+    assert report["steps"] == 6 and report["iteration_budget"] == 3
+    assert report["newton_iterations"] <= 3 * 6
+    assert report["unconverged"] == 0 and 0 <= report["at_budget"] <= 6
+    assert "at the budget of 3 iterations" in report["summary"]
 
 
 def test_run_scene_errors_name_the_file_and_key(tmp_path):

@@ -537,15 +537,14 @@ double gradientFormEnergy(double volume, const Material& material, const Mat3& F
   return volume * psi;
 }
 
-/// The shape-function gradients of a tet as columns (g_0 = −g_1 − g_2 − g_3).
-Mat34 shapeGradients(const TetElementRest& rest) {
+}  // namespace
+
+Mat34 tetShapeGradients(const TetElementRest& rest) {
   Mat34 G;
   G.rightCols<3>() = rest.Dm_inv.transpose();
   G.col(0) = -G.rightCols<3>().rowwise().sum();
   return G;
 }
-
-}  // namespace
 
 double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& material,
                         const Mat34& u, Vec12* gradient, Mat12* hessian, bool psd) {
@@ -555,7 +554,7 @@ double tetElasticEnergy(const TetElementRest& rest, const FemMaterialPoint& mate
 PackedTet packTet(const TetElementRest& rest, const FemMaterialPoint& material, double weight) {
   PackedTet tet;
   tet.C_world = material.C_world;
-  tet.G = shapeGradients(rest);
+  tet.G = tetShapeGradients(rest);
   tet.volume = weight * rest.volume;
   tet.modulus = material.modulus;
   tet.gamma = material.gamma;
@@ -572,7 +571,7 @@ double tetElasticEnergy(const PackedTet& tet, const Mat34& u, Vec12* gradient, M
 }
 
 Mat3X reducedShapeGradients(const TetElementRest& rest, const Eigen::Ref<const Mat4X>& Phi) {
-  return shapeGradients(rest) * Phi;
+  return tetShapeGradients(rest) * Phi;
 }
 
 double reducedTetElasticEnergy(double volume, const FemMaterialPoint& material,

@@ -16,7 +16,7 @@ namespace flsh::detail {
 SubspaceTet subspaceTet(const VolumetricData& data, const ReducedData& rom, const SpMat& basis_rows,
                         const TetElementRest& rest, int t) {
   const MatX4i& tets = data.templ->mesh.tets;
-  const Mat3X G = reducedShapeGradients(rest, Mat4X::Identity(4, 4));  // g_a, column a
+  const Mat34 G = tetShapeGradients(rest);  // g_a, column a
   SubspaceTet out;
   const int H = rom.numHandles(), r = rom.numModes();
   bool moves = false;

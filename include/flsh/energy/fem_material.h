@@ -193,6 +193,10 @@ void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_wor
 void addTetLinearFormRestCotangent(const TetElementRest& rest, const Mat6& C_world, const Mat9& T,
                                    double scale, Mat34& X_bar);
 
+/// The shape-function gradients g_a of a tet as the columns of a 3 × 4 matrix (g_0 = −g_1 − g_2
+/// − g_3): F = I + u Gᵀ for nodal displacements u (columns).
+Mat34 tetShapeGradients(const TetElementRest& rest);
+
 /// Reduced tets (the ROM's elastic term): the tet's nodal displacements are a linear map of n
 /// reduced 3-vectors z_s, u_a = Σ_s Φ(a, s) z_s (Φ: the 4 × n basis rows of the tet's nodes).
 /// Then F = I + Z G̃ᵀ with Z (3 × n, columns z_s) and G̃ = G Φ (3 × n), G the shape-function

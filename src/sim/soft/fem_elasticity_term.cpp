@@ -201,7 +201,7 @@ void FemElasticityTerm::materialElementProducts(int e, const Mat3X& Lambda,
   const TetElementRest& rest = elements_.rest[size_t(e)];
   const Mat34 U = elementDisplacements(e);
   if (d) {
-    const Mat3X G = reducedShapeGradients(rest, Mat4X::Identity(4, 4));
+    const Mat34 G = tetShapeGradients(rest);
     addStressMaterialGradient(Mat3::Identity() + U * G.transpose(), elements_.materials[size_t(e)],
                               Lambda * G.transpose(), elements_.weights[e] * rest.volume, *d);
   }

@@ -355,7 +355,7 @@ void ModalElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values_b
   }
   const auto form = [&](int t, Mat9& Tt) {
     const std::array<int, 16>& pairs = all.tet_pairs[size_t(t)];
-    const Mat3X G = reducedShapeGradients(all.rest[size_t(t)], Mat4X::Identity(4, 4));
+    const Mat34 G = tetShapeGradients(all.rest[size_t(t)]);
     Tt.setZero();
     bool moves = false;
     for (int i = 0; i < 4; ++i)

@@ -16,7 +16,7 @@ struct SplitWeights {
 
 // F = I + u Gᵀ (G: the tet's shape gradients g_a, column a).
 Mat3 displacementGradient(const TetElementRest& rest, const Mat34& u) {
-  return u * reducedShapeGradients(rest, Mat4X::Identity(4, 4)).transpose();
+  return u * tetShapeGradients(rest).transpose();
 }
 
 SplitWeights splitWeights(const SampleElement& s, const Mat3& F, const Mat3& dF, const Vec6& ez,

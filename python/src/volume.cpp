@@ -406,28 +406,32 @@ void bind_volume(py::module_& m) {
               settings.volumetric.cache_dir =
                   py::module_::import("os").attr("fspath")(cache_dir).cast<std::string>();
             settings.volumetric.use_cache = use_cache;
-            // The preset's settings first, then the arguments given (None: the preset's).
-            if (!preset.is_none() && !py::isinstance<py::str>(preset))
-              throw py::type_error("preset: expected 'none', 'realtime' or None, got " +
-                                   py::str(py::type::of(preset)).cast<std::string>());
-            ReducedSettings& r = settings.reduced;
-            r = presetReducedSettings(
-                preset.is_none() ? Preset::None
-                                 : parsePreset(preset.cast<std::string>(), "SoftAvatar: preset"));
-            const auto given = [](const py::object& value, const char* name) {
-              if (!value.is_none() && !py::isinstance<py::int_>(value))
-                throw py::type_error(std::string(name) + ": expected an int or None, got " +
+            // An optional argument: false for None, TypeError naming it for another type than
+            // T (`what` describes the values expected).
+            const auto given = [](const py::object& value, const char* name, auto type,
+                                  const char* what) {
+              if (!value.is_none() && !py::isinstance<decltype(type)>(value))
+                throw py::type_error(std::string(name) + ": expected " + what + " or None, got " +
                                      py::str(py::type::of(value)).cast<std::string>());
               return !value.is_none();
             };
-            if (given(handles, "handles"))
+            // The preset's settings first, then the arguments given (None: the preset's).
+            ReducedSettings& r = settings.reduced;
+            r = presetReducedSettings(
+                given(preset, "preset", py::str(), "'none', 'realtime'")
+                    ? parsePreset(preset.cast<std::string>(), "SoftAvatar: preset")
+                    : Preset::None);
+            const auto given_int = [&](const py::object& value, const char* name) {
+              return given(value, name, py::int_(), "an int");
+            };
+            if (given_int(handles, "handles"))
               r.num_handles =
                   checked_count(handles.cast<int>(), "handles", 1, "point handles of the ROM");
-            if (given(elastic_cubature_points, "elastic_cubature_points"))
+            if (given_int(elastic_cubature_points, "elastic_cubature_points"))
               r.elastic_cubature_points =
                   checked_count(elastic_cubature_points.cast<int>(), "elastic_cubature_points", 1,
                                 "sample tets; enable_elastic_cubature(False) switches it off");
-            if (given(inertial_cubature_points, "inertial_cubature_points"))
+            if (given_int(inertial_cubature_points, "inertial_cubature_points"))
               r.inertial_cubature_points =
                   checked_count(inertial_cubature_points.cast<int>(), "inertial_cubature_points", 1,
                                 "sample tets; enable_inertial_cubature(False) switches it off");
@@ -447,11 +451,7 @@ void bind_volume(py::module_& m) {
             r.surface_partition_of_unity = surface_partition_of_unity;
             // As in scene files: handles without a basis choose the handle basis (the modal
             // basis, the default, has none).
-            if (!basis.is_none() && !py::isinstance<py::str>(basis))
-              throw py::type_error(
-                  "basis: expected 'modes', 'handles', 'modes+handles' or None, got " +
-                  py::str(py::type::of(basis)).cast<std::string>());
-            if (!basis.is_none())
+            if (given(basis, "basis", py::str(), "'modes', 'handles', 'modes+handles'"))
               r.basis_kind = parseReducedBasisKind(basis.cast<std::string>(), "SoftAvatar: basis");
             else if (!handles.is_none())
               r.basis_kind = ReducedBasisKind::Handles;
@@ -459,13 +459,13 @@ void bind_volume(py::module_& m) {
               throw py::value_error(
                   "handles: not used by basis='modes' (handles belong to basis='handles' or "
                   "'modes+handles')");
-            if (given(vibration_modes, "vibration_modes")) {
+            if (given_int(vibration_modes, "vibration_modes")) {
               r.modes.vibration_modes = vibration_modes.cast<int>();
               if (r.modes.vibration_modes < 0)
                 throw py::value_error("vibration_modes: expected ≥ 0, got " +
                                       std::to_string(r.modes.vibration_modes));
             }
-            if (given(modal_columns, "modal_columns")) {
+            if (given_int(modal_columns, "modal_columns")) {
               r.modes.columns = modal_columns.cast<int>();
               if (r.modes.columns < 0)
                 throw py::value_error("modal_columns: expected ≥ 0 (0: every column), got " +

@@ -120,13 +120,6 @@ SceneRunReport runScene(const SceneSpec& spec, const SceneRunOptions& options) {
   report.frames = 1 + report.steps / wanted.every;
   report.time_step = spec.time_step;
   report.output_dir = wanted.dir;
-  // The ROM's solver runs the scene when it has a "rom" avatar and no "fem" one (Scene).
-  bool rom = false, fem = false;
-  for (const AvatarSpec& a : spec.avatars) {
-    rom = rom || a.simulation == "rom";
-    fem = fem || a.simulation == "fem";
-  }
-  if (rom && !fem) report.iteration_budget = spec.reduced_iteration_budget;
   // The outputs go to a staging folder beside outputs.dir, which replaces it at the end.
   std::unique_ptr<StagedOutputDir> out_dir;
   if (any_output)
@@ -139,6 +132,10 @@ SceneRunReport runScene(const SceneSpec& spec, const SceneRunOptions& options) {
   for (const SceneAvatar& run : built.avatars)
     recorded.push_back({run.spec->name, run.simulable, run.soft});
   checkRecordingMemory(spec, recorded, built.colliders.size(), report.frames);
+  // The budget is the ROM solver's: it counts when that solver runs the scene
+  // (Scene::newtonOptions: soft tissue, none of it FEM).
+  if (built.scene->hasSoftTissue() && !built.scene->hasFemSoftTissue())
+    report.iteration_budget = spec.reduced_iteration_budget;
   report.avatars = int(built.avatars.size());
   report.colliders = int(built.colliders.size());
   report.ground = spec.ground.enabled;

@@ -333,9 +333,6 @@ void ModalElasticityTerm::addRestStiffnessProducts(const MatX& W, VecX& values_b
       Pj += phi->second * W.middleRows<3>(3 * Eigen::Index(phi->first));
     if (r > 0) Pj.noalias() += kin_.modeRows(j) * W.bottomRows(r);
   }
-  // T_t = D_t W D_tᵀ = Σ_ab (G_a ⊗ I)(B_a W B_bᵀ)(G_b ⊗ I)ᵀ with B_a = ∂u_a/∂z: the 3 × 3 block
-  // E_ab = P_a B_bᵀ of each soft node pair once (a pair lies in ~5 tets), then per tet a sum
-  // of its 16 blocks weighted by the shape gradients.
   const EveryTet& all = everyTet();
   const MatX4i& mesh = avatar_.volumetricData().templ->mesh.tets;
   std::vector<Mat3> E(all.pair_node.size());

@@ -18,7 +18,8 @@
 // basis held: SoftAvatar::withMaterial / withShape recompute K on the same columns). Each takes
 // its nodal form (nodal_element_derivatives.h): the nodes' displacements and the local
 // direction's through the basis rows. A reverse sweep sums W = Σ λ zᵀ and passes over the tets
-// once, each tet's T = D_t W D_tᵀ formed from per-node products B_a W (B_a = ∂u_a/∂z).
+// once, each tet's T = D_t W D_tᵀ summed from 3 × 3 blocks B_a W B_bᵀ (B_a = ∂u_a/∂z) formed
+// once per soft node pair.
 #pragma once
 
 #include <array>

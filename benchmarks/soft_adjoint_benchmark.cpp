@@ -15,11 +15,14 @@
 //  - forward with the tape (Rollout::run at the same Newton settings: each step also factors its
 //    exact Hessian for the reverse pass);
 //  - the loss's cotangent (Rollout::trajectoryCotangent: the surface's Jacobians per step);
-//  - backward: Rollout::backward (one back-substitution and the parameter and previous-state
-//    products per step), the same for every group but β and the material (what a caller who
-//    does not ask for them pays: Rollout::backward's `groups`), and the first run's alone (the
-//    first backward on an avatar builds what its simulables share: the ROM's table of every tet in
-//    the subspace);
+//  - backward: Rollout::backward (a solve with the step's exact Hessian and the parameter and
+//    previous-state products per step), the same for every group but β and the material (what a
+//    caller who does not ask for them pays: Rollout::backward's `groups`), and the first run's
+//    alone (the first backward on an avatar builds what its simulables share: the ROM's table of
+//    every tet in the subspace);
+//  - the FEM (a tape of snapshots): how the backward solved (steps factored, PCG iterations per
+//    step: TapeSolveOptions), and in the same repeats a backward that factors every step
+//    (TapeSolveOptions::iterative = false) with the relative difference of its gradient;
 //  - the process's peak resident memory after the runs, and the tape's share of it per step;
 //  - central differences over the same parameters: 2 · #parameters forward passes without tape,
 //    extrapolated from the timed one (not run).
@@ -34,6 +37,8 @@
 //                default, 1e-8);
 //   --storage:   what the tape keeps (RolloutOptions::tape_storage; default Auto: snapshots for
 //                the FEM, factors for the ROM).
+//   --factor-every-step: TapeSolveOptions::iterative = false for every rollout (the backward
+//                factors each step's exact Hessian instead of PCG with a nearby step's factor).
 //   --memory-only: one forward with the tape and one backward of a random state cotangent, then
 //                the peak resident memory against the memory before the rollout (for long
 //                horizons: e.g. `fem 1000 --memory-only`; no plain forward, no checks).
@@ -122,9 +127,11 @@ struct Loss {
 
 int main(int argc, char** argv) {
   if (argc < 2 || (std::strcmp(argv[1], "fem") != 0 && std::strcmp(argv[1], "rom") != 0)) {
-    std::fprintf(stderr,
-                 "usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] "
-                 "[--tolerance T] [--storage factors|snapshots] [--memory-only] [--modes V:C]\n");
+    std::fprintf(
+        stderr,
+        "usage: soft_adjoint_benchmark fem|rom [STEPS] [REPEATS=3] "
+        "[--tolerance T] [--storage factors|snapshots] [--factor-every-step] [--memory-only] "
+        "[--modes V:C]\n");
     return 2;
   }
   const bool rom = std::strcmp(argv[1], "rom") == 0;
@@ -141,6 +148,8 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "soft_adjoint_benchmark: --modes V:C with V, C >= 0\n");
         return 2;
       }
+    } else if (std::strcmp(argv[i], "--factor-every-step") == 0) {
+      rollout_options.tape_solve.iterative = false;
     } else if (std::strcmp(argv[i], "--memory-only") == 0) {
       memory_only = true;
     } else if (std::strcmp(argv[i], "--tolerance") == 0 && i + 1 < argc) {
@@ -252,10 +261,14 @@ int main(int argc, char** argv) {
     }
     loss.vertex_targets += 0.02 * RowMatX::Random(steps, 3 * V);
 
-    std::vector<double> forward, backward, backward_cheap, cotangents;
+    std::vector<double> forward, backward, backward_cheap, cotangents, backward_factored;
     RolloutVariables grad;
-    double L = 0.0;
-    int newton_iterations = 0;
+    double L = 0.0, factored_difference = 0.0;
+    int newton_iterations = 0, steps_factored = 0, cg_iterations = 0;
+    // The FEM's tape of snapshots solving by PCG: the same backward factoring every step.
+    const bool compare_factored =
+        rollout_options.tape_solve.iterative && makeSimulable(s)->numDofs() >= 2000 &&
+        rollout_options.tape_storage != RolloutOptions::TapeStorage::Factors && !rom;
     for (int r = 0; r < repeats; ++r) {
       auto sim = makeSimulable(s);
       Rollout rollout(sim, rollout_options);
@@ -271,9 +284,29 @@ int main(int argc, char** argv) {
       backward_cheap.push_back(
           timeOf([&] { without = rollout.backward(c.states, c.direct, cheap); }));
       L = loss.value(rollout);
-      newton_iterations = 0;
-      for (int t = 1; t <= steps; ++t)
-        newton_iterations += rollout.tape().stepInfo(t).newton_iterations;
+      newton_iterations = steps_factored = cg_iterations = 0;
+      for (int t = 1; t <= steps; ++t) {
+        const TapeStepInfo& info = rollout.tape().stepInfo(t);
+        newton_iterations += info.newton_iterations;
+        steps_factored += info.factorization != "pcg";
+        cg_iterations += info.cg_iterations;
+      }
+      if (compare_factored) {
+        RolloutOptions factored_options = rollout_options;
+        factored_options.tape_solve.iterative = false;
+        Rollout factored(makeSimulable(s), factored_options);
+        factored.run(steps);
+        const Rollout::TrajectoryCotangent fc = loss.cotangent(factored);
+        RolloutVariables g;
+        backward_factored.push_back(timeOf([&] { g = factored.backward(fc.states, fc.direct); }));
+        const auto relative = [](const auto& a, const auto& b) {
+          return (a - b).norm() / std::max(b.norm(), 1e-300);
+        };
+        factored_difference = std::max(
+            {relative(grad.pose_targets, g.pose_targets), relative(grad.material, g.material),
+             relative(grad.shape, g.shape), relative(grad.initial_state, g.initial_state),
+             relative(grad.stiffnesses, g.stiffnesses)});
+      }
     }
     const long material_size = makeSimulable(s)->parameterSize(SimParameter::Material);
     const long shape_size = makeSimulable(s)->parameterSize(SimParameter::Shape);
@@ -290,6 +323,16 @@ int main(int argc, char** argv) {
         median(cotangents));
     std::printf("backward              %8.3f s (%.2fx the plain forward, %.2fx with the tape)\n", b,
                 b / f_plain, b / f_tape);
+    if (steps_factored < steps || compare_factored)
+      std::printf(
+          "backward's solves     %d of %d steps factored, %.1f PCG iterations per other step "
+          "(TapeSolveOptions)\n",
+          steps_factored, steps, double(cg_iterations) / std::max(1, steps - steps_factored));
+    if (compare_factored)
+      std::printf(
+          "backward, every step factored %.3f s (%.2fx the plain forward; "
+          "TapeSolveOptions::iterative = false); gradient's relative difference %.1e\n",
+          median(backward_factored), median(backward_factored) / f_plain, factored_difference);
     std::printf(
         "backward without β and the material %.3f s (%.2fx the plain forward; "
         "Rollout::backward's groups)\n",

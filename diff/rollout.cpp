@@ -127,6 +127,7 @@ Rollout::Rollout(std::shared_ptr<Simulable> simulable, const RolloutOptions& opt
     : model_(simulable), simulable_(std::move(simulable)), options_(options) {
   base_stiffnesses_ = simulable_->getParameter(SimParameter::Stiffnesses);
   base_colliders_ = simulable_->colliders();
+  tape_.setSolveOptions(options_.tape_solve);  // InputError now, not at the first run
 }
 
 Rollout::~Rollout() = default;

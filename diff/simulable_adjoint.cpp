@@ -3,6 +3,7 @@
 #include "flsh/diff/simulable_adjoint.h"
 
 #include <algorithm>
+#include <numeric>
 #include <string>
 
 #include "flsh/core/error.h"
@@ -78,6 +79,11 @@ void SimulableAdjointModel::exactHessian(SpMat& H) const {
   blocks_.clear();
   simulable_->getHessianTripletVector(triplets_, blocks_, 0, false);
   assembler_.assemble(triplets_, {}, blocks_, numDofs(), H);
+}
+
+void SimulableAdjointModel::coarseDofs(std::vector<int>& dofs) const {
+  dofs.resize(size_t(simulable_->numBoneDofs()));
+  std::iota(dofs.begin(), dofs.end(), 0);
 }
 
 SpMat SimulableAdjointModel::previousStateJacobian(int which) const {

@@ -1,15 +1,19 @@
-// Tape of converged steps (one exact-Hessian factor each, one shared ordering) and the reverse
-// and forward sweeps over it.
+// Tape of converged steps (one exact-Hessian factor each, one shared ordering; or snapshots,
+// each sweep solving by PCG with a nearby step's factor) and the reverse and forward sweeps over
+// it.
 #include "flsh/diff/tape.h"
 
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseLU>
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 #include "flsh/core/error.h"
 #include "flsh/solve/linear_solver.h"
+#include "solve/coarse_correction.h"
+#include "solve/preconditioned_cg.h"
 
 namespace flsh {
 
@@ -39,6 +43,7 @@ struct StepFactor {
   const Permutation* P_inverse = nullptr;
 
   /// `reuse`: a CHOLMOD solver whose symbolic analysis may serve (the previous step's), or null.
+  /// Returns how H was factored (TapeStepInfo::factorization).
   std::string factorize(const SpMat& H, const Permutation& perm, const Permutation& perm_inv,
                         std::unique_ptr<LinearSolver> reuse = nullptr) {
     P = &perm;
@@ -96,21 +101,39 @@ void checkGroups(const std::vector<ParameterGroupInfo>& groups, const char* who)
 struct Tape::Impl {
   int n = -1;
   Storage storage = Storage::Factors, recording = Storage::Factors;
+  TapeSolveOptions solve_options;
+  std::vector<int> coarse_dofs;  // the model's (AdjointModel::coarseDofs), at recordInitial
   Permutation P, P_inverse;
   // Storage::Snapshots: the factor of step `current_step` (0: none).
-  mutable std::unique_ptr<StepFactor> current;
-  mutable int current_step = 0;
+  std::unique_ptr<StepFactor> current;
+  int current_step = 0;
+  // Storage::Snapshots with PCG: step `pcg_step`'s exact Hessian H (0: none), its coarse level,
+  // and whether the next prepared step factors (a sweep's first, or after a slow PCG).
+  SpMat H;
+  int pcg_step = 0;
+  bool refactor_next = true;
+  detail::CoarseCorrection coarse;
+  detail::CgWorkspace cg;
 
-  // The step's exact Hessian factored (the ordering from the first one); `reuse`: a factor whose
-  // CHOLMOD analysis may serve.
+  void exactHessian(const AdjointModel& model, SpMat& out) const {
+    model.exactHessian(out);
+    if (out.rows() != n || out.cols() != n)
+      throw Error("Tape: the model's exact Hessian is " +
+                  shapeString({long(out.rows()), long(out.cols())}) + ", expected " +
+                  shapeString({long(n), long(n)}));
+  }
+
+  // The step's exact Hessian factored; `reuse`: a factor whose CHOLMOD analysis may serve.
   std::unique_ptr<StepFactor> factor(const AdjointModel& model, std::string& how,
                                      std::unique_ptr<StepFactor> reuse = nullptr) {
-    SpMat H;
-    model.exactHessian(H);
-    if (H.rows() != n || H.cols() != n)
-      throw Error("Tape: the model's exact Hessian is " +
-                  shapeString({long(H.rows()), long(H.cols())}) + ", expected " +
-                  shapeString({long(n), long(n)}));
+    SpMat step_hessian;
+    exactHessian(model, step_hessian);
+    return factorMatrix(step_hessian, how, std::move(reuse));
+  }
+
+  // H factored (the ordering from the first matrix factored).
+  std::unique_ptr<StepFactor> factorMatrix(const SpMat& H, std::string& how,
+                                           std::unique_ptr<StepFactor> reuse) {
     if (P.size() != n) {
       // One fill-reducing ordering for every step (any ordering is valid for any pattern; the
       // skeleton's pattern barely changes between steps).
@@ -122,6 +145,12 @@ struct Tape::Impl {
     auto f = std::make_unique<StepFactor>();
     how = f->factorize(H, P, P_inverse, reuse ? std::move(reuse->supernodal) : nullptr);
     return f;
+  }
+
+  // The held factor may precondition PCG on later steps' Hessians: large enough for PCG, and
+  // a CHOLMOD factor (positive definite, with its single-precision copy).
+  bool factorPreconditions() const {
+    return solve_options.iterative && n >= kSupernodalFrom && current && current->supernodal;
   }
   std::unique_ptr<StepSnapshot> initial;
   std::vector<std::unique_ptr<StepSnapshot>> snapshots;
@@ -141,12 +170,16 @@ void Tape::clear() {
   impl_->infos.clear();
   impl_->current.reset();
   impl_->current_step = 0;
+  impl_->H = SpMat();
+  impl_->pcg_step = 0;
+  impl_->refactor_next = true;
 }
 
 void Tape::recordInitial(const AdjointModel& model) {
   clear();
   impl_->recording = impl_->storage;
   impl_->n = model.numDofs();
+  model.coarseDofs(impl_->coarse_dofs);
   impl_->initial = model.saveStep();
 }
 
@@ -170,15 +203,53 @@ void Tape::recordStep(const AdjointModel& model, TapeStepInfo info) {
 void Tape::setStorage(Storage storage) { impl_->storage = storage; }
 Tape::Storage Tape::storage() const { return impl_->storage; }
 
+void Tape::setSolveOptions(const TapeSolveOptions& options) {
+  const auto bad = [](const std::string& name, const std::string& expected, double value) {
+    char text[64];
+    std::snprintf(text, sizeof(text), "%g", value);
+    throw InputError("Tape::setSolveOptions: TapeSolveOptions::" + name + " must be " + expected +
+                     ", got " + text);
+  };
+  if (!(options.relative_tolerance > 0.0 && options.relative_tolerance < 1.0))
+    bad("relative_tolerance", "in (0, 1)", options.relative_tolerance);
+  if (options.max_iterations < 1) bad("max_iterations", "≥ 1", options.max_iterations);
+  if (options.refactor_after_iterations < 0)
+    bad("refactor_after_iterations", "≥ 0", options.refactor_after_iterations);
+  impl_->solve_options = options;
+}
+
+const TapeSolveOptions& Tape::solveOptions() const { return impl_->solve_options; }
+
+void Tape::beginSweep() const {
+  impl_->pcg_step = 0;
+  impl_->refactor_next = true;
+}
+
 void Tape::prepareStep(int t, const AdjointModel& model) const {
   stepInfo(t);  // range check
   Impl& m = *impl_;
-  if (m.factors[size_t(t - 1)] || m.current_step == t) return;
-  m.current_step = 0;
-  std::string how;
-  m.current = m.factor(model, how, std::move(m.current));
-  m.current_step = t;
-  m.infos[size_t(t - 1)].factorization = how;
+  if (m.factors[size_t(t - 1)] || m.pcg_step == t) return;
+  TapeStepInfo& info = m.infos[size_t(t - 1)];
+  if (m.current_step != t && !m.refactor_next && m.factorPreconditions()) {
+    // PCG on this step's own exact Hessian, preconditioned by the held factor (solve()).
+    m.exactHessian(model, m.H);
+    m.H.makeCompressed();
+    m.coarse.build(m.H, m.coarse_dofs);
+    m.pcg_step = t;
+    info.factorization = "pcg";
+    info.cg_iterations = 0;
+    return;
+  }
+  m.pcg_step = 0;
+  info.cg_iterations = 0;
+  if (m.current_step != t) {
+    m.current_step = 0;
+    std::string how;
+    m.current = m.factor(model, how, std::move(m.current));
+    m.current_step = t;
+    info.factorization = how;
+  }
+  m.refactor_next = false;
 }
 
 int Tape::numSteps() const { return int(impl_->snapshots.size()); }
@@ -205,8 +276,35 @@ const StepSnapshot& Tape::stepSnapshot(int t) const {
 }
 
 VecX Tape::solve(int t, const VecX& b) const {
-  const TapeStepInfo& info = stepInfo(t);
-  const Impl& m = *impl_;
+  stepInfo(t);  // range check
+  Impl& m = *impl_;
+  TapeStepInfo& info = m.infos[size_t(t - 1)];
+  if (b.size() != m.n)
+    throw InputError("Tape::solve: b has " + std::to_string(b.size()) + " entries, expected " +
+                     std::to_string(m.n));
+  if (m.pcg_step == t && !m.factors[size_t(t - 1)]) {
+    const TapeSolveOptions& o = m.solve_options;
+    const double norm = b.norm();
+    if (norm == 0.0) return VecX::Zero(m.n);
+    VecX x;
+    int iterations = 0;
+    const detail::CgOutcome outcome =
+        detail::preconditionedCg(m.H, b, o.relative_tolerance * norm, o.max_iterations,
+                                 *m.current->supernodal, true, &m.coarse, x, m.cg, iterations);
+    info.cg_iterations += iterations;
+    if (outcome == detail::CgOutcome::Converged && x.allFinite()) {
+      if (iterations > o.refactor_after_iterations) m.refactor_next = true;
+      return x;
+    }
+    // PCG failed (H_t indefinite, or too slow): factor H_t and solve with it.
+    std::string how;
+    m.current_step = 0;
+    m.current = m.factorMatrix(m.H, how, std::move(m.current));
+    m.current_step = t;
+    m.pcg_step = 0;
+    m.refactor_next = !m.factorPreconditions();
+    info.factorization = how;
+  }
   const StepFactor* factor = m.factors[size_t(t - 1)]
                                  ? m.factors[size_t(t - 1)].get()
                                  : (m.current_step == t ? m.current.get() : nullptr);
@@ -218,9 +316,6 @@ VecX Tape::solve(int t, const VecX& b) const {
     throw Error("Tape: the exact Hessian of step " + std::to_string(t) +
                 " is singular (the converged state is not a strict local minimum), so the "
                 "step's derivatives are undefined");
-  if (b.size() != impl_->n)
-    throw InputError("Tape::solve: b has " + std::to_string(b.size()) + " entries, expected " +
-                     std::to_string(impl_->n));
   return factor->solve(b);
 }
 
@@ -272,6 +367,7 @@ AdjointResult adjointSweep(AdjointModel& model, const Tape& tape,
       result.global[g] = VecX::Zero(groups[g].size);
   }
   RestoreOnExit restore(model);
+  tape.beginSweep();
   // a[k] holds ā for q_{t}, q_{t−1}, q_{t−2} while sweeping: a_next = ā_{t−1}, a_next2 = ā_{t−2}.
   VecX a_t = VecX::Zero(n), a_prev = VecX::Zero(n), a_prev2 = VecX::Zero(n);
   VecX a_n, a_nm1;
@@ -360,6 +456,7 @@ std::vector<RowMatX> tangentSweep(AdjointModel& model, const Tape& tape,
     }
   }
   RestoreOnExit restore(model);
+  tape.beginSweep();
   // Increments of q_{t−1} and q_{t−2} per direction.
   std::vector<VecX> dq_prev(D), dq_prev2(D);
   model.restoreStep(tape.initialSnapshot());

@@ -91,6 +91,31 @@ py::array_t<double, py::array::c_style> trajectory_argument(const py::handle& ob
 
 void bind_diff(py::module_& m) {
   const RolloutOptions rollout_defaults;
+  py::class_<TapeSolveOptions>(
+      m, "TapeSolveOptions",
+      "How the sweeps over a tape of snapshots (the FEM's) solve with each step's exact Hessian: "
+      "by PCG preconditioned by a nearby step's factor (a float copy) and the bones' exact "
+      "coarse level, or by a factor of every step. Systems under 2000 unknowns always factor.")
+      .def(py::init<>())
+      .def_readwrite("iterative", &TapeSolveOptions::iterative,
+                     "PCG with a nearby step's factor (default True); False: every step "
+                     "factors its exact Hessian")
+      .def_readwrite("relative_tolerance", &TapeSolveOptions::relative_tolerance,
+                     "PCG stops when |b - H x| <= relative_tolerance |b| (in (0, 1); default "
+                     "1e-12)")
+      .def_readwrite("max_iterations", &TapeSolveOptions::max_iterations,
+                     "PCG iterations (>= 1) before the step factors its own Hessian instead "
+                     "(default 60)")
+      .def_readwrite("refactor_after_iterations", &TapeSolveOptions::refactor_after_iterations,
+                     "a solve that needed more iterations (>= 0) makes the next step factor "
+                     "(default 25)")
+      .def("__repr__", [](const TapeSolveOptions& o) {
+        return std::string("TapeSolveOptions(iterative=") + (o.iterative ? "True" : "False") +
+               ", relative_tolerance=" +
+               py::repr(py::float_(o.relative_tolerance)).cast<std::string>() +
+               ", max_iterations=" + std::to_string(o.max_iterations) +
+               ", refactor_after_iterations=" + std::to_string(o.refactor_after_iterations) + ")";
+      });
   py::class_<RolloutOptions>(m, "RolloutOptions", "Options of a Rollout.")
       .def(py::init([](const py::object& newton, const py::object& soft_tissue_newton,
                        const py::object& reduced_newton) {
@@ -137,8 +162,12 @@ void bind_diff(py::module_& m) {
                   "tape_storage: expected 'auto', 'factors' or 'snapshots', got '" + value + "'");
           },
           "What the tape keeps: 'factors' (each step's factor), 'snapshots' (only each step's "
-          "converged state; every sweep factors the steps again: memory grows with the state) or "
-          "'auto' (snapshots for the FEM, factors otherwise; the default).")
+          "converged state; every sweep solves with the steps' exact Hessians again, as "
+          "tape_solve says: memory grows with the state) or 'auto' (snapshots for the FEM, "
+          "factors otherwise; the default).")
+      .def_readwrite("tape_solve", &RolloutOptions::tape_solve,
+                     "TapeSolveOptions of a tape of snapshots (a copy on read; checked when a "
+                     "Rollout is made)")
       .def("__repr__", [](const RolloutOptions& o) {
         return "RolloutOptions(newton=" + py::repr(py::cast(o.newton)).cast<std::string>() + ")";
       });
@@ -296,7 +325,12 @@ void bind_diff(py::module_& m) {
                     "iterations whose direction came from the PSD form")
       .def_readonly("gradient_norm", &TapeStepInfo::gradient_norm, "‖g‖∞ at the recorded state")
       .def_readonly("factorization", &TapeStepInfo::factorization,
-                    "how the exact Hessian was factored: 'llt', 'ldlt', 'lu' or 'singular'")
+                    "how the exact Hessian was factored: 'llt', 'ldlt', 'lu' or 'singular'; "
+                    "'deferred' before a sweep has reached it, 'pcg' where the last sweep solved "
+                    "by PCG with a nearby step's factor (a tape of snapshots, TapeSolveOptions)")
+      .def_readonly("cg_iterations", &TapeStepInfo::cg_iterations,
+                    "PCG iterations of the last sweep's solves at this step (0 where it used "
+                    "the step's own factor)")
       .def("__repr__", [](const TapeStepInfo& i) {
         return "TapeStepInfo(converged=" + std::string(i.converged ? "True" : "False") +
                ", newton_iterations=" + std::to_string(i.newton_iterations) + ", factorization='" +

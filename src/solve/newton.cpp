@@ -12,10 +12,15 @@
 #include "flsh/core/error.h"
 #include "solve/coarse_correction.h"
 #include "solve/coarse_presolve.h"
+#include "solve/preconditioned_cg.h"
 
 namespace flsh {
 
 namespace {
+
+using detail::CgOutcome;
+using detail::CgWorkspace;
+using detail::preconditionedCg;
 
 // Shifts tried per iteration before giving up on the Newton direction: with the ×10 growth
 // this spans 10 orders of magnitude above the first shift.
@@ -75,95 +80,6 @@ class ScopedSeconds {
   double& total_;
   Clock::time_point start_;
 };
-
-enum class CgOutcome { Converged, NonPositiveCurvature, NotConverged, NotFinite };
-
-/// Work vectors of PCG, kept across Newton iterations (each n).
-struct CgWorkspace {
-  VecX residual, preconditioned, direction, product;
-};
-
-/// Preconditioned conjugate gradients on H x = b from x = 0 with M⁻¹ = preconditioner's held
-/// factor (`fast`: through preconditionInPlace, else the exact solveInPlace), with the coarse
-/// level on top when `coarse` is active (built from this H); stops when
-/// ‖b − H x‖₂ ≤ residual_tolerance. H is symmetric in full storage and need not be positive
-/// definite: a direction with pᵀHp ≤ 0 stops it (NonPositiveCurvature). Every iterate is a
-/// descent direction of ½xᵀHx − bᵀx as long as the curvatures met were positive.
-CgOutcome preconditionedCg(const SpMat& H, const VecX& b, double residual_tolerance,
-                           int max_iterations, const LinearSolver& preconditioner, bool fast,
-                           const detail::CoarseCorrection* coarse, VecX& x, CgWorkspace& w,
-                           int& iterations) {
-  auto factorSolve = [&](VecX& v) {
-    if (fast)
-      preconditioner.preconditionInPlace(v);
-    else
-      preconditioner.solveInPlace(v);
-  };
-  auto precondition = [&](VecX& v) {
-    if (coarse && coarse->active())
-      coarse->apply(v, factorSolve);
-    else
-      factorSolve(v);
-  };
-  x.setZero(b.size());
-  w.product.resize(b.size());
-  w.residual = b;
-  w.preconditioned = w.residual;
-  precondition(w.preconditioned);
-  w.direction = w.preconditioned;
-  double rz = w.residual.dot(w.preconditioned);
-  if (!std::isfinite(rz) || !(rz > 0.0)) return CgOutcome::NotFinite;
-  // H in full n × n storage (HessianAssembler::setDense) is a column-major dense matrix.
-  const Eigen::Index n = H.rows();
-  const bool dense = H.isCompressed() && H.nonZeros() == n * n;
-  const Eigen::Map<const MatX> H_dense(H.valuePtr(), dense ? n : 0, dense ? n : 0);
-  for (int k = 0; k < max_iterations; ++k) {
-    // H is symmetric: row c of H p is column c · p, so large products split over the columns
-    // with no shared writes (27 k DoFs: ~1.3 → ~0.7 ms; a quarter of a PCG iteration since the
-    // preconditioner runs in single precision on both cores). Eigen's own OpenMP product (of
-    // a row-major Hᵀ) was 15× slower here: threads waiting at its barriers.
-    if (dense) {
-      // Column dot products too, split over the threads from a few hundred DoFs (ROM, 405:
-      // ~25 → ~15 µs per product).
-      const double* p = w.direction.data();
-      double* out = w.product.data();
-#pragma omp parallel for schedule(static) if (n >= 256)
-      for (Eigen::Index c = 0; c < n; ++c)
-        out[c] = H_dense.col(c).dot(Eigen::Map<const VecX>(p, n));
-    } else if (!H.isCompressed()) {
-      w.product.noalias() = H * w.direction;
-    } else {
-      const int* outer = H.outerIndexPtr();
-      const int* inner = H.innerIndexPtr();
-      const double* values = H.valuePtr();
-      const double* p = w.direction.data();
-      double* out = w.product.data();
-#pragma omp parallel for schedule(static) if (n > 20000)
-      for (Eigen::Index c = 0; c < n; ++c) {
-        double sum = 0.0;
-        for (int k = outer[c]; k < outer[c + 1]; ++k) sum += values[k] * p[inner[k]];
-        out[c] = sum;
-      }
-    }
-    ++iterations;
-    const double curvature = w.direction.dot(w.product);
-    if (!std::isfinite(curvature)) return CgOutcome::NotFinite;
-    if (!(curvature > 0.0)) return CgOutcome::NonPositiveCurvature;
-    const double alpha = rz / curvature;
-    x.noalias() += alpha * w.direction;
-    w.residual.noalias() -= alpha * w.product;
-    const double residual_norm = w.residual.norm();
-    if (!std::isfinite(residual_norm)) return CgOutcome::NotFinite;
-    if (residual_norm <= residual_tolerance) return CgOutcome::Converged;
-    w.preconditioned = w.residual;
-    precondition(w.preconditioned);
-    const double rz_next = w.residual.dot(w.preconditioned);
-    if (!std::isfinite(rz_next) || !(rz_next > 0.0)) return CgOutcome::NotFinite;
-    w.direction = w.preconditioned + (rz_next / rz) * w.direction;
-    rz = rz_next;
-  }
-  return CgOutcome::NotConverged;
-}
 
 /// Pointers to the stored diagonal of H, inserting explicit zeros where it has none, so that a
 /// diagonal shift keeps the sparsity pattern (and the solver's symbolic analysis).

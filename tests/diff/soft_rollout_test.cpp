@@ -498,39 +498,127 @@ TEST_P(SoftRollout, ForwardSensitivitiesAgreeWithTheReversePass) {
   EXPECT_NEAR(forward, reverse, 1e-9 * std::abs(reverse));
 }
 
-// A tape that keeps only the snapshots (each sweep factors every step again) gives the gradients
-// and sensitivities of one that keeps the factors, and says how each step was factored.
+// A tape that keeps only the snapshots gives the gradients and sensitivities of one that keeps
+// the factors, and says how each step was solved: with the FEM's systems (~2 600 DoFs) by PCG
+// with a nearby step's factor (TapeSolveOptions, the default), or, not iterative, each step by
+// its own factor; the ROMs' (a few hundred DoFs) always by their own factors.
 TEST_P(SoftRollout, SnapshotTapeMatchesTheFactorTape) {
   const Case c{GetParam(), true, true};
-  RolloutVariables results[2];
-  RowMatX sensitivities[2];
+  RolloutVariables results[3];
+  RowMatX sensitivities[3];
   RolloutVariables d;
   d.initial_velocity = randomVector(makeSimulable(c)->numDofs(), 0.1, 61);
-  int k = 0;
-  for (auto storage :
-       {RolloutOptions::TapeStorage::Factors, RolloutOptions::TapeStorage::Snapshots}) {
+  const bool fem = c.model == SoftModel::Fem;
+  for (int k = 0; k < 3; ++k) {
     RolloutOptions options = tightOptions();
-    options.tape_storage = storage;
+    options.tape_storage =
+        k == 0 ? RolloutOptions::TapeStorage::Factors : RolloutOptions::TapeStorage::Snapshots;
+    options.tape_solve.iterative = k == 2;
     Rollout rollout(makeSimulable(c), options);
     rollout.run(kSteps, baseInputs(c));
-    const bool kept = storage == RolloutOptions::TapeStorage::Factors;
-    EXPECT_EQ(rollout.tape().stepInfo(1).factorization == "deferred", !kept);
+    EXPECT_EQ(rollout.tape().stepInfo(1).factorization == "deferred", k > 0);
     results[k] = lossFor(c.model).gradient(rollout);
+    int pcg_steps = 0, cg_iterations = 0;
+    for (int t = 1; t <= kSteps; ++t) {
+      const TapeStepInfo& info = rollout.tape().stepInfo(t);
+      EXPECT_NE(info.factorization, "deferred") << "step " << t;
+      pcg_steps += info.factorization == "pcg";
+      cg_iterations += info.cg_iterations;
+    }
+    // The reverse sweep factors its first step (T) and solves the others by PCG, but for a step
+    // after a slow solve (here 13–26 iterations per step: a step after one of 26 factors).
+    if (fem && k == 2) {
+      EXPECT_GE(pcg_steps, kSteps / 2);
+      EXPECT_GE(cg_iterations, 5 * pcg_steps);
+      EXPECT_EQ(rollout.tape().stepInfo(kSteps).factorization, "llt");
+    } else {
+      EXPECT_EQ(pcg_steps, 0) << "tape " << k;
+    }
     sensitivities[k] = rollout.forwardSensitivities({d}).front();
-    EXPECT_NE(rollout.tape().stepInfo(1).factorization, "deferred");
-    ++k;
   }
   ASSERT_GT(results[0].initial_velocity.norm(), 0.0);
-  EXPECT_LT((results[0].initial_velocity - results[1].initial_velocity).norm(),
-            1e-9 * results[0].initial_velocity.norm());
-  EXPECT_LT((results[0].pose_targets - results[1].pose_targets).norm(),
-            1e-9 * results[0].pose_targets.norm());
-  EXPECT_LT((sensitivities[0] - sensitivities[1]).norm(), 1e-9 * sensitivities[0].norm());
+  for (int k = 1; k < 3; ++k) {
+    EXPECT_LT((results[0].initial_velocity - results[k].initial_velocity).norm(),
+              1e-9 * results[0].initial_velocity.norm())
+        << "tape " << k;
+    EXPECT_LT((results[0].pose_targets - results[k].pose_targets).norm(),
+              1e-9 * results[0].pose_targets.norm())
+        << "tape " << k;
+    EXPECT_LT((results[0].material - results[k].material).norm(), 1e-9 * results[0].material.norm())
+        << "tape " << k;
+    EXPECT_LT((sensitivities[0] - sensitivities[k]).norm(), 1e-9 * sensitivities[0].norm())
+        << "tape " << k;
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, SoftRollout,
                          ::testing::Values(SoftModel::Fem, SoftModel::Rom, SoftModel::RomModes),
                          test::modelName);
+
+// The PCG's fallbacks on the FEM: a PCG that cannot converge (one iteration allowed) makes its
+// step factor its own exact Hessian; a slow one (more than 0 iterations) makes the next step
+// factor. Either way the gradients are those of the tape that keeps every factor.
+TEST(SoftRolloutPcg, FallbacksFactorAndKeepTheGradients) {
+  const Case c{SoftModel::Fem, true, true};
+  const RowMatX& a = lossFor(c.model).state_weights;
+  RolloutOptions reference_options = tightOptions();
+  reference_options.tape_storage = RolloutOptions::TapeStorage::Factors;
+  Rollout reference(makeSimulable(c), reference_options);
+  reference.run(kSteps, baseInputs(c));
+  const RolloutVariables expected = reference.backward(a);
+  ASSERT_GT(expected.pose_targets.norm(), 0.0);
+  for (const bool no_convergence : {true, false}) {
+    RolloutOptions options = tightOptions();
+    options.tape_storage = RolloutOptions::TapeStorage::Snapshots;
+    if (no_convergence)
+      options.tape_solve.max_iterations = 1;
+    else
+      options.tape_solve.refactor_after_iterations = 0;
+    Rollout rollout(makeSimulable(c), options);
+    rollout.run(kSteps, baseInputs(c));
+    const RolloutVariables got = rollout.backward(a);
+    int pcg_steps = 0, cg_iterations = 0;
+    for (int t = 1; t <= kSteps; ++t) {
+      pcg_steps += rollout.tape().stepInfo(t).factorization == "pcg";
+      cg_iterations += rollout.tape().stepInfo(t).cg_iterations;
+    }
+    // No convergence: every step tried PCG (one iteration), then factored. Refactor after 0:
+    // PCG and a factor alternate from step T (factored) down.
+    EXPECT_EQ(pcg_steps, no_convergence ? 0 : kSteps / 2) << no_convergence;
+    EXPECT_EQ(cg_iterations > 0, true) << no_convergence;
+    if (no_convergence) {
+      EXPECT_EQ(cg_iterations, kSteps - 1);
+    }
+    EXPECT_LT((got.pose_targets - expected.pose_targets).norm(),
+              1e-9 * expected.pose_targets.norm())
+        << no_convergence;
+    EXPECT_LT((got.initial_state - expected.initial_state).norm(),
+              1e-9 * expected.initial_state.norm())
+        << no_convergence;
+  }
+}
+
+TEST(SoftRolloutPcg, BadSolveOptionsAreInputErrors) {
+  const auto message = [](auto change) {
+    RolloutOptions options;
+    change(options.tape_solve);
+    return test::messageOf<InputError>([&] {
+      Rollout(makeSimulable({SoftModel::Fem, false}), options);
+    });
+  };
+  EXPECT_NE(message([](TapeSolveOptions& o) {
+              o.relative_tolerance = 0.0;
+            }).find("TapeSolveOptions::relative_tolerance must be in (0, 1), got 0"),
+            std::string::npos);
+  EXPECT_NE(message([](TapeSolveOptions& o) {
+              o.max_iterations = 0;
+            }).find("TapeSolveOptions::max_iterations must be ≥ 1, got 0"),
+            std::string::npos);
+  EXPECT_NE(message([](TapeSolveOptions& o) {
+              o.refactor_after_iterations = -1;
+            }).find("TapeSolveOptions::refactor_after_iterations must be ≥ 0, got -1"),
+            std::string::npos);
+}
 
 }  // namespace
 }  // namespace flsh

@@ -178,3 +178,27 @@ def test_rollout_options_tape_storage():
     assert options.tape_storage == "snapshots"
     with pytest.raises(ValueError, match="tape_storage"):
         options.tape_storage = "disk"
+
+
+def test_rollout_options_tape_solve():
+    options = flsh.RolloutOptions()
+    solve = options.tape_solve
+    assert solve.iterative and solve.relative_tolerance == 1e-12
+    assert solve.max_iterations == 60 and solve.refactor_after_iterations == 25
+    solve.iterative = False
+    solve.max_iterations = 7
+    options.tape_solve = solve
+    assert not options.tape_solve.iterative and options.tape_solve.max_iterations == 7
+    assert "iterative=False" in repr(options.tape_solve)
+
+
+def test_rollout_checks_tape_solve(body, walk):
+    avatar = flsh.SoftAvatar(body)
+    avatar.init_volumetric_data()
+    options = flsh.RolloutOptions()
+    solve = options.tape_solve
+    solve.relative_tolerance = 2.0
+    options.tape_solve = solve
+    sim = flsh.Simulable(avatar, walk)
+    with pytest.raises(ValueError, match="relative_tolerance must be in \\(0, 1\\)"):
+        flsh.Rollout(sim, options)

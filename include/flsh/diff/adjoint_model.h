@@ -50,6 +50,10 @@ class AdjointModel {
   /// The EXACT Hessian ∂g/∂q (not a PSD approximation), full symmetric storage, numDofs²;
   /// prescribed (kinematic) DoFs get identity rows/columns.
   virtual void exactHessian(SpMat& H) const = 0;
+  /// The DoFs whose rows of the exact Hessian change most from step to step (an avatar's bones:
+  /// they rotate with the pose), sorted: the tape's iterative solves give them an exact coarse
+  /// level (TapeSolveOptions). Default: none.
+  virtual void coarseDofs(std::vector<int>& dofs) const { dofs.clear(); }
   /// ∂g/∂q_n (which = 1) or ∂g/∂q_{n−1} (which = 2), numDofs × numDofs, w.r.t. increments of
   /// that previous state in its own chart.
   virtual SpMat previousStateJacobian(int which) const = 0;

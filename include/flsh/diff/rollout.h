@@ -111,6 +111,9 @@ struct RolloutOptions {
   /// resolution's exact Hessian is tens of MB: docs/benchmarks.md).
   enum class TapeStorage { Auto, Factors, Snapshots };
   TapeStorage tape_storage = TapeStorage::Auto;
+  /// How the sweeps over snapshots solve with each step's exact Hessian (tape.h: by default
+  /// PCG preconditioned by a nearby step's factor, for the FEM's large systems).
+  TapeSolveOptions tape_solve;
   /// `scene_defaults` with gradient_tolerance 1e-8.
   static NewtonOptions rolloutNewtonDefaults(NewtonOptions scene_defaults) {
     scene_defaults.gradient_tolerance = 1e-8;

@@ -35,6 +35,8 @@ class SimulableAdjointModel final : public AdjointModel {
   std::unique_ptr<StepSnapshot> saveStep() const override;
   void restoreStep(const StepSnapshot& snapshot) override;
   void exactHessian(SpMat& H) const override;
+  /// The bones' DoFs (the first Simulable::numBoneDofs()).
+  void coarseDofs(std::vector<int>& dofs) const override;
   SpMat previousStateJacobian(int which) const override;
   void parameterJacobians(std::vector<MatX>& out) const override;
   /// Products without matrices (Simulable::getGradientParameterVJPs); the Shape entry holds

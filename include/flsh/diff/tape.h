@@ -21,9 +21,22 @@
 // Memory. The snapshots hold every step's converged state, so the factors need not be kept: with
 // Tape::Storage::Snapshots each sweep factors step t's exact Hessian when it reaches it (the
 // model restored there: the same matrix, the same factor) and keeps one factor at a time. Memory
-// then grows with the state (a snapshot per step), not with the factors, at the price of one
-// factorization per step and sweep instead of one per step. Storage::Factors keeps them (the
-// skeleton's are small).
+// then grows with the state (a snapshot per step), not with the factors. Storage::Factors keeps
+// them (the skeleton's are small).
+//
+// Solves with snapshots (TapeSolveOptions). Factoring every step's exact Hessian again is most
+// of a sweep's cost on a large FEM body. By default a Snapshots sweep factors only the first
+// step it reaches and solves the next ones by preconditioned conjugate gradients on their own
+// exact Hessian H_t: the preconditioner is that factor (of a nearby step, in single precision)
+// with the model's coarse DoFs (an avatar's bones, exact from H_t) as a second level, the
+// balancing two-level preconditioner of Newton's lagged factor (src/solve/coarse_correction.h).
+// PCG stops at a relative residual of 1e-12, so the solution is H_t's to that accuracy, as a
+// factor's would be to its round-off. A solve that needed many iterations makes the next step
+// factor its own H_t (the new preconditioner); a PCG that fails (non-positive curvature: H_t
+// indefinite, or no convergence) factors H_t and solves with it directly, as above. Each sweep
+// starts from its first step's own factor, so its results do not depend on earlier sweeps.
+// FEM walk, 26 k DoFs, 30 steps: 7–12 iterations per step from one factorization
+// (docs/benchmarks.md).
 #pragma once
 
 #include <memory>
@@ -46,8 +59,27 @@ struct TapeStepInfo {
   double gradient_norm = 0.0;  ///< ‖g‖∞ at the recorded state
   /// How the exact Hessian was factored: "llt" (positive definite), "ldlt" (indefinite),
   /// "lu" (indefinite, LDLᵀ met a zero pivot) or "singular" (the sweeps refuse this step);
-  /// "deferred" until a sweep has factored it (Storage::Snapshots).
+  /// "deferred" until a sweep has factored it (Storage::Snapshots), "pcg" when the last sweep
+  /// solved it by PCG on its exact Hessian (TapeSolveOptions).
   std::string factorization;
+  /// PCG iterations of the last sweep's solves at this step (every direction of a forward
+  /// sweep), 0 where it solved with the step's own factor.
+  int cg_iterations = 0;
+};
+
+/// How a sweep over a Storage::Snapshots tape solves with each step's exact Hessian H_t
+/// ("Solves with snapshots" above). Systems of fewer than 2000 unknowns (the skeleton, the ROM)
+/// always factor.
+struct TapeSolveOptions {
+  /// PCG on H_t preconditioned by a nearby step's factor; false: every step factors its H_t.
+  bool iterative = true;
+  /// PCG stops when ‖b − H_t x‖₂ ≤ relative_tolerance · ‖b‖₂ (in (0, 1), dimensionless).
+  double relative_tolerance = 1e-12;
+  /// Iterations (≥ 1) before PCG gives up: the step then factors its H_t and solves directly.
+  int max_iterations = 60;
+  /// A solve that needed more iterations (≥ 0) than this makes the next step factor its own
+  /// H_t, the preconditioner from there on.
+  int refactor_after_iterations = 25;
 };
 
 class Tape {
@@ -63,6 +95,9 @@ class Tape {
   enum class Storage { Factors, Snapshots };
   void setStorage(Storage storage);
   Storage storage() const;
+  /// Throws InputError on a value out of its range (TapeSolveOptions).
+  void setSolveOptions(const TapeSolveOptions& options);
+  const TapeSolveOptions& solveOptions() const;
 
   void clear();
   /// Records the initial conditions: the model with q_n = q_0, q_{n−1} = q_{−1} (before the
@@ -78,11 +113,15 @@ class Tape {
   const TapeStepInfo& stepInfo(int t) const;  ///< t = 1..T
   const StepSnapshot& initialSnapshot() const;
   const StepSnapshot& stepSnapshot(int t) const;  ///< t = 1..T
-  /// Makes step t's factor available to solve(): a no-op when it is kept (Storage::Factors),
-  /// else factors the model's exact Hessian, the model restored to step t's snapshot (the sweeps
-  /// call it there), replacing the previous one.
+  /// Starts a sweep (Storage::Snapshots): its first prepareStep factors its step, so that the
+  /// sweep's solves do not depend on the sweeps before it.
+  void beginSweep() const;
+  /// Makes step t's system available to solve(): a no-op when its factor is kept
+  /// (Storage::Factors), else the model's exact Hessian at step t (the model restored to step
+  /// t's snapshot: the sweeps call it there), factored or kept for PCG (TapeSolveOptions).
   void prepareStep(int t, const AdjointModel& model) const;
-  /// Solves H_t x = b with step t's factor (t = 1..T; Storage::Snapshots: after prepareStep(t)).
+  /// Solves H_t x = b (t = 1..T; Storage::Snapshots: after prepareStep(t)): with step t's
+  /// factor, or by PCG on H_t (falling back to a factor of H_t).
   VecX solve(int t, const VecX& b) const;
 
  private:

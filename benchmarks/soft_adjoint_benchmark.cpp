@@ -226,6 +226,14 @@ int main(int argc, char** argv) {
       std::printf("backward              %8.3f s (%.2fx the forward with tape)\n", b, b / f);
       std::printf("peak resident memory  %8.0f MB (%.0f MB before the rollout: %.2f MB per step)\n",
                   peak, before, (peak - before) / steps);
+      int factored = 0, cg = 0;
+      for (int t = 1; t <= steps; ++t) {
+        factored += rollout.tape().stepInfo(t).factorization != "pcg";
+        cg += rollout.tape().stepInfo(t).cg_iterations;
+      }
+      std::printf(
+          "backward's solves     %d of %d steps factored, %.1f PCG iterations per other step\n",
+          factored, steps, double(cg) / std::max(1, steps - factored));
       std::printf("gradient: |shape| %.3g, |material| %.3g (finite: %s)\n", g.shape.norm(),
                   g.material.norm(), g.shape.allFinite() && g.material.allFinite() ? "yes" : "NO");
       return 0;

@@ -112,6 +112,7 @@ struct Tape::Impl {
   SpMat H;
   int pcg_step = 0;
   bool refactor_next = true;
+  bool sweep_iterative = true;  // this sweep may use PCG (few right-hand sides)
   detail::CoarseCorrection coarse;
   detail::CgWorkspace cg;
 
@@ -150,7 +151,8 @@ struct Tape::Impl {
   // The held factor may precondition PCG on later steps' Hessians: large enough for PCG, and
   // a CHOLMOD factor (positive definite, with its single-precision copy).
   bool factorPreconditions() const {
-    return solve_options.iterative && n >= kSupernodalFrom && current && current->supernodal;
+    return solve_options.iterative && sweep_iterative && n >= kSupernodalFrom && current &&
+           current->supernodal;
   }
   std::unique_ptr<StepSnapshot> initial;
   std::vector<std::unique_ptr<StepSnapshot>> snapshots;
@@ -215,14 +217,17 @@ void Tape::setSolveOptions(const TapeSolveOptions& options) {
   if (options.max_iterations < 1) bad("max_iterations", "≥ 1", options.max_iterations);
   if (options.refactor_after_iterations < 0)
     bad("refactor_after_iterations", "≥ 0", options.refactor_after_iterations);
+  if (options.max_right_hand_sides < 1)
+    bad("max_right_hand_sides", "≥ 1", options.max_right_hand_sides);
   impl_->solve_options = options;
 }
 
 const TapeSolveOptions& Tape::solveOptions() const { return impl_->solve_options; }
 
-void Tape::beginSweep() const {
+void Tape::beginSweep(int right_hand_sides) const {
   impl_->pcg_step = 0;
   impl_->refactor_next = true;
+  impl_->sweep_iterative = right_hand_sides <= impl_->solve_options.max_right_hand_sides;
 }
 
 void Tape::prepareStep(int t, const AdjointModel& model) const {
@@ -456,7 +461,7 @@ std::vector<RowMatX> tangentSweep(AdjointModel& model, const Tape& tape,
     }
   }
   RestoreOnExit restore(model);
-  tape.beginSweep();
+  tape.beginSweep(int(D));
   // Increments of q_{t−1} and q_{t−2} per direction.
   std::vector<VecX> dq_prev(D), dq_prev2(D);
   model.restoreStep(tape.initialSnapshot());

@@ -109,12 +109,16 @@ void bind_diff(py::module_& m) {
       .def_readwrite("refactor_after_iterations", &TapeSolveOptions::refactor_after_iterations,
                      "a solve that needed more iterations (>= 0) makes the next step factor "
                      "(default 25)")
+      .def_readwrite("max_right_hand_sides", &TapeSolveOptions::max_right_hand_sides,
+                     "sweeps with more solves per step (>= 1; forward sensitivities' directions) "
+                     "factor every step (default 3)")
       .def("__repr__", [](const TapeSolveOptions& o) {
         return std::string("TapeSolveOptions(iterative=") + (o.iterative ? "True" : "False") +
                ", relative_tolerance=" +
                py::repr(py::float_(o.relative_tolerance)).cast<std::string>() +
                ", max_iterations=" + std::to_string(o.max_iterations) +
-               ", refactor_after_iterations=" + std::to_string(o.refactor_after_iterations) + ")";
+               ", refactor_after_iterations=" + std::to_string(o.refactor_after_iterations) +
+               ", max_right_hand_sides=" + std::to_string(o.max_right_hand_sides) + ")";
       });
   py::class_<RolloutOptions>(m, "RolloutOptions", "Options of a Rollout.")
       .def(py::init([](const py::object& newton, const py::object& soft_tissue_newton,

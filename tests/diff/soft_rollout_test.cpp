@@ -598,6 +598,43 @@ TEST(SoftRolloutPcg, FallbacksFactorAndKeepTheGradients) {
   }
 }
 
+// A forward sweep of more directions than TapeSolveOptions::max_right_hand_sides factors every
+// step (PCG would solve once per direction); of up to that many, it solves by PCG. Both give the
+// sensitivities of the tape that keeps every factor.
+TEST(SoftRolloutPcg, ForwardSweepsOfManyDirectionsFactor) {
+  const Case c{SoftModel::Fem, true, true};
+  const int n = makeSimulable(c)->numDofs();
+  std::vector<RolloutVariables> directions(4);
+  for (int d = 0; d < 4; ++d) directions[size_t(d)].initial_velocity = randomVector(n, 0.1, 70 + d);
+  RolloutOptions factors = tightOptions();
+  factors.tape_storage = RolloutOptions::TapeStorage::Factors;
+  Rollout reference(makeSimulable(c), factors);
+  reference.run(kSteps, baseInputs(c));
+  const std::vector<RowMatX> expected = reference.forwardSensitivities(directions);
+  RolloutOptions snapshots = tightOptions();
+  snapshots.tape_storage = RolloutOptions::TapeStorage::Snapshots;
+  Rollout rollout(makeSimulable(c), snapshots);
+  rollout.run(kSteps, baseInputs(c));
+  for (const int count : {4, 3}) {
+    const std::vector<RolloutVariables> some(directions.begin(), directions.begin() + count);
+    const std::vector<RowMatX> got = rollout.forwardSensitivities(some);
+    int pcg_steps = 0;
+    for (int t = 1; t <= kSteps; ++t)
+      pcg_steps += rollout.tape().stepInfo(t).factorization == "pcg";
+    if (count > snapshots.tape_solve.max_right_hand_sides) {
+      EXPECT_EQ(pcg_steps, 0) << count << " directions";
+    } else {
+      EXPECT_GT(pcg_steps, 0) << count << " directions";
+    }
+    ASSERT_EQ(got.size(), size_t(count));
+    for (int d = 0; d < count; ++d) {
+      ASSERT_GT(expected[size_t(d)].norm(), 0.0);
+      EXPECT_LT((got[size_t(d)] - expected[size_t(d)]).norm(), 1e-9 * expected[size_t(d)].norm())
+          << count << " directions, direction " << d;
+    }
+  }
+}
+
 TEST(SoftRolloutPcg, BadSolveOptionsAreInputErrors) {
   const auto message = [](auto change) {
     RolloutOptions options;
@@ -617,6 +654,10 @@ TEST(SoftRolloutPcg, BadSolveOptionsAreInputErrors) {
   EXPECT_NE(message([](TapeSolveOptions& o) {
               o.refactor_after_iterations = -1;
             }).find("TapeSolveOptions::refactor_after_iterations must be ≥ 0, got -1"),
+            std::string::npos);
+  EXPECT_NE(message([](TapeSolveOptions& o) {
+              o.max_right_hand_sides = 0;
+            }).find("TapeSolveOptions::max_right_hand_sides must be ≥ 1, got 0"),
             std::string::npos);
 }
 

@@ -185,6 +185,7 @@ def test_rollout_options_tape_solve():
     solve = options.tape_solve
     assert solve.iterative and solve.relative_tolerance == 1e-12
     assert solve.max_iterations == 60 and solve.refactor_after_iterations == 25
+    assert solve.max_right_hand_sides == 3
     solve.iterative = False
     solve.max_iterations = 7
     options.tape_solve = solve

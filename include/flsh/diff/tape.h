@@ -80,6 +80,11 @@ struct TapeSolveOptions {
   /// A solve that needed more iterations (≥ 0) than this makes the next step factor its own
   /// H_t, the preconditioner from there on.
   int refactor_after_iterations = 25;
+  /// Sweeps with more right-hand sides per step than this (≥ 1; a forward sweep's directions)
+  /// factor every step: each direction costs a PCG solve of ~9 iterations, a factor's solves
+  /// are cheap. FEM walk, 26 k DoFs: a factorization ~0.1 s, a solve with it ~10 ms, a PCG
+  /// solve ~45 ms, so PCG pays for up to 3 directions.
+  int max_right_hand_sides = 3;
 };
 
 class Tape {
@@ -113,9 +118,10 @@ class Tape {
   const TapeStepInfo& stepInfo(int t) const;  ///< t = 1..T
   const StepSnapshot& initialSnapshot() const;
   const StepSnapshot& stepSnapshot(int t) const;  ///< t = 1..T
-  /// Starts a sweep (Storage::Snapshots): its first prepareStep factors its step, so that the
-  /// sweep's solves do not depend on the sweeps before it.
-  void beginSweep() const;
+  /// Starts a sweep (Storage::Snapshots) with `right_hand_sides` solves per step: its first
+  /// prepareStep factors its step, so that the sweep's solves do not depend on the sweeps before
+  /// it; with more right-hand sides than TapeSolveOptions::max_right_hand_sides, every step.
+  void beginSweep(int right_hand_sides = 1) const;
   /// Makes step t's system available to solve(): a no-op when its factor is kept
   /// (Storage::Factors), else the model's exact Hessian at step t (the model restored to step
   /// t's snapshot: the sweeps call it there), factored or kept for PCG (TapeSolveOptions).

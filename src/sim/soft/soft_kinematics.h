@@ -97,6 +97,8 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
       int j) const {
     return {modes_.data() + size_t(3) * size_t(num_modes_) * size_t(j), 3, num_modes_};
   }
+  /// ROM with modes: every node's Ψ_j stacked (3·#nodes × r, node j's rows 3j .. 3j + 2).
+  const RowMatX& allModeRows() const { return modes_; }
   /// Skinning influences of node j.
   const Influence* influencesBegin(int j) const { return influences_.data() + influence_start_[j]; }
   const Influence* influencesEnd(int j) const {

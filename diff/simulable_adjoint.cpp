@@ -1,5 +1,6 @@
-// The articulated skeleton as an AdjointModel: snapshots, exact Hessian, Jacobians of the total
-// gradient and the chart maps of its [t, rotation vector] state.
+// A Simulable (the articulated skeleton, the FEM or the ROM soft skeleton) as an AdjointModel:
+// snapshots, exact Hessian, the bones as coarse DoFs, Jacobians and products of the total
+// gradient, and the chart maps of its [t, rotation vector] bone state.
 #include "flsh/diff/simulable_adjoint.h"
 
 #include <algorithm>

@@ -1,7 +1,8 @@
-// SimulableAdjointModel: the articulated-skeleton Simulable as an AdjointModel.
+// SimulableAdjointModel: a Simulable (skeleton, FEM or ROM soft skeleton) as an AdjointModel.
 //
-// State vector: 6 values per bone [t_b (m), r_b (rad, rotation vector of R_b)]
-// (Simulable::getState). Increment chart: [δt_b, δω_b] with R_b ← exp([δω_b]×) R_b. The chart
+// State vector: 6 values per bone [t_b (m), r_b (rad, rotation vector of R_b)], then the soft
+// DoFs where there are any (Simulable::getState). Increment chart: [δt_b, δω_b] with
+// R_b ← exp([δω_b]×) R_b (soft DoFs: their own increments). The chart
 // map between them is per bone dt = δt, dr = J_l(r)⁻¹ δω (include/flsh/core/rotation.h).
 // Initial velocity: per DoF in the increment chart (m/s, rad/s), q_{−1} = q_0 ⊖ h v_0, i.e.
 // t_{−1} = t_0 − h v_t and R_{−1} = exp(−h [v_ω]×) R_0 (Simulable::setVelocity).

@@ -79,6 +79,26 @@ double timeOf(const std::function<void()>& f) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+// How the last sweep over the tape solved: steps factored, and PCG iterations over the others.
+struct SolveCounts {
+  int factored = 0, cg_iterations = 0;
+};
+SolveCounts solveCounts(const Tape& tape) {
+  SolveCounts c;
+  for (int t = 1; t <= tape.numSteps(); ++t) {
+    c.factored += tape.stepInfo(t).factorization != "pcg";
+    c.cg_iterations += tape.stepInfo(t).cg_iterations;
+  }
+  return c;
+}
+
+void printSolveCounts(const SolveCounts& c, int steps) {
+  std::printf(
+      "backward's solves     %d of %d steps factored, %.1f PCG iterations per other step "
+      "(TapeSolveOptions)\n",
+      c.factored, steps, double(c.cg_iterations) / std::max(1, steps - c.factored));
+}
+
 double peakResidentMB() {
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
@@ -226,14 +246,7 @@ int main(int argc, char** argv) {
       std::printf("backward              %8.3f s (%.2fx the forward with tape)\n", b, b / f);
       std::printf("peak resident memory  %8.0f MB (%.0f MB before the rollout: %.2f MB per step)\n",
                   peak, before, (peak - before) / steps);
-      int factored = 0, cg = 0;
-      for (int t = 1; t <= steps; ++t) {
-        factored += rollout.tape().stepInfo(t).factorization != "pcg";
-        cg += rollout.tape().stepInfo(t).cg_iterations;
-      }
-      std::printf(
-          "backward's solves     %d of %d steps factored, %.1f PCG iterations per other step\n",
-          factored, steps, double(cg) / std::max(1, steps - factored));
+      printSolveCounts(solveCounts(rollout.tape()), steps);
       std::printf("gradient: |shape| %.3g, |material| %.3g (finite: %s)\n", g.shape.norm(),
                   g.material.norm(), g.shape.allFinite() && g.material.allFinite() ? "yes" : "NO");
       return 0;
@@ -272,11 +285,12 @@ int main(int argc, char** argv) {
     std::vector<double> forward, backward, backward_cheap, cotangents, backward_factored;
     RolloutVariables grad;
     double L = 0.0, factored_difference = 0.0;
-    int newton_iterations = 0, steps_factored = 0, cg_iterations = 0;
+    int newton_iterations = 0;
+    SolveCounts solves;
     // The FEM's tape of snapshots solving by PCG: the same backward factoring every step.
     const bool compare_factored =
-        rollout_options.tape_solve.iterative && makeSimulable(s)->numDofs() >= 2000 &&
-        rollout_options.tape_storage != RolloutOptions::TapeStorage::Factors && !rom;
+        !rom && rollout_options.tape_solve.iterative &&
+        rollout_options.tape_storage != RolloutOptions::TapeStorage::Factors;
     for (int r = 0; r < repeats; ++r) {
       auto sim = makeSimulable(s);
       Rollout rollout(sim, rollout_options);
@@ -292,13 +306,10 @@ int main(int argc, char** argv) {
       backward_cheap.push_back(
           timeOf([&] { without = rollout.backward(c.states, c.direct, cheap); }));
       L = loss.value(rollout);
-      newton_iterations = steps_factored = cg_iterations = 0;
-      for (int t = 1; t <= steps; ++t) {
-        const TapeStepInfo& info = rollout.tape().stepInfo(t);
-        newton_iterations += info.newton_iterations;
-        steps_factored += info.factorization != "pcg";
-        cg_iterations += info.cg_iterations;
-      }
+      newton_iterations = 0;
+      for (int t = 1; t <= steps; ++t)
+        newton_iterations += rollout.tape().stepInfo(t).newton_iterations;
+      solves = solveCounts(rollout.tape());
       if (compare_factored) {
         RolloutOptions factored_options = rollout_options;
         factored_options.tape_solve.iterative = false;
@@ -331,11 +342,7 @@ int main(int argc, char** argv) {
         median(cotangents));
     std::printf("backward              %8.3f s (%.2fx the plain forward, %.2fx with the tape)\n", b,
                 b / f_plain, b / f_tape);
-    if (steps_factored < steps || compare_factored)
-      std::printf(
-          "backward's solves     %d of %d steps factored, %.1f PCG iterations per other step "
-          "(TapeSolveOptions)\n",
-          steps_factored, steps, double(cg_iterations) / std::max(1, steps - steps_factored));
+    if (solves.factored < steps || compare_factored) printSolveCounts(solves, steps);
     if (compare_factored)
       std::printf(
           "backward, every step factored %.3f s (%.2fx the plain forward; "

@@ -287,7 +287,7 @@ VecX Tape::solve(int t, const VecX& b) const {
   if (b.size() != m.n)
     throw InputError("Tape::solve: b has " + std::to_string(b.size()) + " entries, expected " +
                      std::to_string(m.n));
-  if (m.pcg_step == t && !m.factors[size_t(t - 1)]) {
+  if (m.pcg_step == t) {  // set by prepareStep on snapshots only
     const TapeSolveOptions& o = m.solve_options;
     const double norm = b.norm();
     if (norm == 0.0) return VecX::Zero(m.n);

@@ -636,29 +636,23 @@ TEST(SoftRolloutPcg, ForwardSweepsOfManyDirectionsFactor) {
 }
 
 TEST(SoftRolloutPcg, BadSolveOptionsAreInputErrors) {
-  const auto message = [](auto change) {
+  // The Rollout refuses `change`d options with an InputError whose message holds `expected`.
+  const auto expectRefused = [](auto change, const std::string& expected) {
     RolloutOptions options;
     change(options.tape_solve);
-    return test::messageOf<InputError>([&] {
+    const std::string message = test::messageOf<InputError>([&] {
       Rollout(makeSimulable({SoftModel::Fem, false}), options);
     });
+    EXPECT_NE(message.find(expected), std::string::npos) << message;
   };
-  EXPECT_NE(message([](TapeSolveOptions& o) {
-              o.relative_tolerance = 0.0;
-            }).find("TapeSolveOptions::relative_tolerance must be in (0, 1), got 0"),
-            std::string::npos);
-  EXPECT_NE(message([](TapeSolveOptions& o) {
-              o.max_iterations = 0;
-            }).find("TapeSolveOptions::max_iterations must be ≥ 1, got 0"),
-            std::string::npos);
-  EXPECT_NE(message([](TapeSolveOptions& o) {
-              o.refactor_after_iterations = -1;
-            }).find("TapeSolveOptions::refactor_after_iterations must be ≥ 0, got -1"),
-            std::string::npos);
-  EXPECT_NE(message([](TapeSolveOptions& o) {
-              o.max_right_hand_sides = 0;
-            }).find("TapeSolveOptions::max_right_hand_sides must be ≥ 1, got 0"),
-            std::string::npos);
+  expectRefused([](TapeSolveOptions& o) { o.relative_tolerance = 0.0; },
+                "TapeSolveOptions::relative_tolerance must be in (0, 1), got 0");
+  expectRefused([](TapeSolveOptions& o) { o.max_iterations = 0; },
+                "TapeSolveOptions::max_iterations must be ≥ 1, got 0");
+  expectRefused([](TapeSolveOptions& o) { o.refactor_after_iterations = -1; },
+                "TapeSolveOptions::refactor_after_iterations must be ≥ 0, got -1");
+  expectRefused([](TapeSolveOptions& o) { o.max_right_hand_sides = 0; },
+                "TapeSolveOptions::max_right_hand_sides must be ≥ 1, got 0");
 }
 
 }  // namespace

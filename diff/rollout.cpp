@@ -362,6 +362,10 @@ Rollout::TrajectoryCotangent Rollout::trajectoryCotangent(const RowMatX& dL_djoi
   for (int t = 1; t <= T && dL_djoints.size(); ++t)
     out.states.row(t - 1) +=
         jointsCotangent(Eigen::Map<const MatX3>(dL_djoints.row(t - 1).data(), 24, 3)).transpose();
+  if (dL_dvertices.size() && simulable_->hasSoftTissue()) {
+    softSurfaceCotangent(dL_dvertices, out);
+    return out;
+  }
   for (int t = 1; t <= T && dL_dvertices.size(); ++t) {
     const VerticesCotangent c =
         verticesCotangent(t, Eigen::Map<const MatX3>(dL_dvertices.row(t - 1).data(), nv, 3));
@@ -375,6 +379,57 @@ Rollout::TrajectoryCotangent Rollout::trajectoryCotangent(const RowMatX& dL_djoi
     accumulate(out.direct, c.direct);
   }
   return out;
+}
+
+// verticesCotangent of every step, summed as above, with the surfaces of all steps in one call
+// (Simulable::getNodesCotangentsOfFrames: the pose blend shapes and the soft basis are read once
+// for all steps, not once per step; ~34 MB and ~12 MB at full size).
+void Rollout::softSurfaceCotangent(const RowMatX& dL_dvertices, TrajectoryCotangent& out) const {
+  const int T = numSteps();
+  auto& model = const_cast<SimulableAdjointModel&>(model_);
+  RowMatX state, previous;
+  RolloutVariables direct;
+  simulable_->getNodesCotangentsOfFrames(surfaceFrames(), dL_dvertices, &state, &previous,
+                                         &direct.rest_joints, &direct.shape);
+  for (int t = 1; t <= T; ++t) {
+    out.states.row(t - 1) += model
+                                 .incrementToStateCotangentAt(states_.row(t - 1).transpose(),
+                                                              state.row(t - 1).transpose())
+                                 .transpose();
+    // Step t's pose blend is held from q_{t−1}: its cotangent goes to row t − 2 (q_0: direct).
+    const VecX at = t == 1 ? initial_state_ : VecX(states_.row(t - 2).transpose());
+    const VecX a = model.incrementToStateCotangentAt(at, previous.row(t - 1).transpose());
+    if (t > 1)
+      out.states.row(t - 2) += a.transpose();
+    else
+      addMember(out.direct.initial_state, a, "initial_state");
+  }
+  chainShapeCotangent(simulable_->avatar(), direct.rest_joints, VecX(), direct.shape);
+  accumulate(out.direct, direct);
+}
+
+std::vector<SurfaceFrame> Rollout::surfaceFrames() const {
+  RestoreStepOnExit restore(*simulable_);
+  auto& model = const_cast<SimulableAdjointModel&>(model_);
+  std::vector<SurfaceFrame> frames;
+  frames.reserve(size_t(numSteps()));
+  for (int t = 1; t <= numSteps(); ++t) {
+    model.restoreStep(tape_.stepSnapshot(t));
+    frames.push_back(simulable_->getSurfaceFrame());
+  }
+  return frames;
+}
+
+RowMatX Rollout::vertexTrajectory() const {
+  requireRun("vertexTrajectory");
+  if (simulable_->hasSoftTissue()) return simulable_->getNodesOfFrames(surfaceFrames());
+  const long nv = simulable_->avatar().body().numVertices();
+  RowMatX all(numSteps(), 3 * nv);
+  for (int t = 1; t <= numSteps(); ++t) {
+    const MatX3 v = vertices(t);
+    all.row(t - 1) = Eigen::Map<const Eigen::RowVectorXd>(v.data(), 3 * nv);
+  }
+  return all;
 }
 
 RolloutVariables Rollout::backward(const RowMatX& dL_dstates, const RolloutVariables& direct,

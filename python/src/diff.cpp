@@ -401,13 +401,10 @@ void bind_diff(py::module_& m) {
       [](const Rollout& r) {
         const py::ssize_t T = r.numSteps();
         const py::ssize_t V = r.simulable().avatar().body().numVertices();
-        RowMatX all(T, 3 * V);
+        RowMatX all;
         {
           py::gil_scoped_release release;
-          for (int t = 1; t <= T; ++t) {
-            const MatX3 v = r.vertices(t);
-            all.row(t - 1) = Eigen::Map<const Eigen::RowVectorXd>(v.data(), 3 * V);
-          }
+          all = r.vertexTrajectory();
         }
         return take_numpy(std::move(all), {T, V, 3});
       },

@@ -1,6 +1,8 @@
 // Simulable: poses, meshes and nodes read off the state, their Jacobians, and the soft-tissue
 // accessors.
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "flsh/body/body_forward.h"
 #include "flsh/body/smpl_skeleton.h"
@@ -9,6 +11,7 @@
 #include "flsh/energy/skeleton_energies.h"
 #include "flsh/sim/simulable.h"
 #include "sim/simulable_impl.h"
+#include "sim/soft/surface_frames.h"
 #include "sim/terms/term_blocks.h"
 
 namespace flsh {
@@ -114,6 +117,45 @@ void Simulable::getNodesCotangents(const MatX3& dL_dnodes, VecX* state, VecX* pr
   for (int i = 0; i < V; ++i) offsets.row(i) = dL_dnodes.row(i) * kin.M(i);
   if (previous_state) m.soft->addPoseBlendCotangent(m.q_n.R, offsets, *previous_state);
   if (rest_nodes_shape) m.soft->addRestNodesCotangent(offsets, *rest_nodes_shape);
+}
+
+SurfaceFrame Simulable::getSurfaceFrame() const {
+  const Impl& m = *impl_;
+  if (!m.soft) throw InputError("Simulable::getSurfaceFrame: the simulable has no soft tissue");
+  const detail::SoftKinematics& kin = m.soft->kinematics();
+  // The ROM holds the rotations it set its blend from; the FEM's offsets come from q_n's.
+  const std::vector<Mat3>* held = kin.heldPoseRotations();
+  return {m.q.R, m.q.t, held ? *held : m.q_n.R, kin.u};
+}
+
+RowMatX Simulable::getNodesOfFrames(const std::vector<SurfaceFrame>& frames) const {
+  const Impl& m = *impl_;
+  if (!m.soft) throw InputError("Simulable::getNodesOfFrames: the simulable has no soft tissue");
+  return detail::surfaceOfFrames(m.soft->kinematics(), frames);
+}
+
+void Simulable::getNodesCotangentsOfFrames(const std::vector<SurfaceFrame>& frames,
+                                           const RowMatX& dL_dnodes, RowMatX* state,
+                                           RowMatX* previous_state, VecX* rest_joints,
+                                           VecX* rest_nodes_shape) const {
+  const Impl& m = *impl_;
+  if (!m.soft)
+    throw InputError("Simulable::getNodesCotangentsOfFrames: the simulable has no soft tissue");
+  detail::SurfaceFrameCotangents c =
+      detail::surfaceCotangentsOfFrames(m.soft->kinematics(), frames, dL_dnodes);
+  if (state) *state = std::move(c.state);
+  if (previous_state) {
+    *previous_state = RowMatX::Zero(c.rotations.rows(), m.dofs());
+    for (int b = 0; b < m.num_bones; ++b)
+      previous_state->middleCols<3>(detail::rotationRow(b)) = c.rotations.middleCols<3>(3 * b);
+  }
+  if (rest_joints) *rest_joints = std::move(c.rest_joints);
+  if (rest_nodes_shape) {
+    const VecX sum = c.unposed.colwise().sum().transpose();  // rows 3i + c
+    const MatX3 summed = Eigen::Map<const MatX3>(sum.data(), m.kinematics->numSurface(), 3);
+    *rest_nodes_shape = VecX::Zero(parameterSize(SimParameter::Shape));
+    m.soft->addRestNodesCotangent(summed, *rest_nodes_shape);
+  }
 }
 
 // ---- soft tissue --------------------------------------------------------------------------

@@ -454,6 +454,63 @@ TEST_P(SoftRollout, BackwardOfSomeGroupsIsTheirShareOfAll) {
   EXPECT_TRUE(close(rollout.backward(cotangent).stiffnesses, all.stiffnesses));
 }
 
+// trajectoryCotangent (the pose blend's share of all steps in one pass) is the sum of each
+// step's verticesCotangent, and leaves the simulable's step as it was.
+TEST_P(SoftRollout, TrajectoryCotangentIsTheSumOfEachStep) {
+  const Case c{GetParam(), true};
+  auto sim = makeSimulable(c);
+  Rollout rollout(sim, tightOptions());
+  rollout.run(kSteps, baseInputs(c));
+  const Loss& loss = lossFor(c.model);
+  const long nv = scene().body->numVertices();
+  const VecX before = sim->getState();
+  const Rollout::TrajectoryCotangent all =
+      rollout.trajectoryCotangent(RowMatX(), loss.vertex_weights);
+  EXPECT_TRUE(sim->getState() == before);
+  RowMatX states = RowMatX::Zero(kSteps, sim->numDofs());
+  RolloutVariables direct;
+  for (int t = 1; t <= kSteps; ++t) {
+    const Rollout::VerticesCotangent v = rollout.verticesCotangent(
+        t, Eigen::Map<const MatX3>(loss.vertex_weights.row(t - 1).data(), nv, 3));
+    states.row(t - 1) += v.state.transpose();
+    ASSERT_GT(v.previous_state.norm(), 0.0);
+    if (t > 1)
+      states.row(t - 2) += v.previous_state.transpose();
+    else
+      direct.initial_state = v.previous_state;
+    accumulate(direct, v.direct);
+  }
+  const auto close = [](const auto& a, const auto& b) {
+    return a.size() > 0 && a.size() == b.size() &&
+           (a - b).cwiseAbs().maxCoeff() <= 1e-12 * b.cwiseAbs().maxCoeff();
+  };
+  ASSERT_GT(states.cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_TRUE(close(all.states, states));
+  EXPECT_TRUE(close(all.direct.initial_state, direct.initial_state));
+  EXPECT_TRUE(close(all.direct.rest_joints, direct.rest_joints));
+  EXPECT_TRUE(close(all.direct.shape, direct.shape));
+}
+
+// vertexTrajectory (all steps' surfaces in one pass) holds each step's vertices(t).
+TEST_P(SoftRollout, VertexTrajectoryHoldsEachStepsVertices) {
+  const Case c{GetParam(), true};
+  auto sim = makeSimulable(c);
+  Rollout rollout(sim, tightOptions());
+  rollout.run(kSteps, baseInputs(c));
+  const VecX before = sim->getState();
+  const RowMatX all = rollout.vertexTrajectory();
+  EXPECT_TRUE(sim->getState() == before);
+  const long nv = scene().body->numVertices();
+  ASSERT_EQ(all.rows(), kSteps);
+  ASSERT_EQ(all.cols(), 3 * nv);
+  for (int t = 1; t <= kSteps; ++t) {
+    const MatX3 v = rollout.vertices(t);
+    const Eigen::Map<const Eigen::RowVectorXd> row(v.data(), 3 * nv);
+    EXPECT_LT((all.row(t - 1) - row).cwiseAbs().maxCoeff(), 1e-12 * row.cwiseAbs().maxCoeff())
+        << "step " << t;
+  }
+}
+
 // A step Newton leaves unconverged is reported, never differentiated.
 TEST_P(SoftRollout, UnconvergedStepsAreRefused) {
   auto sim = makeSimulable({GetParam(), true});

@@ -141,6 +141,10 @@ class Rollout {
   RowMatX joints() const;            ///< T × 72 joint (bone) positions t_b, m
   /// SMPL vertices (#V × 3, Simulable::getVertices) at step t (0 = initial state).
   MatX3 vertices(int t) const;
+  /// The vertices of steps 1..T (T × 3#V, row t − 1: step t's #V × 3, row-major), as
+  /// vertices(t) has them; the soft models' in one pass over the pose blend shapes and the soft
+  /// basis (Simulable::getNodesOfFrames).
+  RowMatX vertexTrajectory() const;
   const Tape& tape() const { return tape_; }
   Simulable& simulable() const { return model_.simulable(); }
 
@@ -191,6 +195,10 @@ class Rollout {
   void requireRun(const char* who) const;
   void requireConverged(const char* who) const;
   void checkVariables(const RolloutVariables& v, const std::string& who) const;
+  /// trajectoryCotangent's vertex part for a soft-tissue simulable (adds into out).
+  void softSurfaceCotangent(const RowMatX& dL_dvertices, TrajectoryCotangent& out) const;
+  /// Soft tissue: the SurfaceFrame of steps 1..T (restores each; the step is kept).
+  std::vector<SurfaceFrame> surfaceFrames() const;
 
   SimulableAdjointModel model_;
   std::shared_ptr<Simulable> simulable_;

@@ -73,6 +73,16 @@ struct SimulableStep {
   MatX3 pose_blend_rows;
 };
 
+/// What a soft-tissue surface (Simulable::getNodes) depends on at one state: the bones, the
+/// rotations its pose blend is held from and the soft state. A rollout keeps one per step to
+/// output or differentiate the surface of all its steps at once (Simulable::getNodesOfFrames).
+struct SurfaceFrame {
+  std::vector<Mat3> R;       ///< 24 bone rotations of q
+  MatX3 t;                   ///< 24 × 3 bone positions of q, m
+  std::vector<Mat3> held_R;  ///< the 24 rotations the pose blend is held from (q_n's)
+  VecX soft;                 ///< the soft state of q (numDofs − numBoneDofs values)
+};
+
 /// Diagnostics of the last energy evaluation.
 struct SimulableStats {
   int active_contacts = 0;
@@ -174,6 +184,21 @@ class Simulable {
   /// wrong shape. Does not change the state.
   void getNodesCotangents(const MatX3& dL_dnodes, VecX* state, VecX* previous_state,
                           VecX* rest_joints, VecX* rest_nodes_shape = nullptr) const;
+  /// Soft tissue: the current state's SurfaceFrame. Throws InputError without soft tissue.
+  SurfaceFrame getSurfaceFrame() const;
+  /// getNodes of many frames at once (soft tissue): row k (3#V, row-major: 3i + c) the surface
+  /// of frames[k]. The pose blend shapes and the soft basis of every surface node are read
+  /// once for all frames (two matrix products), not once per frame. Throws InputError on a
+  /// frame of the wrong sizes or without soft tissue.
+  RowMatX getNodesOfFrames(const std::vector<SurfaceFrame>& frames) const;
+  /// getNodesCotangents of many frames at once (soft tissue; Rollout::trajectoryCotangent): row
+  /// k of dL_dnodes (3#V, row-major) is a loss's cotangent of frames[k]'s surface; row k of
+  /// `state` and `previous_state` (#frames × numDofs, increments) is that frame's state and
+  /// previous_state; `rest_joints` (72) and `rest_nodes_shape` (K) are summed over the frames.
+  /// Any pointer may be null. Throws InputError on wrong shapes or without soft tissue.
+  void getNodesCotangentsOfFrames(const std::vector<SurfaceFrame>& frames, const RowMatX& dL_dnodes,
+                                  RowMatX* state, RowMatX* previous_state, VecX* rest_joints,
+                                  VecX* rest_nodes_shape) const;
 
   /// Current bone transforms: rotations R_b (24) and joint positions t_b (24 × 3).
   const std::vector<Mat3>& boneRotations() const;

@@ -261,6 +261,12 @@ void SoftKinematics::poseBlendCotangent(const std::vector<Mat3>& R, const std::v
       feature_bar.noalias() += posedirs_->middleRows<3>(3 * j).transpose() * mu[k];
   }
   if (dense) feature_bar.noalias() += posedirs_->transpose() * all;
+  addFeatureCotangent(R, feature_bar, rotation_cotangent);
+}
+
+template <class Feature, class Out>
+void SoftKinematics::addFeatureCotangent(const std::vector<Mat3>& R, const Feature& feature_bar,
+                                         Out&& rotation_cotangent) const {
   for (int b = 1; b < num_bones_; ++b) {
     const int p = parents_[b];
     Mat3 L_bar;
@@ -268,9 +274,43 @@ void SoftKinematics::poseBlendCotangent(const std::vector<Mat3>& R, const std::v
       for (int c = 0; c < 3; ++c) L_bar(r, c) = feature_bar[9 * (b - 1) + 3 * r + c];
     const Mat3 A = R[p] * L_bar * R[b].transpose();
     const Vec3 v(A(2, 1) - A(1, 2), A(0, 2) - A(2, 0), A(1, 0) - A(0, 1));
-    rotation_cotangent.segment<3>(3 * b) += v;
-    rotation_cotangent.segment<3>(3 * p) -= v;
+    rotation_cotangent.template segment<3>(3 * b) += v;
+    rotation_cotangent.template segment<3>(3 * p) -= v;
   }
+}
+
+// The surface's posedirs rows are contiguous: the ROM's first 3#V columns of posedirs_T_ (the
+// surface nodes take the first slots), the FEM's first 3#V rows of posedirs (nodes 0 .. #V − 1).
+void SoftKinematics::surfacePoseBlendCotangents(const std::vector<std::vector<Mat3>>& R,
+                                                const RowMatX& offsets_bar,
+                                                RowMatX& rotation_cotangents) const {
+  const Eigen::Index rows = offsets_bar.rows(), V3 = 3 * Eigen::Index(num_surface_);
+  if (Eigen::Index(R.size()) != rows || offsets_bar.cols() != V3 ||
+      rotation_cotangents.rows() != rows || rotation_cotangents.cols() != 3 * num_bones_)
+    throw Error("SoftKinematics::surfacePoseBlendCotangents: inconsistent sizes");
+  MatX feature_bar(feature_.size(), rows);
+  if (reduced_)
+    feature_bar.noalias() = posedirs_T_.leftCols(V3) * offsets_bar.transpose();
+  else
+    feature_bar.noalias() = posedirs_->topRows(V3).transpose() * offsets_bar.transpose();
+  for (Eigen::Index k = 0; k < rows; ++k)
+    addFeatureCotangent(R[size_t(k)], feature_bar.col(k), rotation_cotangents.row(k));
+}
+
+RowMatX SoftKinematics::surfacePoseBlends(const std::vector<std::vector<Mat3>>& R) const {
+  const Eigen::Index rows = Eigen::Index(R.size()), V3 = 3 * Eigen::Index(num_surface_);
+  MatX features(feature_.size(), rows);
+  VecX feature(feature_.size());
+  for (Eigen::Index k = 0; k < rows; ++k) {
+    featureOf(R[size_t(k)], feature);
+    features.col(k) = feature;
+  }
+  RowMatX P(rows, V3);
+  if (reduced_)
+    P.noalias() = features.transpose() * posedirs_T_.leftCols(V3);
+  else
+    P.noalias() = features.transpose() * posedirs_->topRows(V3).transpose();
+  return P;
 }
 
 Vec3 SoftKinematics::blendOf(int j) const {

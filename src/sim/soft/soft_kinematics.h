@@ -182,6 +182,16 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
                         const std::vector<int>& nodes, MatX3& dP) const;
   void poseBlendCotangent(const std::vector<Mat3>& R, const std::vector<int>& nodes,
                           const std::vector<Vec3>& mu, VecX& rotation_cotangent) const;
+  /// poseBlendCotangent of the surface nodes for many pose blends at once: row k of
+  /// `offsets_bar` (3#V, row-major: 3i + c) is a cotangent of the surface's offsets P_i held
+  /// from the rotations R[k]; ADDS its rotation cotangent (3 per bone) into row k of
+  /// `rotation_cotangents` (#rows × 3·#bones). One product with the surface's posedirs for all
+  /// rows: it reads them once, not once per row.
+  void surfacePoseBlendCotangents(const std::vector<std::vector<Mat3>>& R,
+                                  const RowMatX& offsets_bar, RowMatX& rotation_cotangents) const;
+  /// The surface's offsets P_i for many pose blends: row k (3#V, row-major) held from the
+  /// rotations R[k]. One product with the surface's posedirs for all rows.
+  RowMatX surfacePoseBlends(const std::vector<std::vector<Mat3>>& R) const;
   /// ‖posedirs rows of surface node i‖_F: ‖P_i‖ ≤ blendBound(i) · poseFeatureNorm().
   double blendBound(int i) const { return blend_bound_[i]; }
   double poseFeatureNorm() const { return feature_.norm(); }
@@ -307,6 +317,11 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   std::vector<Mat3> held_R_;  // ROM: the rotations feature_ comes from
   /// The pose feature of rotations R (9 per bone but the root: R_pᵀ R_b − I).
   void featureOf(const std::vector<Mat3>& R, VecX& feature) const;
+  /// ADDS to rotation_cotangent (3 per bone) the rotations' cotangent for a cotangent of the
+  /// feature of R (featureOf).
+  template <class Feature, class Out>
+  void addFeatureCotangent(const std::vector<Mat3>& R, const Feature& feature_bar,
+                           Out&& rotation_cotangent) const;
   /// Whether more than an eighth of all nodes in `nodes` have no contiguous posedirs rows (the
   /// pose blend's tangent and cotangent then go through the whole matrix at once).
   bool manyUnslotted(const std::vector<int>& nodes) const;

@@ -5,7 +5,9 @@
 // blend holds it from the moved R_n, as preUpdate does); the products against the Jacobians;
 // the surface's cotangents.
 #include <memory>
+#include <vector>
 
+#include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
 #include "sim/soft/soft_term_checks.h"
 
@@ -135,6 +137,61 @@ TEST_P(SoftPreviousStateDerivatives, SurfaceCotangentsMatchDifferences) {
   ASSERT_GT(std::abs(joints.dot(dJ)), 0.0);
   EXPECT_NEAR(joints.dot(dJ), (joints_plus - joints_minus) / (2 * eps),
               1e-6 * std::abs(joints.dot(dJ)));
+}
+
+// getNodesOfFrames and getNodesCotangentsOfFrames (many states in one pass) against getNodes and
+// getNodesCotangents of each state: the same values to rounding; bad frames are InputErrors.
+TEST_P(SoftPreviousStateDerivatives, SurfaceOfFramesMatchesEachState) {
+  auto sim = test::softTermScenario(GetParam());
+  const int n = sim->numDofs();
+  const SimulableStep base = sim->saveStep();
+  const int V = int(sim->getNodes().rows());
+  SimulableStep moved = movedHistory(base, 1, 0.05 * test::randomVector(n, 1.0, 61));
+  moved.u += 0.5 * moved.u;  // and another soft state
+  const std::vector<SimulableStep> steps = {base, moved};
+  std::vector<SurfaceFrame> frames;
+  RowMatX nodes(2, 3 * V), dL(2, 3 * V), state(2, n), previous(2, n);
+  VecX joints = VecX::Zero(72), shape;
+  for (int k = 0; k < 2; ++k) {
+    sim->restoreStep(steps[size_t(k)]);
+    frames.push_back(sim->getSurfaceFrame());
+    const MatX3 x = sim->getNodes();
+    nodes.row(k) = Eigen::Map<const Eigen::RowVectorXd>(x.data(), 3 * V);
+    dL.row(k) = test::randomVector(3 * V, 1.0, 62 + k).transpose();
+    VecX s, p, j, b;
+    sim->getNodesCotangents(Eigen::Map<const MatX3>(dL.row(k).data(), V, 3), &s, &p, &j, &b);
+    state.row(k) = s.transpose();
+    previous.row(k) = p.transpose();
+    joints += j;
+    shape = k == 0 ? b : VecX(shape + b);
+  }
+  sim->restoreStep(base);
+  ASSERT_FALSE(frames[0].held_R[1].isApprox(frames[1].held_R[1], 1e-6));
+  ASSERT_GT(frames[1].soft.norm(), 0.0);
+  const auto close = [](const auto& a, const auto& b) {
+    return a.size() > 0 && a.size() == b.size() && b.cwiseAbs().maxCoeff() > 0.0 &&
+           (a - b).cwiseAbs().maxCoeff() <= 1e-12 * b.cwiseAbs().maxCoeff();
+  };
+  EXPECT_TRUE(close(sim->getNodesOfFrames(frames), nodes));
+  RowMatX state_f, previous_f;
+  VecX joints_f, shape_f;
+  sim->getNodesCotangentsOfFrames(frames, dL, &state_f, &previous_f, &joints_f, &shape_f);
+  EXPECT_TRUE(close(state_f, state));
+  EXPECT_TRUE(close(previous_f, previous));
+  EXPECT_TRUE(close(joints_f, joints));
+  EXPECT_TRUE(close(shape_f, shape));
+  std::vector<SurfaceFrame> bad = frames;
+  bad[1].soft.resize(3);
+  EXPECT_THROW(sim->getNodesOfFrames(bad), InputError);
+  bad = frames;
+  bad[0].held_R.pop_back();
+  EXPECT_THROW(sim->getNodesOfFrames(bad), InputError);
+  EXPECT_THROW(sim->getNodesCotangentsOfFrames(frames, RowMatX::Zero(2, 3 * V - 3), &state_f,
+                                               nullptr, nullptr, nullptr),
+               InputError);
+  EXPECT_THROW(sim->getNodesCotangentsOfFrames(frames, RowMatX::Zero(1, 3 * V), &state_f, nullptr,
+                                               nullptr, nullptr),
+               InputError);
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, SoftPreviousStateDerivatives,

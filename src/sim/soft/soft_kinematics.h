@@ -192,6 +192,12 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// The surface's offsets P_i for many pose blends: row k (3#V, row-major) held from the
   /// rotations R[k]. One product with the surface's posedirs for all rows.
   RowMatX surfacePoseBlends(const std::vector<std::vector<Mat3>>& R) const;
+  /// t_b − R_b J_b per bone: x_j = Σ_b w_jb (R_b Y_j + shift_b).
+  void boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const;
+  /// x_j = Σ_b w_jb (R_b Y + shift_b) for node j's unposed position Y (shift: boneShifts'), and
+  /// M_j = Σ_b w_jb R_b when M is not null.
+  Vec3 skin(int j, const std::vector<Mat3>& R, const Vec3* shift, const Vec3& Y,
+            Mat3* M = nullptr) const;
   /// ‖posedirs rows of surface node i‖_F: ‖P_i‖ ≤ blendBound(i) · poseFeatureNorm().
   double blendBound(int i) const { return blend_bound_[i]; }
   double poseFeatureNorm() const { return feature_.norm(); }
@@ -292,12 +298,6 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// p from node j's influences, rotations R, unposed position Y and M_j = Σ_b w_jb R_b.
   void fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y, const Mat3& M, SkinnedPoint& p,
                  bool soft_blocks = true) const;
-  /// t_b − R_b J_b per bone: x_j = Σ_b w_jb (R_b Y_j + shift_b).
-  void boneShifts(const std::vector<Mat3>& R, const MatX3& t, Vec3* shift) const;
-  /// x_j = Σ_b w_jb (R_b Y + shift_b) for node j's unposed position Y (shift: boneShifts'), and
-  /// M_j = Σ_b w_jb R_b when M is not null.
-  Vec3 skin(int j, const std::vector<Mat3>& R, const Vec3* shift, const Vec3& Y,
-            Mat3* M = nullptr) const;
   template <int Rows>
   void addBoneSoft(std::vector<Triplet>& H, int offset, int row, int j,
                    const Eigen::Matrix<double, Rows, 3>& B, int list) const;

@@ -10,14 +10,18 @@ namespace flsh::detail {
 
 namespace {
 
+std::vector<std::vector<Mat3>> heldRotations(const std::vector<SurfaceFrame>& frames) {
+  std::vector<std::vector<Mat3>> held(frames.size());
+  for (size_t k = 0; k < frames.size(); ++k) held[k] = frames[k].held_R;
+  return held;
+}
+
 // Y (#frames × 3#V): the rest nodes, the held pose blends and the soft displacements, as
 // SoftKinematics::nodeDisplacement has them (handles on every node, modes on soft nodes, the
 // FEM's u_j on soft nodes).
 RowMatX unposedSurface(const SoftKinematics& kin, const std::vector<SurfaceFrame>& frames) {
   const int V = kin.numSurface(), F = int(frames.size());
-  std::vector<std::vector<Mat3>> held(frames.size());
-  for (size_t k = 0; k < frames.size(); ++k) held[k] = frames[k].held_R;
-  RowMatX Y = kin.surfacePoseBlends(held);
+  RowMatX Y = kin.surfacePoseBlends(heldRotations(frames));
   const MatX3& rest = kin.restNodes();
   const Eigen::Map<const Eigen::RowVectorXd> rest_row(rest.data(), 3 * Eigen::Index(V));
   Y.rowwise() += rest_row;
@@ -67,20 +71,14 @@ RowMatX surfaceOfFrames(const SoftKinematics& kin, const std::vector<SurfaceFram
   checkFrames(kin, frames, "Simulable::getNodesOfFrames");
   RowMatX x = unposedSurface(kin, frames);
   const int V = kin.numSurface(), F = int(frames.size());
-  const MatX3& J = kin.joints();
 #pragma omp parallel for schedule(static) if (F > 1)
   for (int k = 0; k < F; ++k) {
     const SurfaceFrame& f = frames[size_t(k)];
     Vec3 shift[kNumJoints];
-    for (int b = 0; b < kin.numBones(); ++b)
-      shift[b] = f.t.row(b).transpose() - f.R[size_t(b)] * J.row(b).transpose();
+    kin.boneShifts(f.R, f.t, shift);
     for (int i = 0; i < V; ++i) {
       auto row = x.row(k).segment<3>(3 * i);
-      const Vec3 Y = row.transpose();
-      Vec3 xi = Vec3::Zero();
-      for (auto* inf = kin.influencesBegin(i); inf != kin.influencesEnd(i); ++inf)
-        xi += inf->weight * (f.R[size_t(inf->bone)] * Y + shift[inf->bone]);
-      row = xi.transpose();
+      row = kin.skin(i, f.R, shift, row.transpose()).transpose();
     }
   }
   return x;
@@ -140,10 +138,8 @@ SurfaceFrameCotangents surfaceCotangentsOfFrames(const SoftKinematics& kin,
     out.state.rightCols(kin.numModes()).noalias() +=
         out.unposed * kin.allModeRows().topRows(3 * Eigen::Index(V));
   out.rest_joints = joints.colwise().sum().transpose();
-  std::vector<std::vector<Mat3>> held(frames.size());
-  for (size_t k = 0; k < frames.size(); ++k) held[k] = frames[k].held_R;
   out.rotations = RowMatX::Zero(F, 3 * B);
-  kin.surfacePoseBlendCotangents(held, out.unposed, out.rotations);
+  kin.surfacePoseBlendCotangents(heldRotations(frames), out.unposed, out.rotations);
   return out;
 }
 

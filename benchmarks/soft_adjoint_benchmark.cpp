@@ -282,7 +282,8 @@ int main(int argc, char** argv) {
     }
     loss.vertex_targets += 0.02 * RowMatX::Random(steps, 3 * V);
 
-    std::vector<double> forward, backward, backward_cheap, cotangents, backward_factored;
+    std::vector<double> forward, backward, backward_cheap, cotangents, backward_factored, surfaces,
+        surfaces_per_step;
     RolloutVariables grad;
     double L = 0.0, factored_difference = 0.0;
     int newton_iterations = 0;
@@ -297,6 +298,13 @@ int main(int argc, char** argv) {
       forward.push_back(timeOf([&] { rollout.run(steps); }));
       Rollout::TrajectoryCotangent c;
       cotangents.push_back(timeOf([&] { c = loss.cotangent(rollout); }));
+      // The surface of every step: all at once, and step by step (alternating, same process).
+      RowMatX trajectory;
+      surfaces.push_back(timeOf([&] { trajectory = rollout.vertexTrajectory(); }));
+      surfaces_per_step.push_back(timeOf([&] {
+        for (int t = 1; t <= steps; ++t)
+          trajectory.row(t - 1) = rollout.vertices(t).reshaped<Eigen::RowMajor>().transpose();
+      }));
       backward.push_back(timeOf([&] { grad = rollout.backward(c.states, c.direct); }));
       std::vector<SimParameter> cheap;  // every group but β and the material
       for (const SimParameterInfo& info : simParameters())
@@ -340,6 +348,10 @@ int main(int argc, char** argv) {
         "loss's cotangent      %8.3f s (joints and surface of every step: "
         "Rollout::trajectoryCotangent)\n",
         median(cotangents));
+    std::printf(
+        "surface of every step %8.3f s (Rollout::vertexTrajectory; step by step with "
+        "vertices(t): %.3f s)\n",
+        median(surfaces), median(surfaces_per_step));
     std::printf("backward              %8.3f s (%.2fx the plain forward, %.2fx with the tape)\n", b,
                 b / f_plain, b / f_tape);
     if (solves.factored < steps || compare_factored) printSolveCounts(solves, steps);

@@ -132,14 +132,25 @@ struct Loss {
     }
     return L;
   }
-  Rollout::TrajectoryCotangent cotangent(const Rollout& r) const {
-    RowMatX dV(r.numSteps(), vertex_targets.cols());
-    for (int t = 1; t <= r.numSteps(); ++t) {
-      const MatX3 v = r.vertices(t);
-      dV.row(t - 1) =
-          Eigen::Map<const Eigen::RowVectorXd>(v.data(), v.size()) - vertex_targets.row(t - 1);
-    }
+  RowMatX verticesCotangent(const Rollout& r) const {
+    return r.vertexTrajectory() - vertex_targets;
+  }
+  Rollout::TrajectoryCotangent cotangent(const Rollout& r, const RowMatX& dV) const {
     return r.trajectoryCotangent(r.joints() - joint_targets, dV);
+  }
+  Rollout::TrajectoryCotangent cotangent(const Rollout& r) const {
+    return cotangent(r, verticesCotangent(r));
+  }
+  // The same, step by step with Rollout::verticesCotangent (how trajectoryCotangent summed the
+  // soft models' surfaces before 2026-12-02).
+  void cotangentStepByStep(const Rollout& r, const RowMatX& dV) const {
+    const long nv = dV.cols() / 3;
+    RowMatX states = RowMatX::Zero(r.numSteps(), r.numDofs());
+    for (int t = 1; t <= r.numSteps(); ++t) {
+      const Rollout::VerticesCotangent c =
+          r.verticesCotangent(t, Eigen::Map<const MatX3>(dV.row(t - 1).data(), nv, 3));
+      states.row(t - 1) += c.state.transpose();
+    }
   }
 };
 
@@ -283,7 +294,7 @@ int main(int argc, char** argv) {
     loss.vertex_targets += 0.02 * RowMatX::Random(steps, 3 * V);
 
     std::vector<double> forward, backward, backward_cheap, cotangents, backward_factored, surfaces,
-        surfaces_per_step;
+        surfaces_per_step, cotangents_per_step;
     RolloutVariables grad;
     double L = 0.0, factored_difference = 0.0;
     int newton_iterations = 0;
@@ -297,7 +308,9 @@ int main(int argc, char** argv) {
       Rollout rollout(sim, rollout_options);
       forward.push_back(timeOf([&] { rollout.run(steps); }));
       Rollout::TrajectoryCotangent c;
-      cotangents.push_back(timeOf([&] { c = loss.cotangent(rollout); }));
+      const RowMatX dV = loss.verticesCotangent(rollout);
+      cotangents.push_back(timeOf([&] { c = loss.cotangent(rollout, dV); }));
+      cotangents_per_step.push_back(timeOf([&] { loss.cotangentStepByStep(rollout, dV); }));
       // The surface of every step: all at once, and step by step (alternating, same process).
       RowMatX trajectory;
       surfaces.push_back(timeOf([&] { trajectory = rollout.vertexTrajectory(); }));
@@ -346,8 +359,8 @@ int main(int argc, char** argv) {
                 f_tape / f_plain);
     std::printf(
         "loss's cotangent      %8.3f s (joints and surface of every step: "
-        "Rollout::trajectoryCotangent)\n",
-        median(cotangents));
+        "Rollout::trajectoryCotangent; step by step with verticesCotangent: %.3f s)\n",
+        median(cotangents), median(cotangents_per_step));
     std::printf(
         "surface of every step %8.3f s (Rollout::vertexTrajectory; step by step with "
         "vertices(t): %.3f s)\n",

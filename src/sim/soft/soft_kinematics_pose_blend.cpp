@@ -9,6 +9,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
+#include "sim/soft/on_two_threads.h"
 #include "sim/soft/soft_kinematics.h"
 
 namespace flsh::detail {
@@ -114,11 +115,11 @@ void SoftKinematics::surfacePoseBlendCotangents(const std::vector<std::vector<Ma
   if (Eigen::Index(R.size()) != rows || offsets_bar.cols() != V3 ||
       rotation_cotangents.rows() != rows || rotation_cotangents.cols() != 3 * num_bones_)
     throw Error("SoftKinematics::surfacePoseBlendCotangents: inconsistent sizes");
-  MatX feature_bar(feature_.size(), rows);
+  MatX feature_bar = MatX::Zero(feature_.size(), rows);
   if (reduced_)
-    feature_bar.noalias() = posedirs_T_.leftCols(V3) * offsets_bar.transpose();
+    addLongInnerProduct(posedirs_T_.leftCols(V3), offsets_bar.transpose(), feature_bar);
   else
-    feature_bar.noalias() = posedirs_->topRows(V3).transpose() * offsets_bar.transpose();
+    addLongInnerProduct(posedirs_->topRows(V3).transpose(), offsets_bar.transpose(), feature_bar);
   for (Eigen::Index k = 0; k < rows; ++k)
     addFeatureCotangent(R[size_t(k)], feature_bar.col(k), rotation_cotangents.row(k));
 }

@@ -5,6 +5,7 @@
 
 #include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/error.h"
+#include "sim/soft/on_two_threads.h"
 
 namespace flsh::detail {
 
@@ -135,8 +136,8 @@ SurfaceFrameCotangents surfaceCotangentsOfFrames(const SoftKinematics& kin,
     }
   }
   if (kin.reduced() && kin.numModes() > 0)  // Ψᵀ dL/dY, zero rows on bone nodes
-    out.state.rightCols(kin.numModes()).noalias() +=
-        out.unposed * kin.allModeRows().topRows(3 * Eigen::Index(V));
+    addLongInnerProduct(out.unposed, kin.allModeRows().topRows(3 * Eigen::Index(V)),
+                        out.state.rightCols(kin.numModes()));
   out.rest_joints = joints.colwise().sum().transpose();
   out.rotations = RowMatX::Zero(F, 3 * B);
   kin.surfacePoseBlendCotangents(heldRotations(frames), out.unposed, out.rotations);

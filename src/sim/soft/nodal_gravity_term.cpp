@@ -165,12 +165,16 @@ void NodalGravityTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   if (shape || material) {
     const MatX* dm_dbeta = shape ? &shape_.massJacobian() : nullptr;
     const MatX3* dm = material ? &chain_.massDerivatives() : nullptr;
+    const std::vector<Vec3>* mu = sink.lambda() && kin_.massNodes() == masses_.nodes
+                                      ? &kin_.massCotangents(*sink.lambda())
+                                      : nullptr;
     SkinnedPoint point;
     const Vec3 force = -c.options.gravity;
     for (size_t idx = 0; idx < masses_.nodes.size(); ++idx) {
       const int j = masses_.nodes[idx];
       kin_.point(j, point);
       point.id = int(idx);
+      point.known_cotangent = mu ? &(*mu)[idx] : nullptr;
       if (shape) sink.add(SimParameter::Shape, point, 0, force, dm_dbeta->row(j));
       for (int k = 0; material && k < 3; ++k)
         if ((*dm)(j, k) != 0.0)

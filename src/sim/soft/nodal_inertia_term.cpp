@@ -2,6 +2,7 @@
 
 #include "flsh/core/rotation.h"
 #include "sim/soft/node_offset_blocks.h"
+#include "sim/soft/on_two_threads.h"
 #include "sim/tangent_columns.h"
 #include "sim/terms/term_blocks.h"
 
@@ -115,16 +116,19 @@ const MatX& NodalInertiaTerm::constantSoftBlock() const {
 // turns the lever arm of J_jᵀ's rotation rows (∂(r × f)/∂J_b = w [f]× R_b): per node and bone,
 // a rotation-row block w [f]× R_b and a node block κ · (−w (R_b − 2 R_b,n + R_b,n−1)).
 template <class Visit>
-void NodalInertiaTerm::forEachMassNode(Visit&& visit) const {
+void NodalInertiaTerm::forEachMassNode(const VecX* lambda, Visit&& visit) const {
   const double k = 1.0 / (h_ * h_);
   const std::vector<int>& nodes = masses_.nodes;
   const MatX3& x = kin_.x();
+  const std::vector<Vec3>* mu =
+      lambda && kin_.massNodes() == nodes ? &kin_.massCotangents(*lambda) : nullptr;
   SkinnedPoint point;
   for (size_t idx = 0; idx < nodes.size(); ++idx) {
     const int j = nodes[idx];
     const double kappa = k * masses_.mass[j];
     kin_.point(j, point);
     point.id = int(idx);
+    point.known_cotangent = mu ? &(*mu)[idx] : nullptr;
     visit(j, kappa, Vec3(kappa * (x.row(j) - x_hat_.row(j)).transpose()), point);
   }
 }
@@ -140,23 +144,25 @@ void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
   if (c.is_static || (!joints && !material && !shape)) return;
   const MatX3* dm = material ? &chain_.massDerivatives() : nullptr;
   const MatX* dm_dbeta = shape ? &shape_.massJacobian() : nullptr;
-  forEachMassNode([&](int j, double kappa, const Vec3& f, const SkinnedPoint& point) {
-    if (shape) sink.add(SimParameter::Shape, point, 0, Vec3(f / masses_.mass[j]), dm_dbeta->row(j));
-    if (material)
-      for (int k = 0; k < 3; ++k)
-        if ((*dm)(j, k) != 0.0)
-          sink.add(SimParameter::Material, point, chain_.massCoefficients()[size_t(k)],
-                   Vec3(f / masses_.mass[j]), Eigen::Matrix<double, 1, 1>((*dm)(j, k)));
-    if (!joints) return;
-    const Mat3 turn = skew(f);
-    for (int a = 0; a < point.count; ++a) {
-      const int b = point.bone[a];
-      const double w = point.weight[a];
-      sink.add(SimParameter::RestJoints, rotationRow(b), 3 * b, w * turn * c.R[b]);
-      sink.add(SimParameter::RestJoints, point, 3 * b, kappa * Mat3::Identity(),
-               -w * (c.R[b] - 2.0 * c.R_n[b] + c.R_nm1[b]));
-    }
-  });
+  forEachMassNode(
+      sink.lambda(), [&](int j, double kappa, const Vec3& f, const SkinnedPoint& point) {
+        if (shape)
+          sink.add(SimParameter::Shape, point, 0, Vec3(f / masses_.mass[j]), dm_dbeta->row(j));
+        if (material)
+          for (int k = 0; k < 3; ++k)
+            if ((*dm)(j, k) != 0.0)
+              sink.add(SimParameter::Material, point, chain_.massCoefficients()[size_t(k)],
+                       Vec3(f / masses_.mass[j]), Eigen::Matrix<double, 1, 1>((*dm)(j, k)));
+        if (!joints) return;
+        const Mat3 turn = skew(f);
+        for (int a = 0; a < point.count; ++a) {
+          const int b = point.bone[a];
+          const double w = point.weight[a];
+          sink.add(SimParameter::RestJoints, rotationRow(b), 3 * b, w * turn * c.R[b]);
+          sink.add(SimParameter::RestJoints, point, 3 * b, kappa * Mat3::Identity(),
+                   -w * (c.R[b] - 2.0 * c.R_n[b] + c.R_nm1[b]));
+        }
+      });
 }
 
 // An offset d_j of Y_j (in q, q_n and q_{n−1} alike) moves x_j by M_j d_j and x̂_j by
@@ -165,7 +171,8 @@ void NodalInertiaTerm::parameterBlocks(const TermContext& c, Sink& sink) const {
 template <class Sink>
 void NodalInertiaTerm::nodeOffsetBlocks(const TermContext& c, Sink& sink) const {
   if (c.is_static) return;
-  forEachMassNode([&](int j, double kappa, const Vec3& f, const SkinnedPoint& point) {
+  forEachMassNode(sink.lambda(), [&](int j, double kappa, const Vec3& f,
+                                     const SkinnedPoint& point) {
     sink.add(point, j,
              kappa * (kin_.M(j) - 2.0 * kin_.blendMatrix(j, c.R_n) + kin_.blendMatrix(j, c.R_nm1)));
     const Mat3 turn = skew(f);
@@ -180,20 +187,43 @@ void NodalInertiaTerm::addPreviousStatesProducts(const TermContext& c, const Vec
                                                  VecX* a_n, VecX* a_nm1) const {
   if (c.is_static) return;
   const double k = 1.0 / (h_ * h_);
-  SkinnedPoint point, previous;
-  for (int j : masses_.nodes) {
-    const double kappa = k * masses_.mass[j];
-    kin_.point(j, point);
-    const Vec3 mu = point.cotangent(lambda);  // J_j λ
-    if (a_n) {
-      kin_.pointAt(j, c.R_n, kin_.u_n, previous);
-      previous.addForce(-2.0 * kappa * mu, *a_n);
+  const std::vector<int>& nodes = masses_.nodes;
+  const std::vector<Vec3>* mus = kin_.massNodes() == nodes ? &kin_.massCotangents(lambda) : nullptr;
+  const auto addRange = [&](size_t begin, size_t end, VecX* out_n, VecX* out_nm1) {
+    SkinnedPoint point, previous;
+    for (size_t idx = begin; idx < end; ++idx) {
+      const int j = nodes[idx];
+      const double kappa = k * masses_.mass[j];
+      Vec3 mu;  // J_j λ
+      if (mus) {
+        mu = (*mus)[idx];
+      } else {
+        kin_.point(j, point);
+        mu = point.cotangent(lambda);
+      }
+      if (out_n) {
+        kin_.pointAt(j, c.R_n, kin_.u_n, previous);
+        previous.addForce(-2.0 * kappa * mu, *out_n);
+      }
+      if (out_nm1) {
+        kin_.pointAt(j, c.R_nm1, kin_.u_nm1, previous);
+        previous.addForce(kappa * mu, *out_nm1);
+      }
     }
-    if (a_nm1) {
-      kin_.pointAt(j, c.R_nm1, kin_.u_nm1, previous);
-      previous.addForce(kappa * mu, *a_nm1);
-    }
-  }
+  };
+  // From kSplitNodes nodes, half on each thread (pointAt evaluates each node's own pose blend row),
+  // each into its own products, added in a fixed order.
+  const size_t count = nodes.size();
+  if (count < kSplitNodes) return addRange(0, count, a_n, a_nm1);
+  VecX part_n[2], part_nm1[2];
+  onTwoThreads([&](int p) {
+    if (a_n) part_n[p] = VecX::Zero(a_n->size());
+    if (a_nm1) part_nm1[p] = VecX::Zero(a_nm1->size());
+    addRange(p == 0 ? 0 : count / 2, p == 0 ? count / 2 : count, a_n ? &part_n[p] : nullptr,
+             a_nm1 ? &part_nm1[p] : nullptr);
+  });
+  if (a_n) *a_n += part_n[0] + part_n[1];
+  if (a_nm1) *a_nm1 += part_nm1[0] + part_nm1[1];
 }
 
 void NodalInertiaTerm::addPreviousStatesTangent(const TermContext& c, const VecX& dq_n,

@@ -81,9 +81,10 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
 
  private:
   /// visit(j, κ_j, f_j, point) for every mass node j: κ_j = m_j / h², its force
-  /// f_j = κ_j (x_j − x̂_j) and its skinned point (id: its index among the mass nodes).
+  /// f_j = κ_j (x_j − x̂_j) and its skinned point (id: its index among the mass nodes; with a
+  /// λ, its known cotangent J_j λ from SoftKinematics::massCotangents).
   template <class Visit>
-  void forEachMassNode(Visit&& visit) const;
+  void forEachMassNode(const VecX* lambda, Visit&& visit) const;
 
   const NodeMasses& masses_;
   const MaterialChain& chain_;

@@ -17,8 +17,13 @@ namespace flsh::detail {
 class NodeOffsetCotangentSink {
  public:
   NodeOffsetCotangentSink(const VecX& lambda, MatX3& out) : lambda_(lambda), out_(out) {}
+  /// The λ of the products (see VectorJacobianSink::lambda).
+  const VecX* lambda() const { return &lambda_; }
   void add(const SkinnedPoint& point, int j, const Mat3& B) {
-    if (point.id != mu_id_) {
+    if (point.known_cotangent) {
+      mu_ = *point.known_cotangent;
+      mu_id_ = -1;
+    } else if (point.id != mu_id_) {
       mu_ = point.cotangent(lambda_);
       mu_id_ = point.id;
     }
@@ -39,6 +44,7 @@ class NodeOffsetCotangentSink {
 class NodeOffsetTangentSink {
  public:
   NodeOffsetTangentSink(const MatX3& dY, VecX& out) : dY_(dY), out_(out) {}
+  const VecX* lambda() const { return nullptr; }  ///< no λ: tangents
   void add(const SkinnedPoint& point, int j, const Mat3& B) {
     point.addForce(B * dY_.row(j).transpose(), out_);
   }

@@ -8,6 +8,11 @@
 
 namespace flsh::detail {
 
+/// Loops over nodes whose work is ~0.3–1 µs per node (a posedirs block, a skinned point of the
+/// previous states) split in halves from this many nodes: waking the second thread costs a few
+/// µs, each half saves ≥ 40.
+constexpr size_t kSplitNodes = 128;
+
 /// Runs part(0) and part(1) on a team of two OpenMP threads (both on one thread when the team
 /// has one, e.g. in a nested region); the first exception either throws is rethrown after both.
 template <class Part>

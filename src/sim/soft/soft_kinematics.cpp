@@ -147,6 +147,8 @@ SoftKinematics::SoftKinematics(const SoftAvatar& avatar, const MatX3& joints,
 
 void SoftKinematics::setMassNodes(const std::vector<int>& mass_nodes) {
   const int n = numNodes();
+  mass_nodes_ = mass_nodes;
+  mass_mu_skinning_ = -1;
   if (!reduced_) {
     // prepare() skins every node; the fixed coupling positions of inertia's and gravity's
     // Hessians.
@@ -298,6 +300,7 @@ void SoftKinematics::skinNodes(const std::vector<int>& nodes) const {
   }
   if (x_.rows() != n) x_.setZero(n, 3);
   node_M_.resize(n);
+  ++skinnings_;
   // Y_j = X̄_j + P_j + u_j reads neither the bones nor the joints: its rows stay current while
   // the soft state and the held pose blend do (the bones' presolve, a line search along the
   // bones, the first evaluation after the presolve).
@@ -397,6 +400,26 @@ void SoftKinematics::addBoneSoft(std::vector<Triplet>& H, int offset, int row, i
 
 void SoftKinematics::point(int j, SkinnedPoint& p) const {
   fillPoint(j, *cur_R_, Y_.row(j).transpose(), node_M_[j], p);
+}
+
+const std::vector<Vec3>& SoftKinematics::massCotangents(const VecX& lambda) const {
+  if (mass_mu_skinning_ == skinnings_ && mass_mu_lambda_.size() == lambda.size() &&
+      mass_mu_lambda_ == lambda)
+    return mass_mu_;
+  mass_mu_.resize(mass_nodes_.size());
+  const long count = long(mass_nodes_.size());
+#pragma omp parallel if (count >= 512)
+  {
+    SkinnedPoint p;
+#pragma omp for schedule(static)
+    for (long idx = 0; idx < count; ++idx) {
+      point(mass_nodes_[size_t(idx)], p);
+      mass_mu_[size_t(idx)] = p.cotangent(lambda);
+    }
+  }
+  mass_mu_lambda_ = lambda;
+  mass_mu_skinning_ = skinnings_;
+  return mass_mu_;
 }
 
 void SoftKinematics::pointAt(int j, const std::vector<Mat3>& R, const VecX& state,

@@ -227,6 +227,12 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// bones' weights and lever arms, and its soft DoFs' blocks; id set by the caller), for the
   /// node terms' parameter blocks.
   void point(int j, SkinnedPoint& p) const;
+  /// μ_j = J_j λ (J_j = ∂x_j/∂q of point(j)) of every mass node, in setMassNodes' order: one
+  /// pass per λ and skinning (split over the threads from 512 nodes), which the node terms'
+  /// products with the same λ then share (inertia: parameters, node offsets, previous states;
+  /// gravity: parameters) instead of each forming every μ_j again.
+  const std::vector<Vec3>& massCotangents(const VecX& lambda) const;
+  const std::vector<int>& massNodes() const { return mass_nodes_; }
   void surfacePoint(int i, SkinnedPoint& p, bool soft_blocks = true) const override {
     fillPoint(i, *cur_R_, Y_.row(i).transpose(), node_M_[i], p, soft_blocks);
   }
@@ -349,6 +355,7 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   std::vector<int> influence_start_;
   std::vector<Influence> influences_;
   std::vector<int> eval_nodes_, all_nodes_, surface_nodes_;
+  std::vector<int> mass_nodes_;  // setMassNodes'
   // FEM: see couplingPositions(); per mass node idx its blocks start at coupling_start_[idx].
   std::vector<std::pair<int, int>> coupling_dofs_;
   std::vector<int> coupling_start_;
@@ -364,6 +371,11 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   mutable std::vector<Mat3> node_M_;  // M_j = Σ_b w_jb R_b
   mutable const std::vector<Mat3>* cur_R_ = nullptr;
   mutable const MatX3* cur_t_ = nullptr;
+  mutable long skinnings_ = 0;  // skinNodes calls: x, Y and M rows may have changed
+  // massCotangents' μ_j, for the λ and skinning (skinnings_) they were formed at (−1: none).
+  mutable std::vector<Vec3> mass_mu_;
+  mutable VecX mass_mu_lambda_;
+  mutable long mass_mu_skinning_ = -1;
   mutable BonePairBlocks pair_blocks_[2];  // mapHessian's, per value list
   // mapHessian with K_j = κ_j I: per ordered bone pair (b, c) (key b · #bones + c), Σ κ w_b w_c
   // (s), its sums weighted by r_c (p) and r_b (q), and Σ κ w_b w_c r_c r_bᵀ (W); per value list.

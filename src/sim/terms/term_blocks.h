@@ -53,6 +53,9 @@ struct SkinnedPoint {
   const double* modes = nullptr;
   int num_modes = 0, modal_dof = 0;
   Mat3 blend = Mat3::Zero();
+  /// The point's cotangent μ = J λ for the λ of the sink it is handed to, when the term that
+  /// hands it over knows it (SoftKinematics::massCotangents); null: the sink forms it.
+  const Vec3* known_cotangent = nullptr;
 
   /// Ψ_j as a 3 × r map (valid when modes is not null).
   Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>> modeRows() const {
@@ -84,6 +87,8 @@ class VectorJacobianSink {
  public:
   VectorJacobianSink(const VecX& lambda, ParameterProducts<VecX>& out)
       : lambda_(lambda), out_(out) {}
+  /// The λ of the products (a term that knows its points' J λ for it hands them over).
+  const VecX* lambda() const { return &lambda_; }
   bool wants(SimParameter p) const { return out_.wants(p); }
   template <class M>
   void add(SimParameter p, int dof, int param, const Eigen::MatrixBase<M>& m) {
@@ -100,7 +105,10 @@ class VectorJacobianSink {
   template <class A, class B>
   void add(SimParameter p, const SkinnedPoint& point, int param, const Eigen::MatrixBase<A>& a,
            const Eigen::MatrixBase<B>& b) {
-    if (point.id != mu_id_) {
+    if (point.known_cotangent) {
+      mu_ = *point.known_cotangent;
+      mu_id_ = -1;
+    } else if (point.id != mu_id_) {
       mu_ = point.cotangent(lambda_);
       mu_id_ = point.id;
     }
@@ -124,6 +132,7 @@ class JacobianVectorSink {
  public:
   JacobianVectorSink(const std::vector<ParameterDirection>& directions, std::vector<VecX>& out)
       : directions_(directions), out_(out) {}
+  const VecX* lambda() const { return nullptr; }  ///< no λ: tangents
   bool wants(SimParameter p) const {
     for (const ParameterDirection& d : directions_)
       if (given(d, p)) return true;
@@ -173,6 +182,7 @@ class JacobianVectorSink {
 class JacobianSink {
  public:
   explicit JacobianSink(ParameterProducts<MatX>& out) : out_(out) {}
+  const VecX* lambda() const { return nullptr; }  ///< no λ: Jacobians
   bool wants(SimParameter p) const { return out_.wants(p); }
   template <class M>
   void add(SimParameter p, int dof, int param, const Eigen::MatrixBase<M>& m) {

@@ -2,8 +2,9 @@
 // and elastic terms need to differentiate their gradients with respect to the material file's
 // coefficients. The terms write their derivatives with respect to the coefficient VALUES at the
 // avatar's β (c_i, MaterialModel::coefficientValues: numCoefficients() entries); Simulable
-// chains those to the file's parameters (a = log c₀, b the log-slopes) once. Built on first use:
-// the per-tet material map's geometry costs a pass over the tet mesh. Private to Simulable.
+// chains those to the file's parameters (a = log c₀, b the log-slopes) once. Built on first use
+// and shared by every Simulable of the avatar (SoftAvatar::derived): the per-tet material map's
+// geometry costs a pass over the tet mesh and its faces. Private to Simulable.
 #pragma once
 
 #include <array>
@@ -37,11 +38,14 @@ class MaterialChain {
   VecX valuesTangent(const VecX& parameters_direction) const;
 
  private:
-  void build() const;
+  struct Built {
+    std::unique_ptr<TetMaterialMap> map;
+    std::array<int, 3> mass_coefficients{};
+    MatX3 mass_derivatives;
+  };
+  const Built& built() const;
   const SoftAvatar& avatar_;
-  mutable std::unique_ptr<TetMaterialMap> map_;
-  mutable std::array<int, 3> mass_coefficients_{};
-  mutable MatX3 mass_derivatives_;
+  mutable std::shared_ptr<const Built> built_;
 };
 
 }  // namespace flsh::detail

@@ -5,9 +5,12 @@
 
 namespace flsh::detail {
 
+bool inertialMassCubature(const SoftAvatar& avatar) {
+  return avatar.reducedModelEnabled() && avatar.reducedData().inertial.elements.size() > 0;
+}
+
 Cubature massCubature(const SoftAvatar& avatar) {
-  const ReducedData* rom = avatar.reducedModelEnabled() ? &avatar.reducedData() : nullptr;
-  if (rom && rom->inertial.elements.size() > 0) return rom->inertial;
+  if (inertialMassCubature(avatar)) return avatar.reducedData().inertial;
   return exactCubature(avatar.volumetricData().numTets());  // lumped masses: every tet
 }
 

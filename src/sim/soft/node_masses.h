@@ -19,6 +19,8 @@ struct NodeMasses {
 /// The tets and weights the node masses sum: the ROM's inertial cubature when its avatar has
 /// one, else every tet with weight 1.
 Cubature massCubature(const SoftAvatar& avatar);
+/// Whether massCubature(avatar) is the ROM's inertial cubature (else every tet).
+bool inertialMassCubature(const SoftAvatar& avatar);
 
 /// Lumped masses m_j = Σ_{e ∋ j} ρ_e vol_e / 4 at the rest nodes X̄(β), or the inertial
 /// cubature's when the avatar's ROM has one.

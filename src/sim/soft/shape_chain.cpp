@@ -40,51 +40,48 @@ MatX3 ShapeChain::nodeTangent(const VecX& dbeta) const {
   return Eigen::Map<const MatX3>(d.data(), d.size() / 3, 3);
 }
 
-const MatX& ShapeChain::valuesJacobian() const {
-  build();
-  return values_;
-}
-const MatX& ShapeChain::areaJacobian() const {
-  build();
-  return area_;
-}
-const MatX& ShapeChain::volumeJacobian() const {
-  build();
-  return volume_;
-}
-const MatX& ShapeChain::massJacobian() const {
-  build();
-  return mass_;
-}
+const MatX& ShapeChain::valuesJacobian() const { return built().values; }
+const MatX& ShapeChain::areaJacobian() const { return built().area; }
+const MatX& ShapeChain::volumeJacobian() const { return built().volume; }
+const MatX& ShapeChain::massJacobian() const { return built().mass; }
 
 // Forward mode over the K columns: dX̄ = S e_k moves each tet's area and volume; with dc the
 // column of ∂c/∂β, m_j = Σ_k w_k ρ_t vol_t / 4 (signed volume, as node_masses) moves by
-// w_k (dρ_t vol_t + ρ_t dvol_t) / 4.
-void ShapeChain::build() const {
-  if (built_) return;
-  const VolumetricData& data = avatar_.volumetricData();
-  const TetMesh& mesh = data.templ->mesh;
-  const int K = numBetas();
-  values_ = data.material_model.coefficientValuesShapeJacobian(avatar_.betas());
-  tetMaterialGeometryTangent(mesh, data.rest_nodes, data.templ->fields.shapedirs, area_, volume_);
-  const Cubature cubature = massCubature(avatar_);
+// w_k (dρ_t vol_t + ρ_t dvol_t) / 4. The key names the mass cubature (as MaterialChain's).
+const ShapeChain::Built& ShapeChain::built() const {
+  if (built_) return *built_;
+  // The material map first: it is derived data of the avatar too, and derived() holds the
+  // avatar's lock while it builds.
   const TetMaterialMap& map = materials_.map();
-  mass_ = MatX::Zero(data.numNodes(), K);
-  for (Eigen::Index i = 0; i < cubature.elements.size(); ++i) {
-    const int t = cubature.elements[i];
-    Mat34 X;
-    for (int a = 0; a < 4; ++a) X.col(a) = data.rest_nodes.row(mesh.tets(t, a)).transpose();
-    const double volume = tetSignedVolume(X);
-    const double sign = volume < 0 ? -1.0 : 1.0;
-    Eigen::RowVectorXd dm(K);
-    for (int k = 0; k < K; ++k) {
-      const double d_rho = map.densityTangent(t, values_.col(k), area_(t, k), volume_(t, k));
-      dm[k] = d_rho * volume + data.materials.density[t] * sign * volume_(t, k);
+  const char* key = inertialMassCubature(avatar_) ? "shape_chain.inertial" : "shape_chain.lumped";
+  built_ = avatar_.derived<Built>(key, [&] {
+    const VolumetricData& data = avatar_.volumetricData();
+    const TetMesh& mesh = data.templ->mesh;
+    const int K = numBetas();
+    auto out = std::make_unique<Built>();
+    out->values = data.material_model.coefficientValuesShapeJacobian(avatar_.betas());
+    tetMaterialGeometryTangent(mesh, data.rest_nodes, data.templ->fields.shapedirs, out->area,
+                               out->volume);
+    const Cubature cubature = massCubature(avatar_);
+    out->mass = MatX::Zero(data.numNodes(), K);
+    for (Eigen::Index i = 0; i < cubature.elements.size(); ++i) {
+      const int t = cubature.elements[i];
+      Mat34 X;
+      for (int a = 0; a < 4; ++a) X.col(a) = data.rest_nodes.row(mesh.tets(t, a)).transpose();
+      const double volume = tetSignedVolume(X);
+      const double sign = volume < 0 ? -1.0 : 1.0;
+      Eigen::RowVectorXd dm(K);
+      for (int k = 0; k < K; ++k) {
+        const double d_rho =
+            map.densityTangent(t, out->values.col(k), out->area(t, k), out->volume(t, k));
+        dm[k] = d_rho * volume + data.materials.density[t] * sign * out->volume(t, k);
+      }
+      dm *= cubature.weights[i] / 4;
+      for (int a = 0; a < 4; ++a) out->mass.row(mesh.tets(t, a)) += dm;
     }
-    dm *= cubature.weights[i] / 4;
-    for (int a = 0; a < 4; ++a) mass_.row(mesh.tets(t, a)) += dm;
-  }
-  built_ = true;
+    return out;
+  });
+  return *built_;
 }
 
 }  // namespace flsh::detail

@@ -6,7 +6,8 @@
 //    (tet_material_map.h: the skin fraction);
 //  - the node masses m_j = Σ w ρ_t vol_t / 4 through all three (node_masses.h).
 // The rest joints and bone inertias chain as for the skeleton (sim_parameter.h). The terms
-// write ∂g/∂β from these; built on first use. Private to Simulable.
+// write ∂g/∂β from these; built on first use and shared by every Simulable of the avatar
+// (SoftAvatar::derived). Private to Simulable.
 #pragma once
 
 #include <memory>
@@ -48,11 +49,13 @@ class ShapeChain {
   const MatX& massJacobian() const;
 
  private:
-  void build() const;
+  struct Built {
+    MatX values, area, volume, mass;
+  };
+  const Built& built() const;
   const SoftAvatar& avatar_;
   const MaterialChain& materials_;
-  mutable bool built_ = false;
-  mutable MatX values_, area_, volume_, mass_;
+  mutable std::shared_ptr<const Built> built_;
 };
 
 }  // namespace flsh::detail

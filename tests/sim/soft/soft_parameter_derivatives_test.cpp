@@ -249,6 +249,39 @@ TEST_P(RestSplitBoundedBranch, Shape) {
   expectShapeDerivatives(*sim, base, beta);
 }
 
+// The material and shape chains (the material map, ∂m/∂c, ∂m/∂β) are built once per avatar and
+// mass cubature and shared by its Simulables: a FEM after a ROM on the same avatar object (the
+// reduced model switched off: lumped masses instead of the inertial cubature's) gets the same
+// products as on an avatar of its own.
+TEST(SoftParameterChains, FollowTheMassCubature) {
+  const std::string cache = test::freshTempDir("soft_chain_cache");
+  const auto make = [&] {
+    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(),
+                                          test::smallSoftAvatarSettings(cache));
+    a->enableSoftTissue();
+    a->enableReducedModel();
+    a->enableElasticCubature();
+    a->enableInertialCubature();
+    a->initVolumetricData();
+    return a;
+  };
+  const std::shared_ptr<SoftAvatar> shared = make(), own = make();
+  const std::vector<SimParameter> groups = {SimParameter::Material, SimParameter::Shape};
+  const auto products = [&](const std::shared_ptr<SoftAvatar>& avatar) {
+    auto sim = test::softTermScenario(avatar);
+    return sim->getGradientParameterVJPs(test::randomVector(sim->numDofs(), 1.0, 71), groups);
+  };
+  const std::vector<VecX> rom = products(shared);  // builds the inertial cubature's chains
+  ASSERT_GT(rom[0].norm(), 0.0);
+  shared->enableReducedModel(false);
+  own->enableReducedModel(false);
+  const std::vector<VecX> fem = products(shared), fem_own = products(own);
+  for (size_t g = 0; g < groups.size(); ++g) {
+    ASSERT_GT(fem_own[g].norm(), 0.0);
+    EXPECT_LE((fem[g] - fem_own[g]).norm(), 1e-12 * fem_own[g].norm()) << "group " << g;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Models, SoftParameterDerivatives,
                          ::testing::Values(SoftModel::Fem, SoftModel::Rom, SoftModel::RomModes),
                          test::modelName);

@@ -48,13 +48,7 @@ std::shared_ptr<const SoftAvatar> modalAvatar(bool handles) {
   static const std::shared_ptr<const SoftAvatar> modes = [] {
     SoftAvatarSettings s = test::smallSoftAvatarSettings(test::freshTempDir("approximate_cache"));
     test::useSmallModes(s, ReducedBasisKind::Modes);
-    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(), s);
-    a->enableSoftTissue();
-    a->enableReducedModel();
-    a->enableElasticCubature();
-    a->enableInertialCubature();
-    a->initVolumetricData();
-    return a;
+    return std::shared_ptr<const SoftAvatar>(test::makeSmallSoftAvatar(s, true));
   }();
   return modes;
 }

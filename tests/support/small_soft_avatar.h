@@ -27,6 +27,18 @@ inline void useSmallModes(SoftAvatarSettings& s, ReducedBasisKind kind) {
   s.reduced.modes.columns = 24;
 }
 
+/// A new soft avatar of the 800-vertex synthetic body with settings `s`: the FEM (reduced
+/// false) or the ROM with both cubatures, its volumetric data initialized.
+inline std::shared_ptr<SoftAvatar> makeSmallSoftAvatar(const SoftAvatarSettings& s, bool reduced) {
+  auto a = std::make_shared<SoftAvatar>(smallScene(800).body, VecX(), s);
+  a->enableSoftTissue();
+  a->enableReducedModel(reduced);
+  a->enableElasticCubature(reduced);
+  a->enableInertialCubature(reduced);
+  a->initVolumetricData();
+  return a;
+}
+
 /// Soft avatars of the 800-vertex synthetic body (coarse interior), built once per binary: the
 /// FEM soft skeleton, and the ROM with both cubatures (16 handles, 60 tets each; RomModes with
 /// the small modes too).
@@ -35,14 +47,7 @@ inline std::shared_ptr<const SoftAvatar> smallSoftAvatar(SoftModel model) {
   auto make = [](SoftModel m) {
     SoftAvatarSettings s = smallSoftAvatarSettings(cache);
     if (m == SoftModel::RomModes) useSmallModes(s, ReducedBasisKind::ModesAndHandles);
-    auto a = std::make_shared<SoftAvatar>(smallScene(800).body, VecX(), s);
-    const bool reduced = m != SoftModel::Fem;
-    a->enableSoftTissue();
-    a->enableReducedModel(reduced);
-    a->enableElasticCubature(reduced);
-    a->enableInertialCubature(reduced);
-    a->initVolumetricData();
-    return a;
+    return makeSmallSoftAvatar(s, m != SoftModel::Fem);
   };
   static std::shared_ptr<const SoftAvatar> fem = make(SoftModel::Fem);
   if (model == SoftModel::Fem) return fem;

@@ -256,14 +256,7 @@ TEST_P(RestSplitBoundedBranch, Shape) {
 TEST(SoftParameterChains, FollowTheMassCubature) {
   const std::string cache = test::freshTempDir("soft_chain_cache");
   const auto make = [&] {
-    auto a = std::make_shared<SoftAvatar>(test::smallScene(800).body, VecX(),
-                                          test::smallSoftAvatarSettings(cache));
-    a->enableSoftTissue();
-    a->enableReducedModel();
-    a->enableElasticCubature();
-    a->enableInertialCubature();
-    a->initVolumetricData();
-    return a;
+    return test::makeSmallSoftAvatar(test::smallSoftAvatarSettings(cache), true);
   };
   const std::shared_ptr<SoftAvatar> shared = make(), own = make();
   const std::vector<SimParameter> groups = {SimParameter::Material, SimParameter::Shape};

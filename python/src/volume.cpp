@@ -133,11 +133,12 @@ void bind_volume(py::module_& m) {
   m.def(
       "modal_basis",
       [](const SoftAvatar& avatar, bool static_modes, int vibration_modes, int columns,
-         double eigen_tolerance, std::uint64_t seed) {
+         double eigen_tolerance, std::uint64_t seed, double rotation_weight) {
         ModalBasisSettings settings;
         settings.static_modes = static_modes;
         settings.vibration_modes = vibration_modes;
         settings.columns = columns;
+        settings.rotation_weight = rotation_weight;
         settings.eigen_tolerance = eigen_tolerance;
         settings.seed = seed;
         ModalBasis basis;
@@ -161,12 +162,13 @@ void bind_volume(py::module_& m) {
       },
       py::arg("avatar"), py::kw_only(), py::arg("static_modes") = true,
       py::arg("vibration_modes") = 50, py::arg("columns") = 0, py::arg("eigen_tolerance") = 1e-5,
-      py::arg("seed") = 1,
+      py::arg("seed") = 1, py::arg("rotation_weight") = ModalBasisSettings().rotation_weight,
       "The skeleton-aware soft-tissue basis of an initialized soft avatar (issue 26; docs/rom.md, "
       "'A basis from the physics'): one static-correction mode per bone DoF (static_modes) plus "
       "the lowest fixed-interface vibration modes, mass-orthonormal, dependent columns dropped, "
       "compressed to `columns` when > 0 (mass-PCA of the columns weighted by the load each "
-      "answers). Returns (basis (N, 3, r): displacement of node j in "
+      "answers; rotation_weight: a rotation's static mode against a translation's, m/s² per "
+      "rad/s², > 0). Returns (basis (N, 3, r): displacement of node j in "
       "column k is basis[j, :, k], zero on bone nodes; report dict with the column counts, the "
       "vibration frequencies in Hz and the eigensolver's residual, Lanczos steps and solves). "
       "ValueError for settings out of range.");

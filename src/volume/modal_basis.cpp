@@ -117,6 +117,9 @@ MatX modalColumns(const SoftTissueRestOperators& ops, const ModalBasisSettings& 
   if (settings.columns < 0)
     throw InputError(fn + "columns = " + std::to_string(settings.columns) +
                      ", expected 0 (keep all) or a positive integer");
+  if (!(settings.rotation_weight > 0.0 && std::isfinite(settings.rotation_weight)))
+    throw InputError(fn + "rotation_weight = " + std::to_string(settings.rotation_weight) +
+                     ", expected a positive finite number (m/s² per rad/s²)");
   if (!(settings.eigen_tolerance > 0.0 && settings.eigen_tolerance < 1.0))
     throw InputError(fn + "eigen_tolerance = " + std::to_string(settings.eigen_tolerance) +
                      ", expected in (0, 1)");
@@ -166,15 +169,22 @@ MatX modalColumns(const SoftTissueRestOperators& ops, const ModalBasisSettings& 
   t0 = Clock::now();
   MatX columns(n, statics.cols() + modes.vectors.cols());
   columns << statics, modes.vectors;
-  // Compression weighs each column by the load it answers: the static modes as they are (the
-  // response to a unit acceleration of their bone DoF), each vibration mode by its static
-  // participation ‖φᵀ M_ub‖ / λ (its share of those responses). Normalized columns would count
-  // a mode that barely moves as much as the main ones (docs/benchmarks.md: 2–3× the error).
+  // Compression weighs each column by the load it answers: a static mode by the acceleration
+  // it answers (1 m/s² for a translation, rotation_weight for a rotation), each vibration mode
+  // by its static participation ‖φᵀ M_ub W‖ / λ (its share of those responses). Normalized
+  // columns would count a mode that barely moves as much as the main ones (docs/benchmarks.md:
+  // 2–3× the error).
   const bool weighted = settings.columns > 0;
-  if (weighted)
+  if (weighted) {
+    VecX dof_weight = VecX::Ones(ops.coupling.cols());  // W: column 6b + a, a ≥ 3 a rotation
+    for (Eigen::Index k = 0; k < dof_weight.size(); ++k)
+      if (k % 6 >= 3) dof_weight[k] = settings.rotation_weight;
+    for (Eigen::Index k = 0; k < statics.cols(); ++k) columns.col(k) *= dof_weight[k];
+    const MatX weighted_coupling = ops.coupling * dof_weight.asDiagonal();
     for (Eigen::Index i = 0; i < modes.values.size(); ++i)
       columns.col(statics.cols() + i) *=
-          (modes.vectors.col(i).transpose() * ops.coupling).norm() / modes.values[i];
+          (modes.vectors.col(i).transpose() * weighted_coupling).norm() / modes.values[i];
+  }
   MatX basis = detail::massOrthonormalize(columns, ops.masses, settings.dependence_tolerance,
                                           settings.columns, !weighted);
   r.dropped_columns = int(columns.cols() - basis.cols());

@@ -138,6 +138,7 @@ std::string reducedKey(const VolumetricData& data, const ReducedSettings& s, boo
     h.updateField("modes.dependence_tolerance", &m.dependence_tolerance,
                   sizeof(m.dependence_tolerance));
     h.updateField("modes.seed", &m.seed, sizeof(m.seed));
+    h.updateField("modes.rotation_weight", &m.rotation_weight, sizeof(m.rotation_weight));
   }
   return h.hexDigest();
 }

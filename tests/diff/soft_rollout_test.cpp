@@ -217,7 +217,7 @@ double lossAlong(const Case& c, const RolloutVariables& d, double eps) {
 // contact 8e-7 to 2.2e-6 between 1e-4 and 1e-3 (the loss's noise: the same with Newton stopping at
 // 1e-13), 1.3e-8 / 2.5e-9 at 3e-3.
 void expectDirectionalDerivative(const Case& c, const RolloutVariables& d, double eps,
-                                 double modes_eps = 0.0) {
+                                 double modes_eps = 0.0, bool modes_fourth_order = true) {
   if (c.model == SoftModel::RomModes && modes_eps > 0.0) eps = modes_eps;
   auto sim = makeSimulable(c);
   Rollout rollout(sim, tightOptions(c.coarse_correction));
@@ -245,7 +245,7 @@ void expectDirectionalDerivative(const Case& c, const RolloutVariables& d, doubl
   ASSERT_GT(std::abs(analytic), 1e-8) << "the directional derivative is zero: vacuous check";
   const double central = lossAlong(c, d, eps) - lossAlong(c, d, -eps);
   const double fd =
-      c.model == SoftModel::RomModes
+      c.model == SoftModel::RomModes && modes_fourth_order
           ? (8.0 * central - (lossAlong(c, d, 2 * eps) - lossAlong(c, d, -2 * eps))) / (12.0 * eps)
           : central / (2.0 * eps);
   const double error = std::abs(analytic - fd) / std::abs(fd);
@@ -329,8 +329,12 @@ TEST_P(SoftRolloutGradient, InitialState) {
   // ε = 1e-3, not 1e-4: here the central difference's error is the rollout's convergence noise
   // (Newton stops at a 1e-11 gradient), which grows as 1/ε — RomWithContact 7e-8 at 1e-4,
   // 5e-7 at 1e-5, 8e-9 at 1e-3 (GCC -O3), but 1.7e-6 at 1e-4 in the clang -O1 sanitizer build —
-  // while the truncation error is still ≤ 4e-8 at 1e-3 in all four cases.
-  expectDirectionalDerivative(c, d, 1e-3, 3e-3);
+  // while the truncation error is still ≤ 4e-8 at 1e-3 in all four cases. The modal ROM: the
+  // second-order difference at 4e-4. Its loss along d bends between 5e-4 and 1e-3 (with the
+  // basis compressed with rotation_weight 0.3: at ε = 1e-3 the central difference is 0.3 % off,
+  // from 3e-4 down to 2e-4 within 3.6e-8 without contact and 1.3e-7 with it); a fourth-order
+  // stencil reaching 2ε would straddle it.
+  expectDirectionalDerivative(c, d, 1e-3, 4e-4, false);
 }
 
 TEST_P(SoftRolloutGradient, InitialVelocity) {

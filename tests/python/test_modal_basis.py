@@ -67,6 +67,11 @@ def test_compression_and_errors(avatar):
     assert basis.shape[2] == 30 and report["dropped_columns"] == 144 - 30
     with pytest.raises(ValueError, match="vibration_modes = -1"):
         flsh.modal_basis(avatar, vibration_modes=-1)
+    # The rotations' weight changes the compressed span, not the uncompressed one.
+    light, _ = flsh.modal_basis(avatar, vibration_modes=0, columns=30, rotation_weight=0.1)
+    assert np.abs(light - basis).max() > 1e-3 * np.abs(basis).max()
+    with pytest.raises(ValueError, match="rotation_weight"):
+        flsh.modal_basis(avatar, vibration_modes=0, columns=30, rotation_weight=0.0)
     with pytest.raises(ValueError, match="no columns"):
         flsh.modal_basis(avatar, static_modes=False, vibration_modes=0)
     plain = flsh.SoftAvatar(flsh.make_synthetic_body(vertices=600))

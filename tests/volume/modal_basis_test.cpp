@@ -255,9 +255,25 @@ TEST(ModalBasis, CompressionKeepsTheLeadingMassPrincipalColumns) {
   EXPECT_LT(outOfSpan(soft, ops.masses, V), 1e-6);
 }
 
-// Compression weighs the static modes by the load they answer (their raw size), so their raw
-// responses are kept better than by a mass-PCA of the normalized columns: the weighted PCA is
-// the best r-dimensional span for Σ_k ‖ψ_k − Pψ_k‖²_M (Eckart–Young), the normalized one is not.
+// The static modes ψ_k = K⁻¹ M_ub e_k, the rotations' (k mod 6 ≥ 3) times `rotation_weight`.
+MatX weightedStatics(const SoftTissueRestOperators& ops, double rotation_weight) {
+  const detail::SparseCholesky factor(ops.stiffness, "test");
+  MatX statics = factor.solve(ops.coupling);
+  for (Eigen::Index k = 0; k < statics.cols(); ++k)
+    if (k % 6 >= 3) statics.col(k) *= rotation_weight;
+  return statics;
+}
+
+// Σ_k ‖x_k − P x_k‖²_M over the columns of X, P the M-projection on the (M-orthonormal) basis.
+double squaredResidual(const SoftTissueRestOperators& ops, const MatX& basis, const MatX& X) {
+  const MatX R = X - basis * (basis.transpose() * ops.masses.asDiagonal() * X);
+  return (R.transpose() * ops.masses.asDiagonal() * R).trace();
+}
+
+// Compression weighs the static modes by the load they answer (their raw size, a rotation's
+// times rotation_weight), so those responses are kept better than by a mass-PCA of the
+// normalized columns: the weighted PCA is the best r-dimensional span for Σ_k w_k² ‖ψ_k −
+// Pψ_k‖²_M (Eckart–Young), the normalized one is not.
 TEST(ModalBasis, CompressionKeepsTheLargestStaticResponsesBest) {
   const SoftTissueRestOperators& ops = operators();
   ModalBasisSettings s = smallSettings();
@@ -265,17 +281,49 @@ TEST(ModalBasis, CompressionKeepsTheLargestStaticResponsesBest) {
   s.columns = 24;
   const MatX V = modalColumns(ops, s, nullptr);
   ASSERT_EQ(V.cols(), 24);
-  const detail::SparseCholesky factor(ops.stiffness, "test");
-  const MatX statics = factor.solve(ops.coupling);  // raw ψ_k = K⁻¹ M_ub e_k
+  const MatX statics = weightedStatics(ops, s.rotation_weight);
   ASSERT_GT(statics.norm(), 0.0);
-  auto residual = [&](const MatX& basis) {  // Σ_k ‖ψ_k − Pψ_k‖²_M, P the M-projection
-    const MatX R = statics - basis * (basis.transpose() * ops.masses.asDiagonal() * statics);
-    return (R.transpose() * ops.masses.asDiagonal() * R).trace();
-  };
   const MatX normalized = detail::massOrthonormalize(statics, ops.masses, 1e-10, 24);
   ASSERT_EQ(normalized.cols(), 24);
-  EXPECT_LT(residual(V), 0.8 * residual(normalized));
-  EXPECT_LT(residual(V), residual(V.leftCols(23)));
+  EXPECT_LT(squaredResidual(ops, V, statics), 0.8 * squaredResidual(ops, normalized, statics));
+  EXPECT_LT(squaredResidual(ops, V, statics), squaredResidual(ops, V.leftCols(23), statics));
+  // Eckart–Young: no span of 24 columns keeps the weighted statics better, e.g. not the one
+  // compressed with the rotations at full weight.
+  ModalBasisSettings full_weight = s;
+  full_weight.rotation_weight = 1.0;
+  const MatX U = modalColumns(ops, full_weight, nullptr);
+  EXPECT_LT(squaredResidual(ops, V, statics), squaredResidual(ops, U, statics));
+}
+
+// The rotation weight trades the rotations' static responses against the translations': a
+// smaller weight keeps the translations better and the rotations worse, and without
+// compression it changes nothing.
+TEST(ModalBasis, RotationWeightTradesRotationsForTranslations) {
+  const SoftTissueRestOperators& ops = operators();
+  const MatX statics = weightedStatics(ops, 1.0);
+  MatX translations(statics.rows(), statics.cols() / 2),
+      rotations(statics.rows(), statics.cols() / 2);
+  for (Eigen::Index b = 0; b < statics.cols() / 6; ++b) {
+    translations.middleCols<3>(3 * b) = statics.middleCols<3>(6 * b);
+    rotations.middleCols<3>(3 * b) = statics.middleCols<3>(6 * b + 3);
+  }
+  ASSERT_GT(rotations.norm(), 0.0);
+  ModalBasisSettings s = smallSettings();
+  s.vibration_modes = 0;
+  s.columns = 24;
+  s.rotation_weight = 0.1;
+  const MatX light = modalColumns(ops, s, nullptr);
+  s.rotation_weight = 10.0;
+  const MatX heavy = modalColumns(ops, s, nullptr);
+  EXPECT_LT(squaredResidual(ops, light, translations), squaredResidual(ops, heavy, translations));
+  EXPECT_GT(squaredResidual(ops, light, rotations), squaredResidual(ops, heavy, rotations));
+  s.columns = 0;
+  s.rotation_weight = 0.1;
+  const MatX all_light = modalColumns(ops, s, nullptr);
+  s.rotation_weight = 1.0;
+  const MatX all = modalColumns(ops, s, nullptr);
+  ASSERT_EQ(all_light.cols(), all.cols());
+  EXPECT_EQ((all_light - all).cwiseAbs().maxCoeff(), 0.0);
 }
 
 TEST(ModalBasis, SettingsOutOfRangeAreNamed) {
@@ -293,6 +341,12 @@ TEST(ModalBasis, SettingsOutOfRangeAreNamed) {
   s.vibration_modes = 0;
   EXPECT_NE(messageOf<InputError>([&] { modalColumns(ops, s); }).find("no columns"),
             std::string::npos);
+  for (double weight : {0.0, -1.0, std::nan("")}) {
+    s = ModalBasisSettings();
+    s.rotation_weight = weight;
+    EXPECT_NE(messageOf<InputError>([&] { modalColumns(ops, s); }).find("rotation_weight"),
+              std::string::npos);
+  }
   s = ModalBasisSettings();
   s.eigen_tolerance = 0.0;
   EXPECT_NE(messageOf<InputError>([&] { modalColumns(ops, s); }).find("eigen_tolerance"),

@@ -62,7 +62,8 @@
 // (the partition-of-unity basis): e.g. --models 87pou,150pou,300pou or 87/500/0,87/0/500 (the
 // skeleton and the FEM always run). A basis with modes (issue 26) is written mV[:C][+H] in place
 // of H: the static modes and V vibration modes, compressed to C columns, with H handles appended
-// (ReducedBasisKind::ModesAndHandles; without +H: Modes), e.g. m24:72/500/500 or m24+87exact.
+// (ReducedBasisKind::ModesAndHandles; without +H: Modes), e.g. m24:72/500/500 or m24+87exact;
+// mV:CwX compresses with rotation weight X (ModalBasisSettings::rotation_weight), e.g. m24:72w1.
 // A last sN trains both cubatures on N samples (default 400, which caps a cubature at about
 // 400 tets: the selection stops when more no longer lower the training error), e.g.
 // m24:96/1000/1000s2000. A very last iN caps Newton at N iterations per step
@@ -126,6 +127,12 @@ enum class Kind { Skeleton, Rom, Fem };
 
 std::string g_material_file;  // --materials: every soft model's material file (empty: defaults)
 
+std::string shortNumber(double x) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%g", x);
+  return buf;
+}
+
 struct ModelSpec {
   Kind kind = Kind::Rom;
   int handles = 87, elastic = 500, inertial = 500;  // 0 cubature tets: exact integration
@@ -136,7 +143,8 @@ struct ModelSpec {
   // static modes and this many vibration modes (−1: the handle basis), compressed to `columns`
   // (0: all).
   int vibration_modes = -1, columns = 0;
-  int max_iterations = 0;  // Newton iterations per step at most (0: the scene's default)
+  double rotation_weight = 0.0;  // ModalBasisSettings::rotation_weight (0: its default)
+  int max_iterations = 0;        // Newton iterations per step at most (0: the scene's default)
   std::string name() const {
     return avatarName() +
            (max_iterations > 0 ? " i" + std::to_string(max_iterations) : std::string());
@@ -149,6 +157,7 @@ struct ModelSpec {
     if (vibration_modes >= 0)
       basis = "m" + std::to_string(vibration_modes) +
               (columns > 0 ? ":" + std::to_string(columns) : std::string()) +
+              (rotation_weight > 0 ? "w" + shortNumber(rotation_weight) : std::string()) +
               (handles > 0 ? "+" + std::to_string(handles) : std::string());
     char buf[64];
     if (elastic == 0 && inertial == 0)
@@ -190,6 +199,12 @@ ModelSpec parseModel(const std::string& text) {
     if (!rest.empty() && rest[0] == ':') {
       m.columns = std::atoi(rest.c_str() + 1);
       rest = rest.substr(std::min(rest.find_first_not_of("0123456789", 1), rest.size()));
+    }
+    if (!rest.empty() && rest[0] == 'w') {  // wX: the compression's rotation weight
+      m.rotation_weight = std::atof(rest.c_str() + 1);
+      if (!(m.rotation_weight > 0))
+        throw std::runtime_error("--models: '" + text + "': wX needs a weight > 0");
+      rest = rest.substr(std::min(rest.find_first_not_of("0123456789.e-", 1), rest.size()));
     }
     if (!rest.empty() && rest[0] == '+')
       rest = rest.substr(1);
@@ -238,6 +253,7 @@ std::shared_ptr<SoftAvatar> makeAvatar(std::shared_ptr<const BodyModel> body, co
           m.handles > 0 ? ReducedBasisKind::ModesAndHandles : ReducedBasisKind::Modes;
       settings.reduced.modes.vibration_modes = m.vibration_modes;
       settings.reduced.modes.columns = m.columns;
+      if (m.rotation_weight > 0) settings.reduced.modes.rotation_weight = m.rotation_weight;
     }
     settings.reduced.surface_partition_of_unity = m.pou;
     if (m.basis_drop >= 0) settings.reduced.basis_drop_below = m.basis_drop;

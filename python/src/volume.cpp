@@ -391,7 +391,8 @@ void bind_volume(py::module_& m) {
                       double voxel_size, double resolution, const std::string& material_file,
                       const py::object& cache_dir, bool use_cache, const py::object& handles,
                       const py::object& elastic_cubature_points,
-                      const py::object& inertial_cubature_points, int cubature_training_samples,
+                      const py::object& inertial_cubature_points,
+                      const py::object& cubature_training_samples,
                       double cubature_training_amplitude, std::uint64_t cubature_seed,
                       double basis_drop_below, bool surface_partition_of_unity,
                       const py::object& basis, const py::object& vibration_modes,
@@ -437,9 +438,10 @@ void bind_volume(py::module_& m) {
               r.inertial_cubature_points =
                   checked_count(inertial_cubature_points.cast<int>(), "inertial_cubature_points", 1,
                                 "sample tets; enable_inertial_cubature(False) switches it off");
-            r.training_samples =
-                checked_count(cubature_training_samples, "cubature_training_samples", 1,
-                              "random training samples per cubature");
+            if (given_int(cubature_training_samples, "cubature_training_samples"))
+              r.training_samples =
+                  checked_count(cubature_training_samples.cast<int>(), "cubature_training_samples",
+                                1, "random training samples per cubature");
             if (!(cubature_training_amplitude > 0) || !std::isfinite(cubature_training_amplitude))
               throw py::value_error(
                   "cubature_training_amplitude: expected a finite value > 0 (m), got " +
@@ -481,7 +483,7 @@ void bind_volume(py::module_& m) {
           py::arg("cache_dir") = py::none(), py::arg("use_cache") = true,
           py::arg("handles") = py::none(), py::arg("elastic_cubature_points") = py::none(),
           py::arg("inertial_cubature_points") = py::none(),
-          py::arg("cubature_training_samples") = rd.training_samples,
+          py::arg("cubature_training_samples") = py::none(),
           py::arg("cubature_training_amplitude") = rd.training_amplitude,
           py::arg("cubature_seed") = rd.seed, py::arg("basis_drop_below") = rd.basis_drop_below,
           py::arg("surface_partition_of_unity") = rd.surface_partition_of_unity,
@@ -498,9 +500,11 @@ void bind_volume(py::module_& m) {
           "cut to a multiple of 3; None = 72). handles (point handles on the surface, ≥ 1; None "
           "= 87), elastic_cubature_points / inertial_cubature_points (sample tets of each "
           "cubature when enabled, ≥ 1; None = 500), preset (None or 'none': the defaults above; "
-          "'realtime': modes 12:24 and 100-tet cubatures, the arguments given win; a scene's "
+          "'realtime': modes 12:24 (rotation weight 1) and 100-tet cubatures trained on 400 "
+          "samples, the arguments given win; a scene's "
           "Newton budget is the scene key \"preset\", or SceneOptions.reduced_newton."
-          "max_iterations = 3), cubature_training_samples (random training samples per cubature), "
+          "max_iterations = 3), cubature_training_samples (random training samples per cubature; "
+          "None = 600, the preset's under a preset), "
           "cubature_training_amplitude (largest handle displacement of a training sample, m), "
           "cubature_seed, basis_drop_below (handle weights below it are dropped, in [0, 0.01]), "
           "surface_partition_of_unity (the handle weights rescaled to sum to 1 on the soft "
@@ -634,6 +638,10 @@ void bind_volume(py::module_& m) {
       .def_property_readonly(
           "handles", [](const SoftAvatar& a) { return a.settings().reduced.num_handles; },
           "point handles of a basis with handles (setting)")
+      .def_property_readonly(
+          "cubature_training_samples",
+          [](const SoftAvatar& a) { return a.settings().reduced.training_samples; },
+          "random training samples per cubature (setting)")
       .def_property_readonly(
           "elastic_cubature_points",
           [](const SoftAvatar& a) { return a.settings().reduced.elastic_cubature_points; },

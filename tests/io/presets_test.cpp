@@ -33,7 +33,8 @@ TEST(Presets, NoneIsTheLibraryDefaultAndRealtimeTheSmallModalRom) {
   EXPECT_EQ(realtime.modes.columns, 24);
   EXPECT_EQ(realtime.elastic_cubature_points, 100);
   EXPECT_EQ(realtime.inertial_cubature_points, 100);
-  EXPECT_EQ(realtime.training_samples, defaults.training_samples);
+  EXPECT_EQ(realtime.training_samples, 400);
+  EXPECT_EQ(realtime.modes.rotation_weight, 1.0);
   EXPECT_EQ(presetReducedIterationBudget(Preset::Realtime), 3);
 }
 

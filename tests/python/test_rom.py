@@ -75,6 +75,10 @@ def test_settings_are_keyword_arguments_with_the_documented_defaults(small_body)
     realtime = flsh.SoftAvatar(small_body, preset="realtime")
     assert (realtime.basis, realtime.vibration_modes, realtime.modal_columns) == ("modes", 12, 24)
     assert (realtime.elastic_cubature_points, realtime.inertial_cubature_points) == (100, 100)
+    assert realtime.cubature_training_samples == 400  # the preset's, not the default 600
+    assert flsh.SoftAvatar(small_body).cubature_training_samples == 600
+    assert flsh.SoftAvatar(small_body, preset="realtime",
+                           cubature_training_samples=50).cubature_training_samples == 50
     mixed = flsh.SoftAvatar(small_body, preset="realtime", modal_columns=36, handles=10,
                             inertial_cubature_points=50)
     assert (mixed.basis, mixed.handles, mixed.modal_columns) == ("handles", 10, 36)

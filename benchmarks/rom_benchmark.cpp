@@ -18,8 +18,8 @@
 //        rom_benchmark --sag [--frames F]   (gravity's sag of a standing body: FEM and ROMs)
 //        rom_benchmark --galerkin LIST      (linear static sag: Galerkin against best fit)
 //        rom_benchmark --modal-fit LIST [--frames F]   (the FEM's u against modal bases' spans)
-//   --held-out (--compare, --modal-fit): also arm swings and a jump, motions no default was
-//              chosen on;
+//   --held-out (--compare, --modal-fit): also arm swings and a jump, motions outside the
+//              comparison (to check whether a choice carries over);
 //   --handles / --elastic / --inertial: basis size and cubature tets (defaults 87, 500, 500);
 //   --modes V[:C]: a basis with modes (static and V vibration modes, compressed to C columns),
 //                  with the --handles appended (--handles 0: the modes alone);
@@ -311,7 +311,7 @@ Run makeRun(std::shared_ptr<SoftAvatar> avatar, const Scenario& sc, const SceneO
   return r;
 }
 
-// --held-out: the comparison's scenarios followed by motions that no setting was chosen on.
+// --held-out: the comparison's scenarios followed by two more motions.
 bool g_held_out = false;
 
 // The comparison's scenarios: walk, jumping jacks, a ball pressing the belly of a standing body;

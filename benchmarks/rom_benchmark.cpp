@@ -64,8 +64,9 @@
 // of H: the static modes and V vibration modes, compressed to C columns, with H handles appended
 // (ReducedBasisKind::ModesAndHandles; without +H: Modes), e.g. m24:72/500/500 or m24+87exact;
 // mV:CwX compresses with rotation weight X (ModalBasisSettings::rotation_weight), e.g. m24:72w1.
-// A last sN trains both cubatures on N samples (default 400, which caps a cubature at about
-// 400 tets: the selection stops when more no longer lower the training error), e.g.
+// A last sN trains both cubatures on N samples (default 600, ReducedSettings::training_samples;
+// N samples cap a cubature at about N tets: the selection stops when more no longer lower the
+// training error), e.g.
 // m24:96/1000/1000s2000. A very last iN caps Newton at N iterations per step
 // (NewtonOptions::max_iterations, the real-time trade; a step that reaches it keeps its last
 // iterate), e.g. m12:24/150/100i3.

@@ -13,10 +13,11 @@ enum class Preset {
   None,  ///< the library's defaults
   /// The ROM for real time (issue 26): the static modes and 12 vibration modes compressed to 24
   /// columns (rotation weight 1), 100 sample tets per cubature trained on 400 samples, and a
-  /// budget of 3 Newton iterations per step (after the bones' presolve) instead of a tolerance. Measured on the full-size walk with ground
-  /// contact: 13.6 % of the FEM's soft-tissue displacement off (jumping jacks 23 %, ball 16 %),
-  /// the budget 0.002 mm from a 1e-9 solve; 570–700 steps/s on the 2-core machine (libgomp's
-  /// default spinning wait), 300–460 on a busier one (docs/benchmarks.md "The real-time preset").
+  /// budget of 3 Newton iterations per step (after the bones' presolve) instead of a tolerance.
+  /// Measured on the full-size walk with ground contact: 13.6 % of the FEM's soft-tissue
+  /// displacement off (jumping jacks 23 %, ball 16 %), the budget 0.002 mm from a 1e-9 solve;
+  /// 570–700 steps/s on the 2-core machine (libgomp's default spinning wait), 300–460 on a
+  /// busier one (docs/benchmarks.md "The real-time preset").
   Realtime,
 };
 

@@ -29,6 +29,13 @@ class ModelKinematics {
   /// Skins the nodes every evaluation reads at the current state (bones + soft state); cached
   /// by `version`.
   virtual void prepare(long version, const BoneFrames& bones) const = 0;
+  /// As prepare, for evaluations that read the bones' frames but not the nodes prepare skins
+  /// (the bones' presolve: Simulable's bone-only energy and Hessian). A kinematics may defer the
+  /// skinning until something asks for it (the ROM's: SoftKinematics::ensurePrepared); the next
+  /// prepare() skins.
+  virtual void prepareFrames(long version, const BoneFrames& bones) const {
+    prepare(version, bones);
+  }
   /// For the contact broad phase, at the prepared state: per bone b (`margin`, 24 values), a
   /// bound on how far the surface nodes b dominates are from their skinned rest positions
   /// beyond what the bones' motion explains (pose blend and soft displacement; 0 for the

@@ -111,8 +111,23 @@ double Simulable::getEnergyAndGradientVector(VecX& g, int offset) const {
   return E + boneSpringGradient(g, offset);
 }
 
+namespace {
+/// Impl::frames_only for the lifetime of a bone-only evaluation.
+class FramesOnly {
+ public:
+  explicit FramesOnly(const Simulable::Impl& m) : m_(m) { m_.frames_only = true; }
+  ~FramesOnly() { m_.frames_only = false; }
+  FramesOnly(const FramesOnly&) = delete;
+  FramesOnly& operator=(const FramesOnly&) = delete;
+
+ private:
+  const Simulable::Impl& m_;
+};
+}  // namespace
+
 double Simulable::getBoneEnergyAndGradientVector(VecX& g, int offset) const {
   const Impl& m = *impl_;
+  const FramesOnly frames_only(m);
   m.ensureContact();
   TermContext c = m.context();
   c.bone_block_only = true;  // the presolve reads the bones' rows alone
@@ -123,6 +138,7 @@ double Simulable::getBoneEnergyAndGradientVector(VecX& g, int offset) const {
 void Simulable::getBoneHessianTripletVector(std::vector<Triplet>& H,
                                             std::vector<FixedHessianBlocks>& blocks, int offset,
                                             bool psd) const {
+  const FramesOnly frames_only(*impl_);
   dynamicHessian(H, &blocks, offset, psd, true);
   potentialHessian(H, &blocks, offset, psd, false, true);
 }

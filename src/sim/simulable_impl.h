@@ -95,7 +95,16 @@ struct Simulable::Impl {
   int boneDofs() const { return detail::kDofsPerBone * num_bones; }
   int dofs() const { return boneDofs() + kinematics->numSoftDofs(); }
   /// Prepares the kinematics at the current state (cached by state_version).
-  void prepare() const { kinematics->prepare(state_version, frames(q)); }
+  void prepare() const {
+    if (frames_only)
+      kinematics->prepareFrames(state_version, frames(q));
+    else
+      kinematics->prepare(state_version, frames(q));
+  }
+  /// Set while the bones' presolve evaluates (getBoneEnergyAndGradientVector,
+  /// getBoneHessianTripletVector): prepare() sets the frames and may defer the skinning
+  /// (ModelKinematics::prepareFrames).
+  mutable bool frames_only = false;
   detail::BoneFrames frames(const detail::BoneStates& s) const { return {s.R, s.t}; }
   void setSoftPrediction() { soft->setPrediction(frames(q_n), frames(q_nm1)); }
 

@@ -29,6 +29,7 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
       u_n(kin_.u_n),
       u_nm1(kin_.u_nm1),
       masses_(nodeMasses(avatar)),
+      held_moments_(kin_, masses_),
       material_chain_(avatar),
       shape_chain_(avatar, material_chain_) {
   kin_.setMassNodes(masses_.nodes);
@@ -48,9 +49,10 @@ SoftTissue::SoftTissue(const SoftAvatar& avatar, const MatX3& joints,
   } else {
     elastic_ = std::make_unique<FemElasticityTerm>(kin_, material_chain_, std::move(elements));
   }
-  inertia_ =
-      std::make_unique<NodalInertiaTerm>(kin_, masses_, material_chain_, shape_chain_, time_step);
-  gravity_ = std::make_unique<NodalGravityTerm>(kin_, masses_, material_chain_, shape_chain_);
+  inertia_ = std::make_unique<NodalInertiaTerm>(kin_, masses_, held_moments_, material_chain_,
+                                                shape_chain_, time_step);
+  gravity_ = std::make_unique<NodalGravityTerm>(kin_, masses_, held_moments_, material_chain_,
+                                                shape_chain_);
   contact_ = std::make_unique<NodeContactTerm>(kin_, avatar.vertexAreas());
 }
 

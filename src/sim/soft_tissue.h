@@ -207,6 +207,7 @@ class SoftTissue final : public TwoThreadSchedule {
     return {inertia_.get(), gravity_.get(), contact_.get()};
   }
   NodeMasses masses_;
+  HeldMassMoments held_moments_;  // the inertia's and gravity's bone rows in the presolve
   MaterialChain material_chain_;
   ShapeChain shape_chain_;
   std::unique_ptr<NodalInertiaTerm> inertia_;

@@ -276,8 +276,11 @@ TEST_P(SoftRolloutGradient, BoneInertia) {
       Simulable(test::smallSoftAvatar(c.model)).getParameter(SimParameter::BoneInertia).cwiseAbs();
   d.bone_inertia = randomVector(240, 0.1, 3).cwiseProduct(p0);
   // The inertias reach the loss only through the tracking stiffnesses: a small derivative, so
-  // a longer step (1e-4 of each inertia) keeps the difference above the solves' rounding.
-  expectDirectionalDerivative(c, d, 1e-3);
+  // a longer step (1e-4 of each inertia) keeps the difference above the solves' rounding. The
+  // modal ROM with contact is noisier still (its loss moves by ~5e-12 with the rollout's
+  // convergence: relative error 4e-5 at ε = 1e-4, 3e-6 at 3e-4, 0.7–1.4e-6 at 1e-3 as the
+  // forward states' rounding moves, below 1e-6 at 3e-3): the modal cases at 3e-3.
+  expectDirectionalDerivative(c, d, 1e-3, 3e-3);
 }
 
 TEST_P(SoftRolloutGradient, PoseTargets) {
@@ -531,12 +534,17 @@ TEST_P(SoftRollout, UnconvergedStepsAreRefused) {
 }
 
 // vᵀ(dL/dp) by the reverse pass equals Σ_t a_t · (dq_t/dp v) by forward sensitivities (the
-// loss linear in the states: a_t = its state weights), for a direction in several groups.
+// loss linear in the states: a_t = its state weights), for a direction in several groups. The
+// FEM's sweeps solve by PCG (TapeSolveOptions), whose residual bounds the agreement: measured
+// 2e-10 to 1.2e-9 at the default 1e-12 (it moves with the rounding of the forward states),
+// 1.6e-11 at 1e-14, 5e-12 with every step factored. The check runs at 1e-14.
 TEST_P(SoftRollout, ForwardSensitivitiesAgreeWithTheReversePass) {
   const Case c{GetParam(), true, true};
   auto sim = makeSimulable(c);
   const int n = sim->numDofs();
-  Rollout rollout(sim, tightOptions());
+  RolloutOptions options = tightOptions();
+  options.tape_solve.relative_tolerance = 1e-14;
+  Rollout rollout(sim, options);
   rollout.run(kSteps, baseInputs(c));
   const RowMatX& a = lossFor(c.model).state_weights;
   const RolloutVariables grad = rollout.backward(a);

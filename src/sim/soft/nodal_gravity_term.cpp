@@ -8,8 +8,9 @@
 namespace flsh::detail {
 
 NodalGravityTerm::NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
-                                   const MaterialChain& chain, const ShapeChain& shape)
-    : NodeTerm(kinematics), masses_(masses), chain_(chain), shape_(shape) {
+                                   const HeldMassMoments& moments, const MaterialChain& chain,
+                                   const ShapeChain& shape)
+    : NodeTerm(kinematics), masses_(masses), moments_(moments), chain_(chain), shape_(shape) {
   bone_mass_.assign(size_t(kin_.numBones()), 0.0);
   for (int j : masses_.nodes)
     for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf)
@@ -56,7 +57,10 @@ void NodalGravityTerm::addHessianBlocks(const TermContext& c, std::vector<Triple
                                         bool psd) const {
   // Neither model needs the node forces' pass for the Hessian alone. The bones' block alone:
   // their rotation curvature.
-  if (c.bone_block_only) return boneCurvature(c.options.gravity, H, offset, psd);
+  if (c.bone_block_only) {
+    boneOnly(c.options.gravity, nullptr, &H, offset, psd);
+    return;
+  }
   if (kin_.reduced()) return reducedHessian(c.options.gravity, H, offset, psd);
   femHessian(c.options.gravity, H, blocks, offset, psd);
 }
@@ -108,6 +112,29 @@ double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Trip
     std::vector<FixedHessianBlocks> lists;
     femHessian(gravity, *H, blocks ? &lists : nullptr, offset, psd);
     if (blocks) *blocks = lists.front();
+  }
+  return E;
+}
+
+double NodalGravityTerm::boneOnly(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
+                                  bool psd) const {
+  moments_.update();
+  const std::vector<Mat3>& R = kin_.R();
+  const MatX3& t = kin_.t();
+  double E = 0.0;
+  for (int b = 0; b < kin_.numBones(); ++b) {
+    const double G = moments_.boneMass(b);
+    if (G == 0.0) continue;
+    const Vec3 lever = R[size_t(b)] * moments_.boneLever(b);  // Σ_j m_j w_jb r_jb
+    E -= gravity.dot(lever + G * t.row(b).transpose());
+    if (g) {
+      g->segment<3>(offset + 6 * b) -= G * gravity;
+      g->segment<3>(offset + 6 * b + 3) -= lever.cross(gravity);
+    }
+    if (H) {
+      const Mat3 C = rotationCurvature(-gravity, lever);
+      addBlock(*H, offset + 6 * b + 3, offset + 6 * b + 3, psd ? projectToPSD<3>(C) : C);
+    }
   }
   return E;
 }

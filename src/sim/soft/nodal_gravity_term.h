@@ -10,6 +10,7 @@
 
 #include "flsh/sim/energy_term.h"
 #include "sim/block_hessian_term.h"
+#include "sim/soft/held_mass_moments.h"
 #include "sim/soft/material_chain.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/node_offset_derivatives.h"
@@ -24,11 +25,13 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
  public:
   /// Call after the kinematics' buildReducedPattern (the ROM's rotation–handle slots).
   NodalGravityTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
-                   const MaterialChain& chain, const ShapeChain& shape);
+                   const HeldMassMoments& moments, const MaterialChain& chain,
+                   const ShapeChain& shape);
 
   const char* name() const override { return "nodal gravity"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override {
-    return evaluate(c.options.gravity, g, nullptr, offset, true, nullptr, c.bone_block_only);
+    if (c.bone_block_only) return boneOnly(c.options.gravity, g, nullptr, offset, true);
+    return evaluate(c.options.gravity, g, nullptr, offset, true, nullptr);
   }
   /// FEM: the coupling blocks as fixed blocks; ROM: bone triplets, handle blocks into list 1.
   void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -40,6 +43,13 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
   /// blocks into value list 1). `bones_only`: the gradient's bone rows alone.
   double evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                   FixedHessianBlocks* blocks = nullptr, bool bones_only = false) const;
+  /// The energy −g · Σ_b (R_b L_b + G_b t_b), the gradient's bone rows (ADDED into g:
+  /// −G_b g and −(R_b L_b) × g) and the bones' rotation curvature (appended to H) from the mass
+  /// nodes' moments at held unposed positions (held_mass_moments.h; TermContext::bone_block_only,
+  /// the bones' presolve): no pass over the nodes while Y stays. Equal to evaluate()'s bone rows
+  /// up to rounding.
+  double boneOnly(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
+                  bool psd) const;
   /// ∂g/∂p as local blocks (term_blocks.h).
   template <class Sink>
   void parameterBlocks(const TermContext& c, Sink& sink) const;
@@ -58,6 +68,7 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
 
  private:
   const NodeMasses& masses_;
+  const HeldMassMoments& moments_;
   const MaterialChain& chain_;
   const ShapeChain& shape_;
   // ROM: the rotation–handle blocks D_bh [g]× R_b into value list 1 at `slot`, D_bh = Σ_j m_j

@@ -1,5 +1,6 @@
 #include "sim/soft/nodal_inertia_term.h"
 
+#include "flsh/body/smpl_skeleton.h"
 #include "flsh/core/rotation.h"
 #include "sim/soft/node_offset_blocks.h"
 #include "sim/soft/on_two_threads.h"
@@ -9,10 +10,11 @@
 namespace flsh::detail {
 
 NodalInertiaTerm::NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
-                                   const MaterialChain& chain, const ShapeChain& shape,
-                                   double time_step)
+                                   const HeldMassMoments& moments, const MaterialChain& chain,
+                                   const ShapeChain& shape, double time_step)
     : NodeTerm(kinematics),
       masses_(masses),
+      moments_(moments),
       chain_(chain),
       shape_(shape),
       h_(time_step),
@@ -28,13 +30,108 @@ void NodalInertiaTerm::setPrediction(const BoneFrames& bones_n, const BoneFrames
   kin_.positionsOf(masses_.nodes, bones_n, kin_.u_n, x_n);
   kin_.positionsOf(masses_.nodes, bones_nm1, kin_.u_nm1, x_nm1);
   for (int j : masses_.nodes) x_hat_.row(j) = 2.0 * x_n.row(j) - x_nm1.row(j);
+  ++prediction_stamp_;
+}
+
+namespace {
+/// Σ_k a_k × b_k from M = Σ_k a_k b_kᵀ.
+Vec3 crossOfOuter(const Mat3& M) {
+  return {M(1, 2) - M(2, 1), M(2, 0) - M(0, 2), M(0, 1) - M(1, 0)};
+}
+}  // namespace
+
+void NodalInertiaTerm::updateHeldReference() const {
+  const long id = moments_.update();
+  if (held_.moments == id && held_.prediction == prediction_stamp_) return;
+  kin_.ensurePrepared();  // x at the reference frames (the presolve defers the skinning)
+  const int bones = kin_.numBones();
+  const MatX3& x = kin_.x();
+  const MatX3& Y = kin_.Y();
+  const MatX3& J = kin_.joints();
+  held_.R0 = kin_.R();
+  held_.t0 = kin_.t();
+  held_.P.assign(size_t(bones), Vec3::Zero());
+  held_.Q.assign(size_t(bones), Mat3::Zero());
+  held_.E0 = 0.0;
+  for (int j : masses_.nodes) {
+    const double m = masses_.mass[j];
+    const Vec3 e = (x.row(j) - x_hat_.row(j)).transpose();
+    held_.E0 += m * e.squaredNorm();
+    for (auto* inf = kin_.influencesBegin(j); inf != kin_.influencesEnd(j); ++inf) {
+      const double mw = m * inf->weight;
+      held_.P[size_t(inf->bone)] += mw * e;
+      held_.Q[size_t(inf->bone)].noalias() +=
+          (mw * (Y.row(j) - J.row(inf->bone)).transpose()) * e.transpose();
+    }
+  }
+  held_.moments = id;
+  held_.prediction = prediction_stamp_;
+}
+
+// With f_j = κ m_j (x_j − x̂_j) = κ m_j (e⁰_j + Σ_c w_jc d_jc), per bone b:
+//   F_b = Σ_j w_jb f_j / κ = P_b + Σ_c (ΔR_c U_cb + S_cb Δt_c)          (the translation rows)
+//   O_b = Σ_j w_jb f_j Ỹ_jbᵀ / κ = Q_bᵀ + Σ_c (ΔR_c V_cb + Δt_c U_bcᵀ)  (body-frame levers)
+// so the rotation rows are κ Σ_j w_jb r_jb × f_j = κ (R_b O_bᵀ)'s cross vector (r_jb = R_b Ỹ_jb)
+// and the rotation curvature Σ_j w_jb C(f_j, r_jb) is C of the outer sum κ O_b R_bᵀ (C
+// bilinear: ½(M + Mᵀ) − tr(M) I). The Hessian's Jᵀ K J blocks per pair (a, c), as mapHessian
+// forms them from the nodes: s = κ S_ac, p = Σ s r_c = κ R_c U_ca, q = κ R_a U_ac and
+// W = Σ s r_c r_aᵀ = κ R_c V_acᵀ R_aᵀ.
+double NodalInertiaTerm::boneOnly(VecX* g, std::vector<Triplet>* H, int offset, bool psd) const {
+  updateHeldReference();
+  const double k = 1.0 / (h_ * h_);
+  const int bones = kin_.numBones();
+  const std::vector<Mat3>& R = kin_.R();
+  const MatX3& t = kin_.t();
+  Mat3 dR[kNumJoints];
+  Vec3 dt[kNumJoints], F[kNumJoints];
+  Mat3 O[kNumJoints];
+  double E = held_.E0;
+  for (int b = 0; b < bones; ++b) {
+    dR[b] = R[size_t(b)] - held_.R0[size_t(b)];
+    dt[b] = (t.row(b) - held_.t0.row(b)).transpose();
+    F[b] = held_.P[size_t(b)];
+    O[b] = held_.Q[size_t(b)].transpose();
+    E += 2.0 * ((dR[b] * held_.Q[size_t(b)]).trace() + dt[b].dot(held_.P[size_t(b)]));
+  }
+  for (const HeldMassMoments::Pair& p : moments_.pairs()) {
+    // The pair (b, c): Σ_j m w_b w_c d_jb · d_jc, and its share of bone c's F and O.
+    const int b = p.b, c = p.c;
+    const Vec3 dRU = dR[b] * p.Ub;  // Σ s ΔR_b Ỹ_jb
+    E += (dR[b] * p.V * dR[c].transpose()).trace() + dt[c].dot(dRU) + dt[b].dot(dR[c] * p.Uc) +
+         p.S * dt[b].dot(dt[c]);
+    F[c] += dRU + p.S * dt[b];
+    O[c].noalias() += dR[b] * p.V + dt[b] * p.Uc.transpose();
+  }
+  if (g)
+    for (int b = 0; b < bones; ++b) {
+      g->segment<3>(offset + 6 * b) += k * F[b];
+      g->segment<3>(offset + 6 * b + 3) += k * crossOfOuter(R[size_t(b)] * O[b].transpose());
+    }
+  if (H) {
+    for (const HeldMassMoments::Pair& p : moments_.pairs()) {
+      const int a = p.b, c = p.c;
+      const Vec3 pc = k * (R[size_t(c)] * p.Uc), qa = k * (R[size_t(a)] * p.Ub);
+      const Mat3 W = k * (R[size_t(c)] * p.V.transpose() * R[size_t(a)].transpose());
+      Mat6 B = Mat6::Zero();
+      B.topLeftCorner<3, 3>().diagonal().setConstant(k * p.S);
+      B.topRightCorner<3, 3>() = -skew(pc);
+      B.bottomLeftCorner<3, 3>() = skew(qa);
+      B.bottomRightCorner<3, 3>() = W.trace() * Mat3::Identity() - W;
+      if (a == c && !psd) {
+        const Mat3 M = k * (O[a] * R[size_t(a)].transpose());
+        B.bottomRightCorner<3, 3>() += 0.5 * (M + M.transpose()) - M.trace() * Mat3::Identity();
+      }
+      addBlock(*H, offset + 6 * a, offset + 6 * c, B);
+    }
+  }
+  return 0.5 * k * E;
 }
 
 void NodalInertiaTerm::addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
                                         std::vector<FixedHessianBlocks>* blocks, int offset,
                                         bool psd) const {
   if (c.bone_block_only) {
-    evaluate(nullptr, &H, offset, psd, nullptr, true);
+    boneOnly(nullptr, &H, offset, psd);
     return;
   }
   collectFixedBlocks(blocks,

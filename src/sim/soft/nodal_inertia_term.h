@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "flsh/sim/energy_term.h"
+#include "sim/soft/held_mass_moments.h"
 #include "sim/soft/material_chain.h"
 #include "sim/soft/node_masses.h"
 #include "sim/soft/node_offset_derivatives.h"
@@ -28,11 +29,13 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   static constexpr double kShareBesidePotential = 0.1;
 
   NodalInertiaTerm(const SoftKinematics& kinematics, const NodeMasses& masses,
-                   const MaterialChain& chain, const ShapeChain& shape, double time_step);
+                   const HeldMassMoments& moments, const MaterialChain& chain,
+                   const ShapeChain& shape, double time_step);
 
   const char* name() const override { return "nodal inertia"; }
   double evaluate(const TermContext& c, VecX* g, int offset) const override {
-    return evaluate(g, nullptr, offset, true, nullptr, c.bone_block_only);
+    if (c.bone_block_only) return boneOnly(g, nullptr, offset, true);
+    return evaluate(g, nullptr, offset, true, nullptr);
   }
   /// FEM: the bone–tissue coupling and node-diagonal blocks as fixed blocks; ROM: value list 0.
   void addHessianBlocks(const TermContext& c, std::vector<Triplet>& H,
@@ -68,6 +71,14 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   /// (TermContext::bone_block_only).
   double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
                   FixedHessianBlocks* blocks = nullptr, bool bone_block_only = false) const;
+  /// The energy, the gradient's bone rows (ADDED into g) and the bone–bone Hessian blocks
+  /// (appended to H) from the mass nodes' moments at held unposed positions
+  /// (held_mass_moments.h; TermContext::bone_block_only, the bones' presolve): O(bone pairs),
+  /// no pass over the nodes while Y and the prediction stay. Relative to the reference frames
+  /// (R⁰, t⁰) of the moments' build, where e⁰_j = x_j − x̂_j: with d_jb = ΔR_b Ỹ_jb + Δt_b,
+  ///   E = κ/2 Σ_j m_j ‖e⁰_j + Σ_b w_jb d_jb‖²,
+  /// so no large terms cancel. Equal to evaluate()'s bone rows and blocks up to rounding.
+  double boneOnly(VecX* g, std::vector<Triplet>* H, int offset, bool psd) const;
   /// ROM: the Hessian of one share of the mass nodes (see kShareBesidePotential) into value list
   /// `part` (bone triplets into H). `approximate`: the exact form without the soft–soft blocks
   /// κ_j B_jᵀ M_jᵀ M_j B_j, which part 0 replaces by constantSoftBlock() (see there).
@@ -87,10 +98,24 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
   void forEachMassNode(const VecX* lambda, Visit&& visit) const;
 
   const NodeMasses& masses_;
+  const HeldMassMoments& moments_;
   const MaterialChain& chain_;
   const ShapeChain& shape_;
   double h_;
   MatX3 x_hat_;
+  long prediction_stamp_ = 0;  // setPrediction calls
+  // boneOnly's reference: the frames (R⁰, t⁰) at the moments' build `moments` and prediction
+  // `prediction`, with P_b = Σ_j m_j w_jb e⁰_j, Q_b = Σ_j m_j w_jb Ỹ_jb e⁰_jᵀ, E0 = Σ_j m_j
+  // ‖e⁰_j‖².
+  struct HeldReference {
+    long moments = -1, prediction = -1;
+    std::vector<Mat3> R0, Q;
+    MatX3 t0;
+    std::vector<Vec3> P;
+    double E0 = 0.0;
+  };
+  mutable HeldReference held_;
+  void updateHeldReference() const;
   std::vector<int> parts_[2];
   mutable std::vector<Vec3> forces_;
   mutable std::vector<double> scalars_;

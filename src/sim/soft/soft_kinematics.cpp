@@ -287,9 +287,31 @@ void SoftKinematics::positions(const BoneFrames& bones, const VecX& displacement
 void SoftKinematics::prepare(long version, const BoneFrames& bones) const {
   cur_R_ = &bones.R;
   cur_t_ = &bones.t;
+  pending_version_ = version;
   if (version == version_) return;
   version_ = version;
   skinNodes(eval_nodes_);
+}
+
+void SoftKinematics::prepareFrames(long version, const BoneFrames& bones) const {
+  if (!reduced_) return prepare(version, bones);
+  cur_R_ = &bones.R;
+  cur_t_ = &bones.t;
+  pending_version_ = version;
+}
+
+void SoftKinematics::ensurePrepared() const {
+  if (pending_version_ == version_) return;
+  version_ = pending_version_;
+  skinNodes(eval_nodes_);
+}
+
+void SoftKinematics::refreshUnposed() const {
+  if (y_epoch_ != blend_epoch_ || y_state_.size() != u.size() || y_state_ != u) {
+    ++y_current_;
+    y_epoch_ = blend_epoch_;
+    y_state_ = u;
+  }
 }
 
 void SoftKinematics::skinNodes(const std::vector<int>& nodes) const {
@@ -304,11 +326,7 @@ void SoftKinematics::skinNodes(const std::vector<int>& nodes) const {
   // Y_j = X̄_j + P_j + u_j reads neither the bones nor the joints: its rows stay current while
   // the soft state and the held pose blend do (the bones' presolve, a line search along the
   // bones, the first evaluation after the presolve).
-  if (y_epoch_ != blend_epoch_ || y_state_.size() != u.size() || y_state_ != u) {
-    ++y_current_;
-    y_epoch_ = blend_epoch_;
-    y_state_ = u;
-  }
+  refreshUnposed();
   const std::vector<Mat3>& R = *cur_R_;
   const MatX3& t = *cur_t_;
   Vec3 shift[kNumJoints];

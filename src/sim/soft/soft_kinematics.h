@@ -210,6 +210,11 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
                    MatX3& x) const;
   /// Skins the evaluated nodes at the current state (bones + u); cached by `version`.
   void prepare(long version, const BoneFrames& bones) const override;
+  /// The ROM: the frames alone, the mass nodes' skinning deferred to ensurePrepared() or the
+  /// next prepare() (their x, Y and M rows are stale until then); the FEM: prepare().
+  void prepareFrames(long version, const BoneFrames& bones) const override;
+  /// Skins what prepare() would at the frames set last (nothing when already done).
+  void ensurePrepared() const;
   /// Skins `nodes` (distinct) at the prepared state: x, Y and M rows (the ROM's contact and
   /// output nodes; the FEM's prepare() skins every node).
   void skinNodes(const std::vector<int>& nodes) const;
@@ -218,6 +223,13 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   const MatX3& Y() const { return Y_; }
   const Mat3& M(int j) const { return node_M_[j]; }
   const std::vector<Mat3>& R() const { return *cur_R_; }
+  const MatX3& t() const { return *cur_t_; }
+  /// Changes whenever the unposed positions Y of the skinned nodes may have (the soft state or
+  /// the held pose blend changed), not with the bones: HeldMassMoments' key.
+  long unposedStamp() const {
+    refreshUnposed();
+    return y_current_;
+  }
   const std::vector<int>& surfaceNodes() const { return surface_nodes_; }
   /// World positions and unposed nodes of every surface node (#V × 3) at the prepared state.
   void surface(MatX3* x, MatX3* Y) const override;
@@ -361,7 +373,10 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   std::vector<int> coupling_start_;
 
   // Caches of the prepared state.
-  mutable long version_ = -1;
+  mutable long version_ = -1, pending_version_ = -1;  // skinned at; frames set at
+  /// Starts a new unposed stamp (y_current_) when the soft state or the held pose blend changed
+  /// since the last one.
+  void refreshUnposed() const;
   mutable MatX3 x_, Y_;
   // Y_ row j is current when y_stamp_[j] == y_current_, which changes with the soft state
   // (y_state_: the one it was skinned at) and the held pose blend (y_epoch_).

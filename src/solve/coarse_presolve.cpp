@@ -1,5 +1,6 @@
 #include "solve/coarse_presolve.h"
 
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -44,7 +45,17 @@ class CoarseView final : public Objective {
       throw Error("newtonSolve: Objective::coarseHessian gave " + std::to_string(dense_.rows()) +
                   " × " + std::to_string(dense_.cols()) + ", expected " +
                   std::to_string(numDofs()) + " square");
-    H = dense_.sparseView(0.0, 0.0);
+    // Every entry stored, zeros included: the dense solver copies such a matrix's values as
+    // they are (its full-pattern path) instead of walking a sparse view. The pattern is built
+    // once per size; each call copies the values.
+    const Eigen::Index n = dense_.rows();
+    if (H.rows() != n || H.cols() != n || !H.isCompressed() || H.nonZeros() != n * n) {
+      H.resize(n, n);  // compressed, empty
+      H.resizeNonZeros(n * n);
+      for (Eigen::Index c = 0; c <= n; ++c) H.outerIndexPtr()[c] = int(c * n);
+      for (Eigen::Index k = 0; k < n * n; ++k) H.innerIndexPtr()[k] = int(k % n);
+    }
+    std::copy(dense_.data(), dense_.data() + n * n, H.valuePtr());
   }
   void step(const VecX& dq) override {
     held_ = false;

@@ -336,7 +336,9 @@ TEST_P(SoftRolloutGradient, InitialState) {
   // second-order difference at 4e-4. Its loss along d bends between 5e-4 and 1e-3 (with the
   // basis compressed with rotation_weight 0.3: at ε = 1e-3 the central difference is 0.3 % off,
   // from 3e-4 down to 2e-4 within 3.6e-8 without contact and 1.3e-7 with it); a fourth-order
-  // stencil reaching 2ε would straddle it.
+  // stencil reaching 2ε would straddle it. The bend is a cubature sample crossing the rest
+  // split's branch switch (restSplitExcess, C¹ there, its Hessian jumps): without contact, step
+  // 1's bounded samples go 9 → 8 between ε = 5e-4 and 7e-4 (2026-12-03).
   expectDirectionalDerivative(c, d, 1e-3, 4e-4, false);
 }
 

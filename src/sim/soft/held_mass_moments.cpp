@@ -5,13 +5,9 @@
 namespace flsh::detail {
 
 long HeldMassMoments::update() const {
-  const std::vector<int>& nodes = masses_.nodes;
-  bool current = y_stamp_ == kin_.unposedStamp() && build_id_ > 0 &&
-                 masses_of_.size() == Eigen::Index(nodes.size()) &&
-                 joints_of_.rows() == kin_.joints().rows() && joints_of_ == kin_.joints();
-  for (size_t k = 0; current && k < nodes.size(); ++k)
-    current = masses_of_[Eigen::Index(k)] == masses_.mass[nodes[k]];
-  if (current) return build_id_;
+  if (build_id_ > 0 && y_stamp_ == kin_.unposedStamp() &&
+      joints_of_.rows() == kin_.joints().rows() && joints_of_ == kin_.joints())
+    return build_id_;
   kin_.ensurePrepared();  // Y's rows of the mass nodes (the presolve defers the skinning)
   build();
   return build_id_;
@@ -24,14 +20,10 @@ void HeldMassMoments::build() const {
   const MatX3& J = kin_.joints();
   index_.assign(size_t(bones) * size_t(bones), -1);
   pairs_.clear();
-  G_.assign(size_t(bones), 0.0);
   L_.assign(size_t(bones), Vec3::Zero());
-  masses_of_.resize(Eigen::Index(nodes.size()));
   Vec3 lever[kNumJoints];
-  for (size_t k = 0; k < nodes.size(); ++k) {
-    const int j = nodes[k];
+  for (const int j : nodes) {
     const double m = masses_.mass[j];
-    masses_of_[Eigen::Index(k)] = m;
     const SoftKinematics::Influence* begin = kin_.influencesBegin(j);
     const int count = int(kin_.influencesEnd(j) - begin);
     for (int a = 0; a < count; ++a)
@@ -39,7 +31,6 @@ void HeldMassMoments::build() const {
     for (int a = 0; a < count; ++a) {
       const int b = begin[a].bone;
       const double mw = m * begin[a].weight;
-      G_[size_t(b)] += mw;
       L_[size_t(b)] += mw * lever[a];
       for (int c = 0; c < count; ++c) {
         int& slot = index_[size_t(b) * size_t(bones) + size_t(begin[c].bone)];

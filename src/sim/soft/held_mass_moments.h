@@ -8,7 +8,7 @@
 // node together (b = c included):
 //   S_bc = Σ_j m_j w_jb w_jc,  U_bc = Σ_j m_j w_jb w_jc Ỹ_jb,  V_bc = Σ_j m_j w_jb w_jc Ỹ_jb Ỹ_jcᵀ
 // (so U of the pair (c, b) is the lever sum of c, and V_cb = V_bcᵀ), and per bone
-// G_b = Σ_j m_j w_jb, L_b = Σ_j m_j w_jb Ỹ_jb. A presolve iteration then costs O(bone pairs),
+// L_b = Σ_j m_j w_jb Ỹ_jb. A presolve iteration then costs O(bone pairs),
 // as the skeleton's rigid inertia does, instead of O(mass nodes × influences²). The terms keep
 // their formulas beside them (NodalInertiaTerm::boneOnly, NodalGravityTerm::boneOnly); this file
 // holds the geometry they share.
@@ -36,15 +36,13 @@ class HeldMassMoments {
       : kin_(kinematics), masses_(masses) {}
 
   /// Brings the moments to the unposed positions Y of the kinematics' prepared state (rebuilt
-  /// when Y, the masses or the rest joints changed since the last build) and returns the
-  /// build's id (it changes with every rebuild).
+  /// when Y or the rest joints changed since the last build; the masses are fixed for the
+  /// simulable's life: a material is a new avatar) and returns the build's id (it changes with
+  /// every rebuild).
   long update() const;
   /// Every ordered pair (b, c) with a node skinned by both, in first-touch order.
   const std::vector<Pair>& pairs() const { return pairs_; }
-  double boneMass(int b) const { return G_[size_t(b)]; }        ///< G_b
   const Vec3& boneLever(int b) const { return L_[size_t(b)]; }  ///< L_b
-  /// Rebuilds so far (for tests: the moments follow Y, not the bones).
-  long builds() const { return build_id_; }
 
  private:
   void build() const;
@@ -52,11 +50,9 @@ class HeldMassMoments {
   const NodeMasses& masses_;
   mutable long build_id_ = 0;
   mutable long y_stamp_ = -1;  // the kinematics' unposed stamp of the build
-  mutable VecX masses_of_;     // the mass nodes' masses of the build
   mutable MatX3 joints_of_;    // the rest joints of the build
   mutable std::vector<Pair> pairs_;
   mutable std::vector<int> index_;  // b · #bones + c → pairs_ index, −1 if none
-  mutable std::vector<double> G_;
   mutable std::vector<Vec3> L_;
 };
 

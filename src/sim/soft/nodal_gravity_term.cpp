@@ -95,7 +95,7 @@ void NodalGravityTerm::femHessian(const Vec3& gravity, std::vector<Triplet>& H,
 }
 
 double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
-                                  bool psd, FixedHessianBlocks* blocks, bool bones_only) const {
+                                  bool psd, FixedHessianBlocks* blocks) const {
   const std::vector<int>& nodes = masses_.nodes;
   const MatX3& x = kin_.x();
   double E = 0.0;
@@ -105,7 +105,7 @@ double NodalGravityTerm::evaluate(const Vec3& gravity, VecX* g, std::vector<Trip
     E -= masses_.mass[j] * gravity.dot(x.row(j).transpose());
     forces_[idx] = -masses_.mass[j] * gravity;
   }
-  if (g) kin_.mapForces(nodes, forces_, *g, offset, bones_only);
+  if (g) kin_.mapForces(nodes, forces_, *g, offset);
   if (H && kin_.reduced()) {
     reducedHessian(gravity, *H, offset, psd);
   } else if (H) {
@@ -123,7 +123,7 @@ double NodalGravityTerm::boneOnly(const Vec3& gravity, VecX* g, std::vector<Trip
   const MatX3& t = kin_.t();
   double E = 0.0;
   for (int b = 0; b < kin_.numBones(); ++b) {
-    const double G = moments_.boneMass(b);
+    const double G = bone_mass_[size_t(b)];
     if (G == 0.0) continue;
     const Vec3 lever = R[size_t(b)] * moments_.boneLever(b);  // Σ_j m_j w_jb r_jb
     E -= gravity.dot(lever + G * t.row(b).transpose());

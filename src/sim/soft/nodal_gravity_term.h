@@ -40,14 +40,15 @@ class NodalGravityTerm final : public NodeTerm<1, TermWithParameterBlocks<NodalG
 
   /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM:
   /// femHessian's, with `blocks` its fixed-block list; ROM: bone triplets into H, rotation–handle
-  /// blocks into value list 1). `bones_only`: the gradient's bone rows alone.
+  /// blocks into value list 1). The bones' rows and block alone (TermContext::bone_block_only)
+  /// are boneOnly's.
   double evaluate(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                  FixedHessianBlocks* blocks = nullptr, bool bones_only = false) const;
-  /// The energy −g · Σ_b (R_b L_b + G_b t_b), the gradient's bone rows (ADDED into g:
-  /// −G_b g and −(R_b L_b) × g) and the bones' rotation curvature (appended to H) from the mass
-  /// nodes' moments at held unposed positions (held_mass_moments.h; TermContext::bone_block_only,
-  /// the bones' presolve): no pass over the nodes while Y stays. Equal to evaluate()'s bone rows
-  /// up to rounding.
+                  FixedHessianBlocks* blocks = nullptr) const;
+  /// The energy −g · Σ_b (R_b L_b + G_b t_b) (G_b = Σ_j m_j w_jb, bone_mass_), the gradient's
+  /// bone rows (ADDED into g: −G_b g and −(R_b L_b) × g) and the bones' rotation curvature
+  /// (appended to H) from the mass nodes' moments at held unposed positions (held_mass_moments.h;
+  /// TermContext::bone_block_only, the bones' presolve): no pass over the nodes while Y stays.
+  /// Equal to evaluate()'s bone rows up to rounding.
   double boneOnly(const Vec3& gravity, VecX* g, std::vector<Triplet>* H, int offset,
                   bool psd) const;
   /// ∂g/∂p as local blocks (term_blocks.h).

@@ -139,7 +139,7 @@ void NodalInertiaTerm::addHessianBlocks(const TermContext& c, std::vector<Triple
 }
 
 double NodalInertiaTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                                  FixedHessianBlocks* blocks, bool bone_block_only) const {
+                                  FixedHessianBlocks* blocks) const {
   const double k = 1.0 / (h_ * h_);
   const std::vector<int>& nodes = masses_.nodes;
   const MatX3& x = kin_.x();
@@ -152,14 +152,14 @@ double NodalInertiaTerm::evaluate(VecX* g, std::vector<Triplet>* H, int offset, 
     E += 0.5 * k * masses_.mass[j] * d.squaredNorm();
     forces_[idx] = k * masses_.mass[j] * d;
   }
-  if (g) kin_.mapForces(nodes, forces_, *g, offset, bone_block_only);
+  if (g) kin_.mapForces(nodes, forces_, *g, offset);
   if (H) {
     scalars_.resize(count);
     for (size_t idx = 0; idx < count; ++idx) scalars_[idx] = k * masses_.mass[nodes[idx]];
     // psd: Gauss–Newton Σ m JᵀJ; exact: plus the curvature of the rotating nodes.
-    const bool fixed = blocks && !kin_.reduced() && !bone_block_only;
+    const bool fixed = blocks && !kin_.reduced();
     kin_.mapHessian(nodes, nullptr, psd ? nullptr : &forces_, *H, offset, psd, 0,
-                    fixed ? &fixed_ : nullptr, &scalars_, true, bone_block_only);
+                    fixed ? &fixed_ : nullptr, &scalars_);
     if (fixed) *blocks = {&kin_.couplingPositions(), &fixed_, offset};
   }
   return E;

@@ -66,11 +66,10 @@ class NodalInertiaTerm final : public NodeTerm<0, TermWithParameterBlocks<NodalI
 
   /// At the prepared state: the energy, its gradient ADDED into g, its Hessian (FEM: triplets
   /// appended to H, or with `blocks` the bone–tissue coupling and node-diagonal blocks returned
-  /// at the kinematics' coupling positions; ROM: into value list 0). `bone_block_only`: the
-  /// gradient's bone rows and the Hessian's bone–bone blocks alone, the latter as triplets
-  /// (TermContext::bone_block_only).
+  /// at the kinematics' coupling positions; ROM: into value list 0). The bones' rows and block
+  /// alone (TermContext::bone_block_only) are boneOnly's.
   double evaluate(VecX* g, std::vector<Triplet>* H, int offset, bool psd,
-                  FixedHessianBlocks* blocks = nullptr, bool bone_block_only = false) const;
+                  FixedHessianBlocks* blocks = nullptr) const;
   /// The energy, the gradient's bone rows (ADDED into g) and the bone–bone Hessian blocks
   /// (appended to H) from the mass nodes' moments at held unposed positions
   /// (held_mass_moments.h; TermContext::bone_block_only, the bones' presolve): O(bone pairs),

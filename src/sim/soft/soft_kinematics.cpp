@@ -472,7 +472,7 @@ void SoftKinematics::fillPoint(int j, const std::vector<Mat3>& R, const Vec3& Y,
 }
 
 void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces,
-                               VecX& g, int offset, bool bones_only) const {
+                               VecX& g, int offset) const {
   const std::vector<Mat3>& R = *cur_R_;
   for (size_t idx = 0; idx < nodes.size(); ++idx) {
     const Vec3& f = forces[idx];
@@ -486,7 +486,7 @@ void SoftKinematics::mapForces(const std::vector<int>& nodes, const std::vector<
       g.segment<3>(offset + 6 * b) += w * f;
       g.segment<3>(offset + 6 * b + 3) += w * r.cross(f);
     }
-    if (!bones_only && node_dof_[j] >= 0) addSoftGradient(g, offset, j, node_M_[j].transpose() * f);
+    if (node_dof_[j] >= 0) addSoftGradient(g, offset, j, node_M_[j].transpose() * f);
   }
 }
 
@@ -499,13 +499,8 @@ void SoftKinematics::surfaceForces(const MatX3& forces, VecX& g) const {
 void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                                 const std::vector<Vec3>* forces, std::vector<Triplet>& H,
                                 int offset, bool psd, int list, std::vector<Mat3>* fixed,
-                                const std::vector<double>* K_scalar, bool soft_soft,
-                                bool bone_block_only) const {
-  if (bone_block_only && fixed)
-    throw Error("SoftKinematics::mapHessian: bone_block_only takes no fixed blocks");
+                                const std::vector<double>* K_scalar, bool soft_soft) const {
   if (fixed) fixed->assign(coupling_dofs_.size(), Mat3::Zero());
-  // The bones' block alone: no coupling, no soft–soft blocks.
-  const bool with_soft = !bone_block_only;
   const std::vector<Mat3>& R = *cur_R_;
   BonePairBlocks& pair_blocks = pair_blocks_[size_t(list)];
   auto block = [&](int b, int c) -> Mat6& { return pair_blocks.block(b, c); };
@@ -543,8 +538,8 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
       // Bone–soft coupling per influence, one 6 × 3 block: Jbᵀ K M from K and, in the exact
       // form, ∂²(f·x)/∂δω_b∂δu_j = −w [f]× R_b from the force (rows 3..5).
       const bool force = forces && !(*forces)[idx].isZero(0.0);
-      const bool k_coupling = (K || K_scalar) && dof >= 0 && with_soft;
-      const bool f_coupling = force && !psd && dof >= 0 && with_soft;
+      const bool k_coupling = (K || K_scalar) && dof >= 0;
+      const bool f_coupling = force && !psd && dof >= 0;
       Eigen::Matrix<double, 6, 3> coupling[kNumJoints];
       for (int a = 0; a < count && (k_coupling || f_coupling); ++a) coupling[a].setZero();
       if (K_scalar) {
@@ -560,7 +555,7 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
             m.W.noalias() += (s * lever[c]) * lever[a].transpose();
           }
         }
-        if (dof >= 0 && with_soft) {
+        if (dof >= 0) {
           const Mat3& M = node_M_[j];
           for (int a = 0; a < count; ++a) {
             const double ka = kappa * influences_[influence_start_[j] + a].weight;
@@ -622,8 +617,7 @@ void SoftKinematics::mapHessian(const std::vector<int>& nodes, const std::vector
   // FEM (the blocks of each node into its own fixed slots, no pair blocks from K): two halves of
   // the nodes on two threads, the second's sums added to the first's after; always two halves,
   // so the sums are the same on any number of threads (the inertia of ~9 k nodes: ~8 → ~4 ms).
-  // The bones' block alone likewise (no triplets from K_scalar's nodes).
-  const bool halves = (fixed || bone_block_only) && !K;
+  const bool halves = fixed && !K;
   if (halves) {
     Sums second(pair_moments_second_);
     const size_t mid = nodes.size() / 2;

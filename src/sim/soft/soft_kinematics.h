@@ -262,10 +262,9 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   }
 
   // ---- the chain rule to q (at the prepared state) ----
-  /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g; `bones_only`: the
-  /// bones' rows alone (the soft state's are left alone: TermContext::bone_block_only).
+  /// Adds Σ_j J_jᵀ f_j (f: per-node ∂E/∂x_j for the listed nodes) into g.
   void mapForces(const std::vector<int>& nodes, const std::vector<Vec3>& forces, VecX& g,
-                 int offset, bool bones_only = false) const;
+                 int offset) const;
   /// Appends Σ_j J_jᵀ K_j J_j (K_j symmetric 3 × 3; null = none) plus, when `forces` is given,
   /// the curvature of the rotating points against f_j: exact (psd = false) or, for psd, the PSD
   /// projection of each bone's rotation curvature (the mixed δω–δu terms dropped).
@@ -274,13 +273,11 @@ class SoftKinematics final : public HessianValueLists, public ModelKinematics {
   /// `list`: the ROM value list and the scratch to use (0: inertia, 1: the potential terms).
   /// `K_scalar` (instead of K, which is then null): K_j = K_scalar[idx] · I (inertia).
   /// `soft_soft` false leaves out the soft–soft blocks M_jᵀ K_j M_j (a caller that adds a
-  /// constant in their place: NodalInertiaTerm's approximate form). `bone_block_only`: the
-  /// bone–bone blocks alone (TermContext::bone_block_only; `fixed` must be null).
+  /// constant in their place: NodalInertiaTerm's approximate form).
   void mapHessian(const std::vector<int>& nodes, const std::vector<Mat3>* K,
                   const std::vector<Vec3>* forces, std::vector<Triplet>& H, int offset, bool psd,
                   int list, std::vector<Mat3>* fixed = nullptr,
-                  const std::vector<double>* K_scalar = nullptr, bool soft_soft = true,
-                  bool bone_block_only = false) const;
+                  const std::vector<double>* K_scalar = nullptr, bool soft_soft = true) const;
   /// g(u_j) += v (FEM: into u_j's entries; ROM: through φ into z).
   void addSoftGradient(VecX& g, int offset, int j, const Vec3& v) const;
   /// H(u_j, u_j) += B (symmetric). FEM: a triplet block; ROM: into value list `list`.

@@ -3,18 +3,16 @@
 // replace, and against central differences; and the Simulable's bone-only evaluation, which
 // defers the ROM's skinning, against its whole gradient and Hessian. FEM and ROM.
 #include "flsh/core/rotation.h"
-#include "sim/soft/nodal_gravity_term.h"
-#include "sim/soft/nodal_inertia_term.h"
 #include "sim/soft/soft_term_checks.h"
 
 namespace flsh {
 namespace {
 
-using test::SoftModel;
 using test::atMovedState;
 using test::jacobianMatchesFiniteDifferences;
 using test::pullBackRotationGradient;
 using test::randomVector;
+using test::SoftModel;
 
 class HeldMassMoments : public ::testing::TestWithParam<SoftModel> {};
 
@@ -29,40 +27,27 @@ TermContext boneOnly(const Simulable& sim) {
   return c;
 }
 
-// The bone-only form (moments) against the node sums (evaluate(…, bone_block_only) of the
-// term's own node loop, whose derivatives the terms' tests check by differences): energy, bone
-// rows (the soft rows untouched) and the bone–bone Hessian blocks, exact and PSD.
+// The bone-only form (moments) against the node sums, i.e. the term's whole evaluation (its node
+// loop, whose derivatives the terms' own tests check by differences): energy, bone rows (the
+// soft rows untouched) and the bone–bone Hessian blocks, exact and PSD.
 void expectMomentsMatchNodeSums(const Simulable& sim, const char* when) {
   const int n = sim.numDofs(), nb = sim.numBoneDofs();
-  const auto& inertia =
-      dynamic_cast<const detail::NodalInertiaTerm&>(test::termNamed(sim, "nodal inertia"));
-  const auto& gravity =
-      dynamic_cast<const detail::NodalGravityTerm&>(test::termNamed(sim, "nodal gravity"));
   const TermContext c = boneOnly(sim);
-  const Vec3 g_acc = c.options.gravity;
-  for (int which = 0; which < 2; ++which) {
-    const EnergyTerm& term = which == 0 ? static_cast<const EnergyTerm&>(inertia) : gravity;
-    SCOPED_TRACE(std::string(term.name()) + ", " + when);
+  for (const char* name : {"nodal inertia", "nodal gravity"}) {
+    const EnergyTerm& term = test::termNamed(sim, name);
+    SCOPED_TRACE(std::string(name) + ", " + when);
     VecX g_nodes = VecX::Zero(n), g_moments = VecX::Zero(n);
-    const double E_nodes = which == 0
-                               ? inertia.evaluate(&g_nodes, nullptr, 0, true, nullptr, true)
-                               : gravity.evaluate(g_acc, &g_nodes, nullptr, 0, true, nullptr, true);
+    const double E_nodes = term.evaluate(sim.termContext(), &g_nodes, 0);
     const double E_moments = term.evaluate(c, &g_moments, 0);
     ASSERT_GT(g_nodes.head(nb).norm(), 0.0);
     EXPECT_NEAR(E_moments, E_nodes, 1e-10 * (1.0 + std::abs(E_nodes)));
     EXPECT_LE((g_moments - g_nodes).head(nb).norm(), 1e-9 * g_nodes.head(nb).norm());
     EXPECT_EQ(g_moments.tail(n - nb).norm(), 0.0) << "the soft rows are left alone";
     for (bool psd : {false, true}) {
-      std::vector<Triplet> nodes_triplets, moments_triplets;
-      if (which == 0)
-        inertia.evaluate(nullptr, &nodes_triplets, 0, psd, nullptr, true);
-      else
-        gravity.addHessian(c, nodes_triplets, 0, psd);  // reference below for gravity
+      std::vector<Triplet> moments_triplets;
       term.addHessian(c, moments_triplets, 0, psd);
       const MatX H_moments = test::denseFromTriplets(moments_triplets, n);
-      MatX H_nodes = test::denseFromTriplets(nodes_triplets, n);
-      if (which == 1)  // gravity's node sums: the whole Hessian's bone block
-        H_nodes = test::softTermHessian(sim, gravity, psd);
+      const MatX H_nodes = test::softTermHessian(sim, term, psd);
       ASSERT_GT(H_nodes.topLeftCorner(nb, nb).norm(), 0.0) << "psd " << psd;
       EXPECT_LE((H_moments.topLeftCorner(nb, nb) - H_nodes.topLeftCorner(nb, nb)).norm(),
                 1e-9 * H_nodes.topLeftCorner(nb, nb).norm())

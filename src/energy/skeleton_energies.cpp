@@ -4,13 +4,6 @@
 
 namespace flsh {
 
-namespace {
-
-// vee of the skew part: vee(M) = (M21, M02, M10), so vee([w]×) = w.
-Vec3 vee(const Mat3& M) { return Vec3(M(2, 1), M(0, 2), M(1, 0)); }
-
-}  // namespace
-
 Mat3 rotationCurvature(const Vec3& r, const Vec3& y) {
   return 0.5 * (r * y.transpose() + y * r.transpose()) - r.dot(y) * Mat3::Identity();
 }
@@ -27,8 +20,8 @@ double rigidInertiaEnergy(const Vec3& t, const Mat3& R, const Vec3& t_n, const M
   const Mat3 D = R - A;
   const Vec3 u = t - c;
   const Vec3 Dm = D * m1;
-  const double energy = 0.5 * inv_h2 * ((D * S * D.transpose()).trace() + 2.0 * u.dot(Dm) +
-                                        M * u.squaredNorm());
+  const double energy =
+      0.5 * inv_h2 * ((D * S * D.transpose()).trace() + 2.0 * u.dot(Dm) + M * u.squaredNorm());
   if (gradient) {
     const Mat3 RSAt = R * S * A.transpose();
     gradient->head<3>() = inv_h2 * (Dm + M * u);

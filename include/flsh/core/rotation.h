@@ -21,6 +21,10 @@ constexpr double kMaxRotationAngle = 1e6;
 /// [v]×, the cross-product matrix: skew(v) w = v × w.
 Mat3 skew(const Vec3& v);
 
+/// skew's inverse on skew-symmetric matrices: vee(M) = (M21, M02, M10), so vee([w]×) = w.
+/// Of M − Mᵀ it is twice the axial vector; Σ_k a_k × b_k = vee(Mᵀ − M) for M = Σ_k a_k b_kᵀ.
+inline Vec3 vee(const Mat3& M) { return {M(2, 1), M(0, 2), M(1, 0)}; }
+
 /// Rodrigues' formula R = exp([θ]×). Exact for every finite θ, however large: the angle is
 /// reduced modulo 2π by sin/cos (no overflow of |θ|² above 1e154).
 Mat3 rodrigues(const Vec3& theta);

@@ -33,13 +33,6 @@ void NodalInertiaTerm::setPrediction(const BoneFrames& bones_n, const BoneFrames
   ++prediction_stamp_;
 }
 
-namespace {
-/// Σ_k a_k × b_k from M = Σ_k a_k b_kᵀ.
-Vec3 crossOfOuter(const Mat3& M) {
-  return {M(1, 2) - M(2, 1), M(2, 0) - M(0, 2), M(0, 1) - M(1, 0)};
-}
-}  // namespace
-
 void NodalInertiaTerm::updateHeldReference() const {
   const long id = moments_.update();
   if (held_.moments == id && held_.prediction == prediction_stamp_) return;
@@ -71,7 +64,7 @@ void NodalInertiaTerm::updateHeldReference() const {
 // With f_j = κ m_j (x_j − x̂_j) = κ m_j (e⁰_j + Σ_c w_jc d_jc), per bone b:
 //   F_b = Σ_j w_jb f_j / κ = P_b + Σ_c (ΔR_c U_cb + S_cb Δt_c)          (the translation rows)
 //   O_b = Σ_j w_jb f_j Ỹ_jbᵀ / κ = Q_bᵀ + Σ_c (ΔR_c V_cb + Δt_c U_bcᵀ)  (body-frame levers)
-// so the rotation rows are κ Σ_j w_jb r_jb × f_j = κ (R_b O_bᵀ)'s cross vector (r_jb = R_b Ỹ_jb)
+// so the rotation rows are κ Σ_j w_jb r_jb × f_j = κ vee(Mᵀ − M), M = R_b O_bᵀ (r_jb = R_b Ỹ_jb)
 // and the rotation curvature Σ_j w_jb C(f_j, r_jb) is C of the outer sum κ O_b R_bᵀ (C
 // bilinear: ½(M + Mᵀ) − tr(M) I). The Hessian's Jᵀ K J blocks per pair (a, c), as mapHessian
 // forms them from the nodes: s = κ S_ac, p = Σ s r_c = κ R_c U_ca, q = κ R_a U_ac and
@@ -105,7 +98,8 @@ double NodalInertiaTerm::boneOnly(VecX* g, std::vector<Triplet>* H, int offset, 
   if (g)
     for (int b = 0; b < bones; ++b) {
       g->segment<3>(offset + 6 * b) += k * F[b];
-      g->segment<3>(offset + 6 * b + 3) += k * crossOfOuter(R[size_t(b)] * O[b].transpose());
+      const Mat3 M = R[size_t(b)] * O[b].transpose();  // Σ_j w_jb r_jb f_jᵀ / κ
+      g->segment<3>(offset + 6 * b + 3) += k * vee(M.transpose() - M);
     }
   if (H) {
     for (const HeldMassMoments::Pair& p : moments_.pairs()) {

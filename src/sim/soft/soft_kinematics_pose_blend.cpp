@@ -118,7 +118,7 @@ void SoftKinematics::addFeatureCotangent(const std::vector<Mat3>& R, const Featu
     for (int r = 0; r < 3; ++r)
       for (int c = 0; c < 3; ++c) L_bar(r, c) = feature_bar[9 * (b - 1) + 3 * r + c];
     const Mat3 A = R[p] * L_bar * R[b].transpose();
-    const Vec3 v(A(2, 1) - A(1, 2), A(0, 2) - A(2, 0), A(1, 0) - A(0, 1));
+    const Vec3 v = vee(A - A.transpose());
     rotation_cotangent.template segment<3>(3 * b) += v;
     rotation_cotangent.template segment<3>(3 * p) -= v;
   }

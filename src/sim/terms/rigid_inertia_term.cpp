@@ -9,8 +9,6 @@ namespace flsh::detail {
 
 namespace {
 
-Vec3 vee(const Mat3& M) { return Vec3(M(2, 1), M(0, 2), M(1, 0)); }
-
 // Symmetric basis of the second moment in the order xx, yy, zz, xy, xz, yz.
 Mat3 secondMomentBasis(int k) {
   static const int rows[6] = {0, 1, 2, 0, 0, 1}, cols[6] = {0, 1, 2, 1, 2, 2};

@@ -13,12 +13,14 @@ namespace flsh::detail {
 /// µs, each half saves ≥ 40.
 constexpr size_t kSplitNodes = 128;
 
-/// Runs part(0) and part(1) on a team of two OpenMP threads (both on one thread when the team
-/// has one, e.g. in a nested region); the first exception either throws is rethrown after both.
+/// Runs part(0) and part(1) on a team of two OpenMP threads (both on the calling thread when
+/// OpenMP is limited to one, by OMP_NUM_THREADS=1 or omp_set_num_threads(1), or in a nested
+/// region); the first exception either throws is rethrown after both.
 template <class Part>
 void onTwoThreads(Part&& part) {
   FirstFailure failure;
-#pragma omp parallel num_threads(2)
+  const int team = omp_get_max_threads() >= 2 ? 2 : 1;
+#pragma omp parallel num_threads(team) if (team > 1)
   {
     const int threads = omp_get_num_threads(), t = omp_get_thread_num();
     for (int p = t; p < 2; p += threads) failure.run([&] { part(p); });

@@ -58,4 +58,9 @@ void Scene::coarseHessian(MatX& H, bool psd) {
     }
 }
 
+LinearSolver* Scene::coarseSolver() {
+  if (!coarse_solver_) coarse_solver_ = makeLinearSolver(LinearSolverType::SparseLLT, 0);
+  return coarse_solver_.get();
+}
+
 }  // namespace flsh

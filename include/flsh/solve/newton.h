@@ -58,6 +58,10 @@ class Objective {
   /// kinematic rows and columns those of the identity. Called only where coarseEnergyAndGradient
   /// returns true.
   virtual void coarseHessian(MatX& H, bool psd) {}
+  /// A linear solver the coarse presolve may keep from one call to the next (with its
+  /// symbolic analysis of the coarse block's sparsity), owned by the objective and used for
+  /// nothing else; nullptr (the default): the presolve makes one per call.
+  virtual LinearSolver* coarseSolver() { return nullptr; }
 };
 
 /// Newton directions from conjugate gradients preconditioned with the Cholesky factor of an

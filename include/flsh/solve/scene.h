@@ -160,6 +160,8 @@ class Scene : public Objective {
   /// The bones' block of the Hessian (Simulable::getBoneHessianTripletVector and avatar–avatar
   /// contact), dense.
   void coarseHessian(MatX& H, bool psd) override;
+  /// The presolve's sparse Cholesky, kept with its analysis of the bones' block pattern.
+  LinearSolver* coarseSolver() override;
 
   /// Avatar–avatar contact energy at the current states; adds gradient/Hessian when asked.
   /// For every ordered pair (A, B) of different simulables, A's surface vertices x_i (areas
@@ -186,6 +188,7 @@ class Scene : public Objective {
   std::vector<int> offsets_;
   std::vector<Collider> colliders_;
   std::unique_ptr<LinearSolver> solver_;
+  std::unique_ptr<LinearSolver> coarse_solver_;  // the presolve's (scene_bones.cpp)
   int num_dofs_ = 0;
   int last_solver_dofs_ = -1;
   LinearSolverType solver_type_ = LinearSolverType::Auto;  // of solver_ (resolved)

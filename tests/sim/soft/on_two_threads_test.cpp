@@ -30,29 +30,27 @@ struct PartRuns {
   std::thread::id thread[2];
 };
 
-void runParts(PartRuns& runs) {
+// Runs both parts with OpenMP limited to `threads`; each part runs exactly once.
+void runParts(int threads, PartRuns& runs) {
+  ThreadLimit limit(threads);
   detail::onTwoThreads([&](int p) {
     runs.count[p]++;
     runs.thread[p] = std::this_thread::get_id();
   });
+  EXPECT_EQ(runs.count[0], 1);
+  EXPECT_EQ(runs.count[1], 1);
 }
 
 TEST(OnTwoThreads, OneThreadWhenOpenMPIsLimitedToOne) {
-  ThreadLimit limit(1);
   PartRuns runs;
-  runParts(runs);
-  EXPECT_EQ(runs.count[0], 1);
-  EXPECT_EQ(runs.count[1], 1);
+  runParts(1, runs);
   EXPECT_EQ(runs.thread[0], std::this_thread::get_id());
   EXPECT_EQ(runs.thread[1], std::this_thread::get_id());
 }
 
 TEST(OnTwoThreads, TwoThreadsWhenOpenMPAllowsThem) {
-  ThreadLimit limit(2);
   PartRuns runs;
-  runParts(runs);
-  EXPECT_EQ(runs.count[0], 1);
-  EXPECT_EQ(runs.count[1], 1);
+  runParts(2, runs);
   EXPECT_NE(runs.thread[0], runs.thread[1]);
 }
 

@@ -76,13 +76,8 @@ class CoarseView final : public Objective {
         }
     if (on_ != pattern_ || H.rows() != n || H.cols() != n || !H.isCompressed()) {
       pattern_ = on_;
-      std::vector<Eigen::Index> per_block(size_t(blocks), 0);
-      for (Eigen::Index c = 0; c < blocks; ++c)
-        for (Eigen::Index r = 0; r < blocks; ++r)
-          per_block[size_t(c)] += on_[size_t(c * blocks + r)];
       H.resize(n, n);  // compressed, empty
-      Eigen::Index stored = 0;
-      for (Eigen::Index c = 0; c < blocks; ++c) stored += per_block[size_t(c)] * b * b;
+      const Eigen::Index stored = Eigen::Index(std::count(on_.begin(), on_.end(), 1)) * b * b;
       H.resizeNonZeros(stored);
       Eigen::Index k = 0;
       for (Eigen::Index c = 0; c < n; ++c) {
@@ -124,7 +119,7 @@ double coarsePresolve(Objective& objective, const NewtonOptions& options, Newton
   inner.max_iterations = presolve.max_iterations;
   inner.gradient_tolerance = presolve.relative_tolerance;
   inner.linear_solver = LinearSolverType::SparseLLT;
-  inner.lagged = LaggedFactorOptions{};  // a few hundred dense DoFs: factor every iteration
+  inner.lagged = LaggedFactorOptions{};  // a few hundred DoFs: factor every iteration
   inner.approximate_hessian = false;
   inner.coarse_presolve = CoarsePresolveOptions{};
   CoarseView view(objective, std::move(dofs), energy, std::move(g));

@@ -11,9 +11,9 @@ namespace flsh::detail {
 /// last accepted iterate) with `options`' line search and Hessian forms, a sparse Cholesky of
 /// the coarse block's nonzero 6 × 6 blocks (Objective::coarseSolver, which keeps its analysis
 /// between calls, or one of its own) and options.coarse_presolve's iteration limit and
-/// tolerance. Adds its
-/// iterations to result.coarse_iterations and its time to result's seconds. Returns ‖g_c‖∞ at
-/// the start (0 when nothing ran: no limit, no coarse DoFs or no coarse form).
+/// tolerance. Adds its iterations to result.coarse_iterations and its time to result's
+/// seconds. Returns ‖g_c‖∞ at the start (0 when nothing ran: no limit, no coarse DoFs or no
+/// coarse form).
 double coarsePresolve(Objective& objective, const NewtonOptions& options, NewtonResult& result);
 
 }  // namespace flsh::detail

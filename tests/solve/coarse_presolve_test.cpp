@@ -11,6 +11,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/solve/newton.h"
+#include "solve/vector_state_objective.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -21,9 +22,10 @@ constexpr int kCoarse = 2, kFine = 40;
 /// E(c, f) = Σ_i (exp(c_i) − t c_i) + ½ (f − A c)ᵀ K (f − A c) + ½ ε ‖f‖², convex, minimum far
 /// from 0 in c (t = 60: c* ≈ 4). A is small (the fine DoFs follow c weakly, as the tissue held
 /// in the bones' frames follows them). Coarse DoFs: c (the first two).
-class Coupled : public Objective {
+class Coupled : public test::VectorStateObjective {
  public:
-  explicit Coupled(bool coarse_form) : coarse_form_(coarse_form), x(VecX::Zero(kCoarse + kFine)) {
+  explicit Coupled(bool coarse_form)
+      : VectorStateObjective(VecX::Zero(kCoarse + kFine)), coarse_form_(coarse_form) {
     A = MatX::Zero(kFine, kCoarse);
     for (int i = 0; i < kFine; ++i) A(i, i % kCoarse) = 0.05 + 0.001 * i;
     K = MatX::Identity(kFine, kFine) * 3.0;
@@ -56,12 +58,6 @@ class Coupled : public Objective {
     ++whole_hessians;
     H = dense().sparseView();
   }
-  void step(const VecX& dq) override { x += dq; }
-  void push() override { stack_.push_back(x); }
-  void pop() override {
-    x = stack_.back();
-    stack_.pop_back();
-  }
   void coarseDofs(std::vector<int>& dofs) const override { dofs = {0, 1}; }
   bool coarseEnergyAndGradient(double& E, VecX& g) override {
     if (!coarse_form_) return false;
@@ -75,12 +71,8 @@ class Coupled : public Objective {
 
   static constexpr double kTarget = 60.0, kEps = 0.1;
   bool coarse_form_;
-  VecX x;
   MatX A, K;
   int whole_hessians = 0;
-
- private:
-  std::vector<VecX> stack_;
 };
 
 NewtonOptions optionsWith(int presolve) {
@@ -135,10 +127,10 @@ TEST(CoarsePresolve, NothingWithoutACoarseForm) {
 /// Two bones' worth of coarse DoFs (two 6 × 6 blocks), each DoF exp(c_i) − t_i c_i, held fine
 /// DoFs, and a spring ½ s (c_0 − c_6)² that couples the blocks when s > 0: the presolve hands
 /// the coarse block to a sparse Cholesky in the pattern of its nonzero 6 × 6 blocks.
-class TwoBones : public Objective {
+class TwoBones : public test::VectorStateObjective {
  public:
   static constexpr int kBones = 12, kHeld = 3;
-  TwoBones() : x(VecX::Zero(kBones + kHeld)) {}
+  TwoBones() : VectorStateObjective(VecX::Zero(kBones + kHeld)) {}
   int numDofs() const override { return kBones + kHeld; }
   double target(int i) const { return 20.0 + 5.0 * i; }
   double energy() override {
@@ -162,12 +154,6 @@ class TwoBones : public Objective {
     return H;
   }
   void hessian(SpMat& H, bool) override { H = dense().sparseView(); }
-  void step(const VecX& dq) override { x += dq; }
-  void push() override { stack_.push_back(x); }
-  void pop() override {
-    x = stack_.back();
-    stack_.pop_back();
-  }
   void coarseDofs(std::vector<int>& dofs) const override {
     dofs.resize(kBones);
     for (int i = 0; i < kBones; ++i) dofs[size_t(i)] = i;
@@ -183,11 +169,7 @@ class TwoBones : public Objective {
   LinearSolver* coarseSolver() override { return kept.get(); }
 
   double spring = 0.0;
-  VecX x;
   std::unique_ptr<LinearSolver> kept = makeLinearSolver(LinearSolverType::SparseLLT, 0);
-
- private:
-  std::vector<VecX> stack_;
 };
 
 // The presolve alone to a tight tolerance from x = 0: the coarse gradient ends at ~0.

@@ -11,6 +11,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/solve/newton.h"
+#include "solve/vector_state_objective.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -18,9 +19,9 @@ namespace {
 
 /// E(x) = ½ xᵀ A x − bᵀ x + c Σ x_i⁴ (convex, stiffening away from 0); the approximate Hessian
 /// is `scale` · A (A: the exact Hessian at x = 0), when `has_approximation`.
-class Stiffening : public Objective {
+class Stiffening : public test::VectorStateObjective {
  public:
-  Stiffening(int n, double c, unsigned seed) : c_(c) {
+  Stiffening(int n, double c, unsigned seed) : VectorStateObjective(VecX::Zero(n)), c_(c) {
     std::mt19937 rng(seed);
     std::normal_distribution<double> gauss(0.0, 1.0);
     MatX B(n, n);
@@ -30,7 +31,6 @@ class Stiffening : public Objective {
       for (int j = 0; j < n; ++j) B(i, j) = gauss(rng);
     }
     A_ = B.transpose() * B / n + MatX::Identity(n, n);
-    x = VecX::Zero(n);
   }
 
   int numDofs() const override { return int(x.size()); }
@@ -46,14 +46,7 @@ class Stiffening : public Objective {
     H = (scale * A_).sparseView();
     return true;
   }
-  void step(const VecX& dq) override { x += dq; }
-  void push() override { stack_.push_back(x); }
-  void pop() override {
-    x = stack_.back();
-    stack_.pop_back();
-  }
 
-  VecX x;
   bool has_approximation = true;
   double scale = 1.0;
   int exact_hessians = 0, approximations = 0;
@@ -62,7 +55,6 @@ class Stiffening : public Objective {
   MatX A_;
   VecX b_;
   double c_;
-  std::vector<VecX> stack_;
 };
 
 NewtonOptions tight(bool approximate) {

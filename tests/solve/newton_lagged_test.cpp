@@ -18,6 +18,7 @@
 #include "flsh/core/error.h"
 #include "flsh/solve/linear_solver.h"
 #include "flsh/solve/newton.h"
+#include "solve/vector_state_objective.h"
 
 namespace flsh {
 namespace {
@@ -25,13 +26,13 @@ namespace {
 /// Nodes of an nx × ny × nz grid (spacing 1 m) joined by springs along the 7 edge directions of
 /// the Kuhn tetrahedralization (14 neighbours per inner node, like a tet mesh), plus an inertia
 /// term pulling every node to a target (x̂ of a backward-Euler step):
-///   E(x) = w/2 ‖x − x̂‖² + Σ_springs k/2 (‖x_i − x_j‖ − L_ij)²,   x: #nodes × 3 stacked.
+///   E(x) = w/2 ‖x − x̂‖² + Σ_springs k/2 (‖x_i − x_j‖ − L_ij)²,   x: #nodes × 3 stacked (m).
 /// The exact spring Hessian k[nnᵀ + (1 − L/ℓ)(I − nnᵀ)] is indefinite for compressed springs;
 /// the PSD form clamps 1 − L/ℓ at 0.
-class SpringNetwork : public Objective {
+class SpringNetwork : public test::VectorStateObjective {
  public:
   SpringNetwork(int nx, int ny, int nz, double inertia_weight, double stiffness)
-      : inertia_weight_(inertia_weight), stiffness_(stiffness) {
+      : VectorStateObjective(VecX(), true), inertia_weight_(inertia_weight), stiffness_(stiffness) {
     const int nodes = nx * ny * nz;
     rest_.resize(3 * nodes);
     const auto id = [&](int i, int j, int k) { return (k * ny + j) * nx + i; };
@@ -121,18 +122,6 @@ class SpringNetwork : public Objective {
     H.setFromTriplets(entries.begin(), entries.end());
   }
 
-  void step(const VecX& dq) override { x += dq; }
-  void push() override { stack_.push_back(x); }
-  void pop() override {
-    x = stack_.back();
-    stack_.pop_back();
-  }
-  bool discardPushed() override {
-    stack_.pop_back();
-    return true;
-  }
-
-  VecX x;       ///< positions (m), #nodes·3
   VecX target;  ///< x̂ (m), #nodes·3
   int exact_hessians = 0, psd_hessians = 0;
 
@@ -145,7 +134,6 @@ class SpringNetwork : public Objective {
   VecX rest_;
   std::vector<std::pair<int, int>> springs_;
   std::vector<double> rest_length_;
-  std::vector<VecX> stack_;
 };
 
 /// Sums of NewtonResult counters over a sequence of calls.
@@ -400,8 +388,8 @@ TEST(LaggedNewton, ConvergesWhenTheExactHessianIsIndefinite) {
     const NewtonResult r_psd = newtonSolve(psd_network, psd_options, psd_solver.get());
     ASSERT_TRUE(r_psd.converged) << "call " << t << ": " << r_psd.message;
     EXPECT_LE(r.iterations, r_psd.iterations) << "call " << t;
-    std::printf("call %d: %d iterations (%d on the PSD form), PSD form only: %d\n", t,
-                r.iterations, r.psd_fallbacks, r_psd.iterations);
+    std::printf("call %d: %d iterations (%d on the PSD form), PSD form only: %d\n", t, r.iterations,
+                r.psd_fallbacks, r_psd.iterations);
   }
   EXPECT_GT(exact_used, 0);  // the exact form came back once positive definite
 }

@@ -13,6 +13,7 @@
 
 #include "flsh/core/error.h"
 #include "flsh/core/rotation.h"
+#include "solve/vector_state_objective.h"
 #include "support/test_support.h"
 
 namespace flsh {
@@ -20,14 +21,14 @@ namespace {
 
 /// An objective over x ∈ Rⁿ from callbacks; counts how deep its push/pop stack is. With
 /// `can_discard` off it exercises Newton's pop-and-reapply fallback.
-class FunctionObjective : public Objective {
+class FunctionObjective : public test::VectorStateObjective {
  public:
   using EnergyFn = std::function<double(const VecX&)>;
   using GradientFn = std::function<VecX(const VecX&)>;
   using HessianFn = std::function<MatX(const VecX&)>;
 
   FunctionObjective(VecX x0, EnergyFn e, GradientFn g, HessianFn h, bool can_discard = true)
-      : x(std::move(x0)), e_(e), g_(g), h_(h), can_discard_(can_discard) {}
+      : VectorStateObjective(std::move(x0), can_discard), e_(e), g_(g), h_(h) {}
 
   int numDofs() const override { return int(x.size()); }
   double energy() override {
@@ -36,28 +37,13 @@ class FunctionObjective : public Objective {
   }
   void gradient(VecX& g) override { g = g_(x); }
   void hessian(SpMat& H, bool) override { H = h_(x).sparseView(); }
-  void step(const VecX& dq) override { x += dq; }
-  void push() override { stack_.push_back(x); }
-  void pop() override {
-    x = stack_.back();
-    stack_.pop_back();
-  }
-  bool discardPushed() override {
-    if (!can_discard_) return false;
-    stack_.pop_back();
-    return true;
-  }
-  size_t stackDepth() const { return stack_.size(); }
 
-  VecX x;
   int energy_calls = 0;
 
  private:
   EnergyFn e_;
   GradientFn g_;
   HessianFn h_;
-  bool can_discard_;
-  std::vector<VecX> stack_;
 };
 
 TEST(Newton, SolvesAConvexQuadraticInOneStep) {
